@@ -1,0 +1,89 @@
+"""Array and parameter checks used by every public function (one message format)."""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+from ..errors import InvalidParameterError, InvalidPointsError
+
+
+def check_points(points, *, name: str = "points", min_points: int = 1, source: str | None = None):
+    """Return `points` as a C-contiguous ``(N, 3)`` float64 array or raise.
+
+    Parameters
+    ----------
+    points : array_like, shape (N, 3)
+        Coordinates.
+    name : str
+        Name used in error messages.
+    min_points : int
+        Smallest acceptable N.
+    source : str, optional
+        File the points came from, prefixed to error messages.
+
+    Raises
+    ------
+    InvalidPointsError
+        If the array is empty, not (N, 3), or holds NaN or infinite values.
+    """
+    where = f"{source}: " if source else ""
+    arr = np.asarray(points)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise InvalidPointsError(f"{where}`{name}` must have shape (N, 3); got {arr.shape}")
+    if arr.shape[0] < min_points:
+        if arr.shape[0] == 0:
+            raise InvalidPointsError(f"{where}`{name}` is empty (0 points)")
+        raise InvalidPointsError(
+            f"{where}`{name}` has {arr.shape[0]} points; at least {min_points} are needed"
+        )
+    arr = np.ascontiguousarray(arr, dtype=np.float64)
+    if not np.isfinite(arr.sum()):
+        bad = ~np.isfinite(arr).all(axis=1)
+        first = int(np.flatnonzero(bad)[0])
+        raise InvalidPointsError(
+            f"{where}`{name}` has {int(bad.sum())} points with NaN or infinite coordinates "
+            f"(first at index {first})"
+        )
+    return arr
+
+
+def check_scalar(value, name: str, *, func: str, low=None, high=None, closed="neither",
+                 integer: bool = False):
+    """Validate a real scalar in an interval and return it as float (or int).
+
+    ``closed`` is one of ``"neither"``, ``"left"``, ``"right"``, ``"both"``.
+    The message reads: ``The 'radius' parameter of fit_quadrics must be a float in the
+    range (0, inf). Got -1.0 instead.``
+    """
+    kind = "an int" if integer else "a float"
+    lo = "-inf" if low is None else low
+    hi = "inf" if high is None else high
+    lb = "[" if closed in ("left", "both") and low is not None else "("
+    rb = "]" if closed in ("right", "both") and high is not None else ")"
+    msg = (f"The '{name}' parameter of {func} must be {kind} in the range "
+           f"{lb}{lo}, {hi}{rb}. Got {value!r} instead.")
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise InvalidParameterError(msg)
+    if integer and not float(value).is_integer():
+        raise InvalidParameterError(msg)
+    v = float(value)
+    if not np.isfinite(v) and not (v == np.inf and high is None and closed in ("neither", "left")):
+        raise InvalidParameterError(msg)
+    if low is not None and (v < low or (v == low and lb == "(")):
+        raise InvalidParameterError(msg)
+    if high is not None and (v > high or (v == high and rb == ")")):
+        raise InvalidParameterError(msg)
+    return int(v) if integer else v
+
+
+def check_option(value, name: str, options, *, func: str):
+    """Validate a string option; the message lists the valid values."""
+    options = tuple(options)
+    if value not in options:
+        valid = ", ".join(repr(o) for o in options)
+        raise InvalidParameterError(
+            f"The '{name}' parameter of {func} must be one of {valid}. Got {value!r} instead."
+        )
+    return value
