@@ -1,0 +1,9 @@
+"""Read and write LAS/LAZ, PLY, CSV/TXT and NPZ point clouds (atomic, lossless for LAS)."""
+
+from __future__ import annotations
+
+from ._cloud import SUPPORTED_SUFFIXES, PointCloud, iter_chunks, read, write
+from ._info import describe, format_description
+
+__all__ = ["PointCloud", "read", "write", "describe", "format_description", "iter_chunks",
+           "SUPPORTED_SUFFIXES"]

@@ -1,0 +1,342 @@
+"""The :class:`PointCloud` container and the suffix-dispatching ``read``/``write``/``iter_chunks``.
+
+The per-format readers and writers live in ``_las``, ``_ply``, ``_text`` and ``_npz``; they
+are imported lazily inside the dispatchers so that importing :mod:`lidarstat.io` stays cheap
+and the format modules can import :class:`PointCloud` from here without a cycle.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._shared.validation import check_points
+from ..errors import (
+    InvalidParameterError,
+    InvalidPointsError,
+    PointCloudReadError,
+    PointCloudWriteError,
+    UnknownFieldError,
+    UnknownFormatError,
+)
+
+__all__ = ["PointCloud", "read", "write", "iter_chunks", "SUPPORTED_SUFFIXES"]
+
+#: File suffixes understood by :func:`read` and :func:`write` (compared case-insensitively).
+SUPPORTED_SUFFIXES = (".las", ".laz", ".ply", ".csv", ".txt", ".npz")
+
+_XYZ = ("x", "y", "z")
+
+
+@dataclasses.dataclass(eq=False)
+class PointCloud:
+    """Coordinates plus named per-point attributes, with enough metadata to write back.
+
+    Parameters
+    ----------
+    xyz : ndarray, shape (N, 3)
+        Coordinates in the file's own (scaled) units; stored as C-contiguous float64.
+    attributes : dict of str to ndarray
+        Every other per-point field, each an array whose first dimension is N (LAS
+        standard dimensions use laspy's names: ``intensity``, ``classification`` ...).
+    crs : str, optional
+        Coordinate reference system: WKT when the file has one, else ``"EPSG:<code>"``.
+    source_path : Path, optional
+        File the cloud was read from.
+    source_format : str
+        One of ``"las"``, ``"laz"``, ``"ply"``, ``"csv"``, ``"txt"``, ``"npz"`` or
+        ``"memory"`` for clouds built in code.
+    las_header : laspy.LasHeader, optional
+        Header of the LAS/LAZ file the cloud came from, kept so that :func:`write` can
+        reproduce version, point format, scales, offsets, VLRs and EVLRs.
+
+    Raises
+    ------
+    InvalidPointsError
+        If `xyz` is not ``(N, 3)`` or holds NaN or infinite values.
+    InvalidParameterError
+        If an attribute does not have N rows.
+    """
+
+    xyz: np.ndarray
+    attributes: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    crs: str | None = None
+    source_path: Path | None = None
+    source_format: str = "memory"
+    las_header: Any = None
+
+    def __post_init__(self) -> None:
+        if self.source_path is not None:
+            self.source_path = Path(self.source_path)
+        self.xyz = check_points(self.xyz, name="xyz", min_points=0, source=self._source())
+        attrs = {}
+        for name, values in dict(self.attributes).items():
+            attrs[str(name)] = self._check_field(name, values)
+        self.attributes = attrs
+
+    # ------------------------------------------------------------------ helpers
+    def _source(self) -> str:
+        return str(self.source_path) if self.source_path is not None else "point cloud"
+
+    def _check_field(self, name: str, values) -> np.ndarray:
+        if not isinstance(name, str) or not name:
+            raise InvalidParameterError(f"{self._source()}: field names must be non-empty "
+                                        f"strings; got {name!r}")
+        if name.lower() in _XYZ:
+            raise InvalidParameterError(f"{self._source()}: {name!r} is a coordinate, not an "
+                                        "attribute; change `xyz` instead")
+        arr = np.asarray(values)
+        if arr.ndim == 0 or arr.shape[0] != len(self.xyz):
+            shape = arr.shape if arr.ndim else "a scalar"
+            raise InvalidParameterError(
+                f"{self._source()}: field {name!r} has {shape} values; expected one per "
+                f"point ({len(self.xyz)})"
+            )
+        return arr
+
+    # ------------------------------------------------------------------ mapping API
+    def __len__(self) -> int:
+        return int(self.xyz.shape[0])
+
+    def __repr__(self) -> str:
+        fields = ", ".join(self.attributes) or "no attributes"
+        src = f", from {self.source_path}" if self.source_path is not None else ""
+        return f"<PointCloud {len(self)} points ({fields}){src}>"
+
+    @property
+    def field_names(self) -> list[str]:
+        """``["x", "y", "z", *attributes]``."""
+        return [*_XYZ, *self.attributes]
+
+    def __contains__(self, name: object) -> bool:
+        return isinstance(name, str) and (name.lower() in _XYZ or name in self.attributes)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        """Return coordinate column ``"x"``/``"y"``/``"z"`` or the attribute `name`.
+
+        Raises
+        ------
+        UnknownFieldError
+            If there is no such field; the message lists the available ones.
+        """
+        if isinstance(name, str) and name.lower() in _XYZ:
+            return self.xyz[:, _XYZ.index(name.lower())]
+        try:
+            return self.attributes[name]
+        except (KeyError, TypeError):
+            raise UnknownFieldError(
+                f"{self._source()}: unknown field {name!r}; available: "
+                f"{', '.join(self.field_names)}"
+            ) from None
+
+    def with_fields(self, **arrays) -> PointCloud:
+        """Return a new cloud with `arrays` added to (or replacing) the attributes.
+
+        Raises
+        ------
+        InvalidParameterError
+            If an array does not have one value per point.
+        """
+        attrs = dict(self.attributes)
+        for name, values in arrays.items():
+            attrs[name] = self._check_field(name, values)
+        return dataclasses.replace(self, attributes=attrs)
+
+    def subset(self, index_or_mask) -> PointCloud:
+        """Return a new cloud holding the selected points (boolean mask or integer index)."""
+        idx = np.asarray(index_or_mask)
+        if idx.dtype == bool:
+            if idx.shape != (len(self),):
+                raise InvalidParameterError(
+                    f"{self._source()}: boolean mask has shape {idx.shape}; expected "
+                    f"({len(self)},)"
+                )
+        elif idx.size and not np.issubdtype(idx.dtype, np.integer):
+            raise InvalidParameterError(f"{self._source()}: subset needs a boolean mask or "
+                                        f"integer indices; got dtype {idx.dtype}")
+        else:
+            idx = idx.astype(np.intp, copy=False).reshape(-1)
+        return dataclasses.replace(
+            self,
+            xyz=self.xyz[idx],
+            attributes={k: v[idx] for k, v in self.attributes.items()},
+        )
+
+
+# ---------------------------------------------------------------------- dispatch
+def _format_of(path: Path) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in SUPPORTED_SUFFIXES:
+        shown = path.suffix or "(none)"
+        raise UnknownFormatError(
+            f"{path}: unknown point-cloud format '{shown}'; supported: "
+            f"{', '.join(SUPPORTED_SUFFIXES)}"
+        )
+    return suffix[1:]
+
+
+def _module(fmt: str):
+    if fmt in ("las", "laz"):
+        from . import _las as mod
+    elif fmt == "ply":
+        from . import _ply as mod
+    elif fmt in ("csv", "txt"):
+        from . import _text as mod
+    else:
+        from . import _npz as mod
+    return mod
+
+
+def _select_fields(cloud: PointCloud, fields, path: Path) -> PointCloud:
+    if fields is None:
+        return cloud
+    if isinstance(fields, str):
+        fields = [fields]
+    wanted = [f for f in fields if f.lower() not in _XYZ]
+    missing = [f for f in wanted if f not in cloud.attributes]
+    if missing:
+        raise UnknownFieldError(
+            f"{path}: unknown field {missing[0]!r}; available: {', '.join(cloud.field_names)}"
+        )
+    cloud.attributes = {k: cloud.attributes[k] for k in wanted}
+    return cloud
+
+
+def _finish(cloud: PointCloud, path: Path, fields) -> PointCloud:
+    if len(cloud) == 0:
+        raise InvalidPointsError(f"{path}: empty point cloud (0 points)")
+    return _select_fields(cloud, fields, path)
+
+
+def read(path: str | os.PathLike, *, fields=None) -> PointCloud:
+    """Read a point cloud, choosing the reader from the file suffix (case-insensitive).
+
+    Parameters
+    ----------
+    path : path-like
+        A ``.las``, ``.laz``, ``.ply``, ``.csv``, ``.txt`` or ``.npz`` file.
+    fields : sequence of str, optional
+        Attributes to keep (coordinates are always read); default: all.
+
+    Returns
+    -------
+    PointCloud
+
+    Raises
+    ------
+    PointCloudReadError
+        If the file is missing, truncated or corrupt.
+    UnknownFormatError
+        If the suffix is not supported.
+    InvalidPointsError
+        If the cloud is empty or has NaN/infinite coordinates.
+    UnknownFieldError
+        If `fields` names an attribute the file does not have.
+    """
+    path = Path(path)
+    fmt = _format_of(path)
+    if not path.exists():
+        raise PointCloudReadError(f"{path}: no such file")
+    if path.is_dir():
+        raise PointCloudReadError(f"{path}: is a directory, not a point-cloud file")
+    cloud = _module(fmt).read_file(path, fmt)
+    return _finish(cloud, path, fields)
+
+
+def write(path: str | os.PathLike, cloud: PointCloud, *,
+          fields: Mapping[str, Any] | None = None) -> Path:
+    """Write `cloud` (plus optional new per-point `fields`) atomically to `path`.
+
+    The output goes to a temporary file beside `path` that is renamed onto it only when
+    complete, so a failure never leaves a partial file and never alters the input.
+
+    Parameters
+    ----------
+    path : path-like
+        Destination; its suffix selects the format.
+    cloud : PointCloud
+        Points to write. For LAS/LAZ, ``cloud.las_header`` (if any) is reused so that
+        version, point format, scales, offsets, VLRs, EVLRs and extra bytes survive.
+    fields : dict of str to 1-D array, optional
+        New per-point results (e.g. ``K``, ``H``, ``surface_type``); they become LAS extra
+        bytes, PLY properties, CSV columns or NPZ arrays.
+
+    Returns
+    -------
+    Path
+        The written file.
+
+    Raises
+    ------
+    PointCloudWriteError
+        If `path` is the cloud's own source file or writing fails.
+    InvalidParameterError
+        If a field has the wrong length or cannot be stored in the format.
+    UnknownFormatError
+        If the suffix is not supported.
+    """
+    path = Path(path)
+    fmt = _format_of(path)
+    if not isinstance(cloud, PointCloud):
+        raise InvalidParameterError(f"{path}: `cloud` must be a PointCloud; got "
+                                    f"{type(cloud).__name__}")
+    src = cloud.source_path
+    if src is not None and path.exists() and src.exists() and os.path.samefile(path, src):
+        raise PointCloudWriteError(
+            f"{path}: refusing to overwrite the cloud's own source file; write elsewhere"
+        )
+    new = {}
+    for name, values in (fields or {}).items():
+        arr = np.asarray(values)
+        if arr.ndim != 1 or arr.shape[0] != len(cloud):
+            raise InvalidParameterError(
+                f"{path}: field {name!r} has shape {arr.shape}; expected ({len(cloud)},), "
+                "one value per point"
+            )
+        if name.lower() in _XYZ:
+            raise InvalidParameterError(f"{path}: field {name!r} would overwrite a coordinate")
+        new[str(name)] = arr
+    if not path.parent.is_dir():
+        raise PointCloudWriteError(f"{path}: directory {path.parent} does not exist")
+    try:
+        _module(fmt).write_file(path, cloud, new, fmt)
+    except (InvalidParameterError, PointCloudWriteError, UnknownFieldError):
+        raise
+    except OSError as exc:
+        raise PointCloudWriteError(f"{path}: cannot write ({exc.strerror or exc})") from exc
+    return path
+
+
+def iter_chunks(path: str | os.PathLike, points_per_chunk: int = 1_000_000
+                ) -> Iterator[PointCloud]:
+    """Yield the file as consecutive :class:`PointCloud` chunks.
+
+    LAS/LAZ files are streamed with laspy's chunk iterator; other formats are read whole
+    and yielded as one chunk.
+
+    Parameters
+    ----------
+    path : path-like
+        Point-cloud file.
+    points_per_chunk : int
+        Largest number of points per chunk (LAS/LAZ only).
+    """
+    from .._shared.validation import check_scalar
+
+    points_per_chunk = check_scalar(points_per_chunk, "points_per_chunk", func="iter_chunks",
+                                    low=1, closed="left", integer=True)
+    path = Path(path)
+    fmt = _format_of(path)
+    if not path.exists():
+        raise PointCloudReadError(f"{path}: no such file")
+    if fmt in ("las", "laz"):
+        from . import _las
+
+        yield from _las.iter_file(path, fmt, points_per_chunk)
+    else:
+        yield read(path)

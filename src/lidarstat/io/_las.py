@@ -1,0 +1,262 @@
+"""LAS/LAZ reading and writing through laspy (LAZ via the lazrs backend).
+
+Reading keeps the laspy header on the :class:`PointCloud` so that writing back preserves
+version, point format, scales, offsets, VLRs, EVLRs, CRS, standard dimensions and existing
+extra bytes; new per-point results become LAS extra bytes.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Iterator
+from pathlib import Path
+
+import laspy
+import numpy as np
+from laspy.point.dims import DimensionKind
+from laspy.vlrs.known import GeoKeyDirectoryVlr, LasZipVlr, WktCoordinateSystemVlr
+
+from .._shared._atomic import atomic_path
+from ..errors import InvalidParameterError, PointCloudReadError, PointCloudWriteError
+from ._cloud import PointCloud
+
+_BACKEND = laspy.LazBackend.Lazrs
+_MAX_EB_NAME = 32
+_EB_TYPES = {"b": "u1", "u1": "u1", "u2": "u2", "u4": "u4", "u8": "u8", "i1": "i1",
+             "i2": "i2", "i4": "i4", "i8": "i8", "f2": "f4", "f4": "f4", "f8": "f8"}
+
+
+def short_cause(exc: BaseException, limit: int = 120) -> str:
+    """One-line, length-limited description of an exception."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    text = f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def crs_of(header) -> str | None:
+    """CRS of a LAS header as WKT (or ``"EPSG:<code>"`` from GeoTIFF keys), else None.
+
+    Uses ``header.parse_crs()`` when pyproj is importable; otherwise reads the WKT VLR/EVLR
+    text or the GeoTIFF projected/geographic EPSG key directly.
+    """
+    try:
+        import pyproj  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        try:
+            crs = header.parse_crs()
+            if crs is not None:
+                return crs.to_wkt()
+        except Exception:  # a malformed CRS must not make the points unreadable
+            pass
+    records = list(header.vlrs) + list(getattr(header, "evlrs", None) or [])
+    for vlr in records:
+        if isinstance(vlr, WktCoordinateSystemVlr) and vlr.string.strip("\0 \n"):
+            return vlr.string.rstrip("\0")
+    for vlr in records:
+        if isinstance(vlr, GeoKeyDirectoryVlr):
+            for key in vlr.geo_keys:
+                if (key.id in (3072, 2048) and key.tiff_tag_location == 0
+                        and key.value_offset not in (0, 32767)):
+                    return f"EPSG:{key.value_offset}"
+    return None
+
+
+def _strip_laszip(header):
+    header = copy.deepcopy(header)
+    header.vlrs = type(header.vlrs)([v for v in header.vlrs if not isinstance(v, LasZipVlr)])
+    return header
+
+
+def _cloud_from_points(points, header, path: Path, fmt: str, crs) -> PointCloud:
+    xyz = np.empty((len(points), 3), dtype=np.float64)
+    for j, dim in enumerate("XYZ"):
+        xyz[:, j] = np.asarray(points[dim], dtype=np.float64) * header.scales[j] + header.offsets[j]
+    attrs = {}
+    for name in header.point_format.dimension_names:
+        if name not in ("X", "Y", "Z"):
+            attrs[name] = np.array(points[name])
+    return PointCloud(xyz, attrs, crs=crs, source_path=path, source_format=fmt,
+                      las_header=header)
+
+
+def read_file(path: Path, fmt: str) -> PointCloud:
+    """Read a whole LAS/LAZ file into a :class:`PointCloud`."""
+    try:
+        las = laspy.read(path, laz_backend=_BACKEND)
+        points = las.points
+        n_header = las.header.point_count
+    except Exception as exc:
+        raise PointCloudReadError(
+            f"{path}: unreadable {fmt.upper()} file ({short_cause(exc)})") from exc
+    if len(points) != n_header:
+        raise PointCloudReadError(f"{path}: unreadable {fmt.upper()} file (header announces "
+                                  f"{n_header} points, {len(points)} found)")
+    header = _strip_laszip(las.header)
+    return _cloud_from_points(points, header, path, fmt, crs_of(header))
+
+
+def iter_file(path: Path, fmt: str, points_per_chunk: int) -> Iterator[PointCloud]:
+    """Stream a LAS/LAZ file as clouds of at most `points_per_chunk` points."""
+    try:
+        reader = laspy.open(path, laz_backend=_BACKEND)
+    except Exception as exc:
+        raise PointCloudReadError(
+            f"{path}: unreadable {fmt.upper()} file ({short_cause(exc)})") from exc
+    with reader:
+        header = _strip_laszip(reader.header)
+        crs = crs_of(header)
+        chunks = reader.chunk_iterator(points_per_chunk)
+        while True:
+            try:
+                points = next(chunks)
+            except StopIteration:
+                return
+            except Exception as exc:
+                raise PointCloudReadError(
+                    f"{path}: unreadable {fmt.upper()} file ({short_cause(exc)})") from exc
+            if len(points) == 0:
+                return
+            yield _cloud_from_points(points, header, path, fmt, crs)
+
+
+# ---------------------------------------------------------------------- writing
+def _fits(values: np.ndarray, info) -> bool:
+    """Whether `values` can be stored losslessly in the laspy dimension `info`."""
+    if values.ndim != (1 if info.num_elements == 1 else 2):
+        return False
+    if values.dtype.kind not in "biuf":
+        return False
+    if info.kind == DimensionKind.FloatingPoint or info.scales is not None:
+        return True
+    if values.size == 0:
+        return True
+    v = values
+    if v.dtype.kind == "f":
+        if not np.all(np.isfinite(v)) or not np.all(v == np.round(v)):
+            return False
+    if info.kind == DimensionKind.BitField or info.kind == DimensionKind.UnsignedInteger:
+        lo, hi = 0, 2 ** info.num_bits - 1
+    else:
+        lo, hi = -(2 ** (info.num_bits - 1)), 2 ** (info.num_bits - 1) - 1
+    return bool(v.min() >= lo and v.max() <= hi)
+
+
+def _extra_bytes_param(path: Path, name: str, values: np.ndarray) -> laspy.ExtraBytesParams:
+    if len(name) > _MAX_EB_NAME:
+        raise InvalidParameterError(f"{path}: field name {name!r} is longer than the "
+                                    f"{_MAX_EB_NAME} characters LAS extra bytes allow")
+    code = _EB_TYPES.get(values.dtype.str.lstrip("<>|=")) or _EB_TYPES.get(values.dtype.kind)
+    if code is None:
+        raise InvalidParameterError(f"{path}: field {name!r} has dtype {values.dtype}, which "
+                                    "cannot be stored as LAS extra bytes")
+    if values.ndim == 2 and values.shape[1] in (2, 3):
+        code = f"{values.shape[1]}{code}"
+    elif values.ndim != 1:
+        raise InvalidParameterError(f"{path}: field {name!r} has shape {values.shape}; LAS "
+                                    "extra bytes need (N,) or (N, 2|3)")
+    return laspy.ExtraBytesParams(name=name, type=code,
+                                  description=f"lidarstat {name}"[:31])
+
+
+def _new_header(cloud: PointCloud, attrs: dict) -> laspy.LasHeader:
+    rgb = all(c in attrs for c in ("red", "green", "blue"))
+    pf = 8 if rgb and "nir" in attrs else 7 if rgb else 6
+    header = laspy.LasHeader(version="1.4", point_format=pf)
+    if len(cloud):
+        lo, hi = cloud.xyz.min(axis=0), cloud.xyz.max(axis=0)
+        offsets = np.floor(lo)
+        extent = float(np.max(hi - offsets))
+    else:
+        offsets, extent = np.zeros(3), 0.0
+    scale = 1e-4
+    while extent / scale > 2**31 - 2:
+        scale *= 10.0
+    header.scales = np.full(3, scale)
+    header.offsets = offsets
+    if cloud.crs:
+        if "[" in cloud.crs:
+            header.vlrs.append(WktCoordinateSystemVlr(cloud.crs))
+            header.global_encoding.wkt = True
+        else:
+            try:
+                import pyproj
+
+                header.add_crs(pyproj.CRS.from_user_input(cloud.crs))
+            except Exception:  # no pyproj or unparsable: points are still worth writing
+                pass
+    return header
+
+
+def _plan(path: Path, cloud: PointCloud, new: dict, header) -> tuple[dict, list]:
+    """Split values into standard/existing dimensions and new extra bytes."""
+    fmt = header.point_format
+    existing = {n for n in fmt.dimension_names if n not in ("X", "Y", "Z")}
+    attrs = dict(cloud.attributes)
+    if cloud.las_header is None and "scan_angle" in existing and "scan_angle" not in attrs \
+            and "scan_angle_rank" in attrs:
+        attrs["scan_angle"] = np.round(attrs.pop("scan_angle_rank") / 0.006).astype(np.int16)
+    assign, params = {}, []
+    for source, values_by_name in (("attribute", attrs), ("field", new)):
+        for name, values in values_by_name.items():
+            values = np.asarray(values)
+            if name in existing:
+                if _fits(values, fmt.dimension_by_name(name)):
+                    assign[name] = values
+                    continue
+                if source == "attribute" and cloud.las_header is None and values.dtype.kind == "f":
+                    name = f"{name}_f"  # e.g. float intensity from PLY/NPZ: keep it exactly
+                else:
+                    info = fmt.dimension_by_name(name)
+                    raise InvalidParameterError(
+                        f"{path}: {source} {name!r} ({values.dtype}) does not fit the LAS "
+                        f"dimension {name!r} ({info.kind.name}, {info.num_bits} bits)")
+            if values.dtype == bool:
+                values = values.astype(np.uint8)
+            if name in assign:
+                assign.pop(name)
+                params = [p for p in params if p.name != name]
+            params.append(_extra_bytes_param(path, name, values))
+            assign[name] = values
+    return assign, params
+
+
+def _dump(las: laspy.LasData, tmp: Path, compress: bool) -> None:
+    """Low-level writer: serialise `las` to `tmp`."""
+    with open(tmp, "wb") as fh:
+        las.write(fh, do_compress=compress, laz_backend=_BACKEND)
+
+
+def write_file(path: Path, cloud: PointCloud, new: dict, fmt: str) -> None:
+    """Write `cloud` plus `new` fields to a LAS/LAZ file atomically."""
+    if cloud.las_header is not None:
+        header = _strip_laszip(cloud.las_header)
+    else:
+        header = _new_header(cloud, {**cloud.attributes, **new})
+    assign, params = _plan(path, cloud, new, header)
+    if params:
+        header.add_extra_dims(params)
+    header.point_count = len(cloud)
+    ints = np.round((cloud.xyz - header.offsets) / header.scales)
+    if ints.size and (ints.min() < -(2**31) or ints.max() > 2**31 - 1):
+        raise InvalidParameterError(
+            f"{path}: coordinates do not fit the LAS scale {list(header.scales)} and offset "
+            f"{list(header.offsets)} (32-bit overflow)")
+    try:
+        las = laspy.LasData(header)
+        for j, dim in enumerate("XYZ"):
+            las[dim] = ints[:, j].astype(np.int32)
+        for name, values in assign.items():
+            las[name] = values
+    except (ValueError, OverflowError, TypeError) as exc:
+        raise InvalidParameterError(f"{path}: cannot build LAS points ({short_cause(exc)})"
+                                    ) from exc
+    try:
+        with atomic_path(path) as tmp:
+            _dump(las, tmp, fmt == "laz")
+    except OSError:
+        raise
+    except Exception as exc:  # laspy / lazrs errors
+        raise PointCloudWriteError(f"{path}: cannot write {fmt.upper()} file "
+                                   f"({short_cause(exc)})") from exc

@@ -1,0 +1,122 @@
+"""PLY reading and writing through plyfile (binary little endian, double x/y/z).
+
+Every attribute becomes a scalar property of the ``vertex`` element, which CloudCompare
+shows as a scalar field. A CRS, if any, is stored in a ``comment crs ...`` header line.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import plyfile
+
+from .._shared._atomic import atomic_path
+from ..errors import InvalidParameterError, PointCloudReadError, PointCloudWriteError
+from ._cloud import PointCloud
+
+_CRS_COMMENT = "crs "
+# numpy dtype.str (without byte order) -> PLY-representable dtype
+_PLY_TYPES = {"i1": "i1", "u1": "u1", "i2": "i2", "u2": "u2", "i4": "i4", "u4": "u4",
+              "f4": "f4", "f8": "f8", "b1": "u1", "f2": "f4"}
+
+
+def _short(exc: BaseException) -> str:
+    from ._las import short_cause
+
+    return short_cause(exc)
+
+
+def read_file(path: Path, fmt: str = "ply") -> PointCloud:
+    """Read the ``vertex`` element of a PLY file; x/y/z (any case) are the coordinates."""
+    try:
+        ply = plyfile.PlyData.read(str(path))
+        vertex = ply["vertex"]
+        data = vertex.data
+    except KeyError:
+        raise PointCloudReadError(f"{path}: unreadable PLY file (no 'vertex' element)") from None
+    except Exception as exc:
+        raise PointCloudReadError(f"{path}: unreadable PLY file ({_short(exc)})") from exc
+    names = list(data.dtype.names or ())
+    lower = {n.lower(): n for n in names}
+    missing = [c for c in "xyz" if c not in lower]
+    if missing:
+        raise PointCloudReadError(
+            f"{path}: PLY vertex element has no {'/'.join(missing)} property; found: "
+            f"{', '.join(names)}")
+    xyz = np.column_stack([np.asarray(data[lower[c]], dtype=np.float64) for c in "xyz"])
+    coords = {lower[c] for c in "xyz"}
+    attrs = {}
+    for name in names:
+        if name in coords or data.dtype[name].kind == "O":  # skip list properties
+            continue
+        attrs[name] = np.array(data[name])
+    crs = None
+    for comment in ply.comments:
+        if comment.startswith(_CRS_COMMENT):
+            crs = comment[len(_CRS_COMMENT):].strip() or None
+    return PointCloud(xyz, attrs, crs=crs, source_path=path, source_format="ply")
+
+
+def _ply_dtype(path: Path, name: str, values: np.ndarray) -> np.dtype:
+    code = _PLY_TYPES.get(values.dtype.str.lstrip("<>|="))
+    if code is not None:
+        return np.dtype("<" + code) if code not in ("i1", "u1") else np.dtype(code)
+    if values.dtype.kind in "iu":
+        if values.size == 0:
+            return np.dtype("<i4")
+        lo, hi = values.min(), values.max()
+        if lo >= np.iinfo(np.int32).min and hi <= np.iinfo(np.int32).max:
+            return np.dtype("<i4")
+        if lo >= 0 and hi <= np.iinfo(np.uint32).max:
+            return np.dtype("<u4")
+        return np.dtype("<f8")  # PLY has no 64-bit integers
+    raise InvalidParameterError(f"{path}: field {name!r} has dtype {values.dtype}, which "
+                                "PLY cannot store")
+
+
+def _columns(cloud: PointCloud, new: dict) -> dict[str, np.ndarray]:
+    """Flatten attributes (N, k) into ``name_0 .. name_{k-1}``; new fields override."""
+    cols = {}
+    for name, values in {**cloud.attributes, **new}.items():
+        values = np.asarray(values)
+        if values.ndim == 1:
+            cols[name] = values
+        else:
+            flat = values.reshape(len(values), -1)
+            for j in range(flat.shape[1]):
+                cols[f"{name}_{j}"] = flat[:, j]
+    return cols
+
+
+def _dump(ply: plyfile.PlyData, tmp: Path) -> None:
+    """Low-level writer: serialise `ply` to `tmp`."""
+    ply.write(str(tmp))
+
+
+def write_file(path: Path, cloud: PointCloud, new: dict, fmt: str = "ply") -> None:
+    """Write a binary little-endian PLY with double x/y/z and one property per field."""
+    cols = _columns(cloud, new)
+    bad = [n for n in cols if not n or any(ch.isspace() for ch in n)]
+    if bad:
+        raise InvalidParameterError(f"{path}: PLY property names cannot contain spaces: "
+                                    f"{bad[0]!r}")
+    dtypes = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    dtypes += [(n, _ply_dtype(path, n, v)) for n, v in cols.items()]
+    arr = np.empty(len(cloud), dtype=dtypes)
+    for j, c in enumerate("xyz"):
+        arr[c] = cloud.xyz[:, j]
+    for n, v in cols.items():
+        arr[n] = v
+    comments = ["written by lidarstat"]
+    if cloud.crs:
+        comments.append(_CRS_COMMENT + " ".join(cloud.crs.split()))
+    ply = plyfile.PlyData([plyfile.PlyElement.describe(arr, "vertex")], text=False,
+                          byte_order="<", comments=comments)
+    try:
+        with atomic_path(path) as tmp:
+            _dump(ply, tmp)
+    except OSError:
+        raise
+    except Exception as exc:
+        raise PointCloudWriteError(f"{path}: cannot write PLY file ({_short(exc)})") from exc
