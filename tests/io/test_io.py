@@ -371,3 +371,24 @@ def test_atomic_write_text(tmp_path, rng, monkeypatch):
     with pytest.raises(PointCloudWriteError, match=r"out\.csv: cannot write"):
         lio.write(out, cloud)
     assert out.read_text() == "old" and os.listdir(tmp_path) == ["out.csv"]
+
+
+def test_epsg_crs_without_pyproj_warns(tmp_path, rng):
+    try:
+        import pyproj  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        pytest.skip("pyproj installed: the EPSG code is converted to WKT instead")
+    from lidarstat.errors import LidarstatWarning
+
+    cloud = lio.PointCloud(rng.random((10, 3)), crs="EPSG:2154")
+    with pytest.warns(LidarstatWarning, match="EPSG:2154"):
+        lio.write(tmp_path / "e.las", cloud)
+    assert len(lio.read(tmp_path / "e.las")) == 10
+
+
+def test_iter_chunks_other_format_is_one_chunk(tmp_path, rng):
+    path = tmp_path / "c.ply"
+    lio.write(path, _memory_cloud(rng))
+    assert [len(c) for c in lio.iter_chunks(path)] == [200]

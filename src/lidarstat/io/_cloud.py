@@ -266,6 +266,15 @@ def write(path: str | os.PathLike, cloud: PointCloud, *,
         New per-point results (e.g. ``K``, ``H``, ``surface_type``); they become LAS extra
         bytes, PLY properties, CSV columns or NPZ arrays.
 
+    Notes
+    -----
+    A cloud without a LAS header written to ``.las``/``.laz`` gets LAS 1.4 point format 6
+    (7 with red/green/blue, 8 with nir too), scale 1e-4 and offsets ``floor(min)``;
+    attributes named like standard dimensions fill them when their values fit, float
+    attributes that do not fit are kept as extra bytes named ``<name>_f``. Standard
+    dimensions missing from ``cloud.attributes`` (e.g. after ``read(..., fields=[...])``)
+    are written as zeros.
+
     Returns
     -------
     Path

@@ -8,6 +8,7 @@ extra bytes; new per-point results become LAS extra bytes.
 from __future__ import annotations
 
 import copy
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -17,7 +18,12 @@ from laspy.point.dims import DimensionKind
 from laspy.vlrs.known import GeoKeyDirectoryVlr, LasZipVlr, WktCoordinateSystemVlr
 
 from .._shared._atomic import atomic_path
-from ..errors import InvalidParameterError, PointCloudReadError, PointCloudWriteError
+from ..errors import (
+    InvalidParameterError,
+    LidarstatWarning,
+    PointCloudReadError,
+    PointCloudWriteError,
+)
 from ._cloud import PointCloud
 
 _BACKEND = laspy.LazBackend.Lazrs
@@ -184,8 +190,10 @@ def _new_header(cloud: PointCloud, attrs: dict) -> laspy.LasHeader:
                 import pyproj
 
                 header.add_crs(pyproj.CRS.from_user_input(cloud.crs))
-            except Exception:  # no pyproj or unparsable: points are still worth writing
-                pass
+            except Exception as exc:  # no pyproj or unparsable: points are still worth writing
+                warnings.warn(f"CRS {cloud.crs[:40]!r} not written to the LAS file "
+                              f"({short_cause(exc, 60)}); pyproj converts it to WKT",
+                              LidarstatWarning, stacklevel=4)
     return header
 
 
