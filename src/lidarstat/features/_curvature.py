@@ -1,0 +1,378 @@
+"""Statistically tested curvature of point clouds (Crosilla et al. 2009), whole pipeline."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats as _st
+
+from .._shared.validation import check_option, check_points, check_scalar
+from ..classify import SurfaceType, hk_surface_types
+from ..errors import InsufficientNeighborsError, InvalidParameterError
+from ..neighbors import CellIndex
+from ..stats import (f_test_paper, variance_test_paper, variance_test_satterthwaite, wald_test,
+                     z_test)
+from . import _quadric_kernels as _k
+from ._curvature_formulas import curvature_jacobian, curvatures, principal_jacobian
+from ._quadric import FitStatus, _run_kernel, check_fit_options
+
+logger = logging.getLogger(__name__)
+
+TESTS = ("calibrated", "paper")
+
+#: Per-point output fields, name -> (dtype, description). The first eleven are the contract
+#: of ARCHITECTURE.md; the rest extend it.
+FIELDS = {
+    "neighbors": ("int32", "points in the neighbourhood (positive weight)"),
+    "z0": ("float64", "z of the fitted surface point at the point"),
+    "sigma0_sq": ("float64", "a-posteriori variance factor"),
+    "chi2_pass": ("uint8", "1 where the chi-square test accepts the quadric"),
+    "K": ("float64", "Gaussian curvature"),
+    "H": ("float64", "mean curvature (H<0 convex)"),
+    "kmin": ("float64", "smaller principal curvature"),
+    "kmax": ("float64", "larger principal curvature"),
+    "K_sig": ("uint8", "1 where K differs significantly from 0"),
+    "H_sig": ("uint8", "1 where H differs significantly from 0"),
+    "surface_type": ("uint8", "HK surface type code"),
+    "status": ("uint8", "0 ok,1 few nbrs,2 degenerate,3 rejected"),
+    "dz0": ("float64", "fitted minus observed height (local)"),
+    "chi2_p": ("float64", "p-value of the chi-square test"),
+    "planar_p": ("float64", "p-value of the planarity/F test"),
+    "K_p": ("float64", "p-value of the K test"),
+    "H_p": ("float64", "p-value of the H test"),
+    "NormalX": ("float64", "surface normal x"),
+    "NormalY": ("float64", "surface normal y"),
+    "NormalZ": ("float64", "surface normal z"),
+}
+OPTIONAL_FIELDS = {
+    "K_min": ("float64", "minimal detectable |K| (eq. 19)"),
+    "H_min": ("float64", "minimal detectable |H| (eq. 19)"),
+    "radius": ("float64", "bandwidth chosen (multi-scale)"),
+}
+
+
+@dataclass(frozen=True)
+class CurvatureResult:
+    """Per-point curvature, tests and surface types, plus what produced them.
+
+    Attributes
+    ----------
+    fields : dict of str -> (N,) ndarray
+        Per-point outputs, in input order, named as written to files (see ``FIELDS``).
+    radius : float or tuple of float
+        Bandwidth(s) used.
+    sigma : float
+        Measurement standard deviation used by the tests (given or estimated).
+    sigma_estimated : bool
+        True when `sigma` was estimated from the data.
+    alpha : float
+        Significance level.
+    test : str
+        ``'calibrated'`` or ``'paper'``.
+    frame : str
+        Local frame.
+    """
+
+    fields: dict
+    radius: float | tuple
+    sigma: float
+    sigma_estimated: bool
+    alpha: float
+    test: str
+    frame: str
+    meta: dict = field(default_factory=dict)
+
+    def __getitem__(self, name):
+        return self.fields[name]
+
+    def __len__(self):
+        return self.fields["surface_type"].size
+
+    def to_fields(self):
+        """The per-point arrays with their file dtypes, ready for :func:`lidarstat.io.write`."""
+        spec = {**FIELDS, **OPTIONAL_FIELDS}
+        return {k: np.asarray(v, dtype=spec[k][0]) for k, v in self.fields.items()}
+
+    def counts(self):
+        """Counts per surface type and per status reason."""
+        st = self.fields["surface_type"]
+        status = self.fields["status"]
+        types = {t.name.lower(): int(np.count_nonzero(st == t)) for t in SurfaceType}
+        reasons = {s.name.lower(): int(np.count_nonzero(status == s)) for s in FitStatus}
+        return {"surface_type": types, "status": reasons}
+
+    def summary(self) -> str:
+        """A one-screen text summary (what the CLI prints)."""
+        n = len(self)
+        c = self.counts()
+        rad = self.radius if isinstance(self.radius, float) else ", ".join(map(str, self.radius))
+        lines = [
+            f"{n} points, radius {rad}, frame {self.frame}, test {self.test}, alpha {self.alpha}",
+            f"sigma {self.sigma:.6g}" + (" (estimated from the data)" if self.sigma_estimated else ""),
+            f"median neighbours {np.median(self.fields['neighbors']):.0f}",
+            "surface types:",
+        ]
+        for t in SurfaceType:
+            k = c["surface_type"][t.name.lower()]
+            lines.append(f"  {int(t)} {t.name.lower():<17s} {k:>10d} {100.0 * k / max(n, 1):6.2f}%")
+        lines.append("not classified, by reason:")
+        for s in FitStatus:
+            if s == FitStatus.OK:
+                continue
+            k = c["status"][s.name.lower()]
+            lines.append(f"  {s.name.lower():<20s} {k:>10d} {100.0 * k / max(n, 1):6.2f}%")
+        return "\n".join(lines)
+
+
+def test_curvature(out, *, sigma2, alpha, test, minimal_detectable=False):
+    """Turn raw kernel outputs of one block into curvature, tests and types.
+
+    Parameters
+    ----------
+    out : dict
+        Kernel outputs (``status``, ``npts``, ``beta``, ``cof``, ``frames``, ``stats``).
+    sigma2 : float
+        Measurement variance sigma_ls^2.
+    alpha : float
+        Significance level.
+    test : {'calibrated', 'paper'}
+        Which family of tests (see docs/methods/curvature.md).
+
+    Returns
+    -------
+    dict of per-point arrays named as in ``FIELDS``.
+    """
+    beta, cof, st = out["beta"], out["cof"], out["stats"]
+    q, trb, trb2 = st[:, 0], st[:, 2], st[:, 3]
+    p = out["npts"].astype(np.float64)
+    fitted = out["status"] == _k.OK
+    a = beta[:, 1:]
+    K, H, kmin, kmax = curvatures(a)
+    J = curvature_jacobian(a)
+    if test == "paper":
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s0 = q / (p - 6.0)
+        chi2 = variance_test_paper(q, p, sigma2, alpha)
+        Qww = J @ cof[:, 1:, 1:] @ np.swapaxes(J, 1, 2)
+        ftest = f_test_paper(np.stack([K, H], 1), Qww, s0, alpha)
+        planar = ~ftest.reject
+        planar_p = ftest.pvalue
+        with np.errstate(invalid="ignore"):
+            sdK = np.sqrt(s0 * Qww[:, 0, 0])
+            sdH = np.sqrt(s0 * Qww[:, 1, 1])
+        ktest = z_test(K, sdK, alpha / 2)
+        K_sig, K_p = ktest.reject, ktest.pvalue
+    else:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s0 = q / trb
+        chi2 = variance_test_satterthwaite(q, trb, trb2, sigma2, alpha)
+        cov_a = sigma2 * cof[:, 1:, 1:]
+        plan = wald_test(a[:, 2:], cov_a[:, 2:, 2:], alpha)
+        planar = ~plan.reject
+        planar_p = plan.pvalue
+        Cw = J @ cov_a @ np.swapaxes(J, 1, 2)
+        with np.errstate(invalid="ignore"):
+            sdK = np.sqrt(Cw[:, 0, 0])
+            sdH = np.sqrt(Cw[:, 1, 1])
+        # K = kmin*kmax differs from 0 iff both principal curvatures do (intersection-union
+        # test: each at level alpha/2 gives a level-alpha/2 test of K = 0).
+        Jp = principal_jacobian(K, H, J)
+        Cp = Jp @ cov_a @ np.swapaxes(Jp, 1, 2)
+        with np.errstate(invalid="ignore"):
+            t_min = z_test(kmin, np.sqrt(Cp[:, 0, 0]), alpha / 2)
+            t_max = z_test(kmax, np.sqrt(Cp[:, 1, 1]), alpha / 2)
+        K_sig = t_min.reject & t_max.reject
+        K_p = np.fmax(t_min.pvalue, t_max.pvalue)
+    htest = z_test(H, sdH, alpha / 2)
+    chi2_pass = fitted & np.isfinite(chi2.pvalue) & ~chi2.reject
+    status = out["status"].copy()
+    status[fitted & ~chi2_pass] = FitStatus.MODEL_REJECTED
+    surface_type = hk_surface_types(K, H, tested=chi2_pass, planar=planar, K_sig=K_sig,
+                                    H_sig=htest.reject)
+    frames = out["frames"]
+    nl = np.stack([-a[:, 0], -a[:, 1], np.ones_like(K)], axis=1)
+    nl /= np.linalg.norm(nl, axis=1, keepdims=True)
+    normal = np.einsum("nij,ni->nj", frames, nl)
+    res = {
+        "neighbors": out["npts"],
+        "z0": beta[:, 0] * frames[:, 2, 2],  # z offset of the fitted point; caller adds z
+        "sigma0_sq": s0,
+        "chi2_pass": chi2_pass.astype(np.uint8),
+        "K": K, "H": H, "kmin": kmin, "kmax": kmax,
+        "K_sig": (chi2_pass & K_sig).astype(np.uint8),
+        "H_sig": (chi2_pass & htest.reject).astype(np.uint8),
+        "surface_type": surface_type,
+        "status": status,
+        "dz0": beta[:, 0],
+        "chi2_p": chi2.pvalue, "planar_p": planar_p, "K_p": K_p, "H_p": htest.pvalue,
+        "NormalX": normal[:, 0], "NormalY": normal[:, 1], "NormalZ": normal[:, 2],
+    }
+    if minimal_detectable:
+        zc = _st.norm.isf(alpha / 4)  # two-sided at alpha/2 (Bonferroni), eq. 19
+        res["K_min"] = zc * sdK
+        res["H_min"] = zc * sdH
+    return res
+
+
+def estimate_sigma(points, radius, *, frame="z", sensor=None, min_neighbors=7, sample=20000,
+                   rng=0):
+    """Robust global noise estimate: median of the local unbiased variance estimates.
+
+    ``sigma^2 = median_i( v'Wv / tr(B) )`` over up to `sample` random points, where
+    ``v'Wv / tr(B)`` is unbiased for sigma^2 wherever the quadric holds; the median
+    ignores the minority of points on edges where it does not.
+
+    Returns
+    -------
+    float
+        Estimated sigma (not squared).
+    """
+    pts = check_points(points)
+    index = CellIndex(pts, radius)
+    rng = np.random.default_rng(rng)
+    n = pts.shape[0]
+    pos = np.sort(rng.choice(n, size=min(sample, n), replace=False))
+    indptr, idx, dist = index._query_local(index.sorted_points[pos])
+    sensor_local = None if sensor is None else np.asarray(sensor, float) - index.origin
+    out = _run_kernel(index.sorted_points, pos, indptr, idx, dist, bandwidth=radius, frame=frame,
+                      sensor=sensor_local, min_neighbors=min_neighbors, covariance="sandwich")
+    ok = out["status"] == _k.OK
+    if not ok.any():
+        raise InsufficientNeighborsError(
+            f"cannot estimate sigma: no point has {min_neighbors} neighbours within radius {radius}"
+        )
+    s2 = out["stats"][ok, 0] / out["stats"][ok, 2]
+    return float(np.sqrt(np.median(s2)))
+
+
+def _single_radius(pts, radius, *, sigma2, alpha, test, frame, sensor, min_neighbors,
+                   minimal_detectable, block_size, progress):
+    index = CellIndex(pts, radius)
+    sensor_local = None if sensor is None else np.asarray(sensor, float) - index.origin
+    n = pts.shape[0]
+    fields = None
+    blocks = index.cell_blocks(block_size)
+    done = 0
+    for c0, c1 in blocks:
+        indptr, idx, dist = index.query_cells(c0, c1)
+        s0, s1 = index.cell_start[c0], index.cell_start[c1]
+        query = np.arange(s0, s1, dtype=np.int64)
+        covariance = "paper" if test == "paper" else "sandwich"
+        out = _run_kernel(index.sorted_points, query, indptr, idx, dist, bandwidth=radius,
+                          frame=frame, sensor=sensor_local, min_neighbors=min_neighbors,
+                          covariance=covariance)
+        res = test_curvature(out, sigma2=sigma2, alpha=alpha, test=test,
+                             minimal_detectable=minimal_detectable)
+        orig = index.order[s0:s1]
+        res["z0"] = res["z0"] + pts[orig, 2]
+        if fields is None:
+            fields = {k: np.empty(n, dtype=v.dtype) for k, v in res.items()}
+        for k, v in res.items():
+            fields[k][orig] = v
+        done += s1 - s0
+        if progress is not None:
+            progress(done, n)
+    return fields
+
+
+def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", frame="z",
+              sensor=None, min_neighbors=7, minimal_detectable=False, block_size=131072,
+              progress=None) -> CurvatureResult:
+    """Statistically tested curvature and HK surface type of every point.
+
+    Fits the weighted quadric of Crosilla et al. (2009) in a 3-D sphere of radius
+    `radius` around every point, tests it against the measurement noise, computes K, H and
+    the principal curvatures, tests their significance and assigns HK surface types.
+    Works block by block in a spatially sorted order, so memory does not grow with the
+    number of neighbour pairs of the whole cloud.
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+        Coordinates (any magnitude: a local origin is subtracted).
+    radius : float or sequence of float
+        Bandwidth b (sphere radius, > 0). Several radii give the paper's multi-scale
+        strategy: per point, the smallest radius whose model is accepted.
+    sigma : float, optional
+        Measurement standard deviation sigma_ls along the height axis. If None it is
+        estimated (:func:`estimate_sigma`) and the chi-square test then only flags
+        points whose local variance exceeds the typical one.
+    alpha : float
+        Significance level of every test (individual K, H tests use alpha/2, Bonferroni).
+    test : {'calibrated', 'paper'}
+        ``'paper'``: eq. 6, 7, 16-18 as printed. ``'calibrated'`` (default): the sandwich
+        covariance of the WLS estimator, a Satterthwaite chi-square for v'Wv, an exact
+        chi2(3) test of the second-order terms for planarity, and tests of the principal
+        curvatures for K (see docs/methods/curvature.md).
+    frame : {'z', 'auto', 'pca'}
+        Local height axis (see :func:`fit_quadrics`).
+    sensor : (3,) array_like, optional
+        Scanner position to orient normals (and the sign of H) toward.
+    min_neighbors : int
+        Minimum neighbours (>= 7 so that the chi-square test has a degree of freedom).
+    minimal_detectable : bool
+        Also return ``K_min`` and ``H_min`` (eq. 19).
+    block_size : int
+        Approximate points per processing block.
+    progress : callable(done, total), optional
+        Called after each block.
+
+    Returns
+    -------
+    CurvatureResult
+
+    Examples
+    --------
+    >>> from lidarstat.synth import make_surface
+    >>> from lidarstat.features import curvature
+    >>> cloud = make_surface("cylinder", sigma=0.001, rng=0)
+    >>> res = curvature(cloud.xyz, radius=0.3, sigma=0.001)
+    >>> res.counts()["surface_type"]["parabolic_ridge"] > 0.9 * len(res)
+    True
+    """
+    func = "curvature"
+    pts = check_points(points)
+    radii = np.atleast_1d(np.asarray(radius, dtype=object))
+    radii = tuple(sorted(check_scalar(r, "radius", func=func, low=0.0) for r in radii))
+    if not radii:
+        raise InvalidParameterError(f"The 'radius' parameter of {func} must not be empty.")
+    alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0)
+    check_option(test, "test", TESTS, func=func)
+    check_fit_options(func, frame=frame, covariance="sandwich", min_neighbors=min_neighbors,
+                      sensor=sensor)
+    block_size = check_scalar(block_size, "block_size", func=func, low=1, closed="left",
+                              integer=True)
+    estimated = sigma is None
+    if estimated:
+        sigma = estimate_sigma(pts, radii[0], frame=frame, sensor=sensor,
+                               min_neighbors=min_neighbors)
+        logger.info("estimated sigma = %g", sigma)
+        if not sigma > 0:
+            raise InvalidParameterError(
+                f"{func}: the estimated sigma is {sigma}: the points lie exactly on quadrics; "
+                "give `sigma` explicitly"
+            )
+    else:
+        sigma = check_scalar(sigma, "sigma", func=func, low=0.0)
+    kw = dict(sigma2=sigma * sigma, alpha=alpha, test=test, frame=frame, sensor=sensor,
+              min_neighbors=min_neighbors, minimal_detectable=minimal_detectable,
+              block_size=block_size, progress=progress)
+    fields = _single_radius(pts, radii[0], **kw)
+    if len(radii) > 1:
+        chosen = np.full(pts.shape[0], radii[0])
+        pending = fields["chi2_pass"] == 0
+        for r in radii[1:]:
+            if not pending.any():
+                break
+            nxt = _single_radius(pts, r, **kw)
+            take = pending & (nxt["chi2_pass"] == 1)
+            for k in fields:
+                fields[k][take] = nxt[k][take]
+            chosen[take] = r
+            pending &= ~take
+        fields["radius"] = chosen
+    return CurvatureResult(fields=fields, radius=radii[0] if len(radii) == 1 else radii,
+                           sigma=float(sigma), sigma_estimated=estimated, alpha=alpha, test=test,
+                           frame=frame)

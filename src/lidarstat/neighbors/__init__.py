@@ -1,0 +1,6 @@
+"""CSR neighbourhoods from fixed-radius (3-D sphere, 2-D disc) and kNN queries."""
+
+from ._csr import Neighborhoods
+from ._query import CellIndex, knn_neighbors, radius_neighbors
+
+__all__ = ["Neighborhoods", "CellIndex", "radius_neighbors", "knn_neighbors"]

@@ -1,0 +1,98 @@
+"""The CSR neighbourhood container shared by every local model."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InvalidParameterError
+
+
+@dataclass(frozen=True)
+class Neighborhoods:
+    """Neighbourhoods of a set of query points in compressed sparse row (CSR) form.
+
+    Row ``i`` lists the neighbours of query point ``i``:
+    ``indices[indptr[i]:indptr[i + 1]]`` are indices into the searched cloud and
+    ``distances[indptr[i]:indptr[i + 1]]`` their distances (3-D for spheres and kNN,
+    planimetric for discs). Memory is proportional to the number of neighbour pairs.
+
+    Attributes
+    ----------
+    indptr : (M + 1,) ndarray of int64
+        Row pointers, ``indptr[0] == 0``, non-decreasing.
+    indices : (nnz,) ndarray of int64
+        Neighbour indices into the searched cloud of `n_points` points.
+    distances : (nnz,) ndarray of float64
+        Distance of each neighbour from its query point.
+    n_points : int
+        Size of the searched cloud.
+    kind : {'sphere', 'disc', 'knn'}
+        How the neighbourhoods were built.
+    radius : float or None
+        Search radius for 'sphere' and 'disc'.
+    k : int or None
+        Number of neighbours for 'knn'.
+    query : (M,) ndarray of int64 or None
+        Indices (into the searched cloud) of the query points, or None when the query
+        points are the cloud itself in order.
+    """
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    distances: np.ndarray
+    n_points: int
+    kind: str = "sphere"
+    radius: float | None = None
+    k: int | None = None
+    query: np.ndarray | None = field(default=None)
+
+    def __post_init__(self):
+        indptr = np.ascontiguousarray(self.indptr, dtype=np.int64)
+        indices = np.ascontiguousarray(self.indices, dtype=np.int64)
+        distances = np.ascontiguousarray(self.distances, dtype=np.float64)
+        object.__setattr__(self, "indptr", indptr)
+        object.__setattr__(self, "indices", indices)
+        object.__setattr__(self, "distances", distances)
+        if self.query is not None:
+            object.__setattr__(self, "query", np.ascontiguousarray(self.query, dtype=np.int64))
+        if indptr.ndim != 1 or indptr.size < 1 or indptr[0] != 0:
+            raise InvalidParameterError("Neighborhoods: `indptr` must be 1-D and start at 0")
+        if indptr[-1] != indices.size or indices.size != distances.size:
+            raise InvalidParameterError(
+                f"Neighborhoods: indptr[-1] ({indptr[-1]}), len(indices) ({indices.size}) and "
+                f"len(distances) ({distances.size}) must agree"
+            )
+        if indptr.size > 1 and np.any(np.diff(indptr) < 0):
+            raise InvalidParameterError("Neighborhoods: `indptr` must be non-decreasing")
+        if indices.size and (indices.min() < 0 or indices.max() >= self.n_points):
+            raise InvalidParameterError(
+                f"Neighborhoods: indices must lie in [0, {self.n_points})"
+            )
+        if self.query is not None and self.query.size != indptr.size - 1:
+            raise InvalidParameterError("Neighborhoods: `query` must have one entry per row")
+
+    def __len__(self) -> int:
+        return self.indptr.size - 1
+
+    @property
+    def counts(self) -> np.ndarray:
+        """Number of neighbours of each query point, shape (M,)."""
+        return np.diff(self.indptr)
+
+    @property
+    def nnz(self) -> int:
+        """Total number of neighbour pairs."""
+        return int(self.indptr[-1])
+
+    def row(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """Indices and distances of the neighbours of query point `i`."""
+        s, e = self.indptr[i], self.indptr[i + 1]
+        return self.indices[s:e], self.distances[s:e]
+
+    def query_indices(self) -> np.ndarray:
+        """Indices of the query points in the searched cloud."""
+        if self.query is None:
+            return np.arange(len(self), dtype=np.int64)
+        return self.query

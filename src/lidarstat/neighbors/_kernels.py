@@ -1,0 +1,192 @@
+"""Numba kernels of the cell-list (uniform grid) fixed-radius search.
+
+The searched points are sorted by cell key; ``cell_keys`` holds the sorted unique keys
+and ``cell_start`` the first sorted position of each cell (with a sentinel at the end).
+A query visits the 3**dim cells around its own and keeps the points within ``radius``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import prange
+
+from .._shared._jit import njit, njit_parallel
+
+
+@njit
+def _find_cell(cell_keys, key):
+    pos = np.searchsorted(cell_keys, key)
+    if pos < cell_keys.size and cell_keys[pos] == key:
+        return pos
+    return -1
+
+
+@njit
+def _visit(q, pts, cell_keys, cell_start, lo, cell, dims, radius, ndim, out_idx, out_dist, start,
+           count_only):
+    """Count (and optionally store) the neighbours of query coordinates `q`."""
+    r2 = radius * radius
+    cx = int(np.floor((q[0] - lo[0]) / cell))
+    cy = int(np.floor((q[1] - lo[1]) / cell))
+    cz = 0
+    if ndim == 3:
+        cz = int(np.floor((q[2] - lo[2]) / cell))
+    n = 0
+    zr = 1 if ndim == 3 else 0
+    for ix in range(cx - 1, cx + 2):
+        if ix < 0 or ix >= dims[0]:
+            continue
+        for iy in range(cy - 1, cy + 2):
+            if iy < 0 or iy >= dims[1]:
+                continue
+            for iz in range(cz - zr, cz + zr + 1):
+                if iz < 0 or iz >= dims[2]:
+                    continue
+                key = (ix * dims[1] + iy) * dims[2] + iz
+                c = _find_cell(cell_keys, key)
+                if c < 0:
+                    continue
+                for j in range(cell_start[c], cell_start[c + 1]):
+                    dx = pts[j, 0] - q[0]
+                    dy = pts[j, 1] - q[1]
+                    d2 = dx * dx + dy * dy
+                    if ndim == 3:
+                        dz = pts[j, 2] - q[2]
+                        d2 += dz * dz
+                    if d2 <= r2:
+                        if not count_only:
+                            out_idx[start + n] = j
+                            out_dist[start + n] = np.sqrt(d2)
+                        n += 1
+    return n
+
+
+@njit_parallel
+def count_radius(queries, pts, cell_keys, cell_start, lo, cell, dims, radius, ndim):
+    """Number of neighbours of every query point (parallel over queries)."""
+    m = queries.shape[0]
+    counts = np.empty(m, dtype=np.int64)
+    dummy_i = np.empty(0, dtype=np.int64)
+    dummy_d = np.empty(0, dtype=np.float64)
+    for i in prange(m):
+        counts[i] = _visit(queries[i], pts, cell_keys, cell_start, lo, cell, dims, radius, ndim,
+                           dummy_i, dummy_d, 0, True)
+    return counts
+
+
+@njit_parallel
+def fill_radius(queries, pts, cell_keys, cell_start, lo, cell, dims, radius, ndim, indptr,
+                out_idx, out_dist):
+    """Write neighbour (sorted-order) indices and distances into preallocated CSR arrays."""
+    m = queries.shape[0]
+    for i in prange(m):
+        _visit(queries[i], pts, cell_keys, cell_start, lo, cell, dims, radius, ndim, out_idx,
+               out_dist, indptr[i], False)
+
+
+@njit_parallel
+def remap(indices, order):
+    """Map sorted positions back to original point indices, in place."""
+    for i in prange(indices.size):
+        indices[i] = order[indices[i]]
+
+
+@njit
+def _cell_ranges(c, cell_keys, cell_start, dims, ndim, ranges):
+    """Sorted-position ranges of the (up to 27) cells around occupied cell `c`."""
+    key = cell_keys[c]
+    iz0 = key % dims[2]
+    rest = key // dims[2]
+    iy0 = rest % dims[1]
+    ix0 = rest // dims[1]
+    zr = 1 if ndim == 3 else 0
+    n = 0
+    for ix in range(ix0 - 1, ix0 + 2):
+        if ix < 0 or ix >= dims[0]:
+            continue
+        for iy in range(iy0 - 1, iy0 + 2):
+            if iy < 0 or iy >= dims[1]:
+                continue
+            # cells (ix, iy, iz0-1..iz0+1) are consecutive keys: one search for the run
+            kz0 = max(iz0 - zr, 0)
+            kz1 = min(iz0 + zr, dims[2] - 1)
+            k0 = (ix * dims[1] + iy) * dims[2] + kz0
+            k1 = (ix * dims[1] + iy) * dims[2] + kz1
+            a = np.searchsorted(cell_keys, k0)
+            b = np.searchsorted(cell_keys, k1, side="right")
+            if b > a:
+                ranges[n, 0] = cell_start[a]
+                ranges[n, 1] = cell_start[b]
+                n += 1
+    return n
+
+
+@njit
+def _scan(i, pts, ranges, nr, r2, ndim, out_idx, out_dist, start, count_only):
+    n = 0
+    qx = pts[i, 0]
+    qy = pts[i, 1]
+    qz = pts[i, 2]
+    for t in range(nr):
+        for j in range(ranges[t, 0], ranges[t, 1]):
+            dx = pts[j, 0] - qx
+            dy = pts[j, 1] - qy
+            d2 = dx * dx + dy * dy
+            if ndim == 3:
+                dz = pts[j, 2] - qz
+                d2 += dz * dz
+            if d2 <= r2:
+                if not count_only:
+                    out_idx[start + n] = j
+                    out_dist[start + n] = np.sqrt(d2)
+                n += 1
+    return n
+
+
+@njit_parallel
+def count_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, ndim):
+    """Neighbour counts of the points of occupied cells c0..c1-1 (sorted order)."""
+    base = cell_start[c0]
+    counts = np.zeros(cell_start[c1] - base, dtype=np.int64)
+    r2 = radius * radius
+    dummy_i = np.empty(0, dtype=np.int64)
+    dummy_d = np.empty(0, dtype=np.float64)
+    for c in prange(c0, c1):
+        ranges = np.empty((9, 2), dtype=np.int64)
+        nr = _cell_ranges(c, cell_keys, cell_start, dims, ndim, ranges)
+        for i in range(cell_start[c], cell_start[c + 1]):
+            counts[i - base] = _scan(i, pts, ranges, nr, r2, ndim, dummy_i, dummy_d, 0, True)
+    return counts
+
+
+@njit_parallel
+def fill_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, ndim, indptr, out_idx,
+               out_dist):
+    """Fill CSR rows (sorted positions) for the points of occupied cells c0..c1-1."""
+    base = cell_start[c0]
+    r2 = radius * radius
+    for c in prange(c0, c1):
+        ranges = np.empty((9, 2), dtype=np.int64)
+        nr = _cell_ranges(c, cell_keys, cell_start, dims, ndim, ranges)
+        for i in range(cell_start[c], cell_start[c + 1]):
+            _scan(i, pts, ranges, nr, r2, ndim, out_idx, out_dist, indptr[i - base], False)
+
+
+@njit_parallel
+def permute_rows(indptr, indices, distances, row_of, order):
+    """Reorder CSR rows: output row ``r`` is input row ``row_of[r]``; indices mapped by `order`."""
+    m = row_of.size
+    new_ptr = np.zeros(m + 1, dtype=np.int64)
+    for r in range(m):
+        s = row_of[r]
+        new_ptr[r + 1] = new_ptr[r] + indptr[s + 1] - indptr[s]
+    new_idx = np.empty(new_ptr[m], dtype=np.int64)
+    new_dist = np.empty(new_ptr[m], dtype=np.float64)
+    for r in prange(m):
+        s = row_of[r]
+        o = new_ptr[r]
+        for t in range(indptr[s], indptr[s + 1]):
+            new_idx[o] = order[indices[t]]
+            new_dist[o] = distances[t]
+            o += 1
+    return new_ptr, new_idx, new_dist

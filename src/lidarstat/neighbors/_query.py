@@ -1,0 +1,230 @@
+"""Neighbourhood queries: fixed radius (3-D sphere or 2-D disc) and k nearest neighbours."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._shared.validation import check_option, check_points, check_scalar
+from ..errors import InvalidParameterError
+from . import _kernels
+from ._csr import Neighborhoods
+
+#: Largest number of grid cells per axis before the cell size is enlarged.
+_MAX_CELLS_PER_AXIS = 1 << 20
+
+
+class CellIndex:
+    """Uniform-grid (cell list) index for fixed-radius queries.
+
+    The points are sorted by cell once (O(N log N)); a query then visits the 27 (3-D) or
+    9 (2-D) cells around the query point. For a fixed radius this is the textbook optimal
+    structure and, on this project's benchmark, several times faster than KD-tree ball
+    queries, which return Python lists. The sort order is also a spatially coherent order
+    in which to process points (cache locality), exposed as :attr:`order`.
+
+    Parameters
+    ----------
+    points : (N, 3) ndarray of float64
+        Searched points.
+    radius : float
+        Largest radius that will be queried (the cell edge).
+    dim : {3, 2}
+        3 for spheres, 2 for planimetric discs (z ignored).
+
+    Attributes
+    ----------
+    order : (N,) ndarray of int64
+        Permutation sorting the points by cell (row-major cell key).
+    sorted_points : (N, 3) ndarray of float64
+        ``points[order]`` relative to :attr:`origin` (local origin keeps UTM precision).
+    origin : (3,) ndarray
+        Subtracted from the coordinates before any arithmetic.
+    """
+
+    def __init__(self, points, radius, *, dim=3):
+        points = check_points(points)
+        radius = check_scalar(radius, "radius", func="CellIndex", low=0.0)
+        if dim not in (2, 3):
+            raise InvalidParameterError(f"The 'dim' parameter of CellIndex must be 2 or 3. Got {dim!r} instead.")
+        self.dim = dim
+        self.radius = radius
+        self.n_points = points.shape[0]
+        self.origin = points.min(axis=0)
+        local = points - self.origin
+        extent = local.max(axis=0)
+        cell = max(radius, float(extent[:dim].max()) / _MAX_CELLS_PER_AXIS)
+        self.cell = cell
+        dims = np.floor(extent / cell).astype(np.int64) + 1
+        if dim == 2:
+            dims[2] = 1
+        self.dims = dims
+        ijk = np.floor(local / cell).astype(np.int64)
+        ijk = np.minimum(ijk, dims - 1)
+        if dim == 2:
+            ijk[:, 2] = 0
+        keys = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
+        self.order = np.argsort(keys, kind="stable").astype(np.int64)
+        skeys = keys[self.order]
+        self.sorted_points = np.ascontiguousarray(local[self.order])
+        boundaries = np.flatnonzero(np.diff(skeys)) + 1
+        starts = np.concatenate(([0], boundaries, [skeys.size])).astype(np.int64)
+        self.cell_keys = np.ascontiguousarray(skeys[starts[:-1]])
+        self.cell_start = starts
+        self.lo = np.zeros(3)
+
+    @property
+    def n_cells(self) -> int:
+        """Number of occupied cells."""
+        return self.cell_keys.size
+
+    def cell_blocks(self, max_points):
+        """Split the occupied cells into consecutive ranges of at most ~`max_points` points.
+
+        Returns a list of ``(c0, c1)``; the query points of a block are the sorted
+        positions ``cell_start[c0]:cell_start[c1]``. A single cell larger than
+        `max_points` forms a block on its own.
+        """
+        bounds = [0]
+        starts = self.cell_start
+        c = 0
+        while c < self.n_cells:
+            target = starts[c] + max_points
+            nxt = int(np.searchsorted(starts, target, side="right")) - 1
+            nxt = min(max(nxt, c + 1), self.n_cells)
+            bounds.append(nxt)
+            c = nxt
+        return list(zip(bounds[:-1], bounds[1:]))
+
+    def query_cells(self, c0, c1, radius=None):
+        """CSR neighbourhoods, in sorted positions, of the points of cells ``c0..c1-1``.
+
+        Row ``i`` belongs to sorted position ``cell_start[c0] + i``. This is the fast path
+        used by the local-model drivers, which work block by block in the sorted order so
+        that memory does not grow with the cloud.
+        """
+        radius = self._check_radius(radius)
+        args = (self.sorted_points, self.cell_keys, self.cell_start, self.dims, radius, self.dim)
+        counts = _kernels.count_cells(c0, c1, *args)
+        indptr = np.zeros(counts.size + 1, dtype=np.int64)
+        np.cumsum(counts, out=indptr[1:])
+        idx = np.empty(indptr[-1], dtype=np.int64)
+        dist = np.empty(indptr[-1], dtype=np.float64)
+        _kernels.fill_cells(c0, c1, *args, indptr, idx, dist)
+        return indptr, idx, dist
+
+    def _check_radius(self, radius):
+        radius = self.radius if radius is None else float(radius)
+        if radius > self.cell * (1 + 1e-12):
+            raise InvalidParameterError(
+                f"query radius {radius} exceeds the index cell size {self.cell}"
+            )
+        return radius
+
+    def _query_local(self, q, radius=None):
+        radius = self._check_radius(radius)
+        q = np.ascontiguousarray(q, dtype=np.float64)
+        args = (self.sorted_points, self.cell_keys, self.cell_start, self.lo, self.cell,
+                self.dims, float(radius), self.dim)
+        counts = _kernels.count_radius(q, *args)
+        indptr = np.zeros(q.shape[0] + 1, dtype=np.int64)
+        np.cumsum(counts, out=indptr[1:])
+        idx = np.empty(indptr[-1], dtype=np.int64)
+        dist = np.empty(indptr[-1], dtype=np.float64)
+        _kernels.fill_radius(q, *args, indptr, idx, dist)
+        return indptr, idx, dist
+
+    def query(self, points, radius=None):
+        """Neighbourhoods of arbitrary query coordinates, as original point indices."""
+        q = check_points(points, name="query points") - self.origin
+        indptr, idx, dist = self._query_local(q, radius)
+        _kernels.remap(idx, self.order)
+        return indptr, idx, dist
+
+
+def radius_neighbors(points, radius, *, dim=3, query=None):
+    """All points within `radius` of each query point (the point itself included).
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+        Searched cloud.
+    radius : float
+        Search radius, > 0: a 3-D sphere (``dim=3``, the choice of Crosilla et al. 2009, so
+        that data slips are not bridged) or a planimetric disc (``dim=2``).
+    dim : {3, 2}, optional
+        Sphere or disc.
+    query : (M,) array_like of int, optional
+        Indices of the query points; default every point.
+
+    Returns
+    -------
+    Neighborhoods
+        CSR neighbourhoods, one row per query point, neighbour indices into `points`.
+        Rows are not sorted by distance.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lidarstat.neighbors import radius_neighbors
+    >>> pts = np.array([[0., 0, 0], [0.5, 0, 0], [2, 0, 0]])
+    >>> nb = radius_neighbors(pts, 1.0)
+    >>> nb.counts.tolist()
+    [2, 2, 1]
+    """
+    points = check_points(points)
+    radius = check_scalar(radius, "radius", func="radius_neighbors", low=0.0)
+    check_option(dim, "dim", (2, 3), func="radius_neighbors")
+    index = CellIndex(points, radius, dim=dim)
+    if query is None:
+        indptr, idx, dist = index.query_cells(0, index.n_cells)
+        # rows are in sorted order: row r of the output is sorted row inverse[r]
+        inverse = np.empty_like(index.order)
+        inverse[index.order] = np.arange(index.order.size)
+        indptr, idx, dist = _kernels.permute_rows(indptr, idx, dist, inverse, index.order)
+        return Neighborhoods(indptr, idx, dist, points.shape[0],
+                             kind="sphere" if dim == 3 else "disc", radius=radius)
+    else:
+        qidx = np.asarray(query, dtype=np.int64).ravel()
+        if qidx.size and (qidx.min() < 0 or qidx.max() >= points.shape[0]):
+            raise InvalidParameterError("radius_neighbors: `query` indices out of range")
+        q = points[qidx]
+    indptr, idx, dist = index.query(q)
+    return Neighborhoods(indptr, idx, dist, points.shape[0], kind="sphere" if dim == 3 else "disc",
+                         radius=radius, query=qidx)
+
+
+def knn_neighbors(points, k, *, query=None, workers=-1):
+    """The `k` nearest neighbours of each query point (the point itself included).
+
+    Uses SciPy's ``cKDTree`` (parallel queries). Rows are sorted by distance.
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+        Searched cloud.
+    k : int
+        Neighbours per point, 1 <= k <= N.
+    query : (M,) array_like of int, optional
+        Indices of the query points; default every point.
+    workers : int, optional
+        Threads for the query (-1: all cores).
+
+    Returns
+    -------
+    Neighborhoods
+    """
+    from scipy.spatial import cKDTree
+
+    points = check_points(points)
+    k = check_scalar(k, "k", func="knn_neighbors", low=1, high=points.shape[0], closed="both",
+                     integer=True)
+    origin = points.min(axis=0)
+    tree = cKDTree(points - origin)
+    qidx = None if query is None else np.asarray(query, dtype=np.int64).ravel()
+    q = points if qidx is None else points[qidx]
+    dist, idx = tree.query(q - origin, k=k, workers=workers)
+    dist = np.asarray(dist, dtype=np.float64).reshape(q.shape[0], k)
+    idx = np.asarray(idx, dtype=np.int64).reshape(q.shape[0], k)
+    indptr = np.arange(q.shape[0] + 1, dtype=np.int64) * k
+    return Neighborhoods(indptr, idx.ravel(), dist.ravel(), points.shape[0], kind="knn", k=k,
+                         query=qidx)
