@@ -1,0 +1,56 @@
+"""Synthetic point clouds with exact ground truth (NumPy only).
+
+Height fields (``make_plane``, ``make_cylinder``, ``make_sphere_cap``,
+``make_paraboloid``, ``make_scherk``, ``make_surface``) and orthographic range scans of
+CSG solids (``make_agpart``, ``make_column``) return a :class:`SyntheticCloud` carrying
+the true normals, curvatures (K, H, kmin, kmax), surface type codes, face ids and the
+distance of every point to the nearest edge.
+
+Sign convention: normals point up (+z) / toward the viewer and H < 0 on convex surfaces
+(the top of a horizontal cylinder of radius R has K = 0, H = -1/(2R)).  Surface type
+codes: 0 unclassified, 1 planar, 2 parabolic ridge, 3 parabolic valley, 4 elliptic peak,
+5 elliptic pit, 6 saddle ridge, 7 saddle valley, 8 minimal saddle.
+"""
+
+from __future__ import annotations
+
+from ._csg import Box, Cylinder, FaceRegistry, difference, scan_orthographic, union
+from ._scenes import SCENES, make_agpart, make_column
+from ._surfaces import (
+    SURFACE_KINDS,
+    make_cylinder,
+    make_paraboloid,
+    make_plane,
+    make_scherk,
+    make_sphere_cap,
+    make_surface,
+)
+from ._truth import (
+    SURFACE_TYPE_NAMES,
+    SyntheticCloud,
+    principal_curvatures,
+    surface_type_from_curvature,
+)
+
+__all__ = [
+    "SyntheticCloud",
+    "SURFACE_TYPE_NAMES",
+    "SURFACE_KINDS",
+    "SCENES",
+    "surface_type_from_curvature",
+    "principal_curvatures",
+    "make_plane",
+    "make_cylinder",
+    "make_sphere_cap",
+    "make_paraboloid",
+    "make_scherk",
+    "make_surface",
+    "make_agpart",
+    "make_column",
+    "Cylinder",
+    "Box",
+    "FaceRegistry",
+    "union",
+    "difference",
+    "scan_orthographic",
+]
