@@ -1,9 +1,10 @@
 """Local models per point: weighted quadric (Taylor) fits and tested curvature."""
 
-from ._curvature import FIELDS, CurvatureResult, curvature, estimate_sigma, test_curvature
+from ._curvature import (FIELDS, CurvatureResult, curvature, curvature_tests, estimate_sigma,
+                         height_variance)
 from ._curvature_formulas import curvature_jacobian, curvatures, principal_jacobian
 from ._quadric import FitStatus, QuadricFit, fit_quadrics
 
 __all__ = ["FIELDS", "CurvatureResult", "FitStatus", "QuadricFit", "curvature",
-           "curvature_jacobian", "curvatures", "estimate_sigma", "fit_quadrics",
-           "principal_jacobian", "test_curvature"]
+           "curvature_jacobian", "curvature_tests", "curvatures", "estimate_sigma",
+           "fit_quadrics", "height_variance", "principal_jacobian"]

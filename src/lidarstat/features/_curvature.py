@@ -21,6 +21,7 @@ from ._quadric import FitStatus, _run_kernel, check_fit_options
 logger = logging.getLogger(__name__)
 
 TESTS = ("calibrated", "paper")
+NOISE = ("z", "range", "normal")
 
 #: Per-point output fields, name -> (dtype, description). The first eleven are the contract
 #: of ARCHITECTURE.md; the rest extend it.
@@ -126,15 +127,15 @@ class CurvatureResult:
         return "\n".join(lines)
 
 
-def test_curvature(out, *, sigma2, alpha, test, minimal_detectable=False):
+def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False):
     """Turn raw kernel outputs of one block into curvature, tests and types.
 
     Parameters
     ----------
     out : dict
         Kernel outputs (``status``, ``npts``, ``beta``, ``cof``, ``frames``, ``stats``).
-    sigma2 : float
-        Measurement variance sigma_ls^2.
+    sigma2 : float or (M,) ndarray
+        Variance of the heights (see :func:`height_variance`).
     alpha : float
         Significance level.
     test : {'calibrated', 'paper'}
@@ -145,6 +146,7 @@ def test_curvature(out, *, sigma2, alpha, test, minimal_detectable=False):
     dict of per-point arrays named as in ``FIELDS``.
     """
     beta, cof, st = out["beta"], out["cof"], out["stats"]
+    sigma2 = np.broadcast_to(np.asarray(sigma2, dtype=np.float64), out["status"].shape)
     q, trb, trb2 = st[:, 0], st[:, 2], st[:, 3]
     p = out["npts"].astype(np.float64)
     fitted = out["status"] == _k.OK
@@ -168,7 +170,7 @@ def test_curvature(out, *, sigma2, alpha, test, minimal_detectable=False):
         with np.errstate(invalid="ignore", divide="ignore"):
             s0 = q / trb
         chi2 = variance_test_satterthwaite(q, trb, trb2, sigma2, alpha)
-        cov_a = sigma2 * cof[:, 1:, 1:]
+        cov_a = sigma2[:, None, None] * cof[:, 1:, 1:]
         plan = wald_test(a[:, 2:], cov_a[:, 2:, 2:], alpha)
         planar = ~plan.reject
         planar_p = plan.pvalue
@@ -216,6 +218,40 @@ def test_curvature(out, *, sigma2, alpha, test, minimal_detectable=False):
     return res
 
 
+def height_variance(frames, sigma, *, noise="z", points=None, sensor=None):
+    """Variance of the local heights implied by measurement noise of std `sigma`.
+
+    The local model's heights run along the frame axis n, while the instrument's noise runs
+    along a direction d: z for range images and airborne data (``noise='z'``), the
+    sensor-to-point ray for terrestrial scans (``'range'``), or n itself (``'normal'``,
+    isotropic noise). The height noise then has variance ``sigma^2 (n . d)^2``; in the
+    ``'z'`` frame with ``noise='z'`` this is sigma^2, as in the paper.
+
+    Parameters
+    ----------
+    frames : (M, 3, 3) ndarray
+        Local frames (rows e1, e2, n).
+    sigma : float
+    noise : {'z', 'range', 'normal'}
+    points, sensor : ndarray, optional
+        Point coordinates (M, 3) and sensor position, needed for ``'range'``.
+
+    Returns
+    -------
+    (M,) ndarray
+    """
+    n = frames[:, 2, :]
+    if noise == "normal":
+        f = np.ones(n.shape[0])
+    elif noise == "z":
+        f = n[:, 2] ** 2
+    else:
+        d = points - np.asarray(sensor, dtype=np.float64)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        f = np.einsum("ij,ij->i", n, d) ** 2
+    return sigma * sigma * np.maximum(f, 1e-12)
+
+
 def estimate_sigma(points, radius, *, frame="z", sensor=None, min_neighbors=7, sample=20000,
                    rng=0):
     """Robust global noise estimate: median of the local unbiased variance estimates.
@@ -247,7 +283,7 @@ def estimate_sigma(points, radius, *, frame="z", sensor=None, min_neighbors=7, s
     return float(np.sqrt(np.median(s2)))
 
 
-def _single_radius(pts, radius, *, sigma2, alpha, test, frame, sensor, min_neighbors,
+def _single_radius(pts, radius, *, sigma, noise, alpha, test, frame, sensor, min_neighbors,
                    minimal_detectable, block_size, progress):
     index = CellIndex(pts, radius)
     sensor_local = None if sensor is None else np.asarray(sensor, float) - index.origin
@@ -263,9 +299,11 @@ def _single_radius(pts, radius, *, sigma2, alpha, test, frame, sensor, min_neigh
         out = _run_kernel(index.sorted_points, query, indptr, idx, dist, bandwidth=radius,
                           frame=frame, sensor=sensor_local, min_neighbors=min_neighbors,
                           covariance=covariance)
-        res = test_curvature(out, sigma2=sigma2, alpha=alpha, test=test,
-                             minimal_detectable=minimal_detectable)
         orig = index.order[s0:s1]
+        sigma2 = height_variance(out["frames"], sigma, noise=noise, points=pts[orig],
+                                 sensor=sensor)
+        res = curvature_tests(out, sigma2=sigma2, alpha=alpha, test=test,
+                              minimal_detectable=minimal_detectable)
         res["z0"] = res["z0"] + pts[orig, 2]
         if fields is None:
             fields = {k: np.empty(n, dtype=v.dtype) for k, v in res.items()}
@@ -278,7 +316,7 @@ def _single_radius(pts, radius, *, sigma2, alpha, test, frame, sensor, min_neigh
 
 
 def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", frame="z",
-              sensor=None, min_neighbors=7, minimal_detectable=False, block_size=131072,
+              sensor=None, noise=None, min_neighbors=7, minimal_detectable=False, block_size=131072,
               progress=None) -> CurvatureResult:
     """Statistically tested curvature and HK surface type of every point.
 
@@ -310,6 +348,10 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
         Local height axis (see :func:`fit_quadrics`).
     sensor : (3,) array_like, optional
         Scanner position to orient normals (and the sign of H) toward.
+    noise : {'z', 'range', 'normal'}, optional
+        Direction of the measurement noise `sigma`: along z (airborne, range images),
+        along the sensor ray (terrestrial; needs `sensor`) or isotropic. Default
+        ``'range'`` when `sensor` is given, else ``'z'``. See :func:`height_variance`.
     min_neighbors : int
         Minimum neighbours (>= 7 so that the chi-square test has a degree of freedom).
     minimal_detectable : bool
@@ -340,12 +382,19 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
         raise InvalidParameterError(f"The 'radius' parameter of {func} must not be empty.")
     alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0)
     check_option(test, "test", TESTS, func=func)
+    if noise is None:
+        noise = "z" if sensor is None else "range"
+    check_option(noise, "noise", NOISE, func=func)
+    if noise == "range" and sensor is None:
+        raise InvalidParameterError(f"{func}: noise='range' needs the `sensor` position")
     check_fit_options(func, frame=frame, covariance="sandwich", min_neighbors=min_neighbors,
                       sensor=sensor)
     block_size = check_scalar(block_size, "block_size", func=func, low=1, closed="left",
                               integer=True)
     estimated = sigma is None
     if estimated:
+        # estimated on the local heights, so the noise is "normal" to the frame by construction
+        noise = "normal"
         sigma = estimate_sigma(pts, radii[0], frame=frame, sensor=sensor,
                                min_neighbors=min_neighbors)
         logger.info("estimated sigma = %g", sigma)
@@ -356,7 +405,7 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
             )
     else:
         sigma = check_scalar(sigma, "sigma", func=func, low=0.0)
-    kw = dict(sigma2=sigma * sigma, alpha=alpha, test=test, frame=frame, sensor=sensor,
+    kw = dict(sigma=sigma, noise=noise, alpha=alpha, test=test, frame=frame, sensor=sensor,
               min_neighbors=min_neighbors, minimal_detectable=minimal_detectable,
               block_size=block_size, progress=progress)
     fields = _single_radius(pts, radii[0], **kw)

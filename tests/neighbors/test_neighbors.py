@@ -1,0 +1,70 @@
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from lidarstat.errors import InvalidParameterError, InvalidPointsError
+from lidarstat.neighbors import CellIndex, Neighborhoods, knn_neighbors, radius_neighbors
+
+
+@pytest.mark.parametrize("dim", [3, 2])
+def test_radius_matches_kdtree_on_utm_coordinates(rng, dim):
+    pts = rng.random((5000, 3)) * [20, 20, 2] + [4.5e5, 5.2e6, 120.0]
+    nb = radius_neighbors(pts, 0.7, dim=dim)
+    ref = cKDTree(pts[:, :dim]).query_ball_point(pts[:, :dim], 0.7)
+    assert nb.nnz == sum(len(r) for r in ref)
+    for i in range(0, 5000, 37):
+        idx, dist = nb.row(i)
+        assert sorted(idx.tolist()) == sorted(ref[i])
+        np.testing.assert_allclose(dist, np.linalg.norm((pts[idx] - pts[i])[:, :dim], axis=1),
+                                   atol=1e-9)
+
+
+def test_radius_query_subset_and_self_included(rng):
+    pts = rng.random((2000, 3))
+    q = np.array([5, 17, 1999])
+    nb = radius_neighbors(pts, 0.2, query=q)
+    assert len(nb) == 3
+    for r, i in enumerate(q):
+        idx, dist = nb.row(r)
+        assert i in idx.tolist() and dist[idx.tolist().index(i)] == 0.0
+
+
+def test_cell_blocks_cover_every_point_once(rng):
+    pts = rng.random((10000, 3)) * [50, 50, 1]
+    index = CellIndex(pts, 1.0)
+    blocks = index.cell_blocks(700)
+    sizes = [index.cell_start[c1] - index.cell_start[c0] for c0, c1 in blocks]
+    assert sum(sizes) == 10000 and blocks[0][0] == 0 and blocks[-1][1] == index.n_cells
+    assert max(sizes) < 700 + 200  # a block overshoots by at most one cell
+    indptr, idx, _ = index.query_cells(*blocks[3])
+    assert indptr.size - 1 == sizes[3]
+    assert np.all(idx < 10000)
+
+
+def test_knn_sorted_and_includes_self(rng):
+    pts = rng.random((1000, 3))
+    nb = knn_neighbors(pts, 8)
+    assert (nb.counts == 8).all()
+    assert (nb.indices[nb.indptr[:-1]] == np.arange(1000)).all()
+    d = nb.distances.reshape(-1, 8)
+    assert (np.diff(d, axis=1) >= 0).all()
+
+
+def test_neighborhoods_validation():
+    with pytest.raises(InvalidParameterError, match="indptr"):
+        Neighborhoods(np.array([1, 2]), np.array([0]), np.array([0.0]), 1)
+    with pytest.raises(InvalidParameterError, match="indices must lie"):
+        Neighborhoods(np.array([0, 1]), np.array([5]), np.array([0.0]), 2)
+
+
+@pytest.mark.parametrize("radius", [0, -1.0, np.nan, "a"])
+def test_bad_radius(radius):
+    with pytest.raises(InvalidParameterError, match="'radius' parameter"):
+        radius_neighbors(np.zeros((3, 3)), radius)
+
+
+def test_bad_points():
+    with pytest.raises(InvalidPointsError, match="empty"):
+        radius_neighbors(np.zeros((0, 3)), 1.0)
+    with pytest.raises(InvalidPointsError, match="NaN or infinite"):
+        radius_neighbors(np.array([[0, 0, np.nan]]), 1.0)
