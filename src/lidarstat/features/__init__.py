@@ -2,9 +2,10 @@
 
 from ._curvature import (FIELDS, CurvatureResult, curvature, curvature_tests, estimate_sigma,
                          height_variance)
+from ._bandwidth import BandwidthResult, optimal_bandwidth
 from ._curvature_formulas import curvature_jacobian, curvatures, principal_jacobian
 from ._quadric import FitStatus, QuadricFit, fit_quadrics
 
-__all__ = ["FIELDS", "CurvatureResult", "FitStatus", "QuadricFit", "curvature",
+__all__ = ["BandwidthResult", "optimal_bandwidth", "FIELDS", "CurvatureResult", "FitStatus", "QuadricFit", "curvature",
            "curvature_jacobian", "curvature_tests", "curvatures", "estimate_sigma",
            "fit_quadrics", "height_variance", "principal_jacobian"]

@@ -1,0 +1,5 @@
+"""The ``lidarstat`` command: one subcommand per job, each a thin shell over the library."""
+
+from ._app import build_parser, main
+
+__all__ = ["main", "build_parser"]
