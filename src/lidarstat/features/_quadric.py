@@ -163,8 +163,8 @@ def fit_quadrics(points, neighborhoods: Neighborhoods, *, bandwidth=None, frame=
     >>> x, y = [a.ravel() for a in np.meshgrid(g, g)]
     >>> pts = np.c_[x, y, 0.5 * (0.3 * x**2 + 0.1 * y**2)]
     >>> fit = fit_quadrics(pts, radius_neighbors(pts, 0.5))
-    >>> np.round(fit.beta[220, 3:], 6).tolist()   # a3, a4, a5 at the centre
-    [0.3, 0.0, 0.1]
+    >>> np.round(fit.beta[220, 3:], 6) + 0.0   # a3, a4, a5 at the centre
+    array([0.3, 0. , 0.1])
     """
     func = "fit_quadrics"
     pts = check_points(points)
