@@ -115,3 +115,25 @@ def test_rotated_frames_recover_curvature(frame, rng):
         np.testing.assert_allclose([K[0], abs(H[0])], [0.25, 0.5], rtol=tol)
     n_true = (rp[c] - (np.zeros(3) @ R.T + [100, 200, 300])) / 2
     assert np.dot(fit.normal[c], n_true) > 0.9999
+
+
+@pytest.mark.parametrize("test", ["calibrated", "paper"])
+def test_statistics_kernel_matches_numpy_reference(test):
+    from _reference import curvature_tests_reference
+    from lidarstat.features import curvature_tests
+    from lidarstat.synth import make_surface
+
+    pts = np.vstack([make_surface(k, sigma=0.002, rng=1, spacing=0.05).xyz + [5 * i, 0, 0]
+                     for i, k in enumerate(["plane", "cylinder", "saddle_ridge", "peak"])])
+    pts = np.vstack([pts, [[100.0, 100, 100]]])  # one point without neighbours
+    fit = fit_quadrics(pts, radius_neighbors(pts, 0.3),
+                       covariance="paper" if test == "paper" else "sandwich")
+    out = dict(status=fit.status, npts=fit.neighbors, beta=fit.beta, cof=fit.cofactor,
+               frames=fit.frame, stats=np.c_[fit.q, fit.sum_w, fit.trace_b, fit.trace_b2])
+    got = curvature_tests(out, sigma2=4e-6, alpha=0.05, test=test, minimal_detectable=True)
+    want = curvature_tests_reference(out, sigma2=4e-6, alpha=0.05, test=test,
+                                     minimal_detectable=True)
+    assert set(got) == set(want)
+    for k in want:
+        np.testing.assert_allclose(np.asarray(got[k], float), np.asarray(want[k], float),
+                                   rtol=1e-6, atol=1e-12, equal_nan=True, err_msg=k)

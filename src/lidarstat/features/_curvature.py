@@ -6,16 +6,15 @@ import logging
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import special as _sp
 from scipy import stats as _st
 
 from .._shared.validation import check_option, check_points, check_scalar
 from ..classify import SurfaceType, hk_surface_types
 from ..errors import InsufficientNeighborsError, InvalidParameterError
 from ..neighbors import CellIndex
-from ..stats import (f_test_paper, variance_test_paper, variance_test_satterthwaite, wald_test,
-                     z_test)
+from . import _curvature_kernels as _ck
 from . import _quadric_kernels as _k
-from ._curvature_formulas import curvature_jacobian, curvatures, principal_jacobian
 from ._quadric import FitStatus, _run_kernel, check_fit_options
 
 logger = logging.getLogger(__name__)
@@ -140,82 +139,69 @@ def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False):
         Significance level.
     test : {'calibrated', 'paper'}
         Which family of tests (see docs/methods/curvature.md).
+    minimal_detectable : bool
+        Also return ``K_min`` and ``H_min`` (eq. 19).
 
     Returns
     -------
     dict of per-point arrays named as in ``FIELDS``.
     """
-    beta, cof, st = out["beta"], out["cof"], out["stats"]
-    sigma2 = np.broadcast_to(np.asarray(sigma2, dtype=np.float64), out["status"].shape)
-    q, trb, trb2 = st[:, 0], st[:, 2], st[:, 3]
-    p = out["npts"].astype(np.float64)
+    m = out["status"].size
+    sigma2 = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma2, dtype=np.float64), (m,)))
+    st = np.empty((m, _ck.NCOL))
+    mode = _ck.TEST_PAPER if test == "paper" else _ck.TEST_CALIBRATED
+    _ck.curvature_statistics(out["status"], out["npts"], out["beta"], out["cof"], out["stats"],
+                             out["frames"], sigma2, mode, st)
+    col = {name: st[:, getattr(_ck, "C_" + name)] for name in
+           ("K", "H", "KMIN", "KMAX", "SDK", "SDH", "SDKMIN", "SDKMAX", "CHI2", "CHI2DF",
+            "PLAN", "PLANDF", "S0")}
+    K, H = col["K"], col["H"]
     fitted = out["status"] == _k.OK
-    a = beta[:, 1:]
-    K, H, kmin, kmax = curvatures(a)
-    J = curvature_jacobian(a)
-    if test == "paper":
-        with np.errstate(invalid="ignore", divide="ignore"):
-            s0 = q / (p - 6.0)
-        chi2 = variance_test_paper(q, p, sigma2, alpha)
-        Qww = J @ cof[:, 1:, 1:] @ np.swapaxes(J, 1, 2)
-        ftest = f_test_paper(np.stack([K, H], 1), Qww, s0, alpha)
-        planar = ~ftest.reject
-        planar_p = ftest.pvalue
-        with np.errstate(invalid="ignore"):
-            sdK = np.sqrt(s0 * Qww[:, 0, 0])
-            sdH = np.sqrt(s0 * Qww[:, 1, 1])
-        ktest = z_test(K, sdK, alpha / 2)
-        K_sig, K_p = ktest.reject, ktest.pvalue
-    else:
-        with np.errstate(invalid="ignore", divide="ignore"):
-            s0 = q / trb
-        chi2 = variance_test_satterthwaite(q, trb, trb2, sigma2, alpha)
-        cov_a = sigma2[:, None, None] * cof[:, 1:, 1:]
-        plan = wald_test(a[:, 2:], cov_a[:, 2:, 2:], alpha)
-        planar = ~plan.reject
-        planar_p = plan.pvalue
-        Cw = J @ cov_a @ np.swapaxes(J, 1, 2)
-        with np.errstate(invalid="ignore"):
-            sdK = np.sqrt(Cw[:, 0, 0])
-            sdH = np.sqrt(Cw[:, 1, 1])
-        # K = kmin*kmax differs from 0 iff both principal curvatures do (intersection-union
-        # test: each at level alpha/2 gives a level-alpha/2 test of K = 0).
-        Jp = principal_jacobian(K, H, J)
-        Cp = Jp @ cov_a @ np.swapaxes(Jp, 1, 2)
-        with np.errstate(invalid="ignore"):
-            t_min = z_test(kmin, np.sqrt(Cp[:, 0, 0]), alpha / 2)
-            t_max = z_test(kmax, np.sqrt(Cp[:, 1, 1]), alpha / 2)
-        K_sig = t_min.reject & t_max.reject
-        K_p = np.fmax(t_min.pvalue, t_max.pvalue)
-    htest = z_test(H, sdH, alpha / 2)
-    chi2_pass = fitted & np.isfinite(chi2.pvalue) & ~chi2.reject
+    with np.errstate(invalid="ignore", divide="ignore"):
+        chi2_p = _sp.chdtrc(np.where(col["CHI2DF"] > 0, col["CHI2DF"], np.nan), col["CHI2"])
+        planar_p = _sp.chdtrc(col["PLANDF"], col["PLAN"] * (col["PLANDF"] if test == "paper" else 1.0))
+        H_p = _two_sided(H / col["SDH"])
+        if test == "paper":
+            K_p = _two_sided(K / col["SDK"])
+        else:
+            # K = kmin*kmax differs from 0 iff both principal curvatures do (intersection-
+            # union test: each at alpha/2 gives a level-alpha/2 test of K = 0).
+            K_p = np.fmax(_two_sided(col["KMIN"] / col["SDKMIN"]),
+                          _two_sided(col["KMAX"] / col["SDKMAX"]))
+    half = alpha / 2
+    chi2_pass = fitted & np.isfinite(chi2_p) & ~(chi2_p < alpha)
+    planar = ~(planar_p < alpha)
+    K_sig = K_p < half
+    H_sig = H_p < half
     status = out["status"].copy()
     status[fitted & ~chi2_pass] = FitStatus.MODEL_REJECTED
     surface_type = hk_surface_types(K, H, tested=chi2_pass, planar=planar, K_sig=K_sig,
-                                    H_sig=htest.reject)
-    frames = out["frames"]
-    nl = np.stack([-a[:, 0], -a[:, 1], np.ones_like(K)], axis=1)
-    nl /= np.linalg.norm(nl, axis=1, keepdims=True)
-    normal = np.einsum("nij,ni->nj", frames, nl)
+                                    H_sig=H_sig)
+    frames, beta = out["frames"], out["beta"]
     res = {
         "neighbors": out["npts"],
         "z0": beta[:, 0] * frames[:, 2, 2],  # z offset of the fitted point; caller adds z
-        "sigma0_sq": s0,
+        "sigma0_sq": col["S0"],
         "chi2_pass": chi2_pass.astype(np.uint8),
-        "K": K, "H": H, "kmin": kmin, "kmax": kmax,
+        "K": K, "H": H, "kmin": col["KMIN"], "kmax": col["KMAX"],
         "K_sig": (chi2_pass & K_sig).astype(np.uint8),
-        "H_sig": (chi2_pass & htest.reject).astype(np.uint8),
+        "H_sig": (chi2_pass & H_sig).astype(np.uint8),
         "surface_type": surface_type,
         "status": status,
         "dz0": beta[:, 0],
-        "chi2_p": chi2.pvalue, "planar_p": planar_p, "K_p": K_p, "H_p": htest.pvalue,
-        "NormalX": normal[:, 0], "NormalY": normal[:, 1], "NormalZ": normal[:, 2],
+        "chi2_p": chi2_p, "planar_p": planar_p, "K_p": K_p, "H_p": H_p,
+        "NormalX": st[:, _ck.C_NX], "NormalY": st[:, _ck.C_NY], "NormalZ": st[:, _ck.C_NZ],
     }
     if minimal_detectable:
         zc = _st.norm.isf(alpha / 4)  # two-sided at alpha/2 (Bonferroni), eq. 19
-        res["K_min"] = zc * sdK
-        res["H_min"] = zc * sdH
+        res["K_min"] = zc * col["SDK"]
+        res["H_min"] = zc * col["SDH"]
     return res
+
+
+def _two_sided(z):
+    """Two-sided normal p-value."""
+    return 2.0 * _sp.ndtr(-np.abs(z))
 
 
 def height_variance(frames, sigma, *, noise="z", points=None, sensor=None):

@@ -5,9 +5,11 @@ neighbours, tricube weights w_j = (1 - (d_ij/b)^3)^3 and a local frame R (rows e
 
 * local coordinates (u, v, h) = R d_j, scaled U = u/b, V = v/b for conditioning;
 * design row x_j = [1, U, V, U^2/2, U V, V^2/2] (eq. 4 of Crosilla et al. 2009);
-* N = X'WX, N2 = X'W^2X, r = X'Wh; beta = N^-1 r (eq. 5) via Cholesky;
+* N = X'WX, N2 = X'W^2X, N3 = X'W^3X assembled from weighted moment sums of the 15
+  monomials U^i V^j, i + j <= 4 (one pass); r = X'Wh; beta = N^-1 r (eq. 5) via Cholesky;
 * residuals e_j = h_j - x_j'beta, Q = e'We (numerator of eq. 6);
-* traces for the exact moments of Q under H0: tr(B) = sum w - tr(N^-1 N2) and
+* traces for the exact moments of Q under H0 (from the 6 x 6 matrices, no leverage
+  pass): tr(B) = sum w - tr(N^-1 N2) and
   tr(B^2) = sum w^2 - 2 tr(N^-1 N3) + tr((N^-1 N2)^2), with B = W - W X N^-1 X' W;
 * cofactor of beta: N^-1 (the paper's) or the sandwich N^-1 N2 N^-1 (the WLS estimator's).
 
@@ -34,6 +36,21 @@ COV_PAPER = 0
 COV_SANDWICH = 1
 
 _CHUNK = 64
+
+# x = [1, U, V, U^2/2, UV, V^2/2]: x_a x_c = _COEF * monomial number _MONO (row-major a, c)
+# monomials: 1 U V U2 UV V2 U3 U2V UV2 V3 U4 U3V U2V2 UV3 V4
+_MONO = (0, 1, 2, 3, 4, 5,
+         1, 3, 4, 6, 7, 8,
+         2, 4, 5, 7, 8, 9,
+         3, 6, 7, 10, 11, 12,
+         4, 7, 8, 11, 12, 13,
+         5, 8, 9, 12, 13, 14)
+_COEF = (1.0, 1.0, 1.0, 0.5, 1.0, 0.5,
+         1.0, 1.0, 1.0, 0.5, 1.0, 0.5,
+         1.0, 1.0, 1.0, 0.5, 1.0, 0.5,
+         0.5, 0.5, 0.5, 0.25, 0.5, 0.25,
+         1.0, 1.0, 1.0, 0.5, 1.0, 0.5,
+         0.5, 0.5, 0.5, 0.25, 0.5, 0.25)
 
 
 @njit
@@ -204,16 +221,6 @@ def _local_frame(i, pts, idx, dist, s, e, b, frame, sensor, has_sensor, R, cov, 
 
 
 @njit
-def _design(u, v, x):
-    x[0] = 1.0
-    x[1] = u
-    x[2] = v
-    x[3] = 0.5 * u * u
-    x[4] = u * v
-    x[5] = 0.5 * v * v
-
-
-@njit
 def _cholesky_inverse(a, L, li, inv):
     """Inverse of SPD 6x6 `a` via Cholesky; False if a pivot is not safely positive."""
     n = 6
@@ -261,7 +268,7 @@ def _cholesky_inverse(a, L, li, inv):
 
 @njit
 def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov_mode,
-             R, cov3, ev, evec, x, N, N2, L, LI, Ninv, tmp, rhs,
+             R, cov3, ev, evec, x, mono, mom, N, N2, N3, L, LI, Ninv, tmp, rhs,
              beta_out, cof_out, frame_out, stats_out):
     """Fit point i; returns (status, p). stats_out = [Q, sum w, trB, trB2]."""
     b = bw
@@ -280,35 +287,84 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
     for a in range(3):
         for c in range(3):
             frame_out[a, c] = R[a, c]
-    for a in range(6):
-        rhs[a] = 0.0
-        for c in range(6):
-            N[a, c] = 0.0
-            N2[a, c] = 0.0
+    # Pass 1: weighted moment sums of the 15 monomials U^i V^j (i + j <= 4) for w, w^2, w^3
+    # (the entries of X'WX, X'W^2X, X'W^3X) and of w h U^i V^j (i + j <= 2) for X'Wh.
+    for k in range(15):
+        mom[0, k] = 0.0
+        mom[1, k] = 0.0
+        mom[2, k] = 0.0
+    for k in range(6):
+        rhs[k] = 0.0
     inv_b = 1.0 / b
+    r00 = R[0, 0]
+    r01 = R[0, 1]
+    r02 = R[0, 2]
+    r10 = R[1, 0]
+    r11 = R[1, 1]
+    r12 = R[1, 2]
+    r20 = R[2, 0]
+    r21 = R[2, 1]
+    r22 = R[2, 2]
+    px = pts[i, 0]
+    py = pts[i, 1]
+    pz = pts[i, 2]
     for t in range(s, e):
         w = _tricube(dist[t], b)
         if w <= 0.0:
             continue
         j = idx[t]
-        d0 = pts[j, 0] - pts[i, 0]
-        d1 = pts[j, 1] - pts[i, 1]
-        d2 = pts[j, 2] - pts[i, 2]
-        u = (R[0, 0] * d0 + R[0, 1] * d1 + R[0, 2] * d2) * inv_b
-        v = (R[1, 0] * d0 + R[1, 1] * d1 + R[1, 2] * d2) * inv_b
-        h = R[2, 0] * d0 + R[2, 1] * d1 + R[2, 2] * d2
-        _design(u, v, x)
+        d0 = pts[j, 0] - px
+        d1 = pts[j, 1] - py
+        d2 = pts[j, 2] - pz
+        u = (r00 * d0 + r01 * d1 + r02 * d2) * inv_b
+        v = (r10 * d0 + r11 * d1 + r12 * d2) * inv_b
+        h = r20 * d0 + r21 * d1 + r22 * d2
+        uu = u * u
+        uv = u * v
+        vv = v * v
+        x[0] = 1.0
+        x[1] = u
+        x[2] = v
+        x[3] = uu
+        x[4] = uv
+        x[5] = vv
+        wh = w * h
+        for k in range(6):
+            rhs[k] += wh * x[k]
+        mono[0] = 1.0
+        mono[1] = u
+        mono[2] = v
+        mono[3] = uu
+        mono[4] = uv
+        mono[5] = vv
+        mono[6] = uu * u
+        mono[7] = uu * v
+        mono[8] = u * vv
+        mono[9] = vv * v
+        mono[10] = uu * uu
+        mono[11] = uu * uv
+        mono[12] = uu * vv
+        mono[13] = uv * vv
+        mono[14] = vv * vv
         w2 = w * w
-        for a in range(6):
-            wa = w * x[a]
-            rhs[a] += wa * h
-            for c in range(a, 6):
-                N[a, c] += wa * x[c]
-                N2[a, c] += w2 * x[a] * x[c]
+        w3 = w2 * w
+        for k in range(15):
+            mk = mono[k]
+            mom[0, k] += w * mk
+            mom[1, k] += w2 * mk
+            mom[2, k] += w3 * mk
+    rhs[3] *= 0.5
+    rhs[5] *= 0.5
     for a in range(6):
-        for c in range(a):
-            N[a, c] = N[c, a]
-            N2[a, c] = N2[c, a]
+        for c in range(a, 6):
+            k = _MONO[a * 6 + c]
+            f = _COEF[a * 6 + c]
+            N[a, c] = f * mom[0, k]
+            N2[a, c] = f * mom[1, k]
+            N3[a, c] = f * mom[2, k]
+            N[c, a] = N[a, c]
+            N2[c, a] = N2[a, c]
+            N3[c, a] = N3[a, c]
     if not _cholesky_inverse(N, L, LI, Ninv):
         return SINGULAR, p
     for a in range(6):
@@ -316,38 +372,36 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
         for c in range(6):
             acc += Ninv[a, c] * rhs[c]
         tmp[a] = acc
+    # Pass 2: the weighted residual sum of squares, explicitly (no cancellation)
     q = 0.0
-    sw = 0.0
-    sw2 = 0.0
-    t2 = 0.0
-    t3 = 0.0
+    b0 = tmp[0]
+    b1 = tmp[1]
+    b2 = tmp[2]
+    b3 = 0.5 * tmp[3]
+    b4 = tmp[4]
+    b5 = 0.5 * tmp[5]
     for t in range(s, e):
         w = _tricube(dist[t], b)
         if w <= 0.0:
             continue
         j = idx[t]
-        d0 = pts[j, 0] - pts[i, 0]
-        d1 = pts[j, 1] - pts[i, 1]
-        d2 = pts[j, 2] - pts[i, 2]
-        u = (R[0, 0] * d0 + R[0, 1] * d1 + R[0, 2] * d2) * inv_b
-        v = (R[1, 0] * d0 + R[1, 1] * d1 + R[1, 2] * d2) * inv_b
-        h = R[2, 0] * d0 + R[2, 1] * d1 + R[2, 2] * d2
-        _design(u, v, x)
-        fit = 0.0
-        lev = 0.0
-        for a in range(6):
-            fit += x[a] * tmp[a]
-            acc = 0.0
-            for c in range(6):
-                acc += Ninv[a, c] * x[c]
-            lev += x[a] * acc
-        r = h - fit
+        d0 = pts[j, 0] - px
+        d1 = pts[j, 1] - py
+        d2 = pts[j, 2] - pz
+        u = (r00 * d0 + r01 * d1 + r02 * d2) * inv_b
+        v = (r10 * d0 + r11 * d1 + r12 * d2) * inv_b
+        h = r20 * d0 + r21 * d1 + r22 * d2
+        r = h - (b0 + u * (b1 + b3 * u + b4 * v) + v * (b2 + b5 * v))
         q += w * r * r
-        sw += w
-        sw2 += w * w
-        t2 += w * w * lev
-        t3 += w * w * w * lev
-    # S = Ninv N2 Ninv ; tr(S N2)
+    sw = mom[0, 0]
+    sw2 = mom[1, 0]
+    # traces: tr(Ninv N2), tr(Ninv N3); S = Ninv N2 Ninv and tr(S N2)
+    t2 = 0.0
+    t3 = 0.0
+    for a in range(6):
+        for c in range(6):
+            t2 += Ninv[a, c] * N2[c, a]
+            t3 += Ninv[a, c] * N3[c, a]
     for a in range(6):
         for c in range(6):
             acc = 0.0
@@ -398,8 +452,11 @@ def fit_quadrics_block(pts, query, indptr, idx, dist, bandwidth, frame, sensor, 
         ev = np.empty(3)
         evec = np.empty((3, 3))
         x = np.empty(6)
+        mono = np.empty(15)
+        mom = np.empty((3, 15))
         N = np.empty((6, 6))
         N2 = np.empty((6, 6))
+        N3 = np.empty((6, 6))
         L = np.zeros((6, 6))
         LI = np.zeros((6, 6))
         Ninv = np.empty((6, 6))
@@ -407,8 +464,8 @@ def fit_quadrics_block(pts, query, indptr, idx, dist, bandwidth, frame, sensor, 
         rhs = np.empty(6)
         for r in range(ch * _CHUNK, min(m, (ch + 1) * _CHUNK)):
             st, p = _fit_one(query[r], pts, idx, dist, indptr[r], indptr[r + 1], bandwidth,
-                             frame, sensor, has_sensor, min_nb, cov_mode, R, cov3, ev, evec, x,
-                             N, N2, L, LI, Ninv, tmp, rhs, beta[r], cof[r], frames[r], stats[r])
+                             frame, sensor, has_sensor, min_nb, cov_mode, R, cov3, ev, evec, x, mono, mom,
+                             N, N2, N3, L, LI, Ninv, tmp, rhs, beta[r], cof[r], frames[r], stats[r])
             status[r] = st
             npts[r] = p
             if st != OK:
