@@ -137,3 +137,20 @@ def test_statistics_kernel_matches_numpy_reference(test):
     for k in want:
         np.testing.assert_allclose(np.asarray(got[k], float), np.asarray(want[k], float),
                                    rtol=1e-6, atol=1e-12, equal_nan=True, err_msg=k)
+
+
+@pytest.mark.parametrize("frame", ["z", "pca"])
+def test_fused_cell_kernel_equals_csr_kernel(rng, frame):
+    from lidarstat.features._quadric import _run_cells
+    from lidarstat.neighbors import CellIndex
+
+    pts = rng.random((3000, 3)) * [6, 6, 0.4] + [3e5, 4e6, 50]
+    index = CellIndex(pts, 0.5)
+    csr = fit_quadrics(pts, radius_neighbors(pts, 0.5), frame=frame)
+    out = _run_cells(index, 0, index.n_cells, bandwidth=0.5, frame=frame, sensor=None,
+                     min_neighbors=7, covariance="sandwich")
+    o = index.order
+    np.testing.assert_array_equal(out["status"], csr.status[o])
+    np.testing.assert_array_equal(out["npts"], csr.neighbors[o])
+    np.testing.assert_allclose(out["beta"], csr.beta[o], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(out["stats"][:, 0], csr.q[o], rtol=1e-8, atol=1e-15)

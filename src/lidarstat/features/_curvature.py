@@ -15,7 +15,7 @@ from ..errors import InsufficientNeighborsError, InvalidParameterError
 from ..neighbors import CellIndex
 from . import _curvature_kernels as _ck
 from . import _quadric_kernels as _k
-from ._quadric import FitStatus, _run_kernel, check_fit_options
+from ._quadric import FitStatus, _run_cells, _run_kernel, check_fit_options
 
 logger = logging.getLogger(__name__)
 
@@ -278,13 +278,10 @@ def _single_radius(pts, radius, *, sigma, noise, alpha, test, frame, sensor, min
     blocks = index.cell_blocks(block_size)
     done = 0
     for c0, c1 in blocks:
-        indptr, idx, dist = index.query_cells(c0, c1)
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
-        query = np.arange(s0, s1, dtype=np.int64)
         covariance = "paper" if test == "paper" else "sandwich"
-        out = _run_kernel(index.sorted_points, query, indptr, idx, dist, bandwidth=radius,
-                          frame=frame, sensor=sensor_local, min_neighbors=min_neighbors,
-                          covariance=covariance)
+        out = _run_cells(index, c0, c1, bandwidth=radius, frame=frame, sensor=sensor_local,
+                         min_neighbors=min_neighbors, covariance=covariance)
         orig = index.order[s0:s1]
         sigma2 = height_variance(out["frames"], sigma, noise=noise, points=pts[orig],
                                  sensor=sensor)

@@ -97,10 +97,29 @@ def _run_kernel(pts, query, indptr, idx, dist, *, bandwidth, frame, sensor, min_
         int(min_neighbors), COVARIANCES[covariance], out["status"], out["npts"], out["beta"],
         out["cof"], out["frames"], out["stats"],
     )
+    return _mark_unfitted(out)
+
+
+def _mark_unfitted(out):
     bad = out["status"] != _k.OK
     out["cof"][bad] = np.nan
     out["frames"][bad & (out["status"] == _k.TOO_FEW)] = np.nan
     return out
+
+
+def _run_cells(index, c0, c1, *, bandwidth, frame, sensor, min_neighbors, covariance):
+    """Fused neighbour search + fit of the points of cells c0..c1-1 of a 3-D CellIndex."""
+    m = int(index.cell_start[c1] - index.cell_start[c0])
+    out = _allocate(m)
+    has_sensor = sensor is not None
+    sensor_arr = np.zeros(3) if sensor is None else np.asarray(sensor, dtype=np.float64)
+    _k.fit_quadrics_cells(
+        c0, c1, index.sorted_points, index.cell_keys, index.cell_start, index.dims,
+        float(index.radius), float(bandwidth), FRAMES[frame], sensor_arr, has_sensor,
+        int(min_neighbors), COVARIANCES[covariance], out["status"], out["npts"], out["beta"],
+        out["cof"], out["frames"], out["stats"],
+    )
+    return _mark_unfitted(out)
 
 
 def _to_fit(out, bandwidth, covariance):

@@ -22,6 +22,7 @@ import numpy as np
 from numba import prange
 
 from .._shared._jit import njit, njit_parallel
+from ..neighbors._kernels import _cell_ranges, _scan
 
 # status codes (mirrored by FitStatus in _results.py)
 OK = 0
@@ -289,12 +290,12 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
             frame_out[a, c] = R[a, c]
     # Pass 1: weighted moment sums of the 15 monomials U^i V^j (i + j <= 4) for w, w^2, w^3
     # (the entries of X'WX, X'W^2X, X'W^3X) and of w h U^i V^j (i + j <= 2) for X'Wh.
-    for k in range(15):
-        mom[0, k] = 0.0
-        mom[1, k] = 0.0
-        mom[2, k] = 0.0
-    for k in range(6):
-        rhs[k] = 0.0
+    # scalar accumulators (kept in registers): s{p}_{k} = sum w^(p+1) * monomial k,
+    # g{k} = sum w h * monomial k (k < 6)
+    s0_0 = s0_1 = s0_2 = s0_3 = s0_4 = s0_5 = s0_6 = s0_7 = s0_8 = s0_9 = s0_10 = s0_11 = s0_12 = s0_13 = s0_14 = 0.0
+    s1_0 = s1_1 = s1_2 = s1_3 = s1_4 = s1_5 = s1_6 = s1_7 = s1_8 = s1_9 = s1_10 = s1_11 = s1_12 = s1_13 = s1_14 = 0.0
+    s2_0 = s2_1 = s2_2 = s2_3 = s2_4 = s2_5 = s2_6 = s2_7 = s2_8 = s2_9 = s2_10 = s2_11 = s2_12 = s2_13 = s2_14 = 0.0
+    g0 = g1 = g2 = g3 = g4 = g5 = 0.0
     inv_b = 1.0 / b
     r00 = R[0, 0]
     r01 = R[0, 1]
@@ -322,37 +323,125 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
         uu = u * u
         uv = u * v
         vv = v * v
-        x[0] = 1.0
-        x[1] = u
-        x[2] = v
-        x[3] = uu
-        x[4] = uv
-        x[5] = vv
         wh = w * h
-        for k in range(6):
-            rhs[k] += wh * x[k]
-        mono[0] = 1.0
-        mono[1] = u
-        mono[2] = v
-        mono[3] = uu
-        mono[4] = uv
-        mono[5] = vv
-        mono[6] = uu * u
-        mono[7] = uu * v
-        mono[8] = u * vv
-        mono[9] = vv * v
-        mono[10] = uu * uu
-        mono[11] = uu * uv
-        mono[12] = uu * vv
-        mono[13] = uv * vv
-        mono[14] = vv * vv
+        g0 += wh
+        g1 += wh * u
+        g2 += wh * v
+        g3 += wh * uu
+        g4 += wh * uv
+        g5 += wh * vv
         w2 = w * w
         w3 = w2 * w
-        for k in range(15):
-            mk = mono[k]
-            mom[0, k] += w * mk
-            mom[1, k] += w2 * mk
-            mom[2, k] += w3 * mk
+        s0_0 += w
+        s1_0 += w2
+        s2_0 += w3
+        mk = u
+        s0_1 += w * mk
+        s1_1 += w2 * mk
+        s2_1 += w3 * mk
+        mk = v
+        s0_2 += w * mk
+        s1_2 += w2 * mk
+        s2_2 += w3 * mk
+        mk = uu
+        s0_3 += w * mk
+        s1_3 += w2 * mk
+        s2_3 += w3 * mk
+        mk = uv
+        s0_4 += w * mk
+        s1_4 += w2 * mk
+        s2_4 += w3 * mk
+        mk = vv
+        s0_5 += w * mk
+        s1_5 += w2 * mk
+        s2_5 += w3 * mk
+        mk = uu * u
+        s0_6 += w * mk
+        s1_6 += w2 * mk
+        s2_6 += w3 * mk
+        mk = uu * v
+        s0_7 += w * mk
+        s1_7 += w2 * mk
+        s2_7 += w3 * mk
+        mk = u * vv
+        s0_8 += w * mk
+        s1_8 += w2 * mk
+        s2_8 += w3 * mk
+        mk = vv * v
+        s0_9 += w * mk
+        s1_9 += w2 * mk
+        s2_9 += w3 * mk
+        mk = uu * uu
+        s0_10 += w * mk
+        s1_10 += w2 * mk
+        s2_10 += w3 * mk
+        mk = uu * uv
+        s0_11 += w * mk
+        s1_11 += w2 * mk
+        s2_11 += w3 * mk
+        mk = uu * vv
+        s0_12 += w * mk
+        s1_12 += w2 * mk
+        s2_12 += w3 * mk
+        mk = uv * vv
+        s0_13 += w * mk
+        s1_13 += w2 * mk
+        s2_13 += w3 * mk
+        mk = vv * vv
+        s0_14 += w * mk
+        s1_14 += w2 * mk
+        s2_14 += w3 * mk
+    mom[0, 0] = s0_0
+    mom[0, 1] = s0_1
+    mom[0, 2] = s0_2
+    mom[0, 3] = s0_3
+    mom[0, 4] = s0_4
+    mom[0, 5] = s0_5
+    mom[0, 6] = s0_6
+    mom[0, 7] = s0_7
+    mom[0, 8] = s0_8
+    mom[0, 9] = s0_9
+    mom[0, 10] = s0_10
+    mom[0, 11] = s0_11
+    mom[0, 12] = s0_12
+    mom[0, 13] = s0_13
+    mom[0, 14] = s0_14
+    mom[1, 0] = s1_0
+    mom[1, 1] = s1_1
+    mom[1, 2] = s1_2
+    mom[1, 3] = s1_3
+    mom[1, 4] = s1_4
+    mom[1, 5] = s1_5
+    mom[1, 6] = s1_6
+    mom[1, 7] = s1_7
+    mom[1, 8] = s1_8
+    mom[1, 9] = s1_9
+    mom[1, 10] = s1_10
+    mom[1, 11] = s1_11
+    mom[1, 12] = s1_12
+    mom[1, 13] = s1_13
+    mom[1, 14] = s1_14
+    mom[2, 0] = s2_0
+    mom[2, 1] = s2_1
+    mom[2, 2] = s2_2
+    mom[2, 3] = s2_3
+    mom[2, 4] = s2_4
+    mom[2, 5] = s2_5
+    mom[2, 6] = s2_6
+    mom[2, 7] = s2_7
+    mom[2, 8] = s2_8
+    mom[2, 9] = s2_9
+    mom[2, 10] = s2_10
+    mom[2, 11] = s2_11
+    mom[2, 12] = s2_12
+    mom[2, 13] = s2_13
+    mom[2, 14] = s2_14
+    rhs[0] = g0
+    rhs[1] = g1
+    rhs[2] = g2
+    rhs[3] = g3
+    rhs[4] = g4
+    rhs[5] = g5
     rhs[3] *= 0.5
     rhs[5] *= 0.5
     for a in range(6):
@@ -466,6 +555,58 @@ def fit_quadrics_block(pts, query, indptr, idx, dist, bandwidth, frame, sensor, 
             st, p = _fit_one(query[r], pts, idx, dist, indptr[r], indptr[r + 1], bandwidth,
                              frame, sensor, has_sensor, min_nb, cov_mode, R, cov3, ev, evec, x, mono, mom,
                              N, N2, N3, L, LI, Ninv, tmp, rhs, beta[r], cof[r], frames[r], stats[r])
+            status[r] = st
+            npts[r] = p
+            if st != OK:
+                for a in range(6):
+                    beta[r, a] = np.nan
+                for a in range(4):
+                    stats[r, a] = np.nan
+
+
+@njit_parallel
+def fit_quadrics_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, bandwidth, frame,
+                       sensor, has_sensor, min_nb, cov_mode, status, npts, beta, cof, frames,
+                       stats):
+    """Fused neighbour search and fit for the points of occupied cells ``c0..c1-1``.
+
+    The neighbours of each point (3-D sphere of `radius`) are gathered from the 27 cells
+    around its own into a per-cell buffer and fitted at once by the same ``_fit_one`` as
+    :func:`fit_quadrics_block`, so no global CSR arrays are written and read back. Output
+    row r is sorted position ``cell_start[c0] + r``.
+    """
+    base = cell_start[c0]
+    r2 = radius * radius
+    for c in prange(c0, c1):
+        ranges = np.empty((9, 2), dtype=np.int64)
+        nr = _cell_ranges(c, cell_keys, cell_start, dims, 3, ranges)
+        cap = 0
+        for t in range(nr):
+            cap += ranges[t, 1] - ranges[t, 0]
+        idx_buf = np.empty(cap, dtype=np.int64)
+        dist_buf = np.empty(cap)
+        R = np.empty((3, 3))
+        cov3 = np.empty((3, 3))
+        ev = np.empty(3)
+        evec = np.empty((3, 3))
+        x = np.empty(6)
+        mono = np.empty(15)
+        mom = np.empty((3, 15))
+        N = np.empty((6, 6))
+        N2 = np.empty((6, 6))
+        N3 = np.empty((6, 6))
+        L = np.zeros((6, 6))
+        LI = np.zeros((6, 6))
+        Ninv = np.empty((6, 6))
+        tmp = np.empty(6)
+        rhs = np.empty(6)
+        for i in range(cell_start[c], cell_start[c + 1]):
+            n = _scan(i, pts, ranges, nr, r2, 3, idx_buf, dist_buf, 0, False)
+            r = i - base
+            st, p = _fit_one(i, pts, idx_buf, dist_buf, 0, n, bandwidth, frame, sensor,
+                             has_sensor, min_nb, cov_mode, R, cov3, ev, evec, x, mono, mom,
+                             N, N2, N3, L, LI, Ninv, tmp, rhs, beta[r], cof[r], frames[r],
+                             stats[r])
             status[r] = st
             npts[r] = p
             if st != OK:
