@@ -601,7 +601,8 @@ def fit_quadrics_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, bandwid
         tmp = np.empty(6)
         rhs = np.empty(6)
         for i in range(cell_start[c], cell_start[c + 1]):
-            n = _scan(i, pts, ranges, nr, r2, 3, idx_buf, dist_buf, 0, False)
+            n = _scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, 3, idx_buf, dist_buf,
+                      0, False)
             r = i - base
             st, p = _fit_one(i, pts, idx_buf, dist_buf, 0, n, bandwidth, frame, sensor,
                              has_sensor, min_nb, cov_mode, R, cov3, ev, evec, x, mono, mom,

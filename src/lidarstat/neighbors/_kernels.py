@@ -24,41 +24,14 @@ def _find_cell(cell_keys, key):
 @njit
 def _visit(q, pts, cell_keys, cell_start, lo, cell, dims, radius, ndim, out_idx, out_dist, start,
            count_only):
-    """Count (and optionally store) the neighbours of query coordinates `q`."""
-    r2 = radius * radius
+    """Count (and optionally store) the neighbours of arbitrary query coordinates `q`."""
     cx = int(np.floor((q[0] - lo[0]) / cell))
     cy = int(np.floor((q[1] - lo[1]) / cell))
-    cz = 0
-    if ndim == 3:
-        cz = int(np.floor((q[2] - lo[2]) / cell))
-    n = 0
-    zr = 1 if ndim == 3 else 0
-    for ix in range(cx - 1, cx + 2):
-        if ix < 0 or ix >= dims[0]:
-            continue
-        for iy in range(cy - 1, cy + 2):
-            if iy < 0 or iy >= dims[1]:
-                continue
-            for iz in range(cz - zr, cz + zr + 1):
-                if iz < 0 or iz >= dims[2]:
-                    continue
-                key = (ix * dims[1] + iy) * dims[2] + iz
-                c = _find_cell(cell_keys, key)
-                if c < 0:
-                    continue
-                for j in range(cell_start[c], cell_start[c + 1]):
-                    dx = pts[j, 0] - q[0]
-                    dy = pts[j, 1] - q[1]
-                    d2 = dx * dx + dy * dy
-                    if ndim == 3:
-                        dz = pts[j, 2] - q[2]
-                        d2 += dz * dz
-                    if d2 <= r2:
-                        if not count_only:
-                            out_idx[start + n] = j
-                            out_dist[start + n] = np.sqrt(d2)
-                        n += 1
-    return n
+    cz = int(np.floor((q[2] - lo[2]) / cell)) if ndim == 3 else 0
+    ranges = np.empty((9, 2), dtype=np.int64)
+    nr = _ranges_at(cx, cy, cz, cell_keys, cell_start, dims, ndim, ranges)
+    return _scan(q[0], q[1], q[2], pts, ranges, nr, radius * radius, ndim, out_idx, out_dist,
+                 start, count_only)
 
 
 @njit_parallel
@@ -97,8 +70,17 @@ def _cell_ranges(c, cell_keys, cell_start, dims, ndim, ranges):
     key = cell_keys[c]
     iz0 = key % dims[2]
     rest = key // dims[2]
-    iy0 = rest % dims[1]
-    ix0 = rest // dims[1]
+    return _ranges_at(rest // dims[1], rest % dims[1], iz0, cell_keys, cell_start, dims, ndim,
+                      ranges)
+
+
+@njit
+def _ranges_at(ix0, iy0, iz0, cell_keys, cell_start, dims, ndim, ranges):
+    """Sorted-position ranges of the occupied cells around cell (ix0, iy0, iz0).
+
+    The three cells (ix, iy, iz0-1..iz0+1) have consecutive keys, so each column is one
+    binary search for its first and one for its last key. Returns the number of ranges.
+    """
     zr = 1 if ndim == 3 else 0
     n = 0
     for ix in range(ix0 - 1, ix0 + 2):
@@ -107,9 +89,10 @@ def _cell_ranges(c, cell_keys, cell_start, dims, ndim, ranges):
         for iy in range(iy0 - 1, iy0 + 2):
             if iy < 0 or iy >= dims[1]:
                 continue
-            # cells (ix, iy, iz0-1..iz0+1) are consecutive keys: one search for the run
             kz0 = max(iz0 - zr, 0)
             kz1 = min(iz0 + zr, dims[2] - 1)
+            if kz1 < kz0:
+                continue
             k0 = (ix * dims[1] + iy) * dims[2] + kz0
             k1 = (ix * dims[1] + iy) * dims[2] + kz1
             a = np.searchsorted(cell_keys, k0)
@@ -122,11 +105,9 @@ def _cell_ranges(c, cell_keys, cell_start, dims, ndim, ranges):
 
 
 @njit
-def _scan(i, pts, ranges, nr, r2, ndim, out_idx, out_dist, start, count_only):
+def _scan(qx, qy, qz, pts, ranges, nr, r2, ndim, out_idx, out_dist, start, count_only):
+    """Count (and optionally store) the points of `ranges` within sqrt(r2) of (qx, qy, qz)."""
     n = 0
-    qx = pts[i, 0]
-    qy = pts[i, 1]
-    qz = pts[i, 2]
     for t in range(nr):
         for j in range(ranges[t, 0], ranges[t, 1]):
             dx = pts[j, 0] - qx
@@ -155,7 +136,8 @@ def count_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, ndim):
         ranges = np.empty((9, 2), dtype=np.int64)
         nr = _cell_ranges(c, cell_keys, cell_start, dims, ndim, ranges)
         for i in range(cell_start[c], cell_start[c + 1]):
-            counts[i - base] = _scan(i, pts, ranges, nr, r2, ndim, dummy_i, dummy_d, 0, True)
+            counts[i - base] = _scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, ndim,
+                                     dummy_i, dummy_d, 0, True)
     return counts
 
 
@@ -169,7 +151,8 @@ def fill_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, ndim, indptr, o
         ranges = np.empty((9, 2), dtype=np.int64)
         nr = _cell_ranges(c, cell_keys, cell_start, dims, ndim, ranges)
         for i in range(cell_start[c], cell_start[c + 1]):
-            _scan(i, pts, ranges, nr, r2, ndim, out_idx, out_dist, indptr[i - base], False)
+            _scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, ndim, out_idx, out_dist,
+                  indptr[i - base], False)
 
 
 @njit_parallel
