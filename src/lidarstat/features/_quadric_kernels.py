@@ -268,10 +268,18 @@ def _cholesky_inverse(a, L, li, inv):
 
 
 @njit
-def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov_mode,
-             R, cov3, ev, evec, x, mono, mom, N, N2, N3, L, LI, Ninv, tmp, rhs,
+def _workspace():
+    """Per-thread scratch arrays of ``_fit_one`` (allocated once per chunk or cell)."""
+    return (np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty((3, 3)),
+            np.empty((3, 15)), np.empty((6, 6)), np.empty((6, 6)), np.empty((6, 6)),
+            np.zeros((6, 6)), np.zeros((6, 6)), np.empty((6, 6)), np.empty(6), np.empty(6))
+
+
+@njit
+def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov_mode, ws,
              beta_out, cof_out, frame_out, stats_out):
     """Fit point i; returns (status, p). stats_out = [Q, sum w, trB, trB2]."""
+    R, cov3, ev, evec, mom, N, N2, N3, L, LI, Ninv, tmp, rhs = ws
     b = bw
     if b <= 0.0:  # kNN: the bandwidth is the farthest neighbour's distance (LOESS)
         for t in range(s, e):
@@ -536,25 +544,11 @@ def fit_quadrics_block(pts, query, indptr, idx, dist, bandwidth, frame, sensor, 
     m = query.size
     nchunks = (m + _CHUNK - 1) // _CHUNK
     for ch in prange(nchunks):
-        R = np.empty((3, 3))
-        cov3 = np.empty((3, 3))
-        ev = np.empty(3)
-        evec = np.empty((3, 3))
-        x = np.empty(6)
-        mono = np.empty(15)
-        mom = np.empty((3, 15))
-        N = np.empty((6, 6))
-        N2 = np.empty((6, 6))
-        N3 = np.empty((6, 6))
-        L = np.zeros((6, 6))
-        LI = np.zeros((6, 6))
-        Ninv = np.empty((6, 6))
-        tmp = np.empty(6)
-        rhs = np.empty(6)
+        ws = _workspace()
         for r in range(ch * _CHUNK, min(m, (ch + 1) * _CHUNK)):
             st, p = _fit_one(query[r], pts, idx, dist, indptr[r], indptr[r + 1], bandwidth,
-                             frame, sensor, has_sensor, min_nb, cov_mode, R, cov3, ev, evec, x, mono, mom,
-                             N, N2, N3, L, LI, Ninv, tmp, rhs, beta[r], cof[r], frames[r], stats[r])
+                             frame, sensor, has_sensor, min_nb, cov_mode, ws, beta[r], cof[r],
+                             frames[r], stats[r])
             status[r] = st
             npts[r] = p
             if st != OK:
@@ -585,28 +579,13 @@ def fit_quadrics_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, bandwid
             cap += ranges[t, 1] - ranges[t, 0]
         idx_buf = np.empty(cap, dtype=np.int64)
         dist_buf = np.empty(cap)
-        R = np.empty((3, 3))
-        cov3 = np.empty((3, 3))
-        ev = np.empty(3)
-        evec = np.empty((3, 3))
-        x = np.empty(6)
-        mono = np.empty(15)
-        mom = np.empty((3, 15))
-        N = np.empty((6, 6))
-        N2 = np.empty((6, 6))
-        N3 = np.empty((6, 6))
-        L = np.zeros((6, 6))
-        LI = np.zeros((6, 6))
-        Ninv = np.empty((6, 6))
-        tmp = np.empty(6)
-        rhs = np.empty(6)
+        ws = _workspace()
         for i in range(cell_start[c], cell_start[c + 1]):
             n = _scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, 3, idx_buf, dist_buf,
                       0, False)
             r = i - base
             st, p = _fit_one(i, pts, idx_buf, dist_buf, 0, n, bandwidth, frame, sensor,
-                             has_sensor, min_nb, cov_mode, R, cov3, ev, evec, x, mono, mom,
-                             N, N2, N3, L, LI, Ninv, tmp, rhs, beta[r], cof[r], frames[r],
+                             has_sensor, min_nb, cov_mode, ws, beta[r], cof[r], frames[r],
                              stats[r])
             status[r] = st
             npts[r] = p
