@@ -274,27 +274,29 @@ def _single_radius(pts, radius, *, sigma, noise, alpha, test, frame, sensor, min
     index = CellIndex(pts, radius)
     sensor_local = None if sensor is None else np.asarray(sensor, float) - index.origin
     n = pts.shape[0]
-    fields = None
-    blocks = index.cell_blocks(block_size)
+    sorted_fields = None
     done = 0
-    for c0, c1 in blocks:
+    covariance = "paper" if test == "paper" else "sandwich"
+    for c0, c1 in index.cell_blocks(block_size):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
-        covariance = "paper" if test == "paper" else "sandwich"
         out = _run_cells(index, c0, c1, bandwidth=radius, frame=frame, sensor=sensor_local,
                          min_neighbors=min_neighbors, covariance=covariance)
-        orig = index.order[s0:s1]
-        sigma2 = height_variance(out["frames"], sigma, noise=noise, points=pts[orig],
-                                 sensor=sensor)
+        sigma2 = height_variance(out["frames"], sigma, noise=noise,
+                                 points=index.sorted_points[s0:s1], sensor=sensor_local)
         res = curvature_tests(out, sigma2=sigma2, alpha=alpha, test=test,
                               minimal_detectable=minimal_detectable)
-        res["z0"] = res["z0"] + pts[orig, 2]
-        if fields is None:
-            fields = {k: np.empty(n, dtype=v.dtype) for k, v in res.items()}
-        for k, v in res.items():
-            fields[k][orig] = v
+        res["z0"] = res["z0"] + index.sorted_points[s0:s1, 2] + index.origin[2]
+        if sorted_fields is None:
+            sorted_fields = {k: np.empty(n, dtype=v.dtype) for k, v in res.items()}
+        for k, v in res.items():  # blocks are contiguous in the sorted order
+            sorted_fields[k][s0:s1] = v
         done += s1 - s0
         if progress is not None:
             progress(done, n)
+    # back to input order: one gather per field
+    inverse = np.empty_like(index.order)
+    inverse[index.order] = np.arange(n)
+    fields = {k: np.take(v, inverse) for k, v in sorted_fields.items()}
     return fields
 
 

@@ -37,6 +37,7 @@ COV_PAPER = 0
 COV_SANDWICH = 1
 
 _CHUNK = 64
+_CELL_CHUNK = 64
 
 # x = [1, U, V, U^2/2, UV, V^2/2]: x_a x_c = _COEF * monomial number _MONO (row-major a, c)
 # monomials: 1 U V U2 UV V2 U3 U2V UV2 V3 U4 U3V U2V2 UV3 V4
@@ -276,9 +277,13 @@ def _workspace():
 
 
 @njit
-def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov_mode, ws,
+def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov_mode, ws, buf,
              beta_out, cof_out, frame_out, stats_out):
-    """Fit point i; returns (status, p). stats_out = [Q, sum w, trB, trB2]."""
+    """Fit point i; returns (status, p). stats_out = [Q, sum w, trB, trB2].
+
+    `buf` (at least e - s rows, 4 columns) receives u, v, h, w of the neighbours in pass 1
+    so that the residual pass reads them contiguously.
+    """
     R, cov3, ev, evec, mom, N, N2, N3, L, LI, Ninv, tmp, rhs = ws
     b = bw
     if b <= 0.0:  # kNN: the bandwidth is the farthest neighbour's distance (LOESS)
@@ -317,6 +322,7 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
     px = pts[i, 0]
     py = pts[i, 1]
     pz = pts[i, 2]
+    nk = 0
     for t in range(s, e):
         w = _tricube(dist[t], b)
         if w <= 0.0:
@@ -328,6 +334,11 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
         u = (r00 * d0 + r01 * d1 + r02 * d2) * inv_b
         v = (r10 * d0 + r11 * d1 + r12 * d2) * inv_b
         h = r20 * d0 + r21 * d1 + r22 * d2
+        buf[nk, 0] = u
+        buf[nk, 1] = v
+        buf[nk, 2] = h
+        buf[nk, 3] = w
+        nk += 1
         uu = u * u
         uv = u * v
         vv = v * v
@@ -477,17 +488,11 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
     b3 = 0.5 * tmp[3]
     b4 = tmp[4]
     b5 = 0.5 * tmp[5]
-    for t in range(s, e):
-        w = _tricube(dist[t], b)
-        if w <= 0.0:
-            continue
-        j = idx[t]
-        d0 = pts[j, 0] - px
-        d1 = pts[j, 1] - py
-        d2 = pts[j, 2] - pz
-        u = (r00 * d0 + r01 * d1 + r02 * d2) * inv_b
-        v = (r10 * d0 + r11 * d1 + r12 * d2) * inv_b
-        h = r20 * d0 + r21 * d1 + r22 * d2
+    for t in range(nk):  # the neighbours' local coordinates and weights from pass 1
+        u = buf[t, 0]
+        v = buf[t, 1]
+        h = buf[t, 2]
+        w = buf[t, 3]
         r = h - (b0 + u * (b1 + b3 * u + b4 * v) + v * (b2 + b5 * v))
         q += w * r * r
     sw = mom[0, 0]
@@ -543,12 +548,16 @@ def fit_quadrics_block(pts, query, indptr, idx, dist, bandwidth, frame, sensor, 
     """
     m = query.size
     nchunks = (m + _CHUNK - 1) // _CHUNK
+    longest = 0
+    for r in range(m):
+        longest = max(longest, indptr[r + 1] - indptr[r])
     for ch in prange(nchunks):
         ws = _workspace()
+        buf = np.empty((longest, 4))
         for r in range(ch * _CHUNK, min(m, (ch + 1) * _CHUNK)):
             st, p = _fit_one(query[r], pts, idx, dist, indptr[r], indptr[r + 1], bandwidth,
-                             frame, sensor, has_sensor, min_nb, cov_mode, ws, beta[r], cof[r],
-                             frames[r], stats[r])
+                             frame, sensor, has_sensor, min_nb, cov_mode, ws, buf, beta[r],
+                             cof[r], frames[r], stats[r])
             status[r] = st
             npts[r] = p
             if st != OK:
@@ -571,26 +580,37 @@ def fit_quadrics_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, bandwid
     """
     base = cell_start[c0]
     r2 = radius * radius
-    for c in prange(c0, c1):
+    ncell = c1 - c0
+    nchunks = (ncell + _CELL_CHUNK - 1) // _CELL_CHUNK
+    for ch in prange(nchunks):
+        # scratch space once per chunk of cells; neighbour buffers grow on demand
+        ws = _workspace()
         ranges = np.empty((9, 2), dtype=np.int64)
-        nr = _cell_ranges(c, cell_keys, cell_start, dims, 3, ranges)
-        cap = 0
-        for t in range(nr):
-            cap += ranges[t, 1] - ranges[t, 0]
+        cap = 256
         idx_buf = np.empty(cap, dtype=np.int64)
         dist_buf = np.empty(cap)
-        ws = _workspace()
-        for i in range(cell_start[c], cell_start[c + 1]):
-            n = _scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, 3, idx_buf, dist_buf,
-                      0, False)
-            r = i - base
-            st, p = _fit_one(i, pts, idx_buf, dist_buf, 0, n, bandwidth, frame, sensor,
-                             has_sensor, min_nb, cov_mode, ws, beta[r], cof[r], frames[r],
-                             stats[r])
-            status[r] = st
-            npts[r] = p
-            if st != OK:
-                for a in range(6):
-                    beta[r, a] = np.nan
-                for a in range(4):
-                    stats[r, a] = np.nan
+        buf = np.empty((cap, 4))
+        for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
+            nr = _cell_ranges(c, cell_keys, cell_start, dims, 3, ranges)
+            need = 0
+            for t in range(nr):
+                need += ranges[t, 1] - ranges[t, 0]
+            if need > cap:
+                cap = max(need, 2 * cap)
+                idx_buf = np.empty(cap, dtype=np.int64)
+                dist_buf = np.empty(cap)
+                buf = np.empty((cap, 4))
+            for i in range(cell_start[c], cell_start[c + 1]):
+                n = _scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, 3, idx_buf,
+                          dist_buf, 0, False)
+                r = i - base
+                st, p = _fit_one(i, pts, idx_buf, dist_buf, 0, n, bandwidth, frame, sensor,
+                                 has_sensor, min_nb, cov_mode, ws, buf, beta[r], cof[r],
+                                 frames[r], stats[r])
+                status[r] = st
+                npts[r] = p
+                if st != OK:
+                    for a in range(6):
+                        beta[r, a] = np.nan
+                    for a in range(4):
+                        stats[r, a] = np.nan
