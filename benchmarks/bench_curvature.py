@@ -130,45 +130,54 @@ def child_lidarstat(args):
 
 
 def child_pieces(args):
-    """The loop of lidarstat.features._curvature._single_radius, timed piece by piece."""
+    """The loop of lidarstat.features._curvature._single_radius, timed piece by piece.
+
+    index: CellIndex build; search+fit: the fused Numba kernel (neighbour gathering and
+    quadric fit); statistics: noise model, curvature tests, HK types; reorder: back to
+    input order. `csr_query` times, separately, building the same neighbourhoods as CSR
+    arrays (what `radius_neighbors` returns), for comparison with scipy's pair query.
+    """
     from lidarstat.features import _curvature as C
-    from lidarstat.features._quadric import _run_kernel
+    from lidarstat.features._quadric import _run_cells
     from lidarstat.neighbors import CellIndex
 
     pts = _load(args)
     r = args.radius
-    tt = dict(index=0.0, query=0.0, kernel=0.0, statistics=0.0)
+    tt = dict(index=0.0, search_fit=0.0, statistics=0.0, reorder=0.0)
     t_all = time.perf_counter()
     t0 = time.perf_counter()
     index = CellIndex(pts, r)
     blocks = index.cell_blocks(131072)
     tt["index"] = time.perf_counter() - t0
     n = pts.shape[0]
-    fields = None
+    sorted_fields = None
     pairs = 0
     for c0, c1 in blocks:
         t0 = time.perf_counter()
-        indptr, idx, dist = index.query_cells(c0, c1)
-        t1 = time.perf_counter()
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
-        query = np.arange(s0, s1, dtype=np.int64)
-        out = _run_kernel(index.sorted_points, query, indptr, idx, dist, bandwidth=r, frame="z",
-                          sensor=None, min_neighbors=7, covariance="sandwich")
-        t2 = time.perf_counter()
-        orig = index.order[s0:s1]
-        sigma2 = C.height_variance(out["frames"], NOISE, noise="z", points=pts[orig])
+        out = _run_cells(index, c0, c1, bandwidth=r, frame="z", sensor=None, min_neighbors=7,
+                         covariance="sandwich")
+        t1 = time.perf_counter()
+        sigma2 = C.height_variance(out["frames"], NOISE, noise="z")
         res = C.curvature_tests(out, sigma2=sigma2, alpha=0.05, test="calibrated")
-        res["z0"] = res["z0"] + pts[orig, 2]
-        if fields is None:
-            fields = {k: np.empty(n, dtype=v.dtype) for k, v in res.items()}
+        if sorted_fields is None:
+            sorted_fields = {k: np.empty(n, dtype=v.dtype) for k, v in res.items()}
         for k, v in res.items():
-            fields[k][orig] = v
-        t3 = time.perf_counter()
-        tt["query"] += t1 - t0
-        tt["kernel"] += t2 - t1
-        tt["statistics"] += t3 - t2
-        pairs += int(indptr[-1])
+            sorted_fields[k][s0:s1] = v
+        t2 = time.perf_counter()
+        tt["search_fit"] += t1 - t0
+        tt["statistics"] += t2 - t1
+        pairs += int(out["npts"].sum())
+    t0 = time.perf_counter()
+    inverse = np.empty_like(index.order)
+    inverse[index.order] = np.arange(n)
+    _ = {k: np.take(v, inverse) for k, v in sorted_fields.items()}
+    tt["reorder"] = time.perf_counter() - t0
     tt["total"] = time.perf_counter() - t_all
+    t0 = time.perf_counter()
+    for c0, c1 in blocks:
+        index.query_cells(c0, c1)
+    tt["csr_query"] = time.perf_counter() - t0
     return dict(seconds=tt["total"], pieces=tt, blocks=len(blocks), pairs=pairs)
 
 
