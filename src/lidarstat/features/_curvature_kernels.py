@@ -7,6 +7,8 @@ paper's F test run without per-point temporaries. p-values are left to SciPy's u
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import prange
 
@@ -17,8 +19,33 @@ TEST_CALIBRATED = 1
 
 # columns of the output matrix
 (C_K, C_H, C_KMIN, C_KMAX, C_SDK, C_SDH, C_SDKMIN, C_SDKMAX, C_CHI2, C_CHI2DF, C_PLAN,
- C_PLANDF, C_S0, C_NX, C_NY, C_NZ) = range(16)
-NCOL = 16
+ C_PLANDF, C_S0, C_NX, C_NY, C_NZ, C_PLANP, C_KP, C_HP) = range(19)
+NCOL = 19
+
+_SQRT2 = math.sqrt(2.0)
+_SQRT_2_OVER_PI = math.sqrt(2.0 / math.pi)
+
+
+@njit
+def chi2_sf_small_df(x, df):
+    """Upper tail of chi2(df) for df in {1, 2, 3} in closed form (NaN otherwise)."""
+    if not x >= 0.0:
+        return np.nan
+    if df == 1:
+        return math.erfc(math.sqrt(0.5 * x))
+    if df == 2:
+        return math.exp(-0.5 * x)
+    if df == 3:
+        return math.erfc(math.sqrt(0.5 * x)) + _SQRT_2_OVER_PI * math.sqrt(x) * math.exp(-0.5 * x)
+    return np.nan
+
+
+@njit
+def normal_two_sided(est, sd):
+    """Two-sided normal p-value of est/sd (NaN where sd is not positive)."""
+    if not sd > 0.0:
+        return np.nan
+    return math.erfc(abs(est / sd) / _SQRT2)
 
 
 @njit
@@ -146,6 +173,23 @@ def curvature_statistics(status, npts, beta, cof, stats, frames, sigma2, mode, o
         if disc > 0:
             out[i, C_SDKMIN] = np.sqrt(max(_quad(J, cof, s2, i, 2, 2), 0.0))
             out[i, C_SDKMAX] = np.sqrt(max(_quad(J, cof, s2, i, 3, 3), 0.0))
+        # p-values with closed forms (the Satterthwaite chi-square is left to SciPy)
+        out[i, C_PLANP] = chi2_sf_small_df(out[i, C_PLAN] * (out[i, C_PLANDF] if mode == TEST_PAPER
+                                                             else 1.0), out[i, C_PLANDF])
+        out[i, C_HP] = normal_two_sided(H, out[i, C_SDH])
+        if mode == TEST_PAPER:
+            out[i, C_KP] = normal_two_sided(K, out[i, C_SDK])
+        else:
+            # K = kmin kmax differs from 0 iff both principal curvatures do
+            # (intersection-union test: each at alpha/2 gives a level-alpha/2 test of K = 0)
+            p_min = normal_two_sided(H - disc, out[i, C_SDKMIN])
+            p_max = normal_two_sided(H + disc, out[i, C_SDKMAX])
+            if p_min != p_min:  # undefined (umbilic): the other decides, as np.fmax
+                out[i, C_KP] = p_max
+            elif p_max != p_max:
+                out[i, C_KP] = p_min
+            else:
+                out[i, C_KP] = max(p_min, p_max)
         nx = -a1
         ny = -a2
         nn = np.sqrt(a1 * a1 + a2 * a2 + 1.0)
