@@ -43,9 +43,12 @@ def run_demo(outdir: Path, *, sigma=0.015, radius=0.2, seed=0):
     las = outdir / "agpart_curvature.las"
     write(las, PointCloud(xyz=scene.xyz), fields=fields)
     xyz = scene.xyz
-    plot_field(outdir / "K.png", xyz, res["K"], title="Gaussian curvature K (1/dm^2)",
+    accepted = res["chi2_pass"] == 1  # curvature is only meaningful where the model holds
+    plot_field(outdir / "K.png", xyz, np.where(accepted, res["K"], np.nan),
+               title="Gaussian curvature K (1/dm^2); grey: quadric rejected",
                cmap="coolwarm", symmetric=True)
-    plot_field(outdir / "H.png", xyz, res["H"], title="mean curvature H (1/dm), H<0 convex",
+    plot_field(outdir / "H.png", xyz, np.where(accepted, res["H"], np.nan),
+               title="mean curvature H (1/dm), H<0 convex; grey: quadric rejected",
                cmap="coolwarm", symmetric=True)
     plot_field(outdir / "chi2.png", xyz, res["chi2_pass"].astype(float),
                title="chi-square test: 1 accepted, 0 rejected", cmap="RdYlGn", clip=(0, 100))
