@@ -113,6 +113,13 @@ def test_multiscale_keeps_smallest_accepted_radius(agpart_clean):
     single = curvature(agpart_clean.xyz, radius=0.1, sigma=1e-3)
     assert np.all(r[single["chi2_pass"] == 1] == 0.1)
     assert res["chi2_pass"].mean() >= single["chi2_pass"].mean()
+    assert set(np.unique(res["status"]).tolist()) <= {0, 1, 2, 3}
+    # larger radii refit only the points still rejected, with the same values as a full run
+    at15 = r == 0.15
+    assert at15.any()
+    full15 = curvature(agpart_clean.xyz, radius=0.15, sigma=1e-3)
+    for f in ("K", "H", "chi2_p", "surface_type"):
+        np.testing.assert_array_equal(res[f][at15], full15[f][at15])
 
 
 def test_sigma_estimated_when_not_given(rng):

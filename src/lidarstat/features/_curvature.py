@@ -239,9 +239,15 @@ def estimate_sigma(points, radius, *, frame="z", sensor=None, min_neighbors=7, s
         Estimated sigma (not squared).
     """
     pts = check_points(points)
-    index = CellIndex(pts, radius)
+    return _estimate_sigma(CellIndex(pts, radius), frame=frame, sensor=sensor,
+                           min_neighbors=min_neighbors, sample=sample, rng=rng)
+
+
+def _estimate_sigma(index, *, frame, sensor, min_neighbors, sample, rng):
+    """:func:`estimate_sigma` on an existing index (shared with the curvature driver)."""
+    radius = index.radius
     rng = np.random.default_rng(rng)
-    n = pts.shape[0]
+    n = index.n_points
     pos = np.sort(rng.choice(n, size=min(sample, n), replace=False))
     indptr, idx, dist = index._query_local(index.sorted_points[pos])
     sensor_local = None if sensor is None else np.asarray(sensor, float) - index.origin
@@ -256,18 +262,25 @@ def estimate_sigma(points, radius, *, frame="z", sensor=None, min_neighbors=7, s
     return float(np.sqrt(np.median(s2)))
 
 
-def _single_radius(pts, radius, *, sigma, noise, alpha, test, frame, sensor, min_neighbors,
-                   minimal_detectable, block_size, progress):
-    index = CellIndex(pts, radius)
+def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neighbors,
+                   minimal_detectable, block_size, progress, active=None):
+    """The curvature pipeline at the index's radius, block by block; fields in input order.
+
+    `active` (bool per input point) restricts the work to some points (multi-scale); the
+    other rows are NaN / unclassified.
+    """
+    radius = index.radius
+    active_sorted = None if active is None else active[index.order].astype(np.uint8)
     sensor_local = None if sensor is None else np.asarray(sensor, float) - index.origin
-    n = pts.shape[0]
+    n = index.n_points
     sorted_fields = None
     done = 0
     covariance = "paper" if test == "paper" else "sandwich"
     for c0, c1 in index.cell_blocks(block_size):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
         out = _run_cells(index, c0, c1, bandwidth=radius, frame=frame, sensor=sensor_local,
-                         min_neighbors=min_neighbors, covariance=covariance)
+                         min_neighbors=min_neighbors, covariance=covariance,
+                         active=active_sorted)
         sigma2 = height_variance(out["frames"], sigma, noise=noise,
                                  points=index.sorted_points[s0:s1], sensor=sensor_local)
         res = curvature_tests(out, sigma2=sigma2, alpha=alpha, test=test,
@@ -364,12 +377,13 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
                       sensor=sensor)
     block_size = check_scalar(block_size, "block_size", func=func, low=1, closed="left",
                               integer=True)
+    index = CellIndex(pts, radii[0])
     estimated = sigma is None
     if estimated:
         # estimated on the local heights, so the noise is "normal" to the frame by construction
         noise = "normal"
-        sigma = estimate_sigma(pts, radii[0], frame=frame, sensor=sensor,
-                               min_neighbors=min_neighbors)
+        sigma = _estimate_sigma(index, frame=frame, sensor=sensor, min_neighbors=min_neighbors,
+                                sample=20000, rng=0)
         logger.info("estimated sigma = %g", sigma)
         if not sigma > 0:
             raise InvalidParameterError(
@@ -381,14 +395,14 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
     kw = dict(sigma=sigma, noise=noise, alpha=alpha, test=test, frame=frame, sensor=sensor,
               min_neighbors=min_neighbors, minimal_detectable=minimal_detectable,
               block_size=block_size, progress=progress)
-    fields = _single_radius(pts, radii[0], **kw)
+    fields = _single_radius(index, **kw)
     if len(radii) > 1:
         chosen = np.full(pts.shape[0], radii[0])
         pending = fields["chi2_pass"] == 0
         for r in radii[1:]:
             if not pending.any():
                 break
-            nxt = _single_radius(pts, r, **kw)
+            nxt = _single_radius(CellIndex(pts, r), active=pending, **kw)
             take = pending & (nxt["chi2_pass"] == 1)
             for k in fields:
                 fields[k][take] = nxt[k][take]

@@ -107,8 +107,14 @@ def _mark_unfitted(out):
     return out
 
 
-def _run_cells(index, c0, c1, *, bandwidth, frame, sensor, min_neighbors, covariance):
-    """Fused neighbour search + fit of the points of cells c0..c1-1 of a 3-D CellIndex."""
+def _run_cells(index, c0, c1, *, bandwidth, frame, sensor, min_neighbors, covariance,
+               active=None):
+    """Fused neighbour search + fit of the points of cells c0..c1-1 of a 3-D CellIndex.
+
+    `active` (uint8 per sorted position, default all) restricts the fit to some points.
+    """
+    if active is None:
+        active = np.ones(index.n_points, dtype=np.uint8)
     m = int(index.cell_start[c1] - index.cell_start[c0])
     out = _allocate(m)
     has_sensor = sensor is not None
@@ -116,8 +122,8 @@ def _run_cells(index, c0, c1, *, bandwidth, frame, sensor, min_neighbors, covari
     _k.fit_quadrics_cells(
         c0, c1, index.sorted_points, index.cell_keys, index.cell_start, index.dims,
         float(index.radius), float(bandwidth), FRAMES[frame], sensor_arr, has_sensor,
-        int(min_neighbors), COVARIANCES[covariance], out["status"], out["npts"], out["beta"],
-        out["cof"], out["frames"], out["stats"],
+        int(min_neighbors), COVARIANCES[covariance], active, out["status"], out["npts"],
+        out["beta"], out["cof"], out["frames"], out["stats"],
     )
     return _mark_unfitted(out)
 

@@ -28,6 +28,7 @@ from ..neighbors._kernels import _cell_ranges, _scan
 OK = 0
 TOO_FEW = 1
 SINGULAR = 2
+SKIPPED = 255  # not asked for (inactive in the fused driver); rows are discarded by callers
 
 FRAME_Z = 0
 FRAME_AUTO = 1
@@ -569,14 +570,15 @@ def fit_quadrics_block(pts, query, indptr, idx, dist, bandwidth, frame, sensor, 
 
 @njit_parallel
 def fit_quadrics_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, bandwidth, frame,
-                       sensor, has_sensor, min_nb, cov_mode, status, npts, beta, cof, frames,
-                       stats):
+                       sensor, has_sensor, min_nb, cov_mode, active, status, npts, beta, cof,
+                       frames, stats):
     """Fused neighbour search and fit for the points of occupied cells ``c0..c1-1``.
 
     The neighbours of each point (3-D sphere of `radius`) are gathered from the 27 cells
     around its own into a per-cell buffer and fitted at once by the same ``_fit_one`` as
     :func:`fit_quadrics_block`, so no global CSR arrays are written and read back. Output
-    row r is sorted position ``cell_start[c0] + r``.
+    row r is sorted position ``cell_start[c0] + r``. Points with ``active[i] == 0`` (sorted
+    positions) are not fitted: status SKIPPED, NaN outputs.
     """
     base = cell_start[c0]
     r2 = radius * radius
@@ -601,9 +603,17 @@ def fit_quadrics_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, bandwid
                 dist_buf = np.empty(cap)
                 buf = np.empty((cap, 4))
             for i in range(cell_start[c], cell_start[c + 1]):
+                r = i - base
+                if active[i] == 0:
+                    status[r] = SKIPPED
+                    npts[r] = 0
+                    for a in range(6):
+                        beta[r, a] = np.nan
+                    for a in range(4):
+                        stats[r, a] = np.nan
+                    continue
                 n = _scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, 3, idx_buf,
                           dist_buf, 0, False)
-                r = i - base
                 st, p = _fit_one(i, pts, idx_buf, dist_buf, 0, n, bandwidth, frame, sensor,
                                  has_sensor, min_nb, cov_mode, ws, buf, beta[r], cof[r],
                                  frames[r], stats[r])

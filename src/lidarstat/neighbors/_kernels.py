@@ -22,12 +22,12 @@ def _find_cell(cell_keys, key):
 
 
 @njit
-def _visit(q, pts, cell_keys, cell_start, lo, cell, dims, radius, ndim, out_idx, out_dist, start,
+def _visit(q, pts, cell_keys, cell_start, cell, dims, radius, ndim, out_idx, out_dist, start,
            count_only):
     """Count (and optionally store) the neighbours of arbitrary query coordinates `q`."""
-    cx = int(np.floor((q[0] - lo[0]) / cell))
-    cy = int(np.floor((q[1] - lo[1]) / cell))
-    cz = int(np.floor((q[2] - lo[2]) / cell)) if ndim == 3 else 0
+    cx = int(np.floor(q[0] / cell))
+    cy = int(np.floor(q[1] / cell))
+    cz = int(np.floor(q[2] / cell)) if ndim == 3 else 0
     ranges = np.empty((9, 2), dtype=np.int64)
     nr = _ranges_at(cx, cy, cz, cell_keys, cell_start, dims, ndim, ranges)
     return _scan(q[0], q[1], q[2], pts, ranges, nr, radius * radius, ndim, out_idx, out_dist,
@@ -35,25 +35,25 @@ def _visit(q, pts, cell_keys, cell_start, lo, cell, dims, radius, ndim, out_idx,
 
 
 @njit_parallel
-def count_radius(queries, pts, cell_keys, cell_start, lo, cell, dims, radius, ndim):
+def count_radius(queries, pts, cell_keys, cell_start, cell, dims, radius, ndim):
     """Number of neighbours of every query point (parallel over queries)."""
     m = queries.shape[0]
     counts = np.empty(m, dtype=np.int64)
     dummy_i = np.empty(0, dtype=np.int64)
     dummy_d = np.empty(0, dtype=np.float64)
     for i in prange(m):
-        counts[i] = _visit(queries[i], pts, cell_keys, cell_start, lo, cell, dims, radius, ndim,
+        counts[i] = _visit(queries[i], pts, cell_keys, cell_start, cell, dims, radius, ndim,
                            dummy_i, dummy_d, 0, True)
     return counts
 
 
 @njit_parallel
-def fill_radius(queries, pts, cell_keys, cell_start, lo, cell, dims, radius, ndim, indptr,
+def fill_radius(queries, pts, cell_keys, cell_start, cell, dims, radius, ndim, indptr,
                 out_idx, out_dist):
     """Write neighbour (sorted-order) indices and distances into preallocated CSR arrays."""
     m = queries.shape[0]
     for i in prange(m):
-        _visit(queries[i], pts, cell_keys, cell_start, lo, cell, dims, radius, ndim, out_idx,
+        _visit(queries[i], pts, cell_keys, cell_start, cell, dims, radius, ndim, out_idx,
                out_dist, indptr[i], False)
 
 

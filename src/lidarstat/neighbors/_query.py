@@ -38,7 +38,7 @@ class CellIndex:
     sorted_points : (N, 3) ndarray of float64
         ``points[order]`` relative to :attr:`origin` (local origin keeps UTM precision).
     origin : (3,) ndarray
-        Subtracted from the coordinates before any arithmetic.
+        Subtracted from the coordinates before any arithmetic (the grid starts there).
     """
 
     def __init__(self, points, radius, *, dim=3):
@@ -70,7 +70,6 @@ class CellIndex:
         starts = np.concatenate(([0], boundaries, [skeys.size])).astype(np.int64)
         self.cell_keys = np.ascontiguousarray(skeys[starts[:-1]])
         self.cell_start = starts
-        self.lo = np.zeros(3)
 
     @property
     def n_cells(self) -> int:
@@ -123,7 +122,7 @@ class CellIndex:
     def _query_local(self, q, radius=None):
         radius = self._check_radius(radius)
         q = np.ascontiguousarray(q, dtype=np.float64)
-        args = (self.sorted_points, self.cell_keys, self.cell_start, self.lo, self.cell,
+        args = (self.sorted_points, self.cell_keys, self.cell_start, self.cell,
                 self.dims, float(radius), self.dim)
         counts = _kernels.count_radius(q, *args)
         indptr = np.zeros(q.shape[0] + 1, dtype=np.int64)
