@@ -7,6 +7,7 @@ import json
 import logging
 import sys
 import time
+from importlib import import_module
 from pathlib import Path
 
 from .. import __version__
@@ -14,8 +15,13 @@ from ..errors import LidarstatError, UnknownFormatError
 
 logger = logging.getLogger("lidarstat")
 
+#: Subcommands that live in a module of their own (``cli/<name>.py``), each with a
+#: ``register(subparsers)`` function. Add a command by adding its module here.
+COMMAND_MODULES: tuple[str, ...] = ()
 
-def _check_output(path: str, src: str | None = None) -> Path:
+
+def check_output(path: str, src: str | None = None) -> Path:
+    """Validate an output path before any work: known suffix, existing folder, not ``src``."""
     from ..io import SUPPORTED_SUFFIXES
 
     p = Path(path)
@@ -31,7 +37,8 @@ def _check_output(path: str, src: str | None = None) -> Path:
     return p
 
 
-def _progress(quiet):
+def progress(quiet):
+    """A ``progress(done, total)`` callback printing to a terminal, or None."""
     if quiet or not sys.stderr.isatty():
         return None
     start = time.perf_counter()
@@ -57,13 +64,13 @@ def cmd_curvature(args):
     from ..features import curvature
     from ..io import read, write
 
-    out = _check_output(args.output, args.input)
+    out = check_output(args.output, args.input)
     cloud = read(args.input)
     t0 = time.perf_counter()
     res = curvature(cloud.xyz, radius=args.radius if len(args.radius) > 1 else args.radius[0],
                     sigma=args.sigma, alpha=args.alpha, test=args.test, frame=args.frame,
                     sensor=args.sensor, noise=args.noise, min_neighbors=args.min_neighbors,
-                    minimal_detectable=args.minimal_detectable, progress=_progress(args.quiet))
+                    minimal_detectable=args.minimal_detectable, progress=progress(args.quiet))
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
     if not args.quiet:
@@ -97,7 +104,7 @@ def cmd_synth(args):
     from ..io import PointCloud, write
     from ..synth import SCENES
 
-    out = _check_output(args.output)
+    out = check_output(args.output)
     scene = SCENES[args.scene](sigma=args.sigma, rng=args.seed)
     cloud = PointCloud(xyz=scene.xyz, attributes={})
     fields = scene.to_fields()
@@ -177,6 +184,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--radius", type=float, default=0.2)
     s.add_argument("--seed", type=int, default=0)
     s.set_defaults(func=cmd_demo)
+
+    for name in COMMAND_MODULES:
+        import_module(f".{name}", __package__).register(sub)
     return p
 
 
