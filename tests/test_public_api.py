@@ -24,6 +24,10 @@ def test_public_names():
             "FitStatus"} <= set(features.__all__)
     assert {"Neighborhoods", "radius_neighbors", "knn_neighbors"} <= set(neighbors.__all__)
     assert {"variance_test_satterthwaite", "wald_test", "z_test"} <= set(stats.__all__)
+    from lidarstat import segment
+
+    assert {"Segmentation", "Polylines", "components", "grow_regions", "relabel", "adjacency",
+            "hoover", "binary_scores"} <= set(segment.__all__)
 
 
 def test_contract_field_names():

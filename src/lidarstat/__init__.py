@@ -7,6 +7,7 @@ neighbors  CSR neighbourhoods from radius (3-D sphere, 2-D disc) and kNN queries
 features   local models per point (weighted quadric / Taylor fit, curvature)
 stats      hypothesis tests on per-point estimates (chi-square, F, z, Bonferroni)
 classify   surface types and other per-point classes
+segment    region growing, segment tables, intersection lines, Hoover scores
 synth      synthetic scenes with exact ground truth
 cli        the ``lidarstat`` command
 """
@@ -18,7 +19,7 @@ import logging
 
 __version__ = "0.1.0"
 
-_SUBPACKAGES = ("io", "neighbors", "features", "stats", "classify", "synth", "cli")
+_SUBPACKAGES = ("io", "neighbors", "features", "stats", "classify", "segment", "synth", "cli")
 __all__ = [*_SUBPACKAGES, "read", "write", "curvature", "__version__"]
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())

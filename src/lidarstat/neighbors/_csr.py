@@ -91,6 +91,19 @@ class Neighborhoods:
         s, e = self.indptr[i], self.indptr[i + 1]
         return self.indices[s:e], self.distances[s:e]
 
+    def edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """Both ends of every neighbour pair, aligned with `indices`.
+
+        Returns
+        -------
+        src, dst : (nnz,) ndarray of int64
+            ``src[e]`` is the query point (an index into the searched cloud) of CSR entry
+            ``e`` and ``dst[e] == indices[e]`` its neighbour. Per-edge criteria of region
+            growing (``edge_ok`` masks) are vectorised expressions of ``src`` and ``dst``.
+        """
+        src = np.repeat(self.query_indices(), self.counts)
+        return src, self.indices
+
     def query_indices(self) -> np.ndarray:
         """Indices of the query points in the searched cloud."""
         if self.query is None:

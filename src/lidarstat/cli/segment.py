@@ -1,0 +1,90 @@
+"""``lidarstat segment IN OUT --method M``: one command, several segmentation methods.
+
+A method is a module listed in :data:`SEGMENT_METHODS` that provides
+
+- ``add_arguments(group)``: the options only this method has (argparse group);
+- ``run(args, cloud) -> lidarstat.segment.Segmentation``.
+
+Method modules are imported when the parser is built, so they must import their numerics
+inside ``run``. The options every method shares are defined here.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from importlib import import_module
+from pathlib import Path
+
+from ._app import check_output
+
+#: method name -> module path (``add_arguments``, ``run``). Add a method by adding it here.
+SEGMENT_METHODS: dict[str, str] = {}
+
+
+def _default_path(out: Path, suffix: str) -> Path:
+    return out.with_name(out.stem + suffix)
+
+
+def cmd_segment(args):
+    """Run the chosen method, write OUT (with ``segment_id``), the table and the lines."""
+    from ..io import read, write
+
+    out = check_output(args.output, args.input)
+    table = Path(args.table) if args.table else _default_path(out, ".segments.csv")
+    lines = Path(args.lines) if args.lines else _default_path(out, ".lines.geojson")
+    cloud = read(args.input)
+    method = import_module(SEGMENT_METHODS[args.method])
+    t0 = time.perf_counter()
+    seg = method.run(args, cloud)
+    elapsed = time.perf_counter() - t0
+    write(out, cloud, fields=seg.to_fields())
+    seg.write_table(table)
+    if seg.lines is not None:
+        seg.lines.write(lines, crs=cloud.crs)
+    if not args.quiet:
+        print(f"{args.input} -> {out}  ({elapsed:.2f} s)")
+        print(seg.summary())
+        print(f"  table: {table}" + (f"\n  lines: {lines}" if seg.lines is not None else ""))
+    if args.summary_json:
+        from .._shared._atomic import atomic_path
+
+        meta = {"input": str(args.input), "output": str(out), "table": str(table),
+                "lines": str(lines) if seg.lines is not None else None,
+                "method": args.method, "seconds": elapsed, "n_segments": seg.n_segments,
+                "params": seg.params}
+        with atomic_path(args.summary_json) as tmp:
+            tmp.write_text(json.dumps(meta, indent=2, default=str))
+    return 0
+
+
+def register(sub):
+    """Add the ``segment`` subcommand and every registered method's options."""
+    s = sub.add_parser(
+        "segment", help="group points into surface segments (--method ...)",
+        description="Segment a point cloud into surface units and write segment_id per "
+        "point, a table of segments and the lines where adjacent segments meet.")
+    s.add_argument("input")
+    s.add_argument("output", help="output file with segment_id; format from the suffix")
+    s.add_argument("--method", required=True, choices=sorted(SEGMENT_METHODS),
+                   help="segmentation method")
+    s.add_argument("--k", type=int, default=None, help="neighbours per point (kNN)")
+    s.add_argument("--radius", type=float, default=None, help="neighbourhood radius")
+    s.add_argument("--min-size", type=int, default=None,
+                   help="smallest segment kept (points); method default if omitted")
+    s.add_argument("--sensor", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
+                   help="scanner position (orients normals)")
+    s.add_argument("--sigma", type=float, default=None,
+                   help="measurement noise std (default: estimated from the data)")
+    s.add_argument("--alpha", type=float, default=0.05, help="significance level of tests")
+    s.add_argument("--table", default=None,
+                   help="segment table (.csv or .json; default OUT stem + .segments.csv)")
+    s.add_argument("--lines", default=None,
+                   help="lines between segments (.geojson, .csv, .las/.laz; "
+                   "default OUT stem + .lines.geojson)")
+    s.add_argument("--summary-json", default=None, help="write a run summary as JSON here")
+    s.add_argument("-q", "--quiet", action="store_true")
+    for name in sorted(SEGMENT_METHODS):
+        group = s.add_argument_group(f"--method {name}")
+        import_module(SEGMENT_METHODS[name]).add_arguments(group)
+    s.set_defaults(func=cmd_segment)
