@@ -8,6 +8,7 @@ features   local models per point (weighted quadric / Taylor fit, curvature)
 stats      hypothesis tests on per-point estimates (chi-square, F, z, Bonferroni)
 classify   surface types and other per-point classes
 segment    region growing, segment tables, intersection lines, Hoover scores
+pipeline   tiles with halos, streamed files, threads or Dask
 synth      synthetic scenes with exact ground truth
 cli        the ``lidarstat`` command
 """
@@ -19,7 +20,7 @@ import logging
 
 __version__ = "0.1.0"
 
-_SUBPACKAGES = ("io", "neighbors", "features", "stats", "classify", "segment", "synth", "cli")
+_SUBPACKAGES = ("io", "neighbors", "features", "stats", "classify", "segment", "pipeline", "synth", "cli")
 __all__ = [*_SUBPACKAGES, "read", "write", "curvature", "__version__"]
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())

@@ -65,14 +65,20 @@ def cmd_curvature(args):
     from ..io import read, write
 
     out = check_output(args.output, args.input)
-    cloud = read(args.input)
+    radius = args.radius if len(args.radius) > 1 else args.radius[0]
+    opts = dict(alpha=args.alpha, test=args.test, frame=args.frame, sensor=args.sensor,
+                noise=args.noise, min_neighbors=args.min_neighbors,
+                minimal_detectable=args.minimal_detectable)
     t0 = time.perf_counter()
-    res = curvature(cloud.xyz, radius=args.radius if len(args.radius) > 1 else args.radius[0],
-                    sigma=args.sigma, alpha=args.alpha, test=args.test, frame=args.frame,
-                    sensor=args.sensor, noise=args.noise, min_neighbors=args.min_neighbors,
-                    minimal_detectable=args.minimal_detectable, progress=progress(args.quiet))
+    if args.tile is not None:
+        res = _curvature_tiled(args, out, radius, opts)
+    else:
+        cloud = read(args.input)
+        res = curvature(cloud.xyz, radius=radius, sigma=args.sigma,
+                        progress=progress(args.quiet), **opts)
     elapsed = time.perf_counter() - t0
-    write(out, cloud, fields=res.to_fields())
+    if args.tile is None:
+        write(out, cloud, fields=res.to_fields())
     if not args.quiet:
         print(f"{args.input} -> {out}  ({elapsed:.2f} s)")
         print(res.summary())
@@ -85,6 +91,29 @@ def cmd_curvature(args):
         with atomic_path(args.summary_json) as tmp:
             tmp.write_text(json.dumps(meta, indent=2))
     return 0
+
+
+def _curvature_tiled(args, out, radius, opts):
+    """Out-of-core curvature: noise from the first chunk, then tiles with a radius halo."""
+    from ..features import CurvatureResult, curvature, estimate_sigma
+    from ..io import iter_chunks, read
+    from ..pipeline import process_file
+
+    sigma, estimated = args.sigma, False
+    r_max = max(radius) if isinstance(radius, list) else radius
+    if sigma is None:
+        first = next(iter_chunks(args.input, args.chunk_points))
+        sigma = estimate_sigma(first.xyz, r_max, frame=args.frame, sensor=args.sensor,
+                               min_neighbors=args.min_neighbors)
+        estimated = True
+    process_file(lambda p: curvature(p, radius=radius, sigma=sigma, **opts), args.input, out,
+                 size=args.tile, halo=r_max, scheduler=args.scheduler, workers=args.workers,
+                 points_per_chunk=args.chunk_points, progress=progress(args.quiet))
+    # The summary reads back only the result fields (the output is complete on disk).
+    fields = read(out, fields=["status", "surface_type", "neighbors"]).attributes
+    return CurvatureResult(fields=fields, radius=radius, sigma=sigma,
+                           sigma_estimated=estimated, alpha=args.alpha, test=args.test,
+                           frame=args.frame)
 
 
 def cmd_bandwidth(args):
@@ -122,6 +151,19 @@ def cmd_demo(args):
 
 
 # --------------------------------------------------------------------------- parser
+def _tile_options(s):
+    """Options of out-of-core, tiled processing (lidarstat.pipeline)."""
+    g = s.add_argument_group("large files (tiles with halos; memory independent of size)")
+    g.add_argument("--tile", type=float, default=None, metavar="SIZE",
+                   help="process square tiles of this side, each with a halo of the radius; "
+                   "LAS/LAZ are streamed in chunks")
+    g.add_argument("--scheduler", choices=("sync", "threads", "dask"), default="threads",
+                   help="how tiles run (default threads)")
+    g.add_argument("--workers", type=int, default=None, help="threads for tiles")
+    g.add_argument("--chunk-points", type=int, default=1_000_000,
+                   help="points per streamed chunk")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from ..synth import SCENES
 
@@ -158,6 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--minimal-detectable", action="store_true",
                    help="also write K_min and H_min (eq. 19)")
     s.add_argument("--summary-json", default=None, help="write the summary as JSON here")
+    _tile_options(s)
     s.add_argument("-q", "--quiet", action="store_true")
     s.set_defaults(func=cmd_curvature)
 

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from ._cloud import SUPPORTED_SUFFIXES, PointCloud, iter_chunks, read, write
+from ._cloud import SUPPORTED_SUFFIXES, PointCloud, iter_chunks, read, rewrite, write
 from ._info import describe, format_description
 
-__all__ = ["PointCloud", "read", "write", "describe", "format_description", "iter_chunks",
+__all__ = ["PointCloud", "read", "write", "describe", "format_description", "iter_chunks", "rewrite",
            "SUPPORTED_SUFFIXES"]

@@ -248,6 +248,21 @@ def read(path: str | os.PathLike, *, fields=None) -> PointCloud:
     return _finish(cloud, path, fields)
 
 
+def _check_fields(path: Path, fields, n: int) -> dict:
+    new = {}
+    for name, values in (fields or {}).items():
+        arr = np.asarray(values)
+        if arr.ndim != 1 or arr.shape[0] != n:
+            raise InvalidParameterError(
+                f"{path}: field {name!r} has shape {arr.shape}; expected ({n},), "
+                "one value per point"
+            )
+        if name.lower() in _XYZ:
+            raise InvalidParameterError(f"{path}: field {name!r} would overwrite a coordinate")
+        new[str(name)] = arr
+    return new
+
+
 def write(path: str | os.PathLike, cloud: PointCloud, *,
           fields: Mapping[str, Any] | None = None) -> Path:
     """Write `cloud` (plus optional new per-point `fields`) atomically to `path`.
@@ -299,17 +314,7 @@ def write(path: str | os.PathLike, cloud: PointCloud, *,
         raise PointCloudWriteError(
             f"{path}: refusing to overwrite the cloud's own source file; write elsewhere"
         )
-    new = {}
-    for name, values in (fields or {}).items():
-        arr = np.asarray(values)
-        if arr.ndim != 1 or arr.shape[0] != len(cloud):
-            raise InvalidParameterError(
-                f"{path}: field {name!r} has shape {arr.shape}; expected ({len(cloud)},), "
-                "one value per point"
-            )
-        if name.lower() in _XYZ:
-            raise InvalidParameterError(f"{path}: field {name!r} would overwrite a coordinate")
-        new[str(name)] = arr
+    new = _check_fields(path, fields, len(cloud))
     if not path.parent.is_dir():
         raise PointCloudWriteError(f"{path}: directory {path.parent} does not exist")
     try:
@@ -349,3 +354,46 @@ def iter_chunks(path: str | os.PathLike, points_per_chunk: int = 1_000_000
         yield from _las.iter_file(path, fmt, points_per_chunk)
     else:
         yield read(path)
+
+
+def rewrite(src: str | os.PathLike, dst: str | os.PathLike, fields_of, *,
+            points_per_chunk: int = 1_000_000) -> Path:
+    """Copy `src` to `dst` with new per-point fields computed chunk by chunk.
+
+    LAS/LAZ to LAS/LAZ is streamed: one chunk of `points_per_chunk` points is in memory
+    at a time, every original field, VLR and CRS is kept, and `dst` appears only when
+    complete. Other formats are read and written whole.
+
+    Parameters
+    ----------
+    src, dst : path-like
+        Input (never modified) and output; formats from the suffixes.
+    fields_of : callable
+        ``fields_of(start, chunk) -> dict`` of arrays for the points ``start ..
+        start + len(chunk)`` of the file (`chunk` is a :class:`PointCloud`).
+    points_per_chunk : int
+
+    Returns
+    -------
+    Path
+    """
+    src, dst = Path(src), Path(dst)
+    fin, fout = _format_of(src), _format_of(dst)
+    if dst.exists() and src.exists() and os.path.samefile(src, dst):
+        raise PointCloudWriteError(f"{dst}: refusing to overwrite the input file; "
+                                   "write elsewhere")
+    if not dst.parent.is_dir():
+        raise PointCloudWriteError(f"{dst}: directory {dst.parent} does not exist")
+    if fin in ("las", "laz") and fout in ("las", "laz"):
+        from . import _las
+
+        def chunks():
+            start = 0
+            for chunk in iter_chunks(src, points_per_chunk):
+                yield chunk, _check_fields(dst, fields_of(start, chunk), len(chunk))
+                start += len(chunk)
+
+        _las.write_stream(dst, chunks(), fout)
+        return dst
+    cloud = read(src)
+    return write(dst, cloud, fields=fields_of(0, cloud))

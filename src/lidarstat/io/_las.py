@@ -236,8 +236,28 @@ def _dump(las: laspy.LasData, tmp: Path, compress: bool) -> None:
         las.write(fh, do_compress=compress, laz_backend=_BACKEND)
 
 
-def write_file(path: Path, cloud: PointCloud, new: dict, fmt: str) -> None:
-    """Write `cloud` plus `new` fields to a LAS/LAZ file atomically."""
+def _record(path: Path, header, cloud: PointCloud, assign: dict):
+    """LAS point record of `cloud` with the `assign` values, for `header`."""
+    ints = np.round((cloud.xyz - header.offsets) / header.scales)
+    if ints.size and (ints.min() < -(2**31) or ints.max() > 2**31 - 1):
+        raise InvalidParameterError(
+            f"{path}: coordinates do not fit the LAS scale {list(header.scales)} and offset "
+            f"{list(header.offsets)} (32-bit overflow)")
+    try:
+        # A bare record: building a LasData would reset the shared header's point count,
+        # which the streaming writer keeps.
+        rec = laspy.ScaleAwarePointRecord.zeros(len(cloud), header=header)
+        for j, dim in enumerate("XYZ"):
+            rec[dim] = ints[:, j].astype(np.int32)
+        for name, values in assign.items():
+            rec[name] = values
+    except (ValueError, OverflowError, TypeError) as exc:
+        raise InvalidParameterError(f"{path}: cannot build LAS points ({short_cause(exc)})"
+                                    ) from exc
+    return rec
+
+
+def _header_for(path: Path, cloud: PointCloud, new: dict):
     if cloud.las_header is not None:
         header = _strip_laszip(cloud.las_header)
     else:
@@ -245,21 +265,14 @@ def write_file(path: Path, cloud: PointCloud, new: dict, fmt: str) -> None:
     assign, params = _plan(path, cloud, new, header)
     if params:
         header.add_extra_dims(params)
+    return header, assign
+
+
+def write_file(path: Path, cloud: PointCloud, new: dict, fmt: str) -> None:
+    """Write `cloud` plus `new` fields to a LAS/LAZ file atomically."""
+    header, assign = _header_for(path, cloud, new)
     header.point_count = len(cloud)
-    ints = np.round((cloud.xyz - header.offsets) / header.scales)
-    if ints.size and (ints.min() < -(2**31) or ints.max() > 2**31 - 1):
-        raise InvalidParameterError(
-            f"{path}: coordinates do not fit the LAS scale {list(header.scales)} and offset "
-            f"{list(header.offsets)} (32-bit overflow)")
-    try:
-        las = laspy.LasData(header)
-        for j, dim in enumerate("XYZ"):
-            las[dim] = ints[:, j].astype(np.int32)
-        for name, values in assign.items():
-            las[name] = values
-    except (ValueError, OverflowError, TypeError) as exc:
-        raise InvalidParameterError(f"{path}: cannot build LAS points ({short_cause(exc)})"
-                                    ) from exc
+    las = laspy.LasData(header, points=_record(path, header, cloud, assign))
     try:
         with atomic_path(path) as tmp:
             _dump(las, tmp, fmt == "laz")
@@ -268,3 +281,36 @@ def write_file(path: Path, cloud: PointCloud, new: dict, fmt: str) -> None:
     except Exception as exc:  # laspy / lazrs errors
         raise PointCloudWriteError(f"{path}: cannot write {fmt.upper()} file "
                                    f"({short_cause(exc)})") from exc
+
+
+def write_stream(path: Path, chunks, fmt: str) -> int:
+    """Write ``(cloud, new_fields)`` chunks one after the other to a LAS/LAZ file.
+
+    The first chunk fixes the header (its source header, or a new one) and the extra
+    bytes; memory holds one chunk at a time. The file appears only when complete.
+    Returns the number of points written.
+    """
+    total = 0
+    try:
+        with atomic_path(path) as tmp:
+            writer = None
+            try:
+                for cloud, new in chunks:
+                    if writer is None:
+                        header, _ = _header_for(path, cloud, new)
+                        writer = laspy.open(tmp, mode="w", header=header,
+                                            do_compress=fmt == "laz", laz_backend=_BACKEND)
+                    assign, _ = _plan(path, cloud, new, writer.header)
+                    writer.write_points(_record(path, writer.header, cloud, assign))
+                    total += len(cloud)
+                if writer is None:
+                    raise InvalidParameterError(f"{path}: nothing to write (no points)")
+            finally:
+                if writer is not None:
+                    writer.close()
+    except (OSError, InvalidParameterError, PointCloudReadError):
+        raise
+    except Exception as exc:  # laspy / lazrs errors
+        raise PointCloudWriteError(f"{path}: cannot write {fmt.upper()} file "
+                                   f"({short_cause(exc)})") from exc
+    return total

@@ -1,0 +1,169 @@
+"""Out-of-core processing of a point-cloud file, tile by tile with halos.
+
+Memory holds one input chunk, or the tiles being processed, at a time; it does not grow
+with the file. The steps:
+
+1. stream the file once for its planimetric bounds;
+2. stream it again, appending each point (index, x, y, z) to the scratch file of every
+   tile whose core or halo contains it;
+3. run the method on each tile (one after the other, in threads, or as Dask tasks) and
+   store its core points' results in disk-backed arrays (``numpy.memmap``) indexed by
+   point number;
+4. stream the input a third time, writing every original field plus the results chunk by
+   chunk to a temporary output renamed when complete.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .._shared.validation import check_option, check_scalar
+from ..errors import InvalidPointsError
+from ..io import iter_chunks, rewrite
+from ._tiles import TileGrid, _fields_of
+
+_REC = np.dtype([("i", "<i8"), ("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("core", "u1")])
+
+
+def _bounds(src, points_per_chunk):
+    lo = np.full(2, np.inf)
+    hi = np.full(2, -np.inf)
+    n = 0
+    for chunk in iter_chunks(src, points_per_chunk):
+        xy = chunk.xyz[:, :2]
+        if not np.all(np.isfinite(chunk.xyz)):
+            raise InvalidPointsError(f"{src}: NaN or infinite coordinates")
+        if len(xy):
+            lo = np.minimum(lo, xy.min(axis=0))
+            hi = np.maximum(hi, xy.max(axis=0))
+        n += len(xy)
+    if n == 0:
+        raise InvalidPointsError(f"{src}: the file holds no points")
+    return lo, hi, n
+
+
+def _bucket(src, grid, workdir, points_per_chunk):
+    """Append every point to its tiles' scratch files; return the tile numbers used."""
+    used = set()
+    start = 0
+    for chunk in iter_chunks(src, points_per_chunk):
+        pid, key, core = grid.memberships(chunk.xyz[:, :2], first_index=start)
+        order = np.argsort(key, kind="stable")
+        pid, key, core = pid[order], key[order], core[order]
+        cuts = np.flatnonzero(np.r_[True, key[1:] != key[:-1], True])
+        for s, e in zip(cuts[:-1], cuts[1:]):
+            rec = np.empty(e - s, _REC)
+            rows = pid[s:e] - start
+            rec["i"] = pid[s:e]
+            rec["x"], rec["y"], rec["z"] = chunk.xyz[rows].T
+            rec["core"] = core[s:e]
+            with open(workdir / f"tile_{int(key[s])}.bin", "ab") as fh:
+                rec.tofile(fh)
+            used.add(int(key[s]))
+        start += len(chunk)
+    return sorted(used)
+
+
+def process_file(func: Callable, src, dst, *, size: float, halo: float,
+                 scheduler: str = "sync", workers: int | None = None,
+                 points_per_chunk: int = 1_000_000, workdir=None, progress=None) -> Path:
+    """Run a per-point method on a file tile by tile and write its results beside the input's.
+
+    Parameters
+    ----------
+    func : callable
+        ``func(points) -> dict`` of per-point arrays (or an object with ``to_fields()``)
+        for the (M, 3) points of one tile with its halo. Fix any whole-cloud estimate
+        (noise level, thresholds) beforehand.
+    src, dst : path-like
+        Input (never modified) and output point-cloud files. LAS/LAZ to LAS/LAZ streams;
+        other formats are read and written whole (the tiles still bound the method's
+        working memory).
+    size : float
+        Core tile side (planimetric, in the file's units).
+    halo : float
+        At least the method's neighbourhood radius: the result then equals the untiled
+        one.
+    scheduler : {'sync', 'threads', 'dask'}
+        How tiles run (see :func:`map_tiles`).
+    workers : int, optional
+        Threads for 'threads' (default: the CPU count).
+    points_per_chunk : int
+        Points per streamed chunk of the input.
+    workdir : path-like, optional
+        Folder for the scratch files (tile buckets, result arrays); default a temporary
+        folder beside `dst`, removed at the end.
+    progress : callable, optional
+        ``progress(done_points, total_points)``.
+
+    Returns
+    -------
+    Path
+        `dst`.
+    """
+    src, dst = Path(src), Path(dst)
+    check_option(scheduler, "scheduler", ("sync", "threads", "dask"), func="process_file")
+    size = check_scalar(size, "size", func="process_file", low=0, closed="neither")
+    halo = check_scalar(halo, "halo", func="process_file", low=0, high=size, closed="left")
+    lo, hi, n = _bounds(src, points_per_chunk)
+    grid = TileGrid.covering(lo, hi, size, halo)
+    parent = Path(workdir) if workdir is not None else dst.parent
+    with tempfile.TemporaryDirectory(prefix=".lidarstat-tiles-", dir=parent) as tmp:
+        tmp = Path(tmp)
+        keys = _bucket(src, grid, tmp, points_per_chunk)
+        results: dict[str, np.memmap] = {}
+        done = 0
+
+        def compute(key):
+            rec = np.fromfile(tmp / f"tile_{key}.bin", dtype=_REC)
+            core = rec["core"].astype(bool)
+            if not core.any():
+                return rec["i"][:0], {}
+            xyz = np.c_[rec["x"], rec["y"], rec["z"]]
+            fields = _fields_of(func(xyz), len(rec), grid.key_of(key))
+            return rec["i"][core], {name: arr[core] for name, arr in fields.items()}
+
+        def put(rows, fields):
+            nonlocal done
+            for name, arr in fields.items():
+                if name not in results:
+                    results[name] = np.lib.format.open_memmap(
+                        tmp / f"field_{len(results)}.npy", mode="w+", dtype=arr.dtype,
+                        shape=(n,) + arr.shape[1:])
+                results[name][rows] = arr
+            done += rows.size
+            if progress is not None:
+                progress(done, n)
+
+        # Tiles go in batches, so that finished results never pile up in memory.
+        nworkers = workers or os.cpu_count() or 1
+        batch = 1 if scheduler == "sync" else 2 * nworkers
+        pool = ThreadPoolExecutor(max_workers=nworkers) if scheduler == "threads" else None
+        try:
+            for b in range(0, len(keys), batch):
+                part = keys[b:b + batch]
+                if scheduler == "sync":
+                    out = [compute(k) for k in part]
+                elif scheduler == "threads":
+                    out = list(pool.map(compute, part))
+                else:
+                    import dask
+
+                    out = dask.compute(*[dask.delayed(compute)(k) for k in part])
+                for rows, fields in out:
+                    put(rows, fields)
+        finally:
+            if pool is not None:
+                pool.shutdown()
+        rewrite(src, dst, lambda start, chunk: {name: np.asarray(arr[start:start + len(chunk)])
+                                                 for name, arr in results.items()},
+                points_per_chunk=points_per_chunk)
+        for arr in results.values():  # release the maps before the folder is removed
+            arr._mmap.close()
+    return dst

@@ -1,0 +1,73 @@
+"""Tiles with halos: exact cover, complete halos, and tiled results equal to untiled ones."""
+
+import numpy as np
+import pytest
+
+from lidarstat.errors import InvalidParameterError
+from lidarstat.features import curvature
+from lidarstat.pipeline import map_tiles, tile_grid
+
+
+def test_every_point_is_core_once_and_halos_are_complete(rng):
+    xyz = rng.uniform(0, 10, (4000, 3)) + [4.5e5, 5.7e6, 0]
+    size, halo = 2.5, 0.7
+    tiles = tile_grid(xyz, size, halo)
+    core_count = np.zeros(len(xyz), int)
+    for t in tiles:
+        core_count[t.points[t.core]] += 1
+        x0, y0, x1, y1 = t.bounds
+        inside = ((xyz[:, 0] >= x0) & (xyz[:, 0] < x1) & (xyz[:, 1] >= y0) & (xyz[:, 1] < y1))
+        near = ((xyz[:, 0] >= x0 - halo + 1e-9) & (xyz[:, 0] < x1 + halo - 1e-9)
+                & (xyz[:, 1] >= y0 - halo + 1e-9) & (xyz[:, 1] < y1 + halo - 1e-9))
+        members = np.zeros(len(xyz), bool)
+        members[t.points] = True
+        # Core points are the points of the square (up to rounding at the borders) ...
+        assert np.count_nonzero(inside ^ np.isin(np.arange(len(xyz)), t.points[t.core])) <= 2
+        # ... and every point within the halo band is in the tile.
+        assert not np.any(near & ~members)
+        assert np.all(np.diff(t.points) > 0)
+    assert np.all(core_count == 1)
+    assert len(tiles) == 16
+
+
+@pytest.mark.parametrize("scheduler", ["sync", "threads", "dask"])
+def test_tiled_curvature_equals_untiled(rng, scheduler):
+    if scheduler == "dask":
+        pytest.importorskip("dask", reason="dask is not installed")
+    g = np.arange(0, 6, 0.05)
+    x, y = np.meshgrid(g, g)
+    z = 0.2 * np.sin(x) * np.cos(0.7 * y) + rng.normal(0, 0.002, x.shape)
+    xyz = np.c_[x.ravel(), y.ravel(), z.ravel()]
+    radius = 0.18
+
+    def run(p):
+        return curvature(p, radius=radius, sigma=0.002)
+
+    whole = run(xyz).to_fields()
+    tiled = map_tiles(run, xyz, size=1.5, halo=radius, scheduler=scheduler, workers=2)
+    assert set(tiled) == set(whole)
+    for name, ref in whole.items():
+        if ref.dtype.kind == "f":
+            np.testing.assert_allclose(tiled[name], ref, rtol=1e-9, atol=1e-12, err_msg=name)
+        else:
+            assert np.array_equal(tiled[name], ref), name
+    # A halo narrower than the radius truncates neighbourhoods at tile borders.
+    short = map_tiles(run, xyz, size=1.5, halo=radius / 3)
+    assert not np.array_equal(short["neighbors"], whole["neighbors"])
+
+
+def test_progress_and_bad_results(rng):
+    xyz = rng.uniform(0, 4, (500, 3))
+    seen = []
+    out = map_tiles(lambda p: {"z": p[:, 2]}, xyz, size=1.0, halo=0.1,
+                    progress=lambda d, n: seen.append((d, n)))
+    assert np.array_equal(out["z"], xyz[:, 2])
+    assert seen[-1] == (500, 500) and len(seen) == 16
+    with pytest.raises(InvalidParameterError, match="rows"):
+        map_tiles(lambda p: {"z": p[:1, 2]}, xyz, size=1.0, halo=0.1)
+    with pytest.raises(InvalidParameterError, match="dict"):
+        map_tiles(lambda p: 3, xyz, size=1.0, halo=0.1)
+    with pytest.raises(InvalidParameterError, match="halo"):
+        tile_grid(xyz, 1.0, 2.0)
+    with pytest.raises(InvalidParameterError, match="scheduler"):
+        map_tiles(lambda p: {}, xyz, size=1.0, halo=0.1, scheduler="mpi")
