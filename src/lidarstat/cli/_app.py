@@ -130,12 +130,15 @@ def cmd_bandwidth(args):
 
 
 def cmd_synth(args):
-    from ..io import PointCloud, write
+    from ..io import write
     from ..synth import SCENES
 
     out = check_output(args.output)
-    scene = SCENES[args.scene](sigma=args.sigma, rng=args.seed)
-    cloud = PointCloud(xyz=scene.xyz, attributes={})
+    kwargs = {"rng": args.seed}
+    if args.sigma is not None:
+        kwargs["sigma"] = args.sigma
+    scene = SCENES[args.scene](**kwargs)
+    cloud = scene.to_pointcloud()
     fields = scene.to_fields()
     fields.update(edge_distance=scene.edge_distance)
     write(out, cloud, fields=fields)
@@ -217,7 +220,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("synth", help="write a synthetic scene with exact truth fields")
     s.add_argument("scene", choices=sorted(SCENES))
     s.add_argument("output")
-    s.add_argument("--sigma", type=float, default=0.0)
+    s.add_argument("--sigma", type=float, default=None,
+                   help="noise std (default: the scene's own; 0 for the analytic patches)")
     s.add_argument("--seed", type=int, default=0)
     s.set_defaults(func=cmd_synth)
 

@@ -14,7 +14,16 @@ codes: 0 unclassified, 1 planar, 2 parabolic ridge, 3 parabolic valley, 4 ellipt
 
 from __future__ import annotations
 
-from ._csg import Box, Cylinder, FaceRegistry, difference, scan_orthographic, union
+from ._csg import (
+    Box,
+    Cylinder,
+    FaceRegistry,
+    Polyhedron,
+    difference,
+    scan_orthographic,
+    union,
+)
+from ._edges import crease_lines, distance_to_creases
 from ._scenes import SCENES, make_agpart, make_column
 from ._surfaces import (
     SURFACE_KINDS,
@@ -25,6 +34,7 @@ from ._surfaces import (
     make_sphere_cap,
     make_surface,
 )
+from ._tls import make_tls_building, make_tls_plant, scan_spherical
 from ._truth import (
     SURFACE_TYPE_NAMES,
     SyntheticCloud,
@@ -47,8 +57,14 @@ __all__ = [
     "make_surface",
     "make_agpart",
     "make_column",
+    "make_tls_building",
+    "make_tls_plant",
+    "scan_spherical",
+    "crease_lines",
+    "distance_to_creases",
     "Cylinder",
     "Box",
+    "Polyhedron",
     "FaceRegistry",
     "union",
     "difference",

@@ -33,7 +33,8 @@ import numpy as np
 
 from ..errors import InvalidParameterError
 
-__all__ = ["Cylinder", "Box", "union", "difference", "scan_orthographic", "FaceRegistry"]
+__all__ = ["Cylinder", "Box", "Polyhedron", "union", "difference", "scan_orthographic",
+           "FaceRegistry"]
 
 _EPS = 1e-12
 
@@ -106,41 +107,57 @@ class Cylinder:
         ext = self.radius * np.sqrt(np.maximum(1.0 - self.axis[:2] ** 2, 0.0))
         return ends[:, :2].min(0) - ext, ends[:, :2].max(0) + ext
 
+    def bounds(self):
+        """Axis-aligned 3-D bounding box ``(lo, hi)``."""
+        h = self.length / 2
+        ends = np.stack([self.center + h * self.axis, self.center - h * self.axis])
+        ext = self.radius * np.sqrt(np.maximum(1.0 - self.axis ** 2, 0.0))
+        return ends.min(0) - ext, ends.max(0) + ext
+
+    def contains(self, p):
+        """True for points `p` (M, 3) inside the closed solid."""
+        w = np.asarray(p, dtype=np.float64) - self.center
+        wa = w @ self.axis
+        wp = w - wa[:, None] * self.axis
+        return (np.abs(wa) <= self.length / 2) & (np.einsum("ij,ij->i", wp, wp)
+                                                   <= self.radius ** 2)
+
     def intervals(self, x, y) -> Intervals:
-        M = x.size
+        return self.ray_intervals(*_vertical_rays(x, y))
+
+    def ray_intervals(self, origin, direction) -> Intervals:
+        """Entry/exit parameters of the rays ``origin + t * direction`` (each (M, 3))."""
         a, c, R, h = self.axis, self.center, self.radius, self.length / 2
-        w = np.stack([x - c[0], y - c[1], np.full(M, -c[2])], axis=1)  # ray origin z = 0
+        w = origin - c
         wa = w @ a
-        da = -a[2]
+        da = direction @ a
         wp = w - wa[:, None] * a
-        dp = np.array([0.0, 0.0, -1.0]) - da * a
-        A = float(dp @ dp)
-        B = wp @ dp
+        dp = direction - da[:, None] * a
+        A = np.einsum("ij,ij->i", dp, dp)
+        B = np.einsum("ij,ij->i", wp, dp)
         C = np.einsum("ij,ij->i", wp, wp) - R * R
         with np.errstate(divide="ignore", invalid="ignore"):
-            if A > _EPS:
-                disc = B * B - A * C
-                ok = disc >= 0
-                sq = np.sqrt(np.where(ok, disc, 0.0))
-                q = -(B + np.copysign(sq, B))
-                r1 = q / A
-                r2 = np.where(q != 0, C / q, r1)
-                s_in = np.where(ok, np.minimum(r1, r2), np.inf)
-                s_out = np.where(ok, np.maximum(r1, r2), -np.inf)
-            else:  # ray parallel to the axis
-                inside = C <= 0
-                s_in = np.where(inside, -np.inf, np.inf)
-                s_out = np.where(inside, np.inf, -np.inf)
-            if abs(da) > _EPS:
-                ta = (-h - wa) / da
-                tb = (h - wa) / da
-                c_in, c_out = np.minimum(ta, tb), np.maximum(ta, tb)
-            else:
-                inside = np.abs(wa) <= h
-                c_in = np.where(inside, -np.inf, np.inf)
-                c_out = np.where(inside, np.inf, -np.inf)
-        cap_in, cap_out = (self.cap_bottom, self.cap_top) if da > 0 else (self.cap_top,
-                                                                          self.cap_bottom)
+            par = A <= _EPS  # ray parallel to the axis
+            disc = B * B - A * C
+            ok = (disc >= 0) & ~par
+            sq = np.sqrt(np.where(ok, disc, 0.0))
+            q = -(B + np.copysign(sq, B))
+            r1 = q / A
+            r2 = np.where(q != 0, C / q, r1)
+            inside = C <= 0
+            s_in = np.where(ok, np.minimum(r1, r2),
+                            np.where(par & inside, -np.inf, np.inf))
+            s_out = np.where(ok, np.maximum(r1, r2),
+                             np.where(par & inside, np.inf, -np.inf))
+            cpar = np.abs(da) <= _EPS
+            ta = (-h - wa) / da
+            tb = (h - wa) / da
+            in_slab = np.abs(wa) <= h
+            c_in = np.where(cpar, np.where(in_slab, -np.inf, np.inf), np.minimum(ta, tb))
+            c_out = np.where(cpar, np.where(in_slab, np.inf, -np.inf), np.maximum(ta, tb))
+        up = da > 0
+        cap_in = np.where(up, self.cap_bottom, self.cap_top)
+        cap_out = np.where(up, self.cap_top, self.cap_bottom)
         t0 = np.maximum(s_in, c_in)
         t1 = np.minimum(s_out, c_out)
         f0 = np.where(s_in >= c_in, self.side, cap_in) + 1
@@ -190,36 +207,122 @@ class Box:
         c = self.corners()[:, :2]
         return c.min(0), c.max(0)
 
+    def _planes(self):
+        # half-spaces n . x <= d in the face order +x, -x, +y, -y, +z, -z
+        n = np.stack([sg * self.rotation[:, i] for i in range(3) for sg in (1.0, -1.0)])
+        d = n @ self.center + np.repeat(self.half_extents, 2)
+        return n, d, self.face_ids.ravel()
+
+    def bounds(self):
+        """Axis-aligned 3-D bounding box ``(lo, hi)``."""
+        c = self.corners()
+        return c.min(0), c.max(0)
+
+    def contains(self, p):
+        """True for points `p` (M, 3) inside the closed solid."""
+        n, d, _ = self._planes()
+        return np.all(np.asarray(p, dtype=np.float64) @ n.T <= d, axis=1)
+
     def intervals(self, x, y) -> Intervals:
-        M = x.size
-        w = np.stack([x - self.center[0], y - self.center[1], np.full(M, -self.center[2])], 1)
-        ol = w @ self.rotation  # local coordinates of the ray origin
-        dl = -self.rotation[2, :]  # local ray direction
-        lo = np.empty((M, 3))
-        hi = np.empty((M, 3))
-        flo = np.empty((M, 3), dtype=np.int64)
-        fhi = np.empty((M, 3), dtype=np.int64)
-        for i in range(3):
-            e = self.half_extents[i]
-            if abs(dl[i]) > _EPS:
-                ta = (-e - ol[:, i]) / dl[i]  # on the -i face
-                tb = (e - ol[:, i]) / dl[i]  # on the +i face
-                if dl[i] > 0:
-                    lo[:, i], hi[:, i] = ta, tb
-                    flo[:, i], fhi[:, i] = self.face_ids[i, 1], self.face_ids[i, 0]
-                else:
-                    lo[:, i], hi[:, i] = tb, ta
-                    flo[:, i], fhi[:, i] = self.face_ids[i, 0], self.face_ids[i, 1]
-            else:
-                inside = np.abs(ol[:, i]) <= e
-                lo[:, i] = np.where(inside, -np.inf, np.inf)
-                hi[:, i] = np.where(inside, np.inf, -np.inf)
-                flo[:, i] = fhi[:, i] = -1
-        k0 = np.argmax(lo, axis=1)
-        k1 = np.argmin(hi, axis=1)
-        r = np.arange(M)
-        t0, t1 = lo[r, k0], hi[r, k1]
-        return _single(t0, t1, flo[r, k0] + 1, fhi[r, k1] + 1, t0 < t1)
+        return self.ray_intervals(*_vertical_rays(x, y))
+
+    def ray_intervals(self, origin, direction) -> Intervals:
+        """Entry/exit parameters of the rays ``origin + t * direction`` (each (M, 3))."""
+        return _convex_intervals(origin, direction, *self._planes())
+
+
+@dataclass
+class Polyhedron:
+    """Convex polyhedron, the intersection of half-spaces ``normals[k] . x <= offsets[k]``.
+
+    Faces registered: ``{name}_{face_names[k]}`` with outward normal ``normals[k]``
+    (normalised).  The polyhedron must be bounded; its vertices are found once by
+    enumerating plane triples (fine for the few tens of planes of a house).
+    """
+
+    registry: FaceRegistry
+    name: str
+    normals: np.ndarray
+    offsets: np.ndarray
+    face_names: tuple
+
+    def __post_init__(self):
+        n = np.asarray(self.normals, dtype=np.float64).reshape(-1, 3)
+        d = np.asarray(self.offsets, dtype=np.float64).reshape(-1)
+        if n.shape[0] != d.size or d.size != len(self.face_names) or d.size < 4:
+            raise InvalidParameterError("polyhedron needs >= 4 planes, one name per plane")
+        norm = np.linalg.norm(n, axis=1)
+        if np.any(norm == 0) or not np.all(np.isfinite(n)) or not np.all(np.isfinite(d)):
+            raise InvalidParameterError("polyhedron planes must be finite with non-zero normals")
+        self.normals, self.offsets = n / norm[:, None], d / norm
+        self.vertices = _polyhedron_vertices(self.normals, self.offsets)
+        if self.vertices.shape[0] < 4:
+            raise InvalidParameterError(f"polyhedron {self.name!r} is empty or unbounded")
+        self.face_ids = np.array([
+            self.registry.add(name=f"{self.name}_{fn}", kind="plane",
+                              point=(self.offsets[k] * self.normals[k]).tolist(),
+                              normal=self.normals[k].tolist())
+            for k, fn in enumerate(self.face_names)], dtype=np.int64)
+
+    def bounds(self):
+        """Axis-aligned 3-D bounding box ``(lo, hi)``."""
+        return self.vertices.min(0), self.vertices.max(0)
+
+    def xy_bounds(self):
+        lo, hi = self.bounds()
+        return lo[:2], hi[:2]
+
+    def contains(self, p):
+        """True for points `p` (M, 3) inside the closed solid."""
+        return np.all(np.asarray(p, dtype=np.float64) @ self.normals.T <= self.offsets, axis=1)
+
+    def intervals(self, x, y) -> Intervals:
+        return self.ray_intervals(*_vertical_rays(x, y))
+
+    def ray_intervals(self, origin, direction) -> Intervals:
+        """Entry/exit parameters of the rays ``origin + t * direction`` (each (M, 3))."""
+        return _convex_intervals(origin, direction, self.normals, self.offsets, self.face_ids)
+
+
+def _polyhedron_vertices(n, d, tol=1e-9):
+    K = n.shape[0]
+    tri = np.array([(i, j, k) for i in range(K) for j in range(i + 1, K)
+                    for k in range(j + 1, K)])
+    A = n[tri]  # (T, 3, 3)
+    det = np.linalg.det(A)
+    good = np.abs(det) > 1e-12
+    v = np.linalg.solve(A[good], d[tri[good]][..., None])[..., 0]
+    scale = max(1.0, float(np.abs(d).max()))
+    inside = np.all(v @ n.T <= d + tol * scale, axis=1)
+    return v[inside]
+
+
+def _vertical_rays(x, y):
+    """Rays of the orthographic scans: origin (x, y, 0), direction -z (t = -z)."""
+    x = np.asarray(x, dtype=np.float64).ravel()
+    y = np.asarray(y, dtype=np.float64).ravel()
+    o = np.stack([x, y, np.zeros_like(x)], axis=1)
+    d = np.zeros_like(o)
+    d[:, 2] = -1.0
+    return o, d
+
+
+def _convex_intervals(origin, direction, normals, offsets, face_ids):
+    """Ray / convex polyhedron intervals (Kay-Kajiya slabs generalised to K planes)."""
+    den = direction @ normals.T  # (M, K)
+    num = offsets[None, :] - origin @ normals.T  # > 0 where the origin is inside plane k
+    enter = den < -_EPS
+    leave = den > _EPS
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = num / den
+    lo = np.where(enter, t, -np.inf)
+    hi = np.where(leave, t, np.inf)
+    outside_par = np.any(~enter & ~leave & (num < 0), axis=1)
+    k0 = np.argmax(lo, axis=1)
+    k1 = np.argmin(hi, axis=1)
+    r = np.arange(origin.shape[0])
+    t0, t1 = lo[r, k0], hi[r, k1]
+    return _single(t0, t1, face_ids[k0] + 1, face_ids[k1] + 1, (t0 < t1) & ~outside_par)
 
 
 def _single(t0, t1, f0, f1, hit) -> Intervals:
@@ -241,8 +344,69 @@ class _Op:
         lb, hb = self.b.xy_bounds()
         return np.minimum(la, lb), np.maximum(ha, hb)
 
+    @property
+    def registry(self):
+        return self.a.registry
+
+    def bounds(self):
+        la, ha = self.a.bounds()
+        if self.kind == "difference":
+            return la, ha
+        lb, hb = self.b.bounds()
+        return np.minimum(la, lb), np.maximum(ha, hb)
+
+    def contains(self, p):
+        if self.kind == "union":
+            return self.a.contains(p) | self.b.contains(p)
+        return self.a.contains(p) & ~self.b.contains(p)
+
+    def primitives(self):
+        """The primitives of the tree, left to right."""
+        out = []
+        for s in (self.a, self.b):
+            out.extend(s.primitives() if isinstance(s, _Op) else [s])
+        return out
+
     def intervals(self, x, y) -> Intervals:
-        return _combine(self.a.intervals(x, y), self.b.intervals(x, y), self.kind)
+        return self.ray_intervals(*_vertical_rays(x, y))
+
+    def ray_intervals(self, origin, direction) -> Intervals:
+        """Entry/exit intervals of the rays ``origin + t * direction`` (each (M, 3)).
+
+        Only the rays whose line meets the bounding box of `b` are combined with it;
+        the others keep the intervals of `a` unchanged.
+        """
+        A = self.a.ray_intervals(origin, direction)
+        m = _aabb_hit(origin, direction, *self.b.bounds())
+        if not m.any():
+            return A
+        if m.all():
+            return _combine(A, self.b.ray_intervals(origin, direction), self.kind)
+        C = _combine(Intervals(*(x[m] for x in A)),
+                     self.b.ray_intervals(origin[m], direction[m]), self.kind)
+        k = max(A.t0.shape[1], C.t0.shape[1])
+        out = []
+        for xa, xc, fill in zip(A, C, (np.inf, np.inf, 0, 0)):
+            z = np.full((xa.shape[0], k), fill, dtype=xa.dtype)
+            z[:, :xa.shape[1]] = xa
+            z[m] = fill
+            z[m, :xc.shape[1]] = xc
+            out.append(z)
+        return Intervals(*out)
+
+
+def _aabb_hit(origin, direction, lo, hi, pad=1e-9):
+    """True where the line ``origin + t direction`` (any t) meets the box [lo, hi]."""
+    lo = lo - pad * (1 + np.abs(lo))
+    hi = hi + pad * (1 + np.abs(hi))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta = (lo - origin) / direction
+        tb = (hi - origin) / direction
+    par = direction == 0
+    outside = par & ((origin < lo) | (origin > hi))
+    t_in = np.where(par, -np.inf, np.minimum(ta, tb)).max(axis=1)
+    t_out = np.where(par, np.inf, np.maximum(ta, tb)).min(axis=1)
+    return (t_in <= t_out) & ~outside.any(axis=1)
 
 
 def union(a, b):

@@ -17,6 +17,7 @@ from .._shared.validation import check_scalar
 from ..errors import InvalidParameterError
 from ._csg import Box, Cylinder, FaceRegistry, difference, scan_orthographic, union
 from ._surfaces import SURFACE_KINDS, make_surface
+from ._tls import make_tls_building, make_tls_plant
 from ._truth import SyntheticCloud, _build
 
 __all__ = ["make_agpart", "make_column", "SCENES"]
@@ -249,4 +250,5 @@ def _surface_scene(kind):
 #: Scene name -> callable accepting keyword arguments (``spacing``, ``sigma``, ``rng``, ...)
 #: and returning a :class:`SyntheticCloud`; used by ``lidarstat synth SCENE OUT``.
 SCENES = {"agpart": make_agpart, "column": make_column,
+          "tls_building": make_tls_building, "tls_plant": make_tls_plant,
           **{kind: _surface_scene(kind) for kind in SURFACE_KINDS}}

@@ -127,6 +127,16 @@ class SyntheticCloud:
         Scene name.
     meta : dict
         Parameters of the scene and extras (``xyz_true``, ``faces``, ...).
+    fields : dict of str to ndarray
+        Further per-point truth of a scene (first axis N), e.g. ``boundary_distance``,
+        ``range``, ``row``, ``col`` of terrestrial scans or ``roof_plane``,
+        ``building_id``, ``height_above_ground`` of airborne scenes; written beside the
+        coordinates by :meth:`to_fields`.  Empty for the analytic patches.
+    attributes : dict of str to ndarray
+        Simulated *sensor* attributes under laspy's standard names (``intensity``,
+        ``return_number``, ``number_of_returns``, ``classification``, ``scan_angle``,
+        ``gps_time``, ...); they become a :class:`lidarstat.io.PointCloud`'s attributes
+        (standard LAS dimensions) via :meth:`to_pointcloud`.
     """
 
     xyz: np.ndarray
@@ -142,6 +152,8 @@ class SyntheticCloud:
     scanner: np.ndarray | None
     name: str
     meta: dict = field(default_factory=dict)
+    fields: dict = field(default_factory=dict)
+    attributes: dict = field(default_factory=dict)
 
     def __post_init__(self):
         xyz = np.asarray(self.xyz, dtype=np.float64)
@@ -166,6 +178,15 @@ class SyntheticCloud:
                     f"SyntheticCloud.{key} must have shape {shape}; got {arr.shape}"
                 )
             object.__setattr__(self, key, _readonly(arr))
+        for attr in ("fields", "attributes"):
+            checked = {}
+            for key, val in dict(getattr(self, attr)).items():
+                arr = np.asarray(val)
+                if arr.ndim < 1 or arr.shape[0] != n:
+                    raise InvalidParameterError(
+                        f"SyntheticCloud.{attr}[{key!r}] must have {n} rows; got {arr.shape}")
+                checked[key] = _readonly(arr)
+            object.__setattr__(self, attr, checked)
         if self.scanner is not None:
             object.__setattr__(self, "scanner", _readonly(np.asarray(self.scanner, float)))
         object.__setattr__(self, "sigma", float(self.sigma))
@@ -184,7 +205,8 @@ class SyntheticCloud:
         -------
         dict
             ``{"true_K": float64, "true_H": float64, "true_surface_type": uint8,
-            "face": int32}``, each of shape (N,).
+            "face": int32}``, each of shape (N,), followed by copies of the scene's extra
+            :attr:`fields` (none for the analytic patches).
 
         Examples
         --------
@@ -197,7 +219,24 @@ class SyntheticCloud:
             "true_H": self.H.copy(),
             "true_surface_type": self.surface_type.copy(),
             "face": self.face.copy(),
+            **{k: np.array(v) for k, v in self.fields.items()},
         }
+
+    def to_pointcloud(self):
+        """A :class:`lidarstat.io.PointCloud` of the (noisy) coordinates with the simulated
+        sensor :attr:`attributes` (``intensity``, ``classification``, ... become the
+        standard LAS dimensions when written).
+
+        Examples
+        --------
+        >>> from lidarstat.synth import make_plane
+        >>> make_plane(extent=0.2, spacing=0.1).to_pointcloud().xyz.shape
+        (9, 3)
+        """
+        from ..io import PointCloud
+
+        return PointCloud(xyz=np.array(self.xyz),
+                          attributes={k: np.array(v) for k, v in self.attributes.items()})
 
 
 def _build(*, xyz_true, normal, K, H, face, edge_distance, sigma, rng, name, meta,

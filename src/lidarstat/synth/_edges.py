@@ -1,0 +1,284 @@
+"""True crease lines of a CSG solid and exact point-to-crease distances.
+
+A *crease* is a curve where two faces of the solid's boundary meet at an angle.  For the
+primitives of :mod:`lidarstat.synth._csg` (convex polyhedra, boxes, finite cylinders)
+every crease lies on
+
+* the intersection line of two face planes (straight edges), or
+* a circle where a plane perpendicular to a cylinder's axis cuts its side (cap rims,
+  a tank standing on the ground, a pipe entering a wall at right angles).
+
+Candidates are cut into pieces at every crossing with another face surface (plane or
+cylinder side), so that, along a piece, the solid looks the same.  A piece is a crease
+when, at its midpoint ``q``, exactly one or exactly three of the four wedge points
+``q + eps (s1 n1 + s2 n2)`` (``s1, s2 = +/-1``, ``n1, n2`` the normals of the two
+surfaces) are inside the solid: one for a convex edge, three for a concave one (two
+means the surfaces continue smoothly or one of them is not a boundary there, zero or four
+that the candidate is not on the boundary).  Straight pieces are therefore exact;
+circles are classified on 1440 sample angles, so the end angles of a partial arc are
+exact to 2*pi/1440 (full circles, the usual case, are exact).
+
+The faces meeting at a crease are identified by probing: on each of the two surfaces, a
+point ``eps`` away from the crease on the side where that surface is a boundary is hit by
+a short ray from outside, whose entry face code is the face id.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["crease_lines", "distance_to_creases"]
+
+_PROBE = 1e-5  # distance from a crease of the probe points (scene units: metres)
+_WEDGE = 1e-6
+_ARC_SAMPLES = 1440
+
+
+def _unit_rows(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _surfaces(solid):
+    """Planes (normal, offset, face id) and cylinder sides of the solid's primitives."""
+    faces = solid.registry.faces
+    prims = solid.primitives() if hasattr(solid, "primitives") else [solid]
+    planes, cyls = [], []
+    for prim in prims:
+        for attr in ("face_ids", "cap_top", "cap_bottom"):
+            ids = np.atleast_1d(getattr(prim, attr, np.empty(0, dtype=int))).ravel()
+            for fid in ids:
+                f = faces[int(fid)]
+                n = np.asarray(f["normal"], float)
+                planes.append((n, float(n @ np.asarray(f["point"], float)), int(fid)))
+        if hasattr(prim, "side"):
+            cyls.append(prim)
+    return planes, cyls
+
+
+def _wedge_count(solid, q, n1, n2, eps=_WEDGE):
+    cnt = np.zeros(q.shape[0], dtype=np.int64)
+    for s1 in (1.0, -1.0):
+        for s2 in (1.0, -1.0):
+            cnt += solid.contains(q + eps * (s1 * n1 + s2 * n2))
+    return cnt
+
+
+def _probe_faces(solid, x, n):
+    """Face id of the boundary at points `x` lying on surfaces of normal `n`; -1 if the
+    surface is not a boundary of the solid at `x`."""
+    a = solid.contains(x + _WEDGE * n)
+    b = solid.contains(x - _WEDGE * n)
+    out = np.full(x.shape[0], -1, dtype=np.int64)
+    bnd = a != b
+    if not bnd.any():
+        return out
+    n_out = np.where(a[:, None], -n, n)[bnd]
+    o = x[bnd] + 100 * _WEDGE * n_out
+    iv = solid.ray_intervals(o, -n_out)
+    t0 = np.where(iv.t0 > 0, iv.t0, np.inf)
+    k = np.argmin(t0, axis=1)
+    code = iv.f0[np.arange(o.shape[0]), k]
+    out[bnd] = np.abs(code) - 1
+    return out
+
+
+def _side_faces(solid, q, n, u):
+    """Face of the surface with normal `n` beside the crease at `q`, on side +u or -u."""
+    f_plus = _probe_faces(solid, q + _PROBE * u, n)
+    f_minus = _probe_faces(solid, q - _PROBE * u, n)
+    return np.where(f_plus >= 0, f_plus, f_minus)
+
+
+def _line_crossings(p0, ell, planes, cyls):
+    ts = []
+    for n, d, _ in planes:
+        den = float(n @ ell)
+        if abs(den) > 1e-12:
+            ts.append((d - n @ p0) / den)
+    for c in cyls:
+        w = p0 - c.center
+        wa, la = float(w @ c.axis), float(ell @ c.axis)
+        wp, lp = w - wa * c.axis, ell - la * c.axis
+        A, B, C = lp @ lp, wp @ lp, wp @ wp - c.radius ** 2
+        if A > 1e-12 and B * B - A * C >= 0:
+            sq = np.sqrt(B * B - A * C)
+            ts.extend([(-B - sq) / A, (-B + sq) / A])
+        if abs(la) > 1e-12:
+            ts.extend([(-c.length / 2 - wa) / la, (c.length / 2 - wa) / la])
+    return np.asarray(ts, dtype=np.float64)
+
+
+def _clip_line(p0, ell, lo, hi):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta, tb = (lo - p0) / ell, (hi - p0) / ell
+    par = np.abs(ell) < 1e-15
+    if np.any(par & ((p0 < lo) | (p0 > hi))):
+        return None
+    t_lo = np.max(np.where(par, -np.inf, np.minimum(ta, tb)))
+    t_hi = np.min(np.where(par, np.inf, np.maximum(ta, tb)))
+    return (t_lo, t_hi) if t_hi > t_lo else None
+
+
+def _straight_creases(solid, planes, cyls, lo, hi):
+    # distinct geometric planes (n, d) up to sign
+    geo = {}
+    for n, d, fid in planes:
+        k = int(np.argmax(np.abs(n)))
+        sg = 1.0 if n[k] > 0 else -1.0
+        key = tuple(np.round(np.r_[sg * n, sg * d], 9))
+        geo.setdefault(key, (sg * n, sg * d))
+    geo = list(geo.values())
+    pieces_q, pieces_a, pieces_b, pieces_ell, pieces_seg = [], [], [], [], []
+    seen = set()
+    for i in range(len(geo)):
+        for j in range(i + 1, len(geo)):
+            ni, di = geo[i]
+            nj, dj = geo[j]
+            ell = np.cross(ni, nj)
+            if np.linalg.norm(ell) < 1e-9:
+                continue
+            ell = ell / np.linalg.norm(ell)
+            p0 = np.linalg.solve(np.stack([ni, nj, ell]), np.array([di, dj, 0.0]))
+            key = tuple(np.round(np.r_[ell * np.sign(ell[np.argmax(np.abs(ell))]), p0], 9))
+            if key in seen:  # three or more planes through one line: done once
+                continue
+            seen.add(key)
+            rng = _clip_line(p0, ell, lo, hi)
+            if rng is None:
+                continue
+            ts = _line_crossings(p0, ell, planes, cyls)
+            ts = np.unique(np.clip(np.r_[ts, rng], *rng))
+            if ts.size < 2:
+                continue
+            for a, b in zip(ts[:-1], ts[1:]):
+                if b - a > 1e-9:
+                    pieces_q.append(p0 + 0.5 * (a + b) * ell)
+                    pieces_seg.append((p0 + a * ell, p0 + b * ell))
+                    pieces_a.append(ni)
+                    pieces_b.append(nj)
+                    pieces_ell.append(ell)
+    if not pieces_q:
+        return []
+    q, na, nb = np.array(pieces_q), np.array(pieces_a), np.array(pieces_b)
+    ell = np.array(pieces_ell)
+    seg = np.array(pieces_seg)
+    cnt = _wedge_count(solid, q, na, nb)
+    keep = (cnt == 1) | (cnt == 3)
+    q, na, nb, ell, seg, cnt = q[keep], na[keep], nb[keep], ell[keep], seg[keep], cnt[keep]
+    fa = _side_faces(solid, q, na, _unit_rows(np.cross(ell, na)))
+    fb = _side_faces(solid, q, nb, _unit_rows(np.cross(ell, nb)))
+    out = []
+    for k in range(q.shape[0]):
+        f = tuple(sorted((int(fa[k]), int(fb[k]))))
+        last = out[-1] if out else None
+        if (last is not None and last["kind"] == "segment" and last["faces"] == f
+                and np.allclose(last["vertices"][1], seg[k, 0], atol=1e-9)
+                and np.allclose(last["direction"], ell[k], atol=1e-12)):
+            last["vertices"][1] = seg[k, 1]
+            continue
+        out.append({"kind": "segment", "faces": f, "convex": bool(cnt[k] == 1),
+                    "vertices": seg[k].copy(), "direction": ell[k]})
+    return out
+
+
+def _circle_creases(solid, planes, cyls):
+    out = []
+    phi = (np.arange(_ARC_SAMPLES) + 0.5) * (2 * np.pi / _ARC_SAMPLES)
+    for c in cyls:
+        a = c.axis
+        u = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        u /= np.linalg.norm(u)
+        v = np.cross(a, u)
+        s_vals = {}
+        for n, d, _ in planes:
+            if abs(abs(n @ a) - 1.0) < 1e-12:
+                s = (d - n @ c.center) / (n @ a)
+                if abs(s) <= c.length / 2 + 1e-12:
+                    s_vals.setdefault(round(float(s), 9), float(s))
+        radial = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v
+        for s in s_vals.values():
+            centre = c.center + s * a
+            q = centre + c.radius * radial
+            na = np.broadcast_to(a, q.shape)
+            cnt = _wedge_count(solid, q, na, radial)
+            ok = (cnt == 1) | (cnt == 3)
+            if not ok.any():
+                continue
+            fp = _side_faces(solid, q, na, radial)  # plane: inside or outside the circle
+            fc = _side_faces(solid, q, radial, na)
+            key = np.where(ok, fp * 1_000_003 + fc, -1)
+            # runs of equal keys along the circle (wrapping around)
+            if np.all(key == key[0]):
+                runs = [(0, _ARC_SAMPLES)] if key[0] >= 0 else []
+            else:
+                start = int(np.argmax(key != np.roll(key, 1)))
+                kk = np.roll(key, -start)
+                cuts = np.r_[0, np.flatnonzero(kk[1:] != kk[:-1]) + 1, _ARC_SAMPLES]
+                runs = [(start + b0, start + b1) for b0, b1 in zip(cuts[:-1], cuts[1:])
+                        if kk[b0] >= 0]
+            step = 2 * np.pi / _ARC_SAMPLES
+            for b0, b1 in runs:
+                i0 = b0 % _ARC_SAMPLES
+                full = (b1 - b0) == _ARC_SAMPLES
+                phi0, phi1 = (0.0, 2 * np.pi) if full else (b0 * step, b1 * step)
+                tt = np.linspace(phi0, phi1, max(int((phi1 - phi0) / step) + 1, 2))
+                verts = centre + c.radius * (np.cos(tt)[:, None] * u + np.sin(tt)[:, None] * v)
+                out.append({"kind": "arc", "faces": tuple(sorted((int(fp[i0]), int(fc[i0])))),
+                            "convex": bool(cnt[i0] == 1), "vertices": verts,
+                            "center": centre, "axis": a.copy(), "radius": c.radius,
+                            "u": u.copy(), "v": v.copy(), "phi0": phi0, "phi1": phi1})
+    return out
+
+
+def crease_lines(solid) -> list[dict]:
+    """Every crease of a CSG solid (module docstring).
+
+    Parameters
+    ----------
+    solid : Box, Cylinder, Polyhedron or a union / difference of them
+
+    Returns
+    -------
+    list of dict
+        One dict per crease: ``kind`` ("segment" or "arc"), ``faces`` (sorted pair of face
+        ids of the solid's registry), ``convex`` (bool: True for a salient edge, False for a
+        re-entrant one), ``vertices`` ((2, 3) end points of a segment, or (m, 3) points
+        along an arc every 0.25 degree).  Arcs also carry ``center``, ``axis``, ``radius``,
+        ``u``, ``v`` (in-plane unit vectors) and ``phi0 <= phi1`` (the arc is
+        ``center + radius (cos(phi) u + sin(phi) v)``); segments carry ``direction``.
+    """
+    planes, cyls = _surfaces(solid)
+    lo, hi = solid.bounds()
+    pad = 1e-6 * max(1.0, float(np.max(hi - lo)))
+    return (_straight_creases(solid, planes, cyls, lo - pad, hi + pad)
+            + _circle_creases(solid, planes, cyls))
+
+
+def distance_to_creases(p, creases) -> np.ndarray:
+    """Exact 3-D distance of points `p` (N, 3) to the nearest crease of `creases`.
+
+    Segments: distance to the closed segment; arcs: distance to the circle when the
+    point's azimuth about the axis lies within the arc, else to the nearer arc end.
+    Returns +inf when there are no creases.
+    """
+    p = np.asarray(p, dtype=np.float64)
+    best = np.full(p.shape[0], np.inf)
+    for cr in creases:
+        if cr["kind"] == "segment":
+            a, b = cr["vertices"]
+            ab = b - a
+            t = np.clip(((p - a) @ ab) / (ab @ ab), 0.0, 1.0)
+            d = np.linalg.norm(p - a - t[:, None] * ab, axis=1)
+        else:
+            w = p - cr["center"]
+            h = w @ cr["axis"]
+            x, y = w @ cr["u"], w @ cr["v"]
+            rho = np.hypot(x, y)
+            ang = np.mod(np.arctan2(y, x) - cr["phi0"], 2 * np.pi)
+            within = ang <= (cr["phi1"] - cr["phi0"]) + 1e-15
+            d_in = np.hypot(h, rho - cr["radius"])
+            ends = cr["vertices"][[0, -1]]
+            d_end = np.min(np.linalg.norm(p[:, None, :] - ends[None], axis=2), axis=1)
+            d = np.where(within, d_in, d_end)
+        np.minimum(best, d, out=best)
+    return best
