@@ -377,9 +377,9 @@ def test_noise_on_scene(rng):
 
 
 def test_scenes_registry():
-    assert {"agpart", "column", *SURFACE_KINDS} == set(SCENES)
-    for name, fn in SCENES.items():
-        c = fn(spacing=0.2, sigma=0.0, rng=0)
+    assert {"agpart", "column", *SURFACE_KINDS} <= set(SCENES)
+    for name in ("agpart", "column", *SURFACE_KINDS):
+        c = SCENES[name](spacing=0.2, sigma=0.0, rng=0)
         assert isinstance(c, SyntheticCloud) and len(c) > 10 and c.name == name
 
 

@@ -247,8 +247,10 @@ def _surface_scene(kind):
     return scene
 
 
-#: Scene name -> callable accepting keyword arguments (``spacing``, ``sigma``, ``rng``, ...)
-#: and returning a :class:`SyntheticCloud`; used by ``lidarstat synth SCENE OUT``.
+#: Scene name -> callable returning a :class:`SyntheticCloud`; used by
+#: ``lidarstat synth SCENE OUT``.  Every scene accepts the keywords ``sigma`` (noise std,
+#: overriding the scene's noise model) and ``rng``; the range-image scenes and patches also
+#: take ``spacing``, the terrestrial scans ``step``.
 SCENES = {"agpart": make_agpart, "column": make_column,
           "tls_building": make_tls_building, "tls_plant": make_tls_plant,
           **{kind: _surface_scene(kind) for kind in SURFACE_KINDS}}
