@@ -95,8 +95,10 @@ def cmd_curvature(args):
 
 def _curvature_tiled(args, out, radius, opts):
     """Out-of-core curvature: noise from the first chunk, then tiles with a radius halo."""
+    import numpy as np
+
     from ..features import CurvatureResult, curvature, estimate_sigma
-    from ..io import iter_chunks, read
+    from ..io import iter_chunks
     from ..pipeline import process_file
 
     sigma, estimated = args.sigma, False
@@ -109,8 +111,10 @@ def _curvature_tiled(args, out, radius, opts):
     process_file(lambda p: curvature(p, radius=radius, sigma=sigma, **opts), args.input, out,
                  size=args.tile, halo=r_max, scheduler=args.scheduler, workers=args.workers,
                  points_per_chunk=args.chunk_points, progress=progress(args.quiet))
-    # The summary reads back only the result fields (the output is complete on disk).
-    fields = read(out, fields=["status", "surface_type", "neighbors"]).attributes
+    # The summary streams back three small fields (7 bytes a point) from the output.
+    names = ("status", "surface_type", "neighbors")
+    parts = [[c.attributes[k] for k in names] for c in iter_chunks(out, args.chunk_points)]
+    fields = {k: np.concatenate([p[j] for p in parts]) for j, k in enumerate(names)}
     return CurvatureResult(fields=fields, radius=radius, sigma=sigma,
                            sigma_estimated=estimated, alpha=args.alpha, test=args.test,
                            frame=args.frame)

@@ -15,6 +15,7 @@ with the file. The steps:
 
 from __future__ import annotations
 
+import mmap
 import os
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
@@ -68,6 +69,18 @@ def _bucket(src, grid, workdir, points_per_chunk):
             used.add(int(key[s]))
         start += len(chunk)
     return sorted(used)
+
+
+def _release(results):
+    """Write dirty result pages to disk and drop them from this process's memory.
+
+    Pages of a file-backed map count in the resident set once touched; without this the
+    memory of a tiled run would grow with the file after all.
+    """
+    for arr in results.values():
+        arr.flush()
+        if hasattr(mmap, "MADV_DONTNEED"):
+            arr._mmap.madvise(mmap.MADV_DONTNEED)
 
 
 def process_file(func: Callable, src, dst, *, size: float, halo: float,
@@ -158,12 +171,17 @@ def process_file(func: Callable, src, dst, *, size: float, halo: float,
                     out = dask.compute(*[dask.delayed(compute)(k) for k in part])
                 for rows, fields in out:
                     put(rows, fields)
+                _release(results)
         finally:
             if pool is not None:
                 pool.shutdown()
-        rewrite(src, dst, lambda start, chunk: {name: np.asarray(arr[start:start + len(chunk)])
-                                                 for name, arr in results.items()},
-                points_per_chunk=points_per_chunk)
+        def fields_of(start, chunk):
+            out = {name: np.array(arr[start:start + len(chunk)]) for name, arr in
+                   results.items()}
+            _release(results)
+            return out
+
+        rewrite(src, dst, fields_of, points_per_chunk=points_per_chunk)
         for arr in results.values():  # release the maps before the folder is removed
             arr._mmap.close()
     return dst
