@@ -35,6 +35,12 @@ def _union(parent, a, b):
 
 
 @njit
+def _accepted(e, p, q, mask, edge_ok, use_edge_ok):
+    # An edge is walked when it joins two distinct masked points and passes the criterion.
+    return q != p and mask[q] and (not use_edge_ok or edge_ok[e])
+
+
+@njit
 def union_find_roots(indptr, indices, rows, edge_ok, use_edge_ok, mask, n_points):
     """Root (smallest member index) of every masked point's component; -1 if unmasked."""
     parent = np.arange(n_points)
@@ -43,12 +49,8 @@ def union_find_roots(indptr, indices, rows, edge_ok, use_edge_ok, mask, n_points
         if not mask[p]:
             continue
         for e in range(indptr[r], indptr[r + 1]):
-            q = indices[e]
-            if q == p or not mask[q]:
-                continue
-            if use_edge_ok and not edge_ok[e]:
-                continue
-            _union(parent, p, q)
+            if _accepted(e, p, indices[e], mask, edge_ok, use_edge_ok):
+                _union(parent, p, indices[e])
     roots = np.empty(n_points, np.int64)
     for p in range(n_points):
         roots[p] = _find(parent, p) if mask[p] else -1
@@ -86,9 +88,7 @@ def grow_kernel(indptr, indices, row_of, edge_ok, use_edge_ok, order, can_grow, 
                 continue
             for e in range(indptr[r], indptr[r + 1]):
                 q = indices[e]
-                if q == p or not mask[q]:
-                    continue
-                if use_edge_ok and not edge_ok[e]:
+                if not _accepted(e, p, q, mask, edge_ok, use_edge_ok):
                     continue
                 lq = labels[q]
                 if lq == 0:
