@@ -14,6 +14,7 @@ codes: 0 unclassified, 1 planar, 2 parabolic ridge, 3 parabolic valley, 4 ellipt
 
 from __future__ import annotations
 
+from ._als import ASPRS_CLASSES, MATERIALS, make_als_town, make_hip_roof_scene
 from ._csg import (
     Box,
     Cylinder,
@@ -57,6 +58,10 @@ __all__ = [
     "make_surface",
     "make_agpart",
     "make_column",
+    "make_als_town",
+    "make_hip_roof_scene",
+    "MATERIALS",
+    "ASPRS_CLASSES",
     "make_tls_building",
     "make_tls_plant",
     "scan_spherical",

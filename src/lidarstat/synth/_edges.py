@@ -89,95 +89,90 @@ def _side_faces(solid, q, n, u):
     return np.where(f_plus >= 0, f_plus, f_minus)
 
 
-def _line_crossings(p0, ell, planes, cyls):
-    ts = []
-    for n, d, _ in planes:
-        den = float(n @ ell)
-        if abs(den) > 1e-12:
-            ts.append((d - n @ p0) / den)
-    for c in cyls:
-        w = p0 - c.center
-        wa, la = float(w @ c.axis), float(ell @ c.axis)
-        wp, lp = w - wa * c.axis, ell - la * c.axis
-        A, B, C = lp @ lp, wp @ lp, wp @ wp - c.radius ** 2
-        if A > 1e-12 and B * B - A * C >= 0:
-            sq = np.sqrt(B * B - A * C)
-            ts.extend([(-B - sq) / A, (-B + sq) / A])
-        if abs(la) > 1e-12:
-            ts.extend([(-c.length / 2 - wa) / la, (c.length / 2 - wa) / la])
-    return np.asarray(ts, dtype=np.float64)
-
-
-def _clip_line(p0, ell, lo, hi):
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ta, tb = (lo - p0) / ell, (hi - p0) / ell
-    par = np.abs(ell) < 1e-15
-    if np.any(par & ((p0 < lo) | (p0 > hi))):
-        return None
-    t_lo = np.max(np.where(par, -np.inf, np.minimum(ta, tb)))
-    t_hi = np.min(np.where(par, np.inf, np.maximum(ta, tb)))
-    return (t_lo, t_hi) if t_hi > t_lo else None
-
-
 def _straight_creases(solid, planes, cyls, lo, hi):
     # distinct geometric planes (n, d) up to sign
     geo = {}
-    for n, d, fid in planes:
+    for n, d, _ in planes:
         k = int(np.argmax(np.abs(n)))
         sg = 1.0 if n[k] > 0 else -1.0
         key = tuple(np.round(np.r_[sg * n, sg * d], 9))
         geo.setdefault(key, (sg * n, sg * d))
-    geo = list(geo.values())
-    pieces_q, pieces_a, pieces_b, pieces_ell, pieces_seg = [], [], [], [], []
-    seen = set()
-    for i in range(len(geo)):
-        for j in range(i + 1, len(geo)):
-            ni, di = geo[i]
-            nj, dj = geo[j]
-            ell = np.cross(ni, nj)
-            if np.linalg.norm(ell) < 1e-9:
-                continue
-            ell = ell / np.linalg.norm(ell)
-            p0 = np.linalg.solve(np.stack([ni, nj, ell]), np.array([di, dj, 0.0]))
-            key = tuple(np.round(np.r_[ell * np.sign(ell[np.argmax(np.abs(ell))]), p0], 9))
-            if key in seen:  # three or more planes through one line: done once
-                continue
-            seen.add(key)
-            rng = _clip_line(p0, ell, lo, hi)
-            if rng is None:
-                continue
-            ts = _line_crossings(p0, ell, planes, cyls)
-            ts = np.unique(np.clip(np.r_[ts, rng], *rng))
-            if ts.size < 2:
-                continue
-            for a, b in zip(ts[:-1], ts[1:]):
-                if b - a > 1e-9:
-                    pieces_q.append(p0 + 0.5 * (a + b) * ell)
-                    pieces_seg.append((p0 + a * ell, p0 + b * ell))
-                    pieces_a.append(ni)
-                    pieces_b.append(nj)
-                    pieces_ell.append(ell)
-    if not pieces_q:
+    N = np.array([g[0] for g in geo.values()]).reshape(-1, 3)
+    D = np.array([g[1] for g in geo.values()])
+    I, J = np.triu_indices(N.shape[0], k=1)
+    ell = np.cross(N[I], N[J])
+    norm = np.linalg.norm(ell, axis=1)
+    ok = norm > 1e-9
+    I, J, ell = I[ok], J[ok], ell[ok] / norm[ok, None]
+    if I.size == 0:
         return []
-    q, na, nb = np.array(pieces_q), np.array(pieces_a), np.array(pieces_b)
-    ell = np.array(pieces_ell)
-    seg = np.array(pieces_seg)
+    A = np.stack([N[I], N[J], ell], axis=1)
+    rhs = np.stack([D[I], D[J], np.zeros(I.size)], axis=1)[..., None]
+    p0 = np.linalg.solve(A, rhs)[..., 0]
+    # one representative pair per geometric line (three planes through a line: done once)
+    sg = np.sign(ell[np.arange(ell.shape[0]), np.argmax(np.abs(ell), axis=1)])
+    key = np.round(np.hstack([ell * sg[:, None], p0]), 9)
+    _, first = np.unique(key, axis=0, return_index=True)
+    first = np.sort(first)
+    I, J, ell, p0 = I[first], J[first], ell[first], p0[first]
+    # clip to the bounding box
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta, tb = (lo - p0) / ell, (hi - p0) / ell
+    par = np.abs(ell) < 1e-15
+    out_par = np.any(par & ((p0 < lo) | (p0 > hi)), axis=1)
+    t_lo = np.max(np.where(par, -np.inf, np.minimum(ta, tb)), axis=1)
+    t_hi = np.min(np.where(par, np.inf, np.maximum(ta, tb)), axis=1)
+    keep = ~out_par & (t_hi > t_lo)
+    I, J, ell, p0, t_lo, t_hi = I[keep], J[keep], ell[keep], p0[keep], t_lo[keep], t_hi[keep]
+    if I.size == 0:
+        return []
+    # crossings with every plane and cylinder, clipped to [t_lo, t_hi]
+    den = ell @ N.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        T = [np.where(np.abs(den) > 1e-12, (D[None, :] - p0 @ N.T) / den, np.nan)]
+        for c in cyls:
+            w = p0 - c.center
+            wa, la = w @ c.axis, ell @ c.axis
+            wp, lp = w - wa[:, None] * c.axis, ell - la[:, None] * c.axis
+            a2 = np.einsum("ij,ij->i", lp, lp)
+            b2 = np.einsum("ij,ij->i", wp, lp)
+            c2 = np.einsum("ij,ij->i", wp, wp) - c.radius ** 2
+            disc = b2 * b2 - a2 * c2
+            okc = (a2 > 1e-12) & (disc >= 0)
+            sq = np.sqrt(np.where(okc, disc, 0.0))
+            axial = np.abs(la) > 1e-12
+            T.append(np.stack([np.where(okc, (-b2 - sq) / a2, np.nan),
+                               np.where(okc, (-b2 + sq) / a2, np.nan),
+                               np.where(axial, (-c.length / 2 - wa) / la, np.nan),
+                               np.where(axial, (c.length / 2 - wa) / la, np.nan)], axis=1))
+    T = np.concatenate(T + [t_lo[:, None], t_hi[:, None]], axis=1)
+    T = np.clip(T, t_lo[:, None], t_hi[:, None])
+    T = np.sort(np.where(np.isnan(T), np.inf, T), axis=1)
+    a, b = T[:, :-1], T[:, 1:]
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(b) & (b - a > 1e-9)
+    li, ci = np.nonzero(valid)  # pieces, in order along each line
+    ta_, tb_ = a[li, ci], b[li, ci]
+    ell_p, p0_p = ell[li], p0[li]
+    q = p0_p + 0.5 * (ta_ + tb_)[:, None] * ell_p
+    na, nb = N[I[li]], N[J[li]]
     cnt = _wedge_count(solid, q, na, nb)
     keep = (cnt == 1) | (cnt == 3)
-    q, na, nb, ell, seg, cnt = q[keep], na[keep], nb[keep], ell[keep], seg[keep], cnt[keep]
-    fa = _side_faces(solid, q, na, _unit_rows(np.cross(ell, na)))
-    fb = _side_faces(solid, q, nb, _unit_rows(np.cross(ell, nb)))
-    out = []
+    li, q, na, nb, cnt = li[keep], q[keep], na[keep], nb[keep], cnt[keep]
+    ell_p, p0_p, ta_, tb_ = ell_p[keep], p0_p[keep], ta_[keep], tb_[keep]
+    fa = _side_faces(solid, q, na, _unit_rows(np.cross(ell_p, na)))
+    fb = _side_faces(solid, q, nb, _unit_rows(np.cross(ell_p, nb)))
+    out, lines = [], []
     for k in range(q.shape[0]):
         f = tuple(sorted((int(fa[k]), int(fb[k]))))
-        last = out[-1] if out else None
-        if (last is not None and last["kind"] == "segment" and last["faces"] == f
-                and np.allclose(last["vertices"][1], seg[k, 0], atol=1e-9)
-                and np.allclose(last["direction"], ell[k], atol=1e-12)):
-            last["vertices"][1] = seg[k, 1]
+        start, end = p0_p[k] + ta_[k] * ell_p[k], p0_p[k] + tb_[k] * ell_p[k]
+        if (out and lines[-1] == li[k] and out[-1]["faces"] == f
+                and np.allclose(out[-1]["vertices"][1], start, atol=1e-9)):
+            out[-1]["vertices"][1] = end
             continue
         out.append({"kind": "segment", "faces": f, "convex": bool(cnt[k] == 1),
-                    "vertices": seg[k].copy(), "direction": ell[k]})
+                    "vertices": np.stack([start, end]), "direction": ell_p[k].copy()})
+        lines.append(li[k])
     return out
 
 

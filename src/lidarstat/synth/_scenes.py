@@ -15,6 +15,7 @@ import numpy as np
 
 from .._shared.validation import check_scalar
 from ..errors import InvalidParameterError
+from ._als import make_als_town, make_hip_roof_scene
 from ._csg import Box, Cylinder, FaceRegistry, difference, scan_orthographic, union
 from ._surfaces import SURFACE_KINDS, make_surface
 from ._tls import make_tls_building, make_tls_plant
@@ -250,7 +251,9 @@ def _surface_scene(kind):
 #: Scene name -> callable returning a :class:`SyntheticCloud`; used by
 #: ``lidarstat synth SCENE OUT``.  Every scene accepts the keywords ``sigma`` (noise std,
 #: overriding the scene's noise model) and ``rng``; the range-image scenes and patches also
-#: take ``spacing``, the terrestrial scans ``step``.
+#: take ``spacing``, the terrestrial scans ``step``,
+#: the airborne scenes ``density``.
 SCENES = {"agpart": make_agpart, "column": make_column,
           "tls_building": make_tls_building, "tls_plant": make_tls_plant,
+          "als_town": make_als_town, "hip_roof": make_hip_roof_scene,
           **{kind: _surface_scene(kind) for kind in SURFACE_KINDS}}

@@ -32,7 +32,7 @@ from .._shared.validation import check_scalar
 from ..errors import InvalidParameterError
 from ._csg import Box, Cylinder, FaceRegistry, Polyhedron, _face_truth, difference, union
 from ._edges import crease_lines, distance_to_creases
-from ._truth import SyntheticCloud, principal_curvatures, surface_type_from_curvature
+from ._truth import SyntheticCloud, surface_type_from_curvature
 
 __all__ = ["scan_spherical", "make_tls_building", "make_tls_plant"]
 
@@ -166,7 +166,7 @@ def _scan_station(solid, faces, scanner, az_rng, el_rng, step, max_range):
     normal, K, H, kmin, kmax = _face_truth(faces.faces, fid, flipped, p)
     cosi = -np.einsum("ij,ij->i", normal, d[hit])
     front = cosi > 1e-9  # grazing hits (rounding) are dropped
-    flag, bpts, bface = _borders(solid, scanner, az, el, np.where(hit, face, -1).reshape(
+    flag, bpts, _ = _borders(solid, scanner, az, el, np.where(hit, face, -1).reshape(
         n_el, n_az), np.where(hit, t, np.inf).reshape(n_el, n_az), step, max_range, wrap)
     rows, cols = np.divmod(np.flatnonzero(hit), n_az)
     sel = front
