@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# Installs the peers the benchmarks compare lidarstat with (not needed by the library or
+# the tests): Debian packages for CloudCompare and CGAL, PyPI packages through the
+# `bench` extra. Run from the repository root as root (CI images and this project's
+# machines are Debian bookworm).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+if command -v apt-get >/dev/null; then
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+        cloudcompare xvfb libcgal-dev libeigen3-dev g++ >/dev/null
+fi
+python -m pip install -q -e ".[bench]"
