@@ -5,7 +5,11 @@ from ._curvature import (FIELDS, CurvatureResult, curvature, curvature_tests, es
 from ._bandwidth import BandwidthResult, optimal_bandwidth
 from ._curvature_formulas import curvature_jacobian, curvatures, principal_jacobian
 from ._quadric import FitStatus, QuadricFit, fit_quadrics
+from ._plane_regression import (PLANE_FIELDS, BandwidthSelection, LocalPlaneFit,
+                                geary_bandwidths, local_planes, select_plane_bandwidth)
 
 __all__ = ["BandwidthResult", "optimal_bandwidth", "FIELDS", "CurvatureResult", "FitStatus", "QuadricFit", "curvature",
            "curvature_jacobian", "curvature_tests", "curvatures", "estimate_sigma",
-           "fit_quadrics", "height_variance", "principal_jacobian"]
+           "fit_quadrics", "height_variance", "principal_jacobian",
+           "PLANE_FIELDS", "BandwidthSelection", "LocalPlaneFit", "geary_bandwidths",
+           "local_planes", "select_plane_bandwidth"]

@@ -1,0 +1,189 @@
+"""Forward Search for a regression model (Atkinson and Riani 2000), unitary or block.
+
+Used by the SAR segmentation (seed 002, section 3) on the transformed heights
+``y = (I - rho W) z`` with rho held at its raw-cluster ML value, so that every step is a
+rank-one update of an ordinary least-squares fit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats as _st
+
+from .._shared.validation import check_option, check_scalar
+from ..errors import InvalidParameterError
+from . import _forward_search_kernels as _k
+
+STOP_RULES = ("both", "f", "residual")
+
+
+@dataclass(frozen=True)
+class ForwardSearchResult:
+    """Outcome of :func:`forward_search`.
+
+    Attributes
+    ----------
+    accepted : (n,) ndarray of bool
+        Initial subset plus the points added before the search stopped.
+    m0 : int
+        Size of the initial subset (the raw cluster, n_s).
+    m : int
+        Size of the final subset.
+    order : (n - m0,) ndarray of int64
+        Points in the order they would enter if the search ran to the end.
+    msize : (T,) ndarray
+        Subset size after each step.
+    rmin : (T,) ndarray
+        Smallest deletion residual outside the subset at the start of each step, rescaled
+        for the truncation of the subset variance (consistency factor, Riani and Atkinson
+        2007).
+    envelope : (T,) ndarray
+        Its ``1 - alpha_residual`` envelope: the quantile of the (m+1)-th order statistic
+        of n absolute normal deviates, ``Phi^-1((1 + B)/2)``, ``B ~ Beta(m + 1, n - m)``.
+    fstat, fpvalue, frank : (T,) ndarray
+        F statistic of ``theta(m) - theta(m0)`` with the covariance of the difference
+        (``sigma^2 (P0 - P_m)``, nested least squares) divided by its rank, its p-value
+        from F(rank, m0 - r), and the rank.
+    fpaper : (T,) ndarray
+        The statistic as printed in the paper, ``d' A_m'A_m d / (r s0^2)``.
+    stop_step : int
+        Step at which the search stopped (-1: ran to the end).
+    stop_reason : str
+        'f', 'residual' or 'exhausted'.
+    theta : (r,) ndarray
+        Least-squares coefficients on the accepted subset.
+    """
+
+    accepted: np.ndarray
+    m0: int
+    m: int
+    order: np.ndarray
+    msize: np.ndarray
+    rmin: np.ndarray
+    envelope: np.ndarray
+    fstat: np.ndarray
+    fpvalue: np.ndarray
+    frank: np.ndarray
+    fpaper: np.ndarray
+    stop_step: int
+    stop_reason: str
+    theta: np.ndarray
+
+    def plot(self, path, *, title=None):
+        """Write the monitoring plots (deletion residual and F against m) as a PNG."""
+        from ..report._fs_plots import plot_forward_search
+
+        plot_forward_search(self, path, title=title)
+
+
+def _truncation_factor(p):
+    """Variance of a standard normal truncated to its central fraction p."""
+    p = np.clip(p, 1e-9, 1 - 1e-12)
+    q = _st.norm.ppf((1 + p) / 2)
+    return 1.0 - 2.0 * q * _st.norm.pdf(q) / p
+
+
+def forward_search(A, y, initial, *, block=1, alpha=0.01, alpha_residual=0.001, stop="both",
+                   persistence=2, max_steps=None, refresh=256):
+    """Forward Search from an initial subset, monitoring the F test and deletion residuals.
+
+    Parameters
+    ----------
+    A : (n, r) array_like
+        Design matrix.
+    y : (n,) array_like
+        Response.
+    initial : (n,) array_like of bool
+        Initial subset (at least r + 1 points).
+    block : int
+        Points added per step (1: unitary Forward Search; >1: block Forward Search).
+    alpha : float
+        Level of the F test of ``theta(m) = theta(m0)`` (the paper's stopping rule).
+    alpha_residual : float
+        Level of the deletion-residual envelope.
+    stop : {'both', 'f', 'residual'}
+        Stop at the first step where the F test rejects, where the smallest deletion
+        residual leaves its envelope for `persistence` consecutive steps, or either.
+    persistence : int
+        Consecutive exceedances of the envelope needed to stop.
+    max_steps : int, optional
+        Cap on the number of steps: the block size grows to ``ceil((n - m0) / max_steps)``.
+    refresh : int
+        Additions between exact re-inversions of the normal equations.
+
+    Returns
+    -------
+    ForwardSearchResult
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lidarstat.segment import forward_search
+    >>> rng = np.random.default_rng(0)
+    >>> x = rng.uniform(0, 10, 300)
+    >>> y = 1 + 0.5 * x + rng.normal(0, 0.1, 300)
+    >>> y[250:] += 3.0                      # a second population
+    >>> init = np.zeros(300, bool); init[:50] = True
+    >>> res = forward_search(np.c_[np.ones(300), x], y, init)
+    >>> bool(res.accepted[:250].mean() > 0.97 and not res.accepted[250:].any())
+    True
+    """
+    func = "forward_search"
+    A = np.ascontiguousarray(A, dtype=np.float64)
+    y = np.ascontiguousarray(y, dtype=np.float64).ravel()
+    init = np.ascontiguousarray(initial, dtype=bool).ravel()
+    n, r = A.shape
+    if y.size != n or init.size != n:
+        raise InvalidParameterError(f"{func}: `A` ({A.shape}), `y` ({y.size}) and `initial` "
+                                    f"({init.size}) must have the same number of rows")
+    check_option(stop, "stop", STOP_RULES, func=func)
+    block = check_scalar(block, "block", func=func, low=1, closed="left", integer=True)
+    alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0)
+    alpha_residual = check_scalar(alpha_residual, "alpha_residual", func=func, low=0.0,
+                                  high=1.0)
+    m0 = int(init.sum())
+    if m0 < r + 1:
+        raise InvalidParameterError(f"{func}: the initial subset has {m0} points; at least "
+                                    f"{r + 1} are needed for {r} parameters")
+    if max_steps is not None and n > m0:
+        block = max(block, int(np.ceil((n - m0) / max_steps)))
+    total = n - m0
+    steps = int(np.ceil(total / block)) if total else 0
+    fstat, fpaper, rmin, s2 = (np.zeros(steps) for _ in range(4))
+    frank = np.zeros(steps, dtype=np.int64)
+    msize = np.zeros(steps, dtype=np.int64)
+    order = np.zeros(total, dtype=np.int64)
+    if total:
+        _k.forward_search(A, y, init, block, int(refresh), fstat, fpaper, frank, rmin, msize,
+                          s2, order)
+    m_before = np.concatenate(([m0], msize[:-1])) if steps else msize
+    rmin_c = rmin * np.sqrt(_truncation_factor(m_before / n))
+    beta_q = _st.beta.ppf(1 - alpha_residual, m_before + 1, np.maximum(n - m_before, 1))
+    envelope = _st.norm.ppf((1 + beta_q) / 2)
+    with np.errstate(invalid="ignore"):
+        fp = _st.f.sf(fstat, np.maximum(frank, 1), m0 - r)
+    fp[frank == 0] = 1.0
+    stop_step, reason = -1, "exhausted"
+    f_rej = fp < alpha
+    exceed = rmin_c > envelope
+    if persistence > 1 and exceed.size:
+        run = np.convolve(exceed.astype(int), np.ones(persistence, int), "full")[:exceed.size]
+        # first step of a run of `persistence` exceedances
+        res_stop = np.flatnonzero(run >= persistence) - (persistence - 1)
+    else:
+        res_stop = np.flatnonzero(exceed)
+    cands = []
+    if stop in ("both", "f") and f_rej.any():
+        cands.append((int(np.flatnonzero(f_rej)[0]), "f"))
+    if stop in ("both", "residual") and res_stop.size:
+        cands.append((int(res_stop[0]), "residual"))
+    if cands:
+        stop_step, reason = min(cands)
+    added = total if stop_step < 0 else (int(m_before[stop_step]) - m0)
+    accepted = init.copy()
+    accepted[order[:added]] = True
+    theta = np.linalg.lstsq(A[accepted], y[accepted], rcond=None)[0]
+    return ForwardSearchResult(accepted, m0, int(accepted.sum()), order, msize, rmin_c,
+                               envelope, fstat, fp, frank, fpaper, stop_step, reason, theta)

@@ -1,0 +1,180 @@
+"""SAR-FS refinement of one raw cluster within its search area (seed 002, sections 2-3).
+
+1. Spatial weights W: row-standardised binary adjacency of points within `w_radius` in
+   plan (the paper's binary W; row standardisation makes rho lie in (-1, 1), which the
+   paper's grid over [0, 1] assumes).
+2. Polynomial order by t tests on an orthogonal basis over the raw cluster (or given).
+3. ML fit of ``z = rho W z + A theta + eps`` on the raw cluster (n_s points).
+4. Forward Search over the search area (n_sa points) on ``y = (I - rho W) z`` with rho
+   held at its raw-cluster value: each step is a rank-one least-squares update, the paper's
+   F test of ``theta(m) - theta(n_s)`` and the deletion-residual envelope are monitored.
+5. Final ML fit on the m accepted points; the surface reported is the polynomial closest
+   to the SAR mean ``(I - rho W)^-1 A theta``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..neighbors import radius_neighbors
+from ..stats._sar import (PolynomialBasis, SARFit, sar_fit, sar_mean_surface, select_degree,
+                          weights_matrix)
+from ._forward_search import ForwardSearchResult, forward_search
+
+#: Largest subset on which rho is estimated by full ML; larger clusters estimate rho on
+#: their `SAR_MAX` points nearest to the medoid (a contiguous patch) and theta on all.
+SAR_MAX = 4000
+
+
+@dataclass(frozen=True)
+class SurfaceUnit:
+    """One refined surface unit.
+
+    Attributes
+    ----------
+    accepted : (m,) ndarray of int64
+        Point indices accepted by the Forward Search (raw cluster included).
+    residuals : (m,) ndarray
+        Height residuals of the accepted points from the fitted surface.
+    n_s, n_sa, m : int
+        Raw cluster, search area and accepted sizes (Table 6 of the paper).
+    degree : int
+        Polynomial order.
+    basis : PolynomialBasis
+        Orthogonal basis (fitted on the raw cluster).
+    fit : SARFit
+        Final ML fit on the accepted points.
+    surface : (r,) ndarray
+        Orthogonal-basis coefficients of the surface (projection of the SAR mean).
+    surface_cov : (r, r) ndarray
+        Approximate covariance of `surface`: ``cov(theta) / (1 - rho)^2``.
+    sigma : float
+        Residual standard deviation of the accepted points about `surface`.
+    fs : ForwardSearchResult
+        Monitoring of the search.
+    rho_points : int
+        Points used for the ML estimate of rho (all, or a patch of :data:`SAR_MAX`).
+    """
+
+    accepted: np.ndarray
+    residuals: np.ndarray
+    n_s: int
+    n_sa: int
+    m: int
+    degree: int
+    basis: PolynomialBasis
+    fit: SARFit
+    surface: np.ndarray
+    surface_cov: np.ndarray
+    sigma: float
+    fs: ForwardSearchResult
+    rho_points: int
+
+    def height(self, xy):
+        """Surface height at planimetric positions `xy` (file coordinates)."""
+        return self.basis.evaluate(self.surface, xy)
+
+    def monomials(self):
+        """Coefficients in metres of ``(E - E0)^p (N - N0)^q`` and their standard errors.
+
+        Returns ``powers (r, 2)``, ``coef (r,)``, ``se (r,)``; ``(E0, N0)`` is
+        ``basis.center``.
+        """
+        b = self.basis
+        rinv = np.linalg.inv(b.R)
+        scale = b.scale ** -b.term_degree.astype(float)
+        coef = (rinv @ self.surface) * scale
+        cov = rinv @ self.surface_cov @ rinv.T
+        se = np.sqrt(np.maximum(np.diag(cov), 0.0)) * scale
+        return b.powers, coef, se
+
+
+def _weights(xy, radius):
+    n = xy.shape[0]
+    nb = radius_neighbors(np.c_[xy, np.zeros(n)], radius, dim=2)
+    return weights_matrix(nb.indptr, nb.indices, n)
+
+
+def _ml_fit(z, A, xy, w_radius):
+    """ML SAR fit; above SAR_MAX points rho comes from a contiguous patch."""
+    n = z.size
+    if n <= SAR_MAX:
+        W = _weights(xy, w_radius)
+        return sar_fit(z, A, W), W, n
+    med = np.median(xy, axis=0)
+    patch = np.argsort(np.sum((xy - med) ** 2, axis=1))[:SAR_MAX]
+    sub = sar_fit(z[patch], A[patch], _weights(xy[patch], w_radius))
+    W = _weights(xy, w_radius)
+    ystar = z - sub.rho * (W @ z)
+    theta, *_ = np.linalg.lstsq(A, ystar, rcond=None)
+    resid = ystar - A @ theta
+    s2 = float(resid @ resid / n)
+    r = A.shape[1]
+    cov = np.full((r + 2, r + 2), np.nan)
+    cov[:r, :r] = s2 * np.linalg.inv(A.T @ A)  # conditional on rho
+    cov[r, r] = sub.cov[-2, -2]
+    fit = SARFit(theta, sub.rho, s2, cov, np.nan, resid, n, "patch", sub.profile)
+    return fit, W, SAR_MAX
+
+
+def refine_cluster(points, raw, area, *, w_radius, degree=1, max_degree=3, alpha=0.01,
+                   alpha_residual=0.001, stop="both", block=1, max_steps=1500):
+    """Refine one raw cluster by SAR-FS within its search area.
+
+    Parameters
+    ----------
+    points : (N, 3) ndarray
+        Coordinates.
+    raw : (n_s,) ndarray of int
+        Indices of the raw cluster.
+    area : (n_sa,) ndarray of int
+        Indices of the search area (must contain `raw`).
+    w_radius : float
+        Planimetric radius of the SAR adjacency W.
+    degree : int or None
+        Polynomial order; None chooses it by t tests up to `max_degree`.
+    alpha, alpha_residual, stop, block, max_steps
+        Forward Search settings (:func:`forward_search`).
+
+    Returns
+    -------
+    SurfaceUnit
+    """
+    raw = np.asarray(raw, dtype=np.int64)
+    area = np.unique(np.concatenate([np.asarray(area, dtype=np.int64), raw]))
+    origin = points[area].min(axis=0)
+    xy_area = points[area, :2] - origin[:2]
+    z_area = points[area, 2] - origin[2]
+    in_raw = np.isin(area, raw)
+    xy_raw, z_raw = xy_area[in_raw], z_area[in_raw]
+    if degree is None:
+        degree, _, basis = select_degree(z_raw, xy_raw, _weights(xy_raw, w_radius),
+                                         max_degree=max_degree, alpha=alpha)
+        basis = PolynomialBasis.fit(xy_raw, degree)
+    else:
+        basis = PolynomialBasis.fit(xy_raw, int(degree))
+    A_area = basis(xy_area)
+    fit0, _, _ = _ml_fit(z_raw, A_area[in_raw], xy_raw, w_radius)
+    W_area = _weights(xy_area, w_radius)
+    ystar = z_area - fit0.rho * (W_area @ z_area)
+    fs = forward_search(A_area, ystar, in_raw, block=block, alpha=alpha,
+                        alpha_residual=alpha_residual, stop=stop, max_steps=max_steps)
+    acc = fs.accepted
+    fit, W_acc, rho_points = _ml_fit(z_area[acc], A_area[acc], xy_area[acc], w_radius)
+    surface = sar_mean_surface(fit, A_area[acc], W_acc) if fit.logdet_method != "patch" \
+        else fit.theta / (1.0 - fit.rho)
+    r = basis.n_terms
+    cov = fit.cov[:r, :r] / (1.0 - fit.rho) ** 2
+    res = z_area[acc] - A_area[acc] @ surface
+    sigma = float(np.sqrt(res @ res / max(acc.sum() - r, 1)))
+    # report in file coordinates: shift the basis centre by the local origin
+    basis = PolynomialBasis(basis.degree, basis.center + origin[:2], basis.scale, basis.R,
+                            basis.powers)
+    surface = surface.copy()
+    surface_shift = origin[2]
+    # the constant term: orthogonal column 0 is constant (= 1 / R00); add the origin height
+    surface[0] += surface_shift * basis.R[0, 0]
+    return SurfaceUnit(area[acc], res, int(raw.size), int(area.size), int(acc.sum()), int(degree),
+                       basis, fit, surface, cov, sigma, fs, int(rho_points))

@@ -1,0 +1,464 @@
+"""Simultaneous autoregressive (SAR) trend-surface model by maximum likelihood (seed 002, eq. 1-4).
+
+``z - rho W z = A theta + eps``, ``eps ~ N(0, sigma^2 I)``: written as
+``z = rho W z + A theta + eps`` this is the *spatial lag* model of Anselin (1988), the
+model PySAL fits with ``spreg.ML_Lag`` (not the spatial error model
+``z = A theta + u, u = rho W u + eps``). The fit maximises the profile (concentrated)
+log-likelihood of eq. 2 over rho, first on a grid (Pace, Barry and Sirmans 1998), then by a
+bounded scalar refinement around the best grid value; theta and sigma^2 follow in closed
+form (eq. 3.1, 3.2).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy import linalg as sla
+from scipy import stats as _st
+from scipy.optimize import minimize_scalar
+from scipy.sparse.linalg import splu
+
+from ..errors import InvalidParameterError
+
+#: Largest n for which log|I - rho W| uses the eigenvalues of W (dense O(n^3) once).
+EIG_MAX = 1000
+#: Largest n for which the sparse LU is used at every evaluation; above: Barry-Pace series.
+LU_MAX = 20000
+#: Largest n for which the information-matrix traces use a dense inverse.
+DENSE_TRACE_MAX = 1500
+LOGDET_METHODS = ("auto", "eig", "lu", "series")
+
+
+def weights_matrix(neighbor_lists_indptr, neighbor_lists_indices, n, *, row_standardize=True):
+    """Sparse spatial weights from CSR adjacency (self-pairs dropped).
+
+    Parameters
+    ----------
+    neighbor_lists_indptr, neighbor_lists_indices : ndarray
+        CSR adjacency over ``n`` points (row i lists the neighbours of i).
+    n : int
+        Number of points.
+    row_standardize : bool
+        Divide each row by its sum (rows without neighbours stay zero).
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix
+    """
+    data = np.ones(neighbor_lists_indices.size)
+    w = sp.csr_matrix((data, neighbor_lists_indices, neighbor_lists_indptr), shape=(n, n))
+    w.setdiag(0.0)
+    w.eliminate_zeros()
+    w.sum_duplicates()
+    w.data[:] = 1.0
+    if row_standardize:
+        rs = np.asarray(w.sum(axis=1)).ravel()
+        with np.errstate(divide="ignore"):
+            inv = np.where(rs > 0, 1.0 / rs, 0.0)
+        w = sp.diags(inv) @ w
+    return sp.csr_matrix(w)
+
+
+class LogDet:
+    """``rho -> log|I - rho W|``: exact (eigenvalues, sparse LU) or the Barry-Pace series.
+
+    Parameters
+    ----------
+    W : sparse matrix (n, n)
+        Spatial weights.
+    method : {'auto', 'eig', 'lu', 'series'}
+        ``auto``: eigenvalues for n <= :data:`EIG_MAX`, sparse LU for n <= :data:`LU_MAX`,
+        the series above.
+    order, probes : int
+        Terms and random probes of the series ``log|I - rho W| = -sum_k rho^k tr(W^k)/k``
+        with ``tr(W^k)`` estimated by ``x'W^k x`` over Rademacher probes (Barry and Pace
+        1999); ``tr(W)`` and ``tr(W^2)`` are exact.
+    rng : Generator or int, optional
+        Seed of the probes.
+    """
+
+    def __init__(self, W, method="auto", *, order=40, probes=30, rng=0):
+        if method not in LOGDET_METHODS:
+            raise InvalidParameterError(f"The 'method' parameter of LogDet must be one of "
+                                        f"{LOGDET_METHODS}. Got {method!r} instead.")
+        n = W.shape[0]
+        if method == "auto":
+            method = "eig" if n <= EIG_MAX else ("lu" if n <= LU_MAX else "series")
+        self.method = method
+        self.n = n
+        self.W = sp.csc_matrix(W)
+        self.evals = None
+        if method == "eig":
+            self.evals = _eigenvalues(W)
+        elif method == "series":
+            self.traces = _trace_powers(sp.csr_matrix(W), order, probes, rng)
+
+    def bounds(self):
+        """Open interval of rho for which I - rho W is non-singular (for real eigenvalues)."""
+        if self.evals is not None and np.isrealobj(self.evals):
+            lmin, lmax = float(self.evals.min()), float(self.evals.max())
+            lo = 1.0 / lmin if lmin < 0 else -np.inf
+            hi = 1.0 / lmax if lmax > 0 else np.inf
+            return max(lo, -1.0), min(hi, 1.0)
+        return -1.0, 1.0
+
+    def __call__(self, rho):
+        if self.method == "eig":
+            return float(np.sum(np.log(np.abs(1.0 - rho * self.evals))))
+        if self.method == "lu":
+            a = sp.identity(self.n, format="csc") - rho * self.W
+            lu = splu(a)
+            return float(np.sum(np.log(np.abs(lu.U.diagonal()))))
+        k = np.arange(1, self.traces.size + 1)
+        return float(-np.sum(rho ** k * self.traces / k))
+
+
+def _eigenvalues(W):
+    """Eigenvalues of W, through a symmetric similar matrix when W = D^-1 B with B symmetric."""
+    W = sp.csr_matrix(W)
+    B = W.copy()
+    B.data[:] = 1.0
+    if (B != B.T).nnz == 0:
+        rs = np.asarray(W.sum(axis=1)).ravel()
+        # W = D^-1 B (row-standardised symmetric binary) or W = B (binary symmetric)
+        if np.allclose(W.data, 1.0):
+            return sla.eigvalsh(W.toarray())
+        d = np.asarray(B.sum(axis=1)).ravel()
+        if np.allclose(rs[d > 0], 1.0) and np.allclose((sp.diags(d) @ W).data, 1.0):
+            s = np.where(d > 0, 1.0 / np.sqrt(np.where(d > 0, d, 1.0)), 0.0)
+            sym = (sp.diags(s) @ B @ sp.diags(s)).toarray()
+            return sla.eigvalsh(sym)
+    ev = sla.eigvals(W.toarray())
+    return ev.real if np.allclose(ev.imag, 0.0) else ev
+
+
+def _trace_powers(W, order, probes, rng):
+    n = W.shape[0]
+    gen = np.random.default_rng(rng)
+    x = gen.choice([-1.0, 1.0], size=(n, probes))
+    t = np.empty(order)
+    v = x
+    for k in range(order):
+        v = W @ v
+        t[k] = np.mean(np.sum(x * v, axis=0))
+    t[0] = W.diagonal().sum()
+    if order > 1:
+        t[1] = W.multiply(W.T).sum()
+    return t
+
+
+@dataclass(frozen=True)
+class SARFit:
+    """Maximum-likelihood fit of the SAR (spatial lag) trend model.
+
+    Attributes
+    ----------
+    theta : (r,) ndarray
+        Trend coefficients (eq. 3.1).
+    rho : float
+        Spatial interaction parameter.
+    sigma2 : float
+        ML noise variance (eq. 3.2, divisor n, as in the paper and spreg).
+    cov : (r + 2, r + 2) ndarray
+        Asymptotic covariance of (theta, rho, sigma^2) from the information matrix
+        (Anselin 1988, eq. 12.x; the matrix spreg inverts).
+    loglik : float
+        Full log-likelihood at the optimum.
+    residuals : (n,) ndarray
+        ``(I - rho W) z - A theta``.
+    n : int
+        Observations.
+    logdet_method : str
+        How log|I - rho W| was computed.
+    profile : (2, f) ndarray
+        Grid of rho and the profile log-likelihood on it (for plots).
+    """
+
+    theta: np.ndarray
+    rho: float
+    sigma2: float
+    cov: np.ndarray
+    loglik: float
+    residuals: np.ndarray
+    n: int
+    logdet_method: str
+    profile: np.ndarray
+
+    @property
+    def se_theta(self) -> np.ndarray:
+        """Standard errors of theta."""
+        r = self.theta.size
+        return np.sqrt(np.diag(self.cov)[:r])
+
+    @property
+    def se_rho(self) -> float:
+        """Standard error of rho."""
+        return float(np.sqrt(self.cov[self.theta.size, self.theta.size]))
+
+    @property
+    def se_sigma2(self) -> float:
+        """Standard error of sigma^2."""
+        return float(np.sqrt(self.cov[-1, -1]))
+
+    @property
+    def std_residuals(self) -> np.ndarray:
+        """Standardised residuals e of eq. 4."""
+        return self.residuals / np.sqrt(self.sigma2)
+
+    def t_test(self, alpha=0.05):
+        """Two-sided t tests of ``theta_i = 0`` with n - r - 1 degrees of freedom."""
+        from ._results import TestResult
+
+        t = self.theta / self.se_theta
+        df = self.n - self.theta.size - 1
+        p = 2.0 * _st.t.sf(np.abs(t), df)
+        return TestResult(t, p, float(df), p < alpha, float(alpha))
+
+
+def sar_fit(z, A, W, *, logdet="auto", grid=21, bounds=None, xatol=1e-10, covariance=True,
+            rng=0):
+    """Fit ``z = rho W z + A theta + eps`` by maximum likelihood (profile likelihood in rho).
+
+    Parameters
+    ----------
+    z : (n,) array_like
+        Heights.
+    A : (n, r) array_like
+        Trend design matrix (e.g. :func:`polynomial_basis`).
+    W : (n, n) sparse matrix
+        Spatial weights (row-standardised: see :func:`weights_matrix`).
+    logdet : {'auto', 'eig', 'lu', 'series'} or LogDet
+        How ``log|I - rho W|`` is computed (see :class:`LogDet`).
+    grid : int
+        Grid size over the admissible rho interval before the bounded refinement.
+    bounds : (float, float), optional
+        Search interval of rho; default (-1, 1) cut to the eigenvalue bounds when known
+        (the paper's grid over [0, 1] assumes non-negative interaction).
+    xatol : float
+        Absolute tolerance of the refinement.
+    covariance : bool
+        Compute the information-matrix covariance (traces of ``W (I - rho W)^-1``:
+        dense for n <= :data:`DENSE_TRACE_MAX`, stochastic (Hutchinson, 64 probes) above).
+    rng : Generator or int, optional
+        Seed of stochastic traces.
+
+    Returns
+    -------
+    SARFit
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lidarstat.stats import sar_fit, weights_matrix
+    >>> from lidarstat.neighbors import radius_neighbors
+    >>> rng = np.random.default_rng(1)
+    >>> xy = rng.uniform(0, 10, (300, 2))
+    >>> nb = radius_neighbors(np.c_[xy, np.zeros(300)], 1.0, dim=2)
+    >>> W = weights_matrix(nb.indptr, nb.indices, 300)
+    >>> A = np.c_[np.ones(300), xy]
+    >>> z = A @ [1.0, 0.3, -0.2] + rng.normal(0, 0.1, 300)
+    >>> fit = sar_fit(z, A, W)
+    >>> abs(fit.rho) < 0.3
+    True
+    """
+    z = np.asarray(z, dtype=np.float64).ravel()
+    A = np.asarray(A, dtype=np.float64)
+    n = z.size
+    if A.ndim != 2 or A.shape[0] != n:
+        raise InvalidParameterError(f"sar_fit: `A` must have shape ({n}, r); got {A.shape}")
+    r = A.shape[1]
+    if n <= r + 1:
+        raise InvalidParameterError(f"sar_fit: {n} observations are too few for {r} trend "
+                                    f"parameters and rho")
+    W = sp.csr_matrix(W)
+    if W.shape != (n, n):
+        raise InvalidParameterError(f"sar_fit: `W` must be ({n}, {n}); got {W.shape}")
+    ld = logdet if isinstance(logdet, LogDet) else LogDet(W, logdet, rng=rng)
+    wz = W @ z
+    q, rr = np.linalg.qr(A)
+    e0 = z - q @ (q.T @ z)
+    e1 = wz - q @ (q.T @ wz)
+    a00, a01, a11 = e0 @ e0, e0 @ e1, e1 @ e1
+
+    def negll(rho):
+        ss = a00 - 2 * rho * a01 + rho * rho * a11
+        return 0.5 * n * np.log(max(ss, 1e-300) / n) - ld(rho)
+
+    lo, hi = bounds if bounds is not None else ld.bounds()
+    eps = 1e-6 * (hi - lo)
+    rhos = np.linspace(lo + eps, hi - eps, int(grid))
+    vals = np.array([negll(x) for x in rhos])
+    k = int(np.argmin(vals))
+    a, b = rhos[max(k - 1, 0)], rhos[min(k + 1, rhos.size - 1)]
+    res = minimize_scalar(negll, bounds=(a, b), method="bounded", options={"xatol": xatol})
+    rho = float(res.x)
+    if vals[k] < res.fun:
+        rho = float(rhos[k])
+    ystar = z - rho * wz
+    theta = sla.solve_triangular(rr, q.T @ ystar)
+    resid = ystar - A @ theta
+    sigma2 = float(resid @ resid / n)
+    loglik = float(-negll(rho) - 0.5 * n * (np.log(2 * np.pi) + 1.0))
+    cov = _information_cov(A, W, theta, rho, sigma2, ld, rng) if covariance else \
+        np.full((r + 2, r + 2), np.nan)
+    return SARFit(theta, rho, sigma2, cov, loglik, resid, n, ld.method,
+                  np.vstack([rhos, -vals - 0.5 * n * (np.log(2 * np.pi) + 1.0)]))
+
+
+def _information_cov(A, W, theta, rho, sigma2, ld, rng, probes=64):
+    n, r = A.shape
+    I = sp.identity(n, format="csc")
+    M = sp.csc_matrix(I - rho * W)
+    if n <= DENSE_TRACE_MAX:
+        wai = W @ np.linalg.inv(M.toarray())
+        wai = np.asarray(wai)
+        tr1 = np.trace(wai)
+        tr2 = np.sum(wai * wai.T)
+        tr3 = np.sum(wai * wai)
+    else:
+        lu = splu(M)
+        gen = np.random.default_rng(rng)
+        x = gen.choice([-1.0, 1.0], size=(n, probes))
+        y = W @ lu.solve(x)  # W A^-1 x
+        if ld.evals is not None:
+            lam = ld.evals.real
+            tr1 = float(np.sum(lam / (1 - rho * lam)))
+            tr2 = float(np.sum((lam / (1 - rho * lam)) ** 2))
+        else:
+            tr1 = float(np.mean(np.sum(x * y, axis=0)))
+            y2 = W @ lu.solve(y)
+            tr2 = float(np.mean(np.sum(x * y2, axis=0)))
+        tr3 = float(np.mean(np.sum(y * y, axis=0)))
+    lu = splu(M)
+    predy = lu.solve(A @ theta)
+    wpy = W @ predy
+    v = np.zeros((r + 2, r + 2))
+    v[:r, :r] = A.T @ A / sigma2
+    v[:r, r] = v[r, :r] = A.T @ wpy / sigma2
+    v[r, r] = tr2 + tr3 + wpy @ wpy / sigma2
+    v[r, r + 1] = v[r + 1, r] = tr1 / sigma2
+    v[r + 1, r + 1] = n / (2.0 * sigma2 ** 2)
+    try:
+        return np.linalg.inv(v)
+    except np.linalg.LinAlgError:
+        return np.full((r + 2, r + 2), np.nan)
+
+
+def sar_mean_surface(fit, A, W):
+    """Coefficients of the polynomial closest to the SAR mean ``(I - rho W)^-1 A theta``.
+
+    In the lag model the expected heights are ``(I - rho W)^-1 A theta``, not
+    ``A theta``: inside a surface ``W A ~ A`` so ``A theta ~ (1 - rho) E[z]``. The
+    surface itself (for normals, intersections) is the least-squares projection of the
+    model mean on the trend basis, ``(A'A)^-1 A' (I - rho W)^-1 A theta``.
+    """
+    n = A.shape[0]
+    M = sp.csc_matrix(sp.identity(n, format="csc") - fit.rho * sp.csr_matrix(W))
+    mean = splu(M).solve(A @ fit.theta)
+    return np.linalg.lstsq(A, mean, rcond=None)[0]
+
+
+@dataclass(frozen=True)
+class PolynomialBasis:
+    """A total-degree polynomial basis in (E, N), orthonormalised over a set of points.
+
+    ``orthogonal(xy) = monomials(xy) @ inv(R)`` where the monomials are in centred,
+    scaled coordinates and ``R`` comes from the QR decomposition over the fitting points,
+    so columns are orthogonal there (orthogonal polynomials) and coefficients map back to
+    the monomials with :meth:`to_monomial`.
+    """
+
+    degree: int
+    center: np.ndarray
+    scale: float
+    R: np.ndarray
+    powers: np.ndarray
+
+    @classmethod
+    def fit(cls, xy, degree):
+        xy = np.asarray(xy, dtype=np.float64)
+        center = xy.mean(axis=0)
+        scale = float(np.sqrt(np.mean(np.sum((xy - center) ** 2, axis=1)))) or 1.0
+        powers = np.array([(i - j, j) for i in range(degree + 1) for j in range(i + 1)])
+        mono = _monomials((xy - center) / scale, powers)
+        _, R = np.linalg.qr(mono)
+        sgn = np.sign(np.diag(R))
+        sgn[sgn == 0] = 1.0
+        R = R * sgn[:, None]
+        R = R / np.sqrt(xy.shape[0])
+        return cls(int(degree), center, scale, R, powers)
+
+    @property
+    def n_terms(self) -> int:
+        """Number of basis columns r."""
+        return self.powers.shape[0]
+
+    @property
+    def term_degree(self) -> np.ndarray:
+        """Total degree of each column."""
+        return self.powers.sum(axis=1)
+
+    def monomials(self, xy):
+        """Monomials of the centred, scaled coordinates."""
+        return _monomials((np.asarray(xy, dtype=np.float64) - self.center) / self.scale,
+                          self.powers)
+
+    def __call__(self, xy):
+        """Orthogonal design matrix at `xy`."""
+        return sla.solve_triangular(self.R, self.monomials(xy).T, trans="T").T
+
+    def to_monomial(self, coef):
+        """Coefficients on the monomials of the centred, scaled coordinates."""
+        return sla.solve_triangular(self.R, np.asarray(coef, dtype=np.float64))
+
+    def evaluate(self, coef, xy):
+        """Height of the polynomial with orthogonal-basis coefficients `coef` at `xy`."""
+        return self(xy) @ coef
+
+    def gradient(self, coef, xy):
+        """(m, 2) gradient dz/dE, dz/dN of the polynomial at `xy`."""
+        c = self.to_monomial(coef)
+        u = (np.asarray(xy, dtype=np.float64) - self.center) / self.scale
+        g = np.zeros((u.shape[0], 2))
+        for (pe, pn), ck in zip(self.powers, c):
+            if pe:
+                g[:, 0] += ck * pe * u[:, 0] ** (pe - 1) * u[:, 1] ** pn
+            if pn:
+                g[:, 1] += ck * pn * u[:, 0] ** pe * u[:, 1] ** (pn - 1)
+        return g / self.scale
+
+
+def _monomials(u, powers):
+    return np.column_stack([u[:, 0] ** pe * u[:, 1] ** pn for pe, pn in powers])
+
+
+def select_degree(z, xy, W, *, max_degree=3, alpha=0.05, logdet="auto"):
+    """Polynomial order by t tests on an orthogonal basis (seed 002, section 2).
+
+    Fit the SAR model with the redundant degree `max_degree` on an orthogonal polynomial
+    basis; the order s is the highest degree with at least one coefficient whose t test
+    rejects ``theta_i = 0`` (two-sided, Bonferroni over the terms of that degree).
+    Orthogonality makes each coefficient's test independent of which other terms are kept.
+
+    Returns
+    -------
+    degree : int
+        Selected order s (at least 1).
+    fit : SARFit
+        The fit at `max_degree`.
+    basis : PolynomialBasis
+    """
+    basis = PolynomialBasis.fit(xy, max_degree)
+    A = basis(xy)
+    fit = sar_fit(z, A, W, logdet=logdet)
+    t = np.abs(fit.theta / fit.se_theta)
+    df = fit.n - fit.theta.size - 1
+    deg = basis.term_degree
+    for d in range(max_degree, 1, -1):
+        sel = deg == d
+        crit = _st.t.isf(alpha / (2 * sel.sum()), df)
+        if np.any(t[sel] > crit):
+            return d, fit, basis
+    return 1, fit, basis
