@@ -19,7 +19,10 @@ from pathlib import Path
 from ._app import check_output
 
 #: method name -> module path (``add_arguments``, ``run``). Add a method by adding it here.
-SEGMENT_METHODS: dict[str, str] = {}
+SEGMENT_METHODS: dict[str, str] = {
+    "sar": "lidarstat.cli._segment_sar",
+    "curvature": "lidarstat.cli._segment_curvature",
+}
 
 
 def _default_path(out: Path, suffix: str) -> Path:

@@ -154,42 +154,33 @@ def fit_planes(pts, query, indptr, idx, dist, bandwidth, min_nb, beta, cof, stat
 
 
 @njit_parallel
-def geary_local(z, indptr, idx, dist, bandwidth, c):
-    """Local Geary indicator c_i = sum_j d_ij (h_i - h_j)^2 / (n^-1 sum h^2), tricube d_ij.
+def geary_local(z, query, indptr, idx, dist, bandwidth, m2, c):
+    """Local Geary indicator c_i = sum_j d_ij (h_i - h_j)^2 / m2 per CSR row (tricube d_ij).
 
-    Returns through `c`; the denominator uses the deviations h = z - mean(z) of all
-    points (Anselin 1995). The point itself (j = i) contributes 0.
+    `z` holds the deviations h = z - mean(z) of all points and ``m2 = n^-1 sum h^2``
+    (Anselin 1995); row r is point ``query[r]``; the point itself contributes 0.
     """
-    n = z.size
-    mean = 0.0
-    for i in range(n):
-        mean += z[i]
-    mean /= n
-    m2 = 0.0
-    for i in range(n):
-        m2 += (z[i] - mean) ** 2
-    m2 /= n
-    if m2 <= 0.0:
-        m2 = 1.0
-    for i in numba.prange(indptr.size - 1):
+    for r in numba.prange(indptr.size - 1):
+        i = query[r]
         acc = 0.0
-        for t in range(indptr[i], indptr[i + 1]):
+        for t in range(indptr[r], indptr[r + 1]):
             j = idx[t]
             if j == i:
                 continue
             w = _tricube(dist[t], bandwidth)
             d = z[i] - z[j]
             acc += w * d * d
-        c[i] = acc / m2
+        c[r] = acc / m2
 
 
 @njit_parallel
-def geary_gamma(c, indptr, idx, dist, bandwidth, gamma):
+def geary_gamma(c, query, indptr, idx, dist, bandwidth, gamma):
     """gamma_i = c_i sum_j d_ij / sum_j d_ij c_j (Sclocco and Di Marzio 2004); 1 if undefined."""
-    for i in numba.prange(indptr.size - 1):
+    for r in numba.prange(indptr.size - 1):
+        i = query[r]
         sw = 0.0
         swc = 0.0
-        for t in range(indptr[i], indptr[i + 1]):
+        for t in range(indptr[r], indptr[r + 1]):
             j = idx[t]
             if j == i:
                 continue
@@ -197,6 +188,6 @@ def geary_gamma(c, indptr, idx, dist, bandwidth, gamma):
             sw += w
             swc += w * c[j]
         if swc > 0.0 and sw > 0.0:
-            gamma[i] = c[i] * sw / swc
+            gamma[r] = c[i] * sw / swc
         else:
-            gamma[i] = 1.0
+            gamma[r] = 1.0

@@ -123,6 +123,38 @@ def _run_kernel(points, nbh, bandwidth, min_neighbors):
     return beta, cof, stats, status
 
 
+#: Query points per chunk: the CSR of one chunk stays a few hundred MB at most.
+CHUNK = 200_000
+
+
+def _chunks(points, radius):
+    """Yield CSR neighbourhoods (2-D discs) of consecutive spatially coherent chunks."""
+    from ..neighbors import CellIndex
+
+    n = points.shape[0]
+    if n <= CHUNK:
+        yield radius_neighbors(points, radius, dim=2)
+        return
+    index = CellIndex(points, radius, dim=2)
+    for start in range(0, n, CHUNK):
+        q = np.sort(index.order[start:start + CHUNK])
+        indptr, idx, dist = index.query(points[q])
+        yield Neighborhoods(indptr, idx, dist, n, kind="disc", radius=radius, query=q)
+
+
+def _chunked(points, radius, bw, min_neighbors):
+    n = points.shape[0]
+    beta = np.full((n, 3), np.nan)
+    cof = np.full((n, 3, 3), np.nan)
+    st = np.full((n, 7), np.nan)
+    status = np.zeros(n, dtype=np.uint8)
+    for nbh in _chunks(points, radius):
+        q = nbh.query_indices()
+        out = _run_kernel(points, nbh, bw[q], min_neighbors)
+        beta[q], cof[q], st[q], status[q] = out
+    return beta, cof, st, status
+
+
 def _robust_sigma2(local_sigma2, nu):
     """Median of local variance estimates, corrected to a mean (Wilson-Hilferty median of chi2)."""
     good = np.isfinite(local_sigma2) & np.isfinite(nu) & (nu > 0)
@@ -214,15 +246,14 @@ def local_planes(points, bandwidth, *, sigma=None, alpha=0.05, adaptive=False,
                                         f"satisfy 0 < low <= 1 <= high. Got {adaptive_range!r}.")
     radius = b * hi
     n = points.shape[0]
-    if neighborhoods is None:
-        neighborhoods = radius_neighbors(points, radius, dim=2)
-    else:
+    if neighborhoods is not None:
         _check_neighborhoods(neighborhoods, n, radius, func)
-    if adaptive:
-        bw = geary_bandwidths(points, b, neighborhoods=neighborhoods, bounds=(lo, hi))
+        bw = geary_bandwidths(points, b, neighborhoods=neighborhoods, bounds=(lo, hi)) \
+            if adaptive else np.full(n, b)
+        beta, cof, st, status = _run_kernel(points, neighborhoods, bw, min_neighbors)
     else:
-        bw = np.full(n, b)
-    beta, cof, st, status = _run_kernel(points, neighborhoods, bw, min_neighbors)
+        bw = geary_bandwidths(points, b, bounds=(lo, hi)) if adaptive else np.full(n, b)
+        beta, cof, st, status = _chunked(points, radius, bw, min_neighbors)
     with np.errstate(invalid="ignore", divide="ignore"):
         local_s2 = st[:, 0] / st[:, 1]
         nu = st[:, 1] ** 2 / st[:, 2]
@@ -276,16 +307,24 @@ def geary_bandwidths(points, bandwidth, *, neighborhoods=None, bounds=(0.5, 2.0)
     points = check_points(points, min_points=2)
     b = check_scalar(bandwidth, "bandwidth", func=func, low=0.0)
     lo, hi = (float(v) for v in bounds)
-    if neighborhoods is None:
-        neighborhoods = radius_neighbors(points, b, dim=2)
-    else:
+    if neighborhoods is not None:
         _check_neighborhoods(neighborhoods, points.shape[0], b, func)
     z = np.ascontiguousarray(points[:, 2] - points[:, 2].mean())
-    c = np.empty(points.shape[0])
-    gamma = np.empty(points.shape[0])
-    nb = neighborhoods
-    _k.geary_local(z, nb.indptr, nb.indices, nb.distances, b, c)
-    _k.geary_gamma(c, nb.indptr, nb.indices, nb.distances, b, gamma)
+    n = points.shape[0]
+    c = np.empty(n)
+    gamma = np.empty(n)
+    chunks = [neighborhoods] if neighborhoods is not None else None
+    m2 = float(np.mean(z * z)) or 1.0
+    for nb in (chunks or _chunks(points, b)):
+        q = nb.query_indices()
+        cq = np.empty(q.size)
+        _k.geary_local(z, q, nb.indptr, nb.indices, nb.distances, b, m2, cq)
+        c[q] = cq
+    for nb in (chunks or _chunks(points, b)):
+        q = nb.query_indices()
+        gq = np.empty(q.size)
+        _k.geary_gamma(c, q, nb.indptr, nb.indices, nb.distances, b, gq)
+        gamma[q] = gq
     with np.errstate(divide="ignore"):
         ratio = np.where(gamma > 0, 1.0 / gamma, hi)
     return b * np.clip(ratio, lo, hi)

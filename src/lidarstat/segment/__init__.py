@@ -10,8 +10,15 @@ from ._metrics import HooverScore, binary_scores, hoover
 from ._result import Polylines, Segmentation, segment_table
 from ._forward_search import ForwardSearchResult, forward_search
 from ._search_area import SearchAreas, delaunay_graph, search_areas
+from ._raw_clusters import RawClusters, plane_edges, raw_clusters
+from ._sar_refine import SurfaceUnit, refine_cluster
+from ._intersect import intersection_lines
+from ._sar import refine_raw_clusters, segment_sar
+from ._curvature_units import curvature_units, segment_curvature
 
 __all__ = ["Segmentation", "Polylines", "segment_table", "components", "grow_regions",
            "relabel", "adjacency", "hoover", "HooverScore", "binary_scores",
            "ForwardSearchResult", "forward_search", "SearchAreas", "delaunay_graph",
-           "search_areas"]
+           "search_areas", "RawClusters", "plane_edges", "raw_clusters", "SurfaceUnit",
+           "refine_cluster", "intersection_lines", "refine_raw_clusters", "segment_sar",
+           "curvature_units", "segment_curvature"]

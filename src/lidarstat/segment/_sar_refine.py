@@ -8,8 +8,9 @@
 4. Forward Search over the search area (n_sa points) on ``y = (I - rho W) z`` with rho
    held at its raw-cluster value: each step is a rank-one least-squares update, the paper's
    F test of ``theta(m) - theta(n_s)`` and the deletion-residual envelope are monitored.
-5. Final ML fit on the m accepted points; the surface reported is the polynomial closest
-   to the SAR mean ``(I - rho W)^-1 A theta``.
+5. theta and sigma^2 re-estimated on the m accepted points (eq. 3.1-3.2, rho from step
+   3); the surface reported is the polynomial closest to the SAR mean
+   ``(I - rho W)^-1 A theta``.
 """
 
 from __future__ import annotations
@@ -18,14 +19,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..neighbors import radius_neighbors
+from scipy.spatial import cKDTree
 from ..stats._sar import (PolynomialBasis, SARFit, sar_fit, sar_mean_surface, select_degree,
                           weights_matrix)
 from ._forward_search import ForwardSearchResult, forward_search
 
 #: Largest subset on which rho is estimated by full ML; larger clusters estimate rho on
 #: their `SAR_MAX` points nearest to the medoid (a contiguous patch) and theta on all.
-SAR_MAX = 4000
+SAR_MAX = 3000
 
 
 @dataclass(frozen=True)
@@ -45,7 +46,8 @@ class SurfaceUnit:
     basis : PolynomialBasis
         Orthogonal basis (fitted on the raw cluster).
     fit : SARFit
-        Final ML fit on the accepted points.
+        Final fit on the accepted points: rho (and its standard error) from the ML fit
+        on the raw cluster, theta and sigma^2 by eq. 3.1-3.2 on the m accepted points.
     surface : (r,) ndarray
         Orthogonal-basis coefficients of the surface (projection of the SAR mean).
     surface_cov : (r, r) ndarray
@@ -55,7 +57,10 @@ class SurfaceUnit:
     fs : ForwardSearchResult
         Monitoring of the search.
     rho_points : int
-        Points used for the ML estimate of rho (all, or a patch of :data:`SAR_MAX`).
+        Points used for the ML estimate of rho (the raw cluster, or a patch of
+        :data:`SAR_MAX` of its points).
+    raw : (n_s,) ndarray of int64
+        Indices of the raw cluster.
     """
 
     accepted: np.ndarray
@@ -71,6 +76,7 @@ class SurfaceUnit:
     sigma: float
     fs: ForwardSearchResult
     rho_points: int
+    raw: np.ndarray
 
     def height(self, xy):
         """Surface height at planimetric positions `xy` (file coordinates)."""
@@ -92,35 +98,44 @@ class SurfaceUnit:
 
 
 def _weights(xy, radius):
+    """Row-standardised binary adjacency of points within `radius` in plan."""
     n = xy.shape[0]
-    nb = radius_neighbors(np.c_[xy, np.zeros(n)], radius, dim=2)
-    return weights_matrix(nb.indptr, nb.indices, n)
+    pairs = cKDTree(xy).query_pairs(radius, output_type="ndarray")
+    i = np.r_[pairs[:, 0], pairs[:, 1]]
+    j = np.r_[pairs[:, 1], pairs[:, 0]]
+    o = np.argsort(i, kind="stable")
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.add.at(indptr, i + 1, 1)
+    return weights_matrix(np.cumsum(indptr), j[o], n)
 
 
 def _ml_fit(z, A, xy, w_radius):
     """ML SAR fit; above SAR_MAX points rho comes from a contiguous patch."""
     n = z.size
     if n <= SAR_MAX:
-        W = _weights(xy, w_radius)
-        return sar_fit(z, A, W), W, n
+        return sar_fit(z, A, _weights(xy, w_radius)), n
     med = np.median(xy, axis=0)
     patch = np.argsort(np.sum((xy - med) ** 2, axis=1))[:SAR_MAX]
     sub = sar_fit(z[patch], A[patch], _weights(xy[patch], w_radius))
-    W = _weights(xy, w_radius)
-    ystar = z - sub.rho * (W @ z)
+    return _conditional_fit(z, A, _weights(xy, w_radius), sub), SAR_MAX
+
+
+def _conditional_fit(z, A, W, ref):
+    """theta and sigma^2 by eq. 3.1-3.2 with rho fixed at ``ref.rho`` (covariance given rho)."""
+    n, r = A.shape
+    ystar = z - ref.rho * (W @ z)
     theta, *_ = np.linalg.lstsq(A, ystar, rcond=None)
     resid = ystar - A @ theta
     s2 = float(resid @ resid / n)
-    r = A.shape[1]
     cov = np.full((r + 2, r + 2), np.nan)
-    cov[:r, :r] = s2 * np.linalg.inv(A.T @ A)  # conditional on rho
-    cov[r, r] = sub.cov[-2, -2]
-    fit = SARFit(theta, sub.rho, s2, cov, np.nan, resid, n, "patch", sub.profile)
-    return fit, W, SAR_MAX
+    cov[:r, :r] = s2 * np.linalg.inv(A.T @ A)
+    cov[r, r] = ref.cov[r, r] if ref.cov.shape[0] == r + 2 else np.nan
+    cov[r + 1, r + 1] = 2.0 * s2 * s2 / n
+    return SARFit(theta, ref.rho, s2, cov, np.nan, resid, n, "conditional", ref.profile)
 
 
 def refine_cluster(points, raw, area, *, w_radius, degree=1, max_degree=3, alpha=0.01,
-                   alpha_residual=0.001, stop="both", block=1, max_steps=1500):
+                   alpha_residual=0.001, stop="both", block=1, max_steps=500):
     """Refine one raw cluster by SAR-FS within its search area.
 
     Parameters
@@ -156,15 +171,15 @@ def refine_cluster(points, raw, area, *, w_radius, degree=1, max_degree=3, alpha
     else:
         basis = PolynomialBasis.fit(xy_raw, int(degree))
     A_area = basis(xy_area)
-    fit0, _, _ = _ml_fit(z_raw, A_area[in_raw], xy_raw, w_radius)
+    fit0, rho_points = _ml_fit(z_raw, A_area[in_raw], xy_raw, w_radius)
     W_area = _weights(xy_area, w_radius)
     ystar = z_area - fit0.rho * (W_area @ z_area)
     fs = forward_search(A_area, ystar, in_raw, block=block, alpha=alpha,
                         alpha_residual=alpha_residual, stop=stop, max_steps=max_steps)
     acc = fs.accepted
-    fit, W_acc, rho_points = _ml_fit(z_area[acc], A_area[acc], xy_area[acc], w_radius)
-    surface = sar_mean_surface(fit, A_area[acc], W_acc) if fit.logdet_method != "patch" \
-        else fit.theta / (1.0 - fit.rho)
+    W_acc = _weights(xy_area[acc], w_radius)
+    fit = _conditional_fit(z_area[acc], A_area[acc], W_acc, fit0)
+    surface = sar_mean_surface(fit, A_area[acc], W_acc)
     r = basis.n_terms
     cov = fit.cov[:r, :r] / (1.0 - fit.rho) ** 2
     res = z_area[acc] - A_area[acc] @ surface
@@ -177,4 +192,4 @@ def refine_cluster(points, raw, area, *, w_radius, degree=1, max_degree=3, alpha
     # the constant term: orthogonal column 0 is constant (= 1 / R00); add the origin height
     surface[0] += surface_shift * basis.R[0, 0]
     return SurfaceUnit(area[acc], res, int(raw.size), int(area.size), int(acc.sum()), int(degree),
-                       basis, fit, surface, cov, sigma, fs, int(rho_points))
+                       basis, fit, surface, cov, sigma, fs, int(rho_points), raw)

@@ -1,0 +1,30 @@
+"""``lidarstat segment IN OUT --method curvature``: units from tested HK classes (seed 000).
+
+Shared options used: ``--radius`` (curvature bandwidth, required), ``--sigma``,
+``--alpha``, ``--min-size``.
+"""
+
+from __future__ import annotations
+
+
+def add_arguments(group):
+    """Options only the curvature method has."""
+    group.add_argument("--normal-angle", type=float, default=10.0,
+                       help="largest normal angle between neighbours of a unit (degrees)")
+    group.add_argument("--refine", action="store_true",
+                       help="refine the units by SAR-FS (order 1 planar, 2 curved) and "
+                       "intersect adjacent surfaces")
+
+
+def run(args, cloud):
+    """Segment `cloud` by :func:`lidarstat.segment.segment_curvature`."""
+    from ..errors import InvalidParameterError
+    from ..segment import segment_curvature
+
+    if args.radius is None:
+        raise InvalidParameterError("--method curvature needs --radius (the curvature "
+                                    "bandwidth)")
+    return segment_curvature(cloud.xyz, radius=args.radius, sigma=args.sigma,
+                             alpha=args.alpha, max_angle=args.normal_angle,
+                             min_size=args.min_size or 30, refine=args.refine,
+                             diagnostics=getattr(args, "diagnostics", None))

@@ -1,0 +1,58 @@
+"""``lidarstat segment IN OUT --method sar``: SAR models and the Forward Search (seed 002).
+
+Shared options used: ``--radius`` (plane-regression bandwidth b; default chosen by the
+penalised PRESS), ``--sigma``, ``--alpha`` (planarity test), ``--min-size``.
+"""
+
+from __future__ import annotations
+
+
+def add_arguments(group):
+    """Options only the SAR method has."""
+    group.add_argument("--criterion", default="rice", choices=("rice", "gcv", "press"),
+                       help="bandwidth selector when --radius is omitted (default rice)")
+    group.add_argument("--adaptive", action="store_true",
+                       help="per-point bandwidths from Geary's local indicator")
+    group.add_argument("--sar-degree", default="1",
+                       help="polynomial order of the units: 1 (planes), 2, 3 or 'auto' "
+                       "(t tests up to 3)")
+    group.add_argument("--edge-alpha", type=float, default=0.01,
+                       help="level of the height/slope tests of region growing")
+    group.add_argument("--search", type=float, default=None,
+                       help="search-area distance from a raw cluster (default 3 b)")
+    group.add_argument("--w-radius", type=float, default=None,
+                       help="radius of the SAR adjacency W (default 1.5 x point spacing)")
+    group.add_argument("--fs-alpha", type=float, default=0.01,
+                       help="level of the Forward Search F test")
+    group.add_argument("--fs-envelope", type=float, default=0.001,
+                       help="level of the deletion-residual envelope")
+    group.add_argument("--fs-stop", default="both", choices=("both", "f", "residual"),
+                       help="Forward Search stopping rule")
+    group.add_argument("--fs-block", type=int, default=1,
+                       help="points added per Forward Search step (1 = unitary)")
+    group.add_argument("--diagnostics", default=None, metavar="DIR",
+                       help="write Forward Search monitoring plots (PNG) to DIR")
+
+
+def run(args, cloud):
+    """Segment `cloud` by :func:`lidarstat.segment.segment_sar`."""
+    from ..errors import InvalidParameterError
+    from ..features import select_plane_bandwidth
+    from ..segment import segment_sar
+
+    deg = None if str(args.sar_degree) == "auto" else args.sar_degree
+    if deg is not None:
+        try:
+            deg = int(deg)
+        except ValueError:
+            raise InvalidParameterError(f"--sar-degree must be 1, 2, 3 or 'auto'; got "
+                                        f"{args.sar_degree!r}") from None
+    b = args.radius
+    if b is None:
+        b = select_plane_bandwidth(cloud.xyz, criterion=args.criterion).bandwidth
+    return segment_sar(cloud.xyz, bandwidth=b, sigma=args.sigma, alpha=args.alpha,
+                       edge_alpha=args.edge_alpha, fs_alpha=args.fs_alpha,
+                       alpha_residual=args.fs_envelope, stop=args.fs_stop, degree=deg,
+                       adaptive=args.adaptive, threshold=args.search, w_radius=args.w_radius,
+                       min_size=args.min_size or 30, block=args.fs_block,
+                       diagnostics=args.diagnostics)

@@ -1,0 +1,140 @@
+"""Surface units from the tested HK classes (seed 000, "Analytical parametric modelling").
+
+Raw clusters: region growing among points of the same HK surface type whose quadric was
+accepted, through neighbours whose normals agree within `max_angle` (the paper compares
+``Z0_i - Z_i`` and K, H within a threshold; the chi-square acceptance and the common,
+*tested* type play that role here, the normal angle stops growth across a crease between
+two units of the same type). Optionally each raw cluster is refined by SAR-FS with the
+polynomial order implied by its type (planar: 1; cylinders and other quadrics: 2), and
+adjacent fitted surfaces are intersected into break lines.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._shared.validation import check_points, check_scalar
+from ..neighbors import radius_neighbors
+from ._grow import components, relabel
+from ._result import Segmentation, segment_table
+
+
+def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_size=30):
+    """Raw clusters of one HK type with agreeing normals.
+
+    Parameters
+    ----------
+    points : (N, 3) ndarray
+        Coordinates.
+    curv : CurvatureResult
+        Output of :func:`lidarstat.features.curvature` for `points`.
+    grow_radius : float
+        Radius (3-D) of the growth graph.
+    max_angle : float
+        Largest angle between the normals of two neighbours, degrees.
+    min_size : int
+        Smallest cluster kept.
+
+    Returns
+    -------
+    labels : (N,) ndarray of int32
+        Clusters 1..C by decreasing size, 0 none.
+    types : (C,) ndarray of uint8
+        HK type of each cluster.
+    """
+    f = curv.fields
+    st = np.asarray(f["surface_type"])
+    ok = (st > 0) & (np.asarray(f["chi2_pass"]) > 0)
+    nrm = np.c_[f["NormalX"], f["NormalY"], f["NormalZ"]]
+    nbh = radius_neighbors(points, grow_radius, dim=3)
+    src, dst = nbh.edges()
+    cosang = np.abs(np.einsum("ij,ij->i", nrm[src], nrm[dst]))
+    edge_ok = (st[src] == st[dst]) & (cosang >= np.cos(np.radians(max_angle)))
+    labels = components(nbh, edge_ok=edge_ok, mask=ok)
+    labels = relabel(labels, max(int(min_size), 1))
+    c = int(labels.max()) if labels.size else 0
+    types = np.zeros(c, dtype=np.uint8)
+    if c:
+        lab = labels[labels > 0]
+        # the common type of each cluster (all members share it by construction)
+        types[lab - 1] = st[labels > 0]
+    return labels, types
+
+
+def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
+                      grow_radius=None, min_size=30, refine=False, threshold=None,
+                      w_radius=None, fs_alpha=0.01, diagnostics=None, curv=None):
+    """Segment by tested curvature classes, optionally refined by SAR-FS (seed 000).
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+        Coordinates; heights are z (the SAR refinement models z as a function of E, N).
+    radius : float
+        Curvature bandwidth (3-D sphere).
+    sigma : float, optional
+        Noise; estimated when omitted.
+    alpha : float
+        Level of the curvature tests.
+    max_angle : float
+        Normal agreement for region growing, degrees.
+    grow_radius : float, optional
+        Growth graph radius (default radius / 2).
+    min_size : int
+        Smallest unit.
+    refine : bool
+        Refine the raw clusters by SAR-FS (polynomial order 1 for planar units, 2 for
+        the others) and intersect adjacent surfaces.
+    threshold, w_radius, fs_alpha, diagnostics
+        Refinement settings (:func:`refine_raw_clusters`); defaults radius and radius / 2.
+    curv : CurvatureResult, optional
+        Precomputed curvature of `points`.
+
+    Returns
+    -------
+    Segmentation
+        Table columns ``surface_type`` and (refined) the SAR columns of
+        :func:`segment_sar`; per point ``surface_type``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lidarstat.segment import segment_curvature
+    >>> rng = np.random.default_rng(0)
+    >>> xy = rng.uniform(0, 10, (3000, 2))
+    >>> z = np.where(xy[:, 0] < 5, 0.0, 0.02 * (xy[:, 0] - 5) ** 2 * 10)
+    >>> seg = segment_curvature(np.c_[xy, z + rng.normal(0, 0.005, 3000)], radius=1.0,
+    ...                         sigma=0.005)
+    >>> sorted(seg.table["surface_type"].tolist())
+    [1, 3]
+    """
+    from ..features import curvature
+
+    func = "segment_curvature"
+    points = check_points(points, min_points=10)
+    radius = check_scalar(radius, "radius", func=func, low=0.0)
+    if curv is None:
+        curv = curvature(points, radius=radius, sigma=sigma, alpha=alpha)
+    grow_radius = grow_radius or radius / 2.0
+    labels, types = curvature_units(points, curv, grow_radius=grow_radius, max_angle=max_angle,
+                                    min_size=min_size)
+    st = np.asarray(curv.fields["surface_type"]).astype(np.uint8)
+    if not refine:
+        table = segment_table(labels, points)
+        table["surface_type"] = types
+        return Segmentation(labels, table, None, {"surface_type": st}, "curvature",
+                            {"radius": radius, "max_angle": max_angle,
+                             "grow_radius": grow_radius, "alpha": alpha})
+    from ._sar import refine_raw_clusters
+
+    degrees = np.where(types == 1, 1, 2)
+    seg = refine_raw_clusters(points, labels, threshold=threshold or radius,
+                              w_radius=w_radius or radius / 2.0, degrees=degrees, alpha=fs_alpha,
+                              min_size=min_size, diagnostics=diagnostics)
+    # type of each refined unit = type of its raw cluster
+    raw_of = np.array([int(np.bincount(labels[u.raw]).argmax()) for u in seg.units], dtype=int)
+    seg.table["surface_type"] = types[raw_of - 1] if raw_of.size else np.zeros(0, np.uint8)
+    seg.fields["surface_type"] = st
+    seg.method = "curvature+sar"
+    seg.params.update({"radius": radius, "max_angle": max_angle, "grow_radius": grow_radius})
+    return seg

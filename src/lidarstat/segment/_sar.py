@@ -1,0 +1,295 @@
+"""Mixed nonparametric + parametric segmentation (Crosilla, Visintini and Sepic 2005).
+
+:func:`segment_sar` chains the four steps of seed 002 and returns a
+:class:`~lidarstat.segment.Segmentation`:
+
+1. local plane regression of every point (:func:`lidarstat.features.local_planes`);
+2. raw clusters by region growing on tested height and slope agreement
+   (:func:`raw_clusters`);
+3. a search area per raw cluster over the Delaunay triangulation (:func:`search_areas`);
+4. SAR-FS refinement of every raw cluster within its search area
+   (:func:`refine_cluster`); points claimed by several units go to the one they fit best
+   (smallest standardised residual); adjacent surfaces are intersected into break lines.
+"""
+
+from __future__ import annotations
+
+import logging
+import warnings
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from .._shared.validation import check_points, check_scalar
+from ..errors import InvalidParameterError, LidarstatWarning
+from ..neighbors import radius_neighbors
+from ._grow import relabel
+from ._intersect import intersection_lines
+from ._raw_clusters import raw_clusters
+from ._result import Polylines, Segmentation, segment_table
+from ._sar_refine import refine_cluster
+from ._search_area import delaunay_graph, search_areas
+
+logger = logging.getLogger(__name__)
+
+#: Forward Search stop reasons written to the table (``fs_stop``).
+STOP_CODES = {"exhausted": 0, "f": 1, "residual": 2}
+
+
+def _mean_spacing(points):
+    from ..features._plane_regression import _mean_spacing as ms
+
+    return ms(points)
+
+
+def _two_hop_contacts(graph, labels):
+    """(point, other segment) pairs: labelled points with another segment within 2 hops."""
+    indptr, idx, _ = graph
+    n = labels.size
+    G = sp.csr_matrix((np.ones(idx.size), idx, indptr), shape=(n, n))
+    G = G + sp.identity(n, format="csr")
+    lab = labels > 0
+    L = sp.csr_matrix((np.ones(lab.sum()), (np.flatnonzero(lab), labels[lab] - 1)),
+                      shape=(n, int(labels.max()) if labels.size else 0))
+    reach = (G @ (G @ L)).tocoo()
+    p, s = reach.row, reach.col + 1
+    keep = lab[p] & (labels[p] != s)
+    return p[keep], s[keep]
+
+
+def _assign(units, n):
+    """Final labels: every accepted point to the unit it fits best."""
+    pts, who, score = [], [], []
+    for u, unit in enumerate(units):
+        pts.append(unit.accepted)
+        who.append(np.full(unit.accepted.size, u))
+        sd = max(unit.sigma, 1e-12)
+        sc = np.abs(unit.residuals) / sd
+        sc[np.isin(unit.accepted, unit.raw)] = -1.0  # raw clusters keep their points
+        score.append(sc)
+    labels = np.zeros(n, dtype=np.int64)
+    if not pts:
+        return labels
+    pts, who, score = (np.concatenate(a) for a in (pts, who, score))
+    o = np.lexsort((who, score))
+    pts, who = pts[o], who[o]
+    first = np.unique(pts, return_index=True)[1]
+    labels[pts[first]] = who[first] + 1
+    return labels
+
+
+def _table(points, labels, units, keep_units):
+    table = segment_table(labels, points)
+    s = len(keep_units)
+    max_deg = max((units[u].degree for u in keep_units), default=1)
+    powers = [(i - j, j) for i in range(max_deg + 1) for j in range(i + 1)]
+    cols = {k: np.full(s, np.nan) for k in
+            ["degree", "n_s", "n_sa", "m", "rho", "se_rho", "sigma_sar", "sigma", "E0", "N0",
+             "normal_x", "normal_y", "normal_z", "slope_deg", "fs_stop", "rho_points"]}
+    for pe, pn in powers:
+        cols[f"c_{pe}{pn}"] = np.full(s, np.nan)
+        cols[f"se_c_{pe}{pn}"] = np.full(s, np.nan)
+    for k, u in enumerate(keep_units):
+        unit = units[u]
+        cols["degree"][k] = unit.degree
+        cols["n_s"][k], cols["n_sa"][k], cols["m"][k] = unit.n_s, unit.n_sa, unit.m
+        cols["rho"][k] = unit.fit.rho
+        cols["se_rho"][k] = unit.fit.se_rho
+        cols["sigma_sar"][k] = np.sqrt(unit.fit.sigma2)
+        cols["sigma"][k] = unit.sigma
+        cols["E0"][k], cols["N0"][k] = unit.basis.center
+        pw, coef, se = unit.monomials()
+        for (pe, pn), c, e in zip(pw, coef, se):
+            cols[f"c_{pe}{pn}"][k] = c
+            cols[f"se_c_{pe}{pn}"][k] = e
+        cen = np.array([[table["centroid_x"][k], table["centroid_y"][k]]])
+        g = unit.basis.gradient(unit.surface, cen)[0]
+        nrm = np.array([-g[0], -g[1], 1.0]) / np.sqrt(1.0 + g @ g)
+        cols["normal_x"][k], cols["normal_y"][k], cols["normal_z"][k] = nrm
+        cols["slope_deg"][k] = np.degrees(np.arccos(nrm[2]))
+        cols["fs_stop"][k] = STOP_CODES[unit.fs.stop_reason]
+        cols["rho_points"][k] = unit.rho_points
+    for k in ("degree", "n_s", "n_sa", "m", "fs_stop", "rho_points"):
+        cols[k] = cols[k].astype(np.int64)
+    table.update(cols)
+    return table
+
+
+def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, max_degree=3,
+                        alpha=0.01, alpha_residual=0.001, stop="both", block=1,
+                        max_steps=500, min_size=10, graph=None, diagnostics=None,
+                        progress=None):
+    """SAR-FS refinement of given raw clusters; returns a :class:`Segmentation`.
+
+    Parameters
+    ----------
+    points : (N, 3) ndarray
+        Coordinates.
+    raw_labels : (N,) ndarray of int
+        Raw clusters 1..C (0: none).
+    threshold : float
+        Search-area path length (section 5.3).
+    w_radius : float
+        Radius of the SAR adjacency.
+    degrees : int, None or (C,) array
+        Polynomial order per cluster (None: t tests up to `max_degree`).
+    alpha, alpha_residual, stop, block, max_steps
+        Forward Search settings (:func:`forward_search`).
+    min_size : int
+        Smallest raw cluster refined and smallest final segment.
+    graph : tuple, optional
+        Precomputed :func:`delaunay_graph`.
+    diagnostics : path, optional
+        Folder for the Forward Search monitoring plots (``fs_XXXX.png``, 40 largest units).
+    progress : callable, optional
+        ``progress(done, total)`` after each cluster.
+    """
+    n = points.shape[0]
+    raw_labels = relabel(raw_labels, max(int(min_size), 1))
+    graph = graph if graph is not None else delaunay_graph(points)
+    areas = search_areas(points, raw_labels, threshold, graph=graph)
+    c_max = int(raw_labels.max()) if n else 0
+    order = np.argsort(raw_labels, kind="stable")
+    starts = np.searchsorted(raw_labels[order], np.arange(1, c_max + 2))
+    units, skipped = [], []
+    for c in range(1, c_max + 1):
+        raw = order[starts[c - 1]:starts[c]]
+        extra = areas.indices[areas.indptr[c - 1]:areas.indptr[c]]
+        deg = degrees if degrees is None or np.isscalar(degrees) else int(degrees[c - 1])
+        try:
+            unit = refine_cluster(points, raw, np.concatenate([raw, extra]), w_radius=w_radius,
+                                  degree=deg, max_degree=max_degree, alpha=alpha,
+                                  alpha_residual=alpha_residual, stop=stop, block=block,
+                                  max_steps=max_steps)
+            units.append(unit)
+        except (np.linalg.LinAlgError, InvalidParameterError, ValueError) as exc:
+            skipped.append((c, int(raw.size), str(exc)))
+        if progress is not None:
+            progress(c, c_max)
+    if skipped:
+        warnings.warn(f"{len(skipped)} raw clusters could not be modelled (first: cluster "
+                      f"{skipped[0][0]}, {skipped[0][1]} points: {skipped[0][2]})",
+                      LidarstatWarning, stacklevel=3)
+    unit_labels = _assign(units, n)
+    labels = relabel(unit_labels, max(int(min_size), 1))
+    # segment s (1..S) -> unit index
+    keep_units = []
+    for s in range(1, int(labels.max()) + 1 if n else 1):
+        u = np.bincount(unit_labels[labels == s]).argmax() - 1
+        keep_units.append(int(u))
+    table = _table(points, labels, units, keep_units)
+    kept = [units[u] for u in keep_units]
+    if len(kept) > 1:
+        pts_c, seg_c = _two_hop_contacts(graph, labels)
+        lines = intersection_lines(points, labels, kept, pts_c, seg_c, max_shift=threshold)
+    else:
+        lines = Polylines([], {})
+    if diagnostics is not None:
+        folder = Path(diagnostics)
+        folder.mkdir(parents=True, exist_ok=True)
+        for s, unit in enumerate(kept[:40], start=1):
+            unit.fs.plot(folder / f"fs_{s:04d}.png",
+                         title=f"segment {s}: n_s={unit.n_s}, n_sa={unit.n_sa}, m={unit.m}, "
+                               f"stop: {unit.fs.stop_reason}")
+    residual = np.full(n, np.nan)
+    for s, unit in enumerate(kept, start=1):
+        mine = labels[unit.accepted] == s
+        residual[unit.accepted[mine]] = unit.residuals[mine]
+    fields = {"raw_cluster": raw_labels.astype(np.uint32), "surface_residual": residual}
+    params = {"threshold": threshold, "w_radius": w_radius, "alpha": alpha,
+              "alpha_residual": alpha_residual, "stop": stop, "block": block,
+              "raw_clusters": c_max, "skipped": skipped}
+    seg = Segmentation(labels, table, lines, fields, "sar", params)
+    seg.units = kept
+    return seg
+
+
+def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.01,
+                fs_alpha=0.01, alpha_residual=0.001, stop="both", degree=1, max_degree=3,
+                adaptive=False, grow_radius=None, threshold=None, w_radius=None,
+                min_size=30, block=1, max_steps=500, diagnostics=None, progress=None,
+                rng=0):
+    """Segment a cloud into planar (or polynomial) surface units by SAR-FS (seed 002).
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+        Coordinates (E, N, height).
+    bandwidth : float, optional
+        Plane-regression bandwidth b; default chosen by :func:`select_plane_bandwidth`.
+    sigma : float, optional
+        Height noise; default estimated from the local planes.
+    alpha : float
+        Level of the local planarity test.
+    edge_alpha : float
+        Level of the height and slope tests of region growing.
+    fs_alpha, alpha_residual, stop, block, max_steps
+        Forward Search settings (:func:`forward_search`).
+    degree : int or None
+        Polynomial order of every unit (1: planes); None chooses it by t tests.
+    max_degree : int
+        Largest order considered when `degree` is None.
+    adaptive : bool
+        Geary adaptive bandwidths (section 4.1).
+    grow_radius : float, optional
+        Radius of the region-growing graph (default ``min(b, 2 * spacing)``).
+    threshold : float, optional
+        Search-area path length (default b).
+    w_radius : float, optional
+        Radius of the SAR adjacency W (default ``1.5 * spacing``).
+    min_size : int
+        Smallest raw cluster and final segment (points).
+    diagnostics : path, optional
+        Folder for the Forward Search plots.
+    progress : callable, optional
+        ``progress(done, total)``.
+    rng : int or Generator
+        Seed of the bandwidth subsample.
+
+    Returns
+    -------
+    Segmentation
+        ``labels`` (0: no unit), the table (Table 6 sizes ``n_s``, ``n_sa``, ``m``; ``rho``,
+        ``sigma``; surface coefficients ``c_pq`` of ``(E - E0)^p (N - N0)^q`` with
+        standard errors; normal and slope at the centroid), the intersection lines and
+        per-point ``raw_cluster``, ``z0``, ``slope_e``, ``slope_n``, ``plane_pass``,
+        ``surface_residual``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lidarstat.segment import segment_sar
+    >>> rng = np.random.default_rng(0)
+    >>> xy = rng.uniform(0, 20, (4000, 2))
+    >>> z = np.where(xy[:, 0] < 10, 0.5 * xy[:, 0], 10 - 0.5 * xy[:, 0])   # a gable roof
+    >>> seg = segment_sar(np.c_[xy, z + rng.normal(0, 0.03, 4000)], bandwidth=1.5)
+    >>> seg.n_segments, np.round(np.abs(seg.table["c_10"]), 2).tolist()
+    (2, [0.5, 0.5])
+    """
+    from ..features import local_planes, select_plane_bandwidth
+
+    func = "segment_sar"
+    points = check_points(points, min_points=10)
+    if bandwidth is None:
+        bandwidth = select_plane_bandwidth(points, rng=rng).bandwidth
+    b = check_scalar(bandwidth, "bandwidth", func=func, low=0.0)
+    spacing = _mean_spacing(points)
+    grow_radius = grow_radius or min(b, 2.0 * spacing)
+    threshold = threshold or 3.0 * b
+    w_radius = w_radius or 1.5 * spacing
+    fit = local_planes(points, b, sigma=sigma, alpha=alpha, adaptive=adaptive)
+    nbh = radius_neighbors(points, grow_radius, dim=2)
+    raw = raw_clusters(points, fit, nbh, alpha=edge_alpha, min_size=min_size)
+    seg = refine_raw_clusters(points, raw.labels, threshold=threshold, w_radius=w_radius,
+                              degrees=degree, max_degree=max_degree, alpha=fs_alpha,
+                              alpha_residual=alpha_residual, stop=stop, block=block,
+                              max_steps=max_steps, min_size=min_size, diagnostics=diagnostics,
+                              progress=progress)
+    f = fit.to_fields()
+    seg.fields.update({"z0": f["z0"], "slope_e": f["slope_e"], "slope_n": f["slope_n"],
+                       "plane_pass": f["plane_pass"]})
+    seg.params.update({"bandwidth": b, "sigma": float(np.sqrt(fit.sigma2)),
+                       "grow_radius": grow_radius, "spacing": spacing, "adaptive": adaptive,
+                       "degree": degree})
+    return seg

@@ -1,0 +1,47 @@
+"""``lidarstat segment --method sar|curvature`` end to end on a small LAS file."""
+
+import csv
+
+import numpy as np
+
+from lidarstat.cli import main
+from lidarstat.io import PointCloud, read, write
+
+
+def _gable(rng, tmp_path):
+    xy = rng.uniform(0, 16, (4000, 2)) + [85000.0, 445000.0]
+    y = xy[:, 1] - 445000
+    z = 8 - 0.6 * np.abs(y - 8) + rng.normal(0, 0.03, 4000)
+    path = tmp_path / "gable.las"
+    write(path, PointCloud(xyz=np.c_[xy, z], attributes={"intensity": np.arange(4000) % 9}))
+    return path
+
+
+def test_sar_method_writes_ids_table_lines_and_plots(rng, tmp_path, capsys):
+    src = _gable(rng, tmp_path)
+    out = tmp_path / "seg.laz"
+    diag = tmp_path / "fs"
+    assert main(["segment", str(src), str(out), "--method", "sar", "--radius", "1.0",
+                 "--diagnostics", str(diag)]) == 0
+    pc = read(out)
+    assert np.bincount(pc.attributes["segment_id"])[1:].tolist()[:2] == sorted(
+        np.bincount(pc.attributes["segment_id"])[1:].tolist(), reverse=True)[:2]
+    assert {"raw_cluster", "surface_residual", "z0", "slope_e", "slope_n"} <= set(pc.attributes)
+    rows = list(csv.DictReader((tmp_path / "seg.segments.csv").read_text().splitlines()))
+    assert len(rows) == 2
+    for row in rows:
+        assert int(row["n_s"]) < int(row["m"]) <= int(row["n_sa"])
+        assert abs(abs(float(row["c_01"])) - 0.6) < 0.01
+    assert (tmp_path / "seg.lines.geojson").is_file()
+    assert len(list(diag.glob("fs_*.png"))) == 2
+    assert "2 segments" in capsys.readouterr().out
+
+
+def test_curvature_method_needs_a_radius(rng, tmp_path, capsys):
+    src = _gable(rng, tmp_path)
+    out = tmp_path / "c.las"
+    assert main(["segment", str(src), str(out), "--method", "curvature"]) == 2
+    assert "--radius" in capsys.readouterr().err
+    assert main(["segment", str(src), str(out), "--method", "curvature", "--radius", "1.0",
+                 "--sigma", "0.03", "-q"]) == 0
+    assert "surface_type" in read(out).attributes

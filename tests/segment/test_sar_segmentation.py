@@ -1,0 +1,137 @@
+"""SAR-FS segmentation end to end on a small airborne scene with exact truth: a gable
+roof with a chimney beside a hip face, flat ground and a tree; search areas; curvature
+units; clusters too small for the model."""
+
+import numpy as np
+import pytest
+
+from lidarstat.segment import (delaunay_graph, hoover, refine_raw_clusters, search_areas,
+                               segment_curvature, segment_sar)
+
+SLOPE = 0.6
+
+
+def _scene(rng, density=12.0, sigma=0.03):
+    """Gable roof (planes 1, 2; ridge y = 10 at z = 8), chimney on plane 1, ground, tree."""
+    n = int(30 * 24 * density)
+    xy = rng.uniform(0, [30, 24], (n, 2))
+    x, y = xy.T
+    z = np.zeros(n)
+    truth = np.zeros(n, int)
+    house = (x > 6) & (x < 22) & (y > 4) & (y < 16)
+    roof = 8.0 - SLOPE * np.abs(y - 10)
+    z[house] = roof[house]
+    truth[house] = np.where(y[house] < 10, 1, 2)
+    chimney = (x > 9) & (x < 10) & (y > 6) & (y < 7)
+    z[chimney] = 8.0 - SLOPE * 3 + 1.5
+    truth[chimney] = 0
+    z += rng.normal(0, sigma, n)
+    m = 1200
+    r = 2.5 * np.sqrt(rng.uniform(0, 1, m))
+    a = rng.uniform(0, 2 * np.pi, m)
+    tree = np.c_[24 + r * np.cos(a), 10 + r * np.sin(a), rng.uniform(2, 7, m)]
+    pts = np.r_[np.c_[xy, z], tree]
+    return pts, np.r_[truth, np.zeros(m, int)], np.r_[chimney, np.zeros(m, bool)], \
+        np.r_[np.zeros(n, bool), np.ones(m, bool)]
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return _scene(np.random.default_rng(7))
+
+
+@pytest.fixture(scope="module")
+def result(scene):
+    pts = scene[0]
+    return segment_sar(pts, bandwidth=1.0)
+
+
+def test_roof_planes_found_with_accurate_normals(scene, result):
+    pts, truth, chimney, tree = scene
+    seg = result
+    roof_truth = np.where(truth > 0, truth, 0)
+    score = hoover(seg.labels, roof_truth, 0.8)
+    assert score.correct == 2
+    normals = np.c_[seg.table["normal_x"], seg.table["normal_y"], seg.table["normal_z"]]
+    for plane, ny in ((1, -SLOPE), (2, SLOPE)):
+        s = np.bincount(seg.labels[truth == plane]).argmax()
+        true_n = np.array([0.0, ny, 1.0]) / np.hypot(SLOPE, 1)
+        ang = np.degrees(np.arccos(min(1.0, abs(normals[s - 1] @ true_n))))
+        assert ang < 0.5
+        # Table 6 columns: raw cluster < accepted <= search area
+        k = s - 1
+        assert seg.table["n_s"][k] < seg.table["m"][k] <= seg.table["n_sa"][k]
+        assert seg.table["sigma"][k] == pytest.approx(0.03, rel=0.25)
+        assert abs(seg.table["rho"][k]) < 0.5 and seg.table["se_rho"][k] > 0
+
+
+def test_chimney_and_tree_rejected_from_the_roof(scene, result):
+    pts, truth, chimney, tree = scene
+    roof_ids = {np.bincount(result.labels[truth == p]).argmax() for p in (1, 2)}
+    in_roof = np.isin(result.labels, list(roof_ids))
+    assert not in_roof[chimney].any()
+    assert in_roof[tree].mean() < 0.01
+
+
+def test_ridge_line_from_the_intersection(scene, result):
+    lines = result.lines
+    roof_ids = sorted({np.bincount(result.labels[scene[1] == p]).argmax() for p in (1, 2)})
+    sel = [i for i in range(len(lines))
+           if sorted((lines.attributes["segment_a"][i], lines.attributes["segment_b"][i]))
+           == roof_ids]
+    assert len(sel) == 1
+    v = lines.vertices[sel[0]]
+    np.testing.assert_allclose(v[:, 1], 10.0, atol=0.05)
+    np.testing.assert_allclose(v[:, 2], 8.0, atol=0.05)
+    assert 14 < np.ptp(v[:, 0]) < 16.5
+    assert lines.attributes["angle_deg"][sel[0]] == pytest.approx(2 * np.degrees(np.arctan(SLOPE)),
+                                                                   abs=0.5)
+
+
+def test_search_areas_never_take_another_cluster(rng):
+    g = np.mgrid[0:30, 0:10].reshape(2, -1).T.astype(float)
+    pts = np.c_[g + rng.uniform(-0.1, 0.1, g.shape), np.zeros(len(g))]
+    lab = np.zeros(len(g), int)
+    lab[g[:, 0] < 10] = 1
+    lab[g[:, 0] > 14] = 2
+    sa = search_areas(pts, lab, 3.6)
+    a1 = sa.indices[sa.indptr[0]:sa.indptr[1]]
+    a2 = sa.indices[sa.indptr[1]:sa.indptr[2]]
+    assert (lab[a1] == 0).all() and (lab[a2] == 0).all()
+    assert {10.0, 11.0} <= set(np.unique(g[a1, 0])) <= {10.0, 11.0, 12.0, 13.0}
+    assert {13.0, 14.0} <= set(np.unique(g[a2, 0])) <= {11.0, 12.0, 13.0, 14.0}
+    assert np.intersect1d(a1, a2).size > 0  # shared border points, as the paper's ridges
+    full = sa.area(lab, 1)
+    assert np.isin(np.flatnonzero(lab == 1), full).all()
+
+
+def test_delaunay_graph_links_points_coincident_in_plan(rng):
+    pts = np.c_[rng.uniform(0, 5, (100, 2)), np.zeros(100)]
+    wall = np.c_[np.full(10, 2.5), np.full(10, 2.5), np.arange(10.0)]
+    indptr, idx, lengths = delaunay_graph(np.r_[pts, wall])
+    deg = np.diff(indptr)
+    assert (deg > 0).all()
+
+
+def test_small_clusters_are_reported_not_fatal(rng):
+    pts = np.c_[rng.uniform(0, 10, (400, 2)), rng.normal(0, 0.01, 400)]
+    lab = np.zeros(400, int)
+    lab[:200] = 1
+    lab[200:203] = 2  # three points: too few for a plane, rho and sigma
+    with pytest.warns(Warning, match="could not be modelled"):
+        seg = refine_raw_clusters(pts, lab, threshold=1.0, w_radius=0.8, min_size=1)
+    assert seg.n_segments >= 1 and seg.params["skipped"][0][0] == 2
+
+
+def test_curvature_units_and_refinement(rng):
+    xy = rng.uniform(0, 12, (5000, 2))
+    z = np.where(xy[:, 0] < 6, 0.3 * xy[:, 0], 1.8 - 0.3 * (xy[:, 0] - 6)) \
+        + rng.normal(0, 0.005, 5000)
+    pts = np.c_[xy, z]
+    raw = segment_curvature(pts, radius=0.8, sigma=0.005)
+    assert raw.n_segments == 2 and set(raw.table["surface_type"].tolist()) == {1}
+    ref = segment_curvature(pts, radius=0.8, sigma=0.005, refine=True)
+    assert ref.n_segments == 2 and ref.method == "curvature+sar"
+    assert np.count_nonzero(ref.labels) > np.count_nonzero(raw.labels)
+    assert len(ref.lines) == 1
+    np.testing.assert_allclose(ref.lines.vertices[0][:, 0], 6.0, atol=0.02)
