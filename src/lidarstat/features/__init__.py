@@ -2,13 +2,16 @@
 
 from ._curvature import (FIELDS, CurvatureResult, curvature, curvature_tests, estimate_sigma,
                          height_variance)
+from ._covariance import FIELDS as COVARIANCE_FIELDS
+from ._covariance import CovarianceResult, covariance_features, eigen_features
 from ._bandwidth import BandwidthResult, optimal_bandwidth
 from ._curvature_formulas import curvature_jacobian, curvatures, principal_jacobian
 from ._quadric import FitStatus, QuadricFit, fit_quadrics
 from ._plane_regression import (PLANE_FIELDS, BandwidthSelection, LocalPlaneFit,
                                 geary_bandwidths, local_planes, select_plane_bandwidth)
 
-__all__ = ["BandwidthResult", "optimal_bandwidth", "FIELDS", "CurvatureResult", "FitStatus", "QuadricFit", "curvature",
+__all__ = ["COVARIANCE_FIELDS", "CovarianceResult", "covariance_features", "eigen_features",
+           "BandwidthResult", "optimal_bandwidth", "FIELDS", "CurvatureResult", "FitStatus", "QuadricFit", "curvature",
            "curvature_jacobian", "curvature_tests", "curvatures", "estimate_sigma",
            "fit_quadrics", "height_variance", "principal_jacobian",
            "PLANE_FIELDS", "BandwidthSelection", "LocalPlaneFit", "geary_bandwidths",

@@ -1,0 +1,410 @@
+"""Per-point covariance (eigen) features over kNN or radius neighbourhoods (seed 003)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._shared.validation import check_option, check_points, check_scalar
+from ..errors import InvalidParameterError
+from ..neighbors import CellIndex, Neighborhoods
+from . import _covariance_kernels as _ck
+
+logger = logging.getLogger(__name__)
+
+EIGEN_MODES = ("raw", "sqrt", "normalized")
+
+#: Per-point output fields, name -> (dtype, description). Names follow PDAL's
+#: ``filters.covariancefeatures`` / ``filters.normal`` / ``filters.eigenvalues``.
+FIELDS = {
+    "NormalX": ("float64", "unit normal x (toward the sensor, else up)"),
+    "NormalY": ("float64", "unit normal y"),
+    "NormalZ": ("float64", "unit normal z"),
+    "Eigenvalue0": ("float64", "smallest covariance eigenvalue"),
+    "Eigenvalue1": ("float64", "middle covariance eigenvalue"),
+    "Eigenvalue2": ("float64", "largest covariance eigenvalue"),
+    "SurfaceVariation": ("float64", "lambda0/(lambda0+lambda1+lambda2), eq. 4"),
+    "CurvatureVariance": ("float64", "variance of SurfaceVariation over nbhd, eq. 5"),
+    "Linearity": ("float64", "(l2-l1)/l2"),
+    "Planarity": ("float64", "(l1-l0)/l2"),
+    "Scattering": ("float64", "l0/l2"),
+    "Verticality": ("float64", "z of the eigenvalue-weighted |e| (PDAL)"),
+    "Omnivariance": ("float64", "cbrt(l0 l1 l2)"),
+    "Anisotropy": ("float64", "(l2-l0)/l2"),
+    "Eigenentropy": ("float64", "-sum l ln l"),
+    "EigenvalueSum": ("float64", "l0+l1+l2"),
+    "DemantkeVerticality": ("float64", "1-|NormalZ|"),
+    "neighbors": ("int32", "points in the neighbourhood"),
+}
+
+
+@dataclass(frozen=True)
+class CovarianceResult:
+    """Per-point covariance features and what the classification needs beside them.
+
+    Attributes
+    ----------
+    fields : dict of str -> (N,) ndarray
+        The per-point output fields (``FIELDS``), in input order.
+    centroid : (N, 3) ndarray
+        Neighbourhood centroids (file coordinates).
+    major : (N, 3) ndarray
+        Eigenvector of the largest eigenvalue.
+    offset_uv : (N, 2) ndarray
+        Index point minus centroid along the largest and the middle eigenvector (eq. 7, 8).
+    mean_variation : (N,) ndarray
+        Mean of SurfaceVariation over each neighbourhood (beside its variance, eq. 5).
+    k, radius : int or None, float or None
+        The neighbourhood definition.
+    neighborhoods : Neighborhoods or None
+        The neighbourhoods (original indices, rows sorted by distance for kNN), when
+        ``keep_neighbors`` was asked.
+    """
+
+    fields: dict
+    centroid: np.ndarray
+    major: np.ndarray
+    offset_uv: np.ndarray
+    mean_variation: np.ndarray
+    k: int | None
+    radius: float | None
+    eigen_mode: str = "raw"
+    neighborhoods: Neighborhoods | None = None
+    meta: dict = field(default_factory=dict)
+
+    def __getitem__(self, name):
+        return self.fields[name]
+
+    def __len__(self):
+        return self.fields["SurfaceVariation"].size
+
+    @property
+    def normals(self) -> np.ndarray:
+        """(N, 3) unit normals."""
+        f = self.fields
+        return np.stack([f["NormalX"], f["NormalY"], f["NormalZ"]], axis=1)
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        """(N, 3) eigenvalues, ascending."""
+        f = self.fields
+        return np.stack([f["Eigenvalue0"], f["Eigenvalue1"], f["Eigenvalue2"]], axis=1)
+
+    @property
+    def counts(self) -> np.ndarray:
+        """Neighbours per point."""
+        return self.fields["neighbors"]
+
+    def to_fields(self):
+        """The per-point arrays with their file dtypes, for :func:`lidarstat.io.write`."""
+        return {k: np.asarray(v, dtype=FIELDS[k][0]) for k, v in self.fields.items()}
+
+
+def eigen_features(evals, normal, major, *, mode="raw"):
+    """The eigenvalue features of PDAL's ``filters.covariancefeatures`` from eigenvalues.
+
+    Parameters
+    ----------
+    evals : (N, 3) ndarray
+        Eigenvalues in ascending order ``l0 <= l1 <= l2`` (``l0`` is the paper's lambda0).
+    normal, major : (N, 3) ndarray
+        Eigenvectors of ``l0`` and ``l2`` (the middle one is their cross product).
+    mode : {'raw', 'sqrt', 'normalized'}
+        What the ratios are computed from, as PDAL's ``mode`` option: the eigenvalues
+        (jakteristics, CloudCompare), their square roots (PDAL's default, pgeof,
+        Guinard and Landrieu 2017) or the eigenvalues divided by their sum.
+        ``SurfaceVariation`` and ``EigenvalueSum`` always use the raw eigenvalues (eq. 4).
+
+    Returns
+    -------
+    dict of str -> (N,) ndarray
+    """
+    check_option(mode, "mode", EIGEN_MODES, func="eigen_features")
+    raw = np.asarray(evals, dtype=np.float64)
+    total = raw.sum(axis=1)
+    if mode == "sqrt":
+        lam = np.sqrt(raw)
+    elif mode == "normalized":
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lam = raw / total[:, None]
+    else:
+        lam = raw
+    l0, l1, l2 = lam[:, 0], lam[:, 1], lam[:, 2]
+    middle = np.cross(normal, major)
+    unary = (l2[:, None] * np.abs(major) + l1[:, None] * np.abs(middle)
+             + l0[:, None] * np.abs(normal))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = {
+            "Linearity": (l2 - l1) / l2,
+            "Planarity": (l1 - l0) / l2,
+            "Scattering": l0 / l2,
+            "Verticality": unary[:, 2] / np.linalg.norm(unary, axis=1),
+            "Omnivariance": np.cbrt(l0 * l1 * l2),
+            "Anisotropy": (l2 - l0) / l2,
+            "Eigenentropy": -(_xlogx(l0) + _xlogx(l1) + _xlogx(l2)),
+            "EigenvalueSum": total,
+            "SurfaceVariation": raw[:, 0] / total,
+            "DemantkeVerticality": 1.0 - np.abs(normal[:, 2]),
+        }
+    return out
+
+
+def _xlogx(x):
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(x > 0, x * np.log(np.where(x > 0, x, 1.0)), 0.0)
+
+
+def _knn_cell_size(local, k, rng=0, sample=4000):
+    """Grid cell for the kNN kernel: the 0.9 quantile of k-th neighbour distances of a sample.
+
+    With the cell at least the k-th neighbour distance, the 27 cells around a point hold its
+    k neighbours for most points (the rest are searched in a wider block).
+    """
+    from scipy.spatial import cKDTree
+
+    n = local.shape[0]
+    rng = np.random.default_rng(rng)
+    pos = rng.choice(n, size=min(sample, n), replace=False)
+    tree = cKDTree(local)
+    d, _ = tree.query(local[pos], k=k, workers=-1)
+    d = np.asarray(d).reshape(pos.size, k)[:, -1]
+    cell = float(np.quantile(d, 0.9))
+    if not cell > 0:  # duplicates: any positive size works
+        cell = float(np.ptp(local, axis=0).max()) or 1.0
+    return cell, float(np.median(d)) * 1.15
+
+
+def _knn_table(points, k, *, block_size, sort=True, progress=None, rng=0):
+    """Exact kNN of every point with the grid kernel: (index, table, dist) in sorted order.
+
+    ``table[r]`` lists the sorted positions of the k nearest neighbours of sorted position r,
+    ascending distance; int32 when the cloud allows (4 k bytes per point).
+    """
+    origin = points.min(axis=0)
+    cell, tau0 = _knn_cell_size(points - origin, k, rng=rng)
+    index = CellIndex(points, cell)
+    n = index.n_points
+    dtype = np.int32 if n < 2**31 - 1 else np.int64
+    table = np.empty((n, k), dtype=dtype)
+    dist = np.empty((n, k), dtype=np.float32)
+    for c0, c1 in index.cell_blocks(block_size):
+        s0, s1 = index.cell_start[c0], index.cell_start[c1]
+        dblock = np.empty((s1 - s0, k))
+        _ck.knn_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
+                      index.dims, float(index.cell), int(k), tau0, sort, table[s0:s1],
+                      dblock)
+        dist[s0:s1] = dblock
+        if progress is not None:
+            progress(int(s1), 2 * n)
+    return index, table, dist
+
+
+def _check_sensor(sensor, func):
+    if sensor is None:
+        return None
+    s = np.asarray(sensor, dtype=np.float64)
+    if s.shape != (3,) or not np.isfinite(s).all():
+        raise InvalidParameterError(
+            f"The 'sensor' parameter of {func} must be 3 finite coordinates. Got {sensor!r} instead."
+        )
+    return s
+
+
+def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor=None,
+                        eigen_mode="raw", keep_neighbors=False, block_size=262144,
+                        progress=None) -> CovarianceResult:
+    """Covariance features of every point (Bae, Lichti et al.; Pauly et al. 2002).
+
+    For each point the covariance of its neighbourhood is computed centred on the
+    neighbourhood mean (two passes, divided by n - 1), and eigen-decomposed:
+    eigenvalues ``l0 <= l1 <= l2``, the normal (eigenvector of ``l0``, oriented toward
+    `sensor` or else up), the surface variation ``l0 / (l0 + l1 + l2)`` (eq. 4), its
+    variance over the neighbourhood (eq. 5) and PDAL's eigen features.
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+        Coordinates (any magnitude: local origins are subtracted).
+    k : int
+        Neighbours per point, the point itself included (the paper: 50). Ignored when
+        `radius` or `neighborhoods` is given.
+    radius : float, optional
+        Use the points within a 3-D sphere of this radius instead of the k nearest.
+    neighborhoods : Neighborhoods, optional
+        Precomputed neighbourhoods (one row per point) instead of either.
+    sensor : (3,) array_like, optional
+        Scanner position; normals point toward it. Default: normals point up (+z).
+    eigen_mode : {'raw', 'sqrt', 'normalized'}
+        See :func:`eigen_features`.
+    keep_neighbors : bool
+        Keep the neighbourhoods in the result (for segmentation); kNN rows are sorted by
+        distance.
+    block_size : int
+        Points per processing block (bounds the scratch memory).
+    progress : callable(done, total), optional
+
+    Returns
+    -------
+    CovarianceResult
+
+    Notes
+    -----
+    Rows with fewer than 3 neighbours get NaN features. The kNN search is exact; it runs
+    on a uniform grid (cell = 0.9 quantile of the k-th neighbour distance of a sample)
+    in the grid's sorted order, which is much faster than KD-tree queries for k = 50.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lidarstat.features import covariance_features
+    >>> rng = np.random.default_rng(0)
+    >>> pts = np.c_[rng.uniform(0, 10, (2000, 2)), np.zeros(2000)] + [5e5, 5e6, 100.0]
+    >>> res = covariance_features(pts, k=20)
+    >>> bool(np.abs(res["NormalZ"] - 1).max() < 1e-9), float(res["SurfaceVariation"].max())
+    (True, 0.0)
+    """
+    func = "covariance_features"
+    pts = check_points(points)
+    n = pts.shape[0]
+    sensor = _check_sensor(sensor, func)
+    check_option(eigen_mode, "eigen_mode", EIGEN_MODES, func=func)
+    block_size = check_scalar(block_size, "block_size", func=func, low=1, closed="left",
+                              integer=True)
+    if neighborhoods is not None:
+        if not isinstance(neighborhoods, Neighborhoods):
+            raise InvalidParameterError(f"{func}: `neighborhoods` must be a Neighborhoods instance")
+        if neighborhoods.n_points != n or len(neighborhoods) != n:
+            raise InvalidParameterError(
+                f"{func}: `neighborhoods` must have one row per point and index the {n} points "
+                f"(got {len(neighborhoods)} rows over {neighborhoods.n_points} points)"
+            )
+        kind = "given"
+    elif radius is not None:
+        radius = check_scalar(radius, "radius", func=func, low=0.0)
+        kind = "radius"
+    else:
+        k = check_scalar(k, "k", func=func, low=3, high=n, closed="both", integer=True)
+        kind = "knn"
+
+    keep = None
+    if kind == "given":
+        origin = pts.mean(axis=0)
+        local = pts - origin
+        sens = None if sensor is None else sensor - origin
+        raw = _rows(local, np.arange(n), neighborhoods.indptr, neighborhoods.indices, sens)
+        mean_sv, var_sv = _variance_csr(raw, neighborhoods.indptr, neighborhoods.indices)
+        order = None
+        keep = neighborhoods if keep_neighbors else None
+        k, radius = neighborhoods.k, neighborhoods.radius
+    elif kind == "radius":
+        index = CellIndex(pts, radius)
+        origin = index.origin
+        sens = None if sensor is None else sensor - origin
+        raw = np.empty((n, _ck.NCOL))
+        blocks = index.cell_blocks(block_size)
+        for c0, c1 in blocks:
+            s0, s1 = index.cell_start[c0], index.cell_start[c1]
+            indptr, idx, _ = index.query_cells(c0, c1)
+            raw[s0:s1] = _rows(index.sorted_points, np.arange(s0, s1), indptr, idx, sens)
+            if progress is not None:
+                progress(int(s1), 2 * n)
+        sv = _surface_variation(raw)
+        mean_sv = np.empty(n)
+        var_sv = np.empty(n)
+        for c0, c1 in blocks:
+            s0, s1 = index.cell_start[c0], index.cell_start[c1]
+            indptr, idx, _ = index.query_cells(c0, c1)
+            _ck.neighbourhood_variance(sv, indptr, idx, mean_sv[s0:s1], var_sv[s0:s1])
+            if progress is not None:
+                progress(int(n + s1), 2 * n)
+        order = index.order
+        if keep_neighbors:
+            from ..neighbors import radius_neighbors
+
+            keep = radius_neighbors(pts, radius)
+        k = None
+    else:
+        index, table, dist = _knn_table(pts, k, block_size=block_size, sort=keep_neighbors,
+                                        progress=progress)
+        origin = index.origin
+        sens = None if sensor is None else sensor - origin
+        raw = np.empty((n, _ck.NCOL))
+        for s0 in range(0, n, block_size):
+            s1 = min(n, s0 + block_size)
+            _ck.covariance_table(index.sorted_points, s0, table[s0:s1], np.zeros(3) if sens is None else sens,
+                                 sens is not None, raw[s0:s1])
+        sv = _surface_variation(raw)
+        mean_sv = np.empty(n)
+        var_sv = np.empty(n)
+        _ck.table_variance(sv, table, mean_sv, var_sv)
+        if progress is not None:
+            progress(2 * n, 2 * n)
+        order = index.order
+        if keep_neighbors:
+            keep = _table_to_csr(table, dist, order, k)
+        del table, dist
+
+    if order is not None:  # back to input order
+        inverse = np.empty_like(order)
+        inverse[order] = np.arange(n)
+        raw = raw[inverse]
+        mean_sv = mean_sv[inverse]
+        var_sv = var_sv[inverse]
+    return _assemble(raw, mean_sv, var_sv, origin, k=k, radius=radius, eigen_mode=eigen_mode,
+                     neighborhoods=keep)
+
+
+def _table_to_csr(table, dist, order, k):
+    """Dense sorted-order kNN table -> Neighborhoods in input order (original indices)."""
+    n = table.shape[0]
+    inverse = np.empty_like(order)
+    inverse[order] = np.arange(n)
+    rows = table[inverse]
+    idx = order[rows.ravel()]
+    d = dist[inverse].ravel().astype(np.float64)
+    indptr = np.arange(n + 1, dtype=np.int64) * k
+    return Neighborhoods(indptr, idx, d, n, kind="knn", k=k)
+
+
+def _rows(local, query, indptr, idx, sens):
+    out = np.empty((query.size, _ck.NCOL))
+    _ck.covariance_rows(local, np.ascontiguousarray(query, dtype=np.int64), indptr, idx,
+                        np.zeros(3) if sens is None else sens, sens is not None, out)
+    return out
+
+
+def _surface_variation(raw):
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return raw[:, _ck.C_L0] / (raw[:, _ck.C_L0] + raw[:, _ck.C_L1] + raw[:, _ck.C_L2])
+
+
+def _variance_csr(raw, indptr, idx):
+    sv = _surface_variation(raw)
+    mean_sv = np.empty(sv.size)
+    var_sv = np.empty(sv.size)
+    _ck.neighbourhood_variance(sv, indptr, idx, mean_sv, var_sv)
+    return mean_sv, var_sv
+
+
+def _assemble(raw, mean_sv, var_sv, origin, *, k, radius, eigen_mode, neighborhoods):
+    evals = raw[:, _ck.C_L0:_ck.C_L2 + 1]
+    normal = raw[:, _ck.C_NX:_ck.C_NZ + 1]
+    major = np.ascontiguousarray(raw[:, _ck.C_AX:_ck.C_AZ + 1])
+    feats = eigen_features(evals, normal, major, mode=eigen_mode)
+    fields = {
+        "NormalX": raw[:, _ck.C_NX].copy(), "NormalY": raw[:, _ck.C_NY].copy(),
+        "NormalZ": raw[:, _ck.C_NZ].copy(),
+        "Eigenvalue0": raw[:, _ck.C_L0].copy(), "Eigenvalue1": raw[:, _ck.C_L1].copy(),
+        "Eigenvalue2": raw[:, _ck.C_L2].copy(),
+        "SurfaceVariation": feats.pop("SurfaceVariation"),
+        "CurvatureVariance": var_sv,
+    }
+    fields.update(feats)
+    fields["neighbors"] = raw[:, _ck.C_N].astype(np.int32)
+    return CovarianceResult(
+        fields=fields, centroid=raw[:, _ck.C_CX:_ck.C_CZ + 1] + origin, major=major,
+        offset_uv=np.ascontiguousarray(raw[:, _ck.C_U:_ck.C_V + 1]), mean_variation=mean_sv,
+        k=k, radius=radius, eigen_mode=eigen_mode, neighborhoods=neighborhoods,
+    )

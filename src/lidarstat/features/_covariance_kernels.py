@@ -1,0 +1,433 @@
+"""Numba kernels of the neighbourhood covariance features (Bae, Lichti et al. 2005/2007).
+
+Two kernels do the work:
+
+* :func:`knn_cells` - exact k nearest neighbours on the uniform grid of a
+  :class:`lidarstat.neighbors.CellIndex`. The candidates of all points of one cell are the
+  points of the (2R+1)^3 cells around it (R = 1 first); a point whose k-th candidate is
+  farther than the distance from the point to the faces of that block is searched again
+  with R + 1, so the result is exact. A quickselect keeps the k best, insertion-sorted
+  so rows are ordered by distance (the region growing of Fig. 4 walks them from
+  the closest). Working per cell in the grid's sorted order keeps the candidates in cache;
+  this is several times faster than a KD-tree query for k = 50.
+* :func:`covariance_rows` - per query point, the centred covariance of its neighbourhood
+  (two passes: centroid, then the sum of outer products of the centred offsets, divided by
+  n - 1), its eigen-decomposition by cyclic Jacobi (``_eigh3``), the normal (smallest
+  eigenvector) oriented toward the sensor or up, and the index point's offset from the
+  centroid in the plane of the two largest eigenvectors (the boundary test, eq. 6-8).
+
+Coordinates are local (a grid origin is subtracted) and the covariance is accumulated from
+centred offsets, so UTM-sized coordinates lose no precision.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import prange
+
+from .._shared._jit import njit, njit_parallel
+from ._quadric_kernels import _eigh3
+
+# columns of the per-point output of covariance_rows
+C_L0 = 0  # eigenvalues, ascending (lambda0 <= lambda1 <= lambda2)
+C_L1 = 1
+C_L2 = 2
+C_NX = 3  # normal = eigenvector of lambda0, oriented
+C_NY = 4
+C_NZ = 5
+C_AX = 6  # eigenvector of lambda2 (largest)
+C_AY = 7
+C_AZ = 8
+C_CX = 9  # neighbourhood centroid (local coordinates)
+C_CY = 10
+C_CZ = 11
+C_U = 12  # offset of the index point from the centroid along e(lambda2)
+C_V = 13  # ... along e(lambda1)
+C_N = 14  # neighbours used
+NCOL = 15
+
+_CELL_CHUNK = 32
+_ROW_CHUNK = 256
+
+
+# ------------------------------------------------------------------ k nearest neighbours
+@njit
+def _select(bd, bi, n, k, sort):
+    """Partial sort: move the k smallest of ``bd[:n]`` (with their ``bi``) to the front.
+
+    Quickselect with median-of-three pivots (expected O(n)), then (if `sort`) insertion
+    sort of the first k so rows come out in ascending distance.
+    """
+    lo = 0
+    hi = n - 1
+    kk = k - 1
+    while hi > lo:
+        mid = (lo + hi) // 2
+        a = bd[lo]
+        b = bd[mid]
+        c = bd[hi]
+        if a < b:
+            pivot = b if b < c else (c if a < c else a)
+        else:
+            pivot = a if a < c else (c if b < c else b)
+        i = lo
+        j = hi
+        while i <= j:
+            while bd[i] < pivot:
+                i += 1
+            while bd[j] > pivot:
+                j -= 1
+            if i <= j:
+                td = bd[i]
+                bd[i] = bd[j]
+                bd[j] = td
+                ti = bi[i]
+                bi[i] = bi[j]
+                bi[j] = ti
+                i += 1
+                j -= 1
+        if kk <= j:
+            hi = j
+        elif kk >= i:
+            lo = i
+        else:
+            break
+    if not sort:
+        return
+    for i in range(1, k):
+        d = bd[i]
+        t = bi[i]
+        j = i - 1
+        while j >= 0 and bd[j] > d:
+            bd[j + 1] = bd[j]
+            bi[j + 1] = bi[j]
+            j -= 1
+        bd[j + 1] = d
+        bi[j + 1] = t
+
+
+@njit
+def _block_ranges(ix0, iy0, iz0, rad, cell_keys, cell_start, dims, ranges):
+    """Sorted-position ranges of the occupied cells within `rad` cells of (ix0, iy0, iz0).
+
+    Cells of one (ix, iy) column have consecutive keys: one binary search pair per column.
+    `ranges` must hold (2 rad + 1)^2 rows. Returns the number of ranges.
+    """
+    n = 0
+    kz0 = max(iz0 - rad, 0)
+    kz1 = min(iz0 + rad, dims[2] - 1)
+    if kz1 < kz0:
+        return 0
+    for ix in range(max(ix0 - rad, 0), min(ix0 + rad, dims[0] - 1) + 1):
+        for iy in range(max(iy0 - rad, 0), min(iy0 + rad, dims[1] - 1) + 1):
+            k0 = (ix * dims[1] + iy) * dims[2] + kz0
+            k1 = (ix * dims[1] + iy) * dims[2] + kz1
+            a = np.searchsorted(cell_keys, k0)
+            b = np.searchsorted(cell_keys, k1, side="right")
+            if b > a:
+                ranges[n, 0] = cell_start[a]
+                ranges[n, 1] = cell_start[b]
+                n += 1
+    return n
+
+
+@njit
+def _guaranteed(px, py, pz, ix0, iy0, iz0, rad, cell, dims):
+    """Radius around the point inside which the block of `rad` cells holds every point.
+
+    Faces of the block on the border of the grid do not limit it (nothing lies beyond).
+    """
+    g = np.inf
+    if ix0 - rad > 0:
+        g = min(g, px - (ix0 - rad) * cell)
+    if ix0 + rad < dims[0] - 1:
+        g = min(g, (ix0 + rad + 1) * cell - px)
+    if iy0 - rad > 0:
+        g = min(g, py - (iy0 - rad) * cell)
+    if iy0 + rad < dims[1] - 1:
+        g = min(g, (iy0 + rad + 1) * cell - py)
+    if iz0 - rad > 0:
+        g = min(g, pz - (iz0 - rad) * cell)
+    if iz0 + rad < dims[2] - 1:
+        g = min(g, (iz0 + rad + 1) * cell - pz)
+    return g
+
+
+@njit
+def _gather(px, py, pz, pts, ranges, nr, bd, bi):
+    """Squared distances of every point of `ranges` to (px, py, pz) into bd, bi."""
+    n = 0
+    for t in range(nr):
+        for j in range(ranges[t, 0], ranges[t, 1]):
+            dx = pts[j, 0] - px
+            dy = pts[j, 1] - py
+            dz = pts[j, 2] - pz
+            bd[n] = dx * dx + dy * dy + dz * dz
+            bi[n] = j
+            n += 1
+    return n
+
+
+@njit
+def _gather_within(px, py, pz, pts, ranges, nr, tau2, bd, bi):
+    """Like :func:`_gather` but keeps only squared distances <= tau2 (branch-free store)."""
+    n = 0
+    for t in range(nr):
+        for j in range(ranges[t, 0], ranges[t, 1]):
+            dx = pts[j, 0] - px
+            dy = pts[j, 1] - py
+            dz = pts[j, 2] - pz
+            d = dx * dx + dy * dy + dz * dz
+            bd[n] = d
+            bi[n] = j
+            n += d <= tau2
+    return n
+
+
+@njit
+def _count(ranges, nr):
+    n = 0
+    for t in range(nr):
+        n += ranges[t, 1] - ranges[t, 0]
+    return n
+
+
+@njit_parallel
+def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out_idx,
+              out_dist):
+    """Exact `k` nearest neighbours (self included) of the points of cells ``c0..c1-1``.
+
+    `pts` are the grid's sorted local coordinates; output row r is sorted position
+    ``cell_start[c0] + r``; ``out_idx`` (sorted positions, any integer dtype) and
+    ``out_dist`` get the k neighbours, in ascending distance if `sort`. Requires
+    ``k <= len(pts)``. `tau0` is a typical k-th neighbour distance: candidates farther
+    than 1.15 times the previous point's k-th distance (tau0 for a cell's first point)
+    are dropped before the selection, unless fewer than k remain (then all are kept), so
+    the pre-filter changes the speed, never the result.
+    """
+    base = cell_start[c0]
+    ncell = c1 - c0
+    nchunks = (ncell + _CELL_CHUNK - 1) // _CELL_CHUNK
+    maxrad = max(dims[0], max(dims[1], dims[2]))
+    for ch in prange(nchunks):
+        cap = 1024
+        bd = np.empty(cap + 1)
+        bi = np.empty(cap + 1, dtype=np.int64)
+        ranges = np.empty((9, 2), dtype=np.int64)
+        for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
+            key = cell_keys[c]
+            iz0 = key % dims[2]
+            rest = key // dims[2]
+            ix0 = rest // dims[1]
+            iy0 = rest % dims[1]
+            nr = _block_ranges(ix0, iy0, iz0, 1, cell_keys, cell_start, dims, ranges)
+            need = _count(ranges, nr)
+            if need > cap:
+                cap = max(need, 2 * cap)
+                bd = np.empty(cap + 1)
+                bi = np.empty(cap + 1, dtype=np.int64)
+            tau2 = tau0 * tau0
+            for i in range(cell_start[c], cell_start[c + 1]):
+                px = pts[i, 0]
+                py = pts[i, 1]
+                pz = pts[i, 2]
+                m = _gather_within(px, py, pz, pts, ranges, nr, tau2, bd, bi)
+                if m < k:
+                    m = _gather(px, py, pz, pts, ranges, nr, bd, bi)
+                rad = 1
+                if m >= k:
+                    _select(bd, bi, m, k, sort)
+                while m < k or _kth(bd, k, sort) > _guaranteed(px, py, pz, ix0, iy0, iz0, rad,
+                                                               cell, dims) ** 2:
+                    if rad > maxrad:
+                        break
+                    rad += 1
+                    big = np.empty(((2 * rad + 1) ** 2, 2), dtype=np.int64)
+                    nb = _block_ranges(ix0, iy0, iz0, rad, cell_keys, cell_start, dims, big)
+                    need = _count(big, nb)
+                    if need > cap:
+                        cap = max(need, 2 * cap)
+                        bd = np.empty(cap + 1)
+                        bi = np.empty(cap + 1, dtype=np.int64)
+                    m = _gather(px, py, pz, pts, big, nb, bd, bi)
+                    if m >= k:
+                        _select(bd, bi, m, k, sort)
+                kth = _kth(bd, k, sort)
+                tau2 = kth * 1.3225  # (1.15 r_k)^2 for the next point of the cell
+                r = i - base
+                for t in range(k):
+                    out_idx[r, t] = bi[t]
+                    out_dist[r, t] = np.sqrt(bd[t])
+
+
+@njit
+def _kth(bd, k, sorted_):
+    """Largest of the k selected squared distances."""
+    if sorted_:
+        return bd[k - 1]
+    mx = bd[0]
+    for t in range(1, k):
+        if bd[t] > mx:
+            mx = bd[t]
+    return mx
+
+
+# ------------------------------------------------------------------ covariance per row
+@njit
+def _covariance_one(pos, pts, idx, s, e, sensor, has_sensor, cov, evals, evecs, out):
+    """Features of one neighbourhood (rows s..e of `idx`) of the point at `pos`."""
+    n = e - s
+    out[C_N] = n
+    if n < 3:
+        for a in range(NCOL - 1):
+            out[a] = np.nan
+        return
+    # pass 1: centroid relative to the index point
+    px = pts[pos, 0]
+    py = pts[pos, 1]
+    pz = pts[pos, 2]
+    m0 = 0.0
+    m1 = 0.0
+    m2 = 0.0
+    for t in range(s, e):
+        j = idx[t]
+        m0 += pts[j, 0] - px
+        m1 += pts[j, 1] - py
+        m2 += pts[j, 2] - pz
+    m0 /= n
+    m1 /= n
+    m2 /= n
+    # pass 2: centred second moments
+    c00 = c01 = c02 = c11 = c12 = c22 = 0.0
+    for t in range(s, e):
+        j = idx[t]
+        d0 = pts[j, 0] - px - m0
+        d1 = pts[j, 1] - py - m1
+        d2 = pts[j, 2] - pz - m2
+        c00 += d0 * d0
+        c01 += d0 * d1
+        c02 += d0 * d2
+        c11 += d1 * d1
+        c12 += d1 * d2
+        c22 += d2 * d2
+    f = 1.0 / (n - 1)
+    cov[0, 0] = c00 * f
+    cov[0, 1] = c01 * f
+    cov[0, 2] = c02 * f
+    cov[1, 0] = c01 * f
+    cov[1, 1] = c11 * f
+    cov[1, 2] = c12 * f
+    cov[2, 0] = c02 * f
+    cov[2, 1] = c12 * f
+    cov[2, 2] = c22 * f
+    _eigh3(cov, evals, evecs)
+    for a in range(3):
+        out[C_L0 + a] = max(evals[a], 0.0)
+    n0 = evecs[0, 0]
+    n1 = evecs[1, 0]
+    n2 = evecs[2, 0]
+    if has_sensor:
+        flip = n0 * (sensor[0] - px) + n1 * (sensor[1] - py) + n2 * (sensor[2] - pz) < 0.0
+    else:
+        flip = n2 < 0.0
+    if flip:
+        n0 = -n0
+        n1 = -n1
+        n2 = -n2
+    out[C_NX] = n0
+    out[C_NY] = n1
+    out[C_NZ] = n2
+    out[C_AX] = evecs[0, 2]
+    out[C_AY] = evecs[1, 2]
+    out[C_AZ] = evecs[2, 2]
+    out[C_CX] = px + m0
+    out[C_CY] = py + m1
+    out[C_CZ] = pz + m2
+    # index point minus centroid, in the plane of the two largest eigenvectors (eq. 7, 8)
+    out[C_U] = -(m0 * evecs[0, 2] + m1 * evecs[1, 2] + m2 * evecs[2, 2])
+    out[C_V] = -(m0 * evecs[0, 1] + m1 * evecs[1, 1] + m2 * evecs[2, 1])
+
+
+@njit_parallel
+def covariance_rows(pts, query, indptr, idx, sensor, has_sensor, out):
+    """Covariance features of every CSR row: row r is the neighbourhood of ``pts[query[r]]``.
+
+    ``out`` is (M, NCOL); rows with fewer than 3 neighbours are NaN.
+    """
+    m = query.size
+    nchunks = (m + _ROW_CHUNK - 1) // _ROW_CHUNK
+    for ch in prange(nchunks):
+        cov = np.empty((3, 3))
+        evals = np.empty(3)
+        evecs = np.empty((3, 3))
+        for r in range(ch * _ROW_CHUNK, min(m, (ch + 1) * _ROW_CHUNK)):
+            _covariance_one(query[r], pts, idx, indptr[r], indptr[r + 1], sensor, has_sensor,
+                            cov, evals, evecs, out[r])
+
+
+@njit_parallel
+def covariance_table(pts, row0, nbr, sensor, has_sensor, out):
+    """:func:`covariance_rows` over a dense (M, k) neighbour table of rows ``row0..row0+M``."""
+    m = nbr.shape[0]
+    k = nbr.shape[1]
+    nchunks = (m + _ROW_CHUNK - 1) // _ROW_CHUNK
+    for ch in prange(nchunks):
+        cov = np.empty((3, 3))
+        evals = np.empty(3)
+        evecs = np.empty((3, 3))
+        for r in range(ch * _ROW_CHUNK, min(m, (ch + 1) * _ROW_CHUNK)):
+            _covariance_one(row0 + r, pts, nbr[r], 0, k, sensor, has_sensor, cov, evals,
+                            evecs, out[r])
+
+
+@njit_parallel
+def neighbourhood_variance(values, indptr, idx, mean_out, var_out):
+    """Mean and population variance (eq. 5, 1/n) of `values` over each CSR row, NaN ignored."""
+    m = indptr.size - 1
+    for r in prange(m):
+        n = 0
+        acc = 0.0
+        for t in range(indptr[r], indptr[r + 1]):
+            v = values[idx[t]]
+            if v == v:
+                acc += v
+                n += 1
+        if n == 0:
+            mean_out[r] = np.nan
+            var_out[r] = np.nan
+            continue
+        mu = acc / n
+        acc = 0.0
+        for t in range(indptr[r], indptr[r + 1]):
+            v = values[idx[t]]
+            if v == v:
+                acc += (v - mu) * (v - mu)
+        mean_out[r] = mu
+        var_out[r] = acc / n
+
+
+@njit_parallel
+def table_variance(values, nbr, mean_out, var_out):
+    """:func:`neighbourhood_variance` over a dense (M, k) neighbour table."""
+    m = nbr.shape[0]
+    k = nbr.shape[1]
+    for r in prange(m):
+        n = 0
+        acc = 0.0
+        for t in range(k):
+            v = values[nbr[r, t]]
+            if v == v:
+                acc += v
+                n += 1
+        if n == 0:
+            mean_out[r] = np.nan
+            var_out[r] = np.nan
+            continue
+        mu = acc / n
+        acc = 0.0
+        for t in range(k):
+            v = values[nbr[r, t]]
+            if v == v:
+                acc += (v - mu) * (v - mu)
+        mean_out[r] = mu
+        var_out[r] = acc / n
