@@ -179,8 +179,9 @@ def _knn_cell_size(local, k, rng=0, sample=4000):
 def _knn_table(points, k, *, block_size, sort=True, progress=None, rng=0):
     """Exact kNN of every point with the grid kernel: (index, table, dist) in sorted order.
 
-    ``table[r]`` lists the sorted positions of the k nearest neighbours of sorted position r,
-    ascending distance; int32 when the cloud allows (4 k bytes per point).
+    ``table[r]`` lists the sorted positions of the k nearest neighbours of sorted position r
+    (in ascending distance if `sort`, and then ``dist`` holds the distances, else None);
+    int32 when the cloud allows (4 k bytes per point).
     """
     origin = points.min(axis=0)
     cell, tau0 = _knn_cell_size(points - origin, k, rng=rng)
@@ -188,14 +189,13 @@ def _knn_table(points, k, *, block_size, sort=True, progress=None, rng=0):
     n = index.n_points
     dtype = np.int32 if n < 2**31 - 1 else np.int64
     table = np.empty((n, k), dtype=dtype)
-    dist = np.empty((n, k), dtype=np.float32)
+    dist = np.empty((n, k)) if sort else None  # kept (float64) only for the neighbourhoods
     for c0, c1 in index.cell_blocks(block_size):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
-        dblock = np.empty((s1 - s0, k))
+        dblock = dist[s0:s1] if sort else np.empty((s1 - s0, k))
         _ck.knn_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
                       index.dims, float(index.cell), int(k), tau0, sort, table[s0:s1],
                       dblock)
-        dist[s0:s1] = dblock
         if progress is not None:
             progress(int(s1), 2 * n)
     return index, table, dist
@@ -363,7 +363,7 @@ def _table_to_csr(table, dist, order, k):
     inverse[order] = np.arange(n)
     rows = table[inverse]
     idx = order[rows.ravel()]
-    d = dist[inverse].ravel().astype(np.float64)
+    d = dist[inverse].ravel()
     indptr = np.arange(n + 1, dtype=np.int64) * k
     return Neighborhoods(indptr, idx, d, n, kind="knn", k=k)
 

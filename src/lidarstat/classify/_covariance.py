@@ -1,0 +1,337 @@
+"""Surface / edge / boundary classification from covariance features (seed 003), with tests.
+
+Three tests, each written beside the label as a p-value (see docs/methods/covariance.md):
+
+1. *Low curvature* - is the neighbourhood a plane with the measurement noise sigma? Under
+   that hypothesis ``(n - 1) lambda0 / sigma^2 ~ chi2(n - 3)`` (lambda0 is the residual
+   variance of the total-least-squares plane). Accepted -> surface. This is the paper's
+   surface-variation threshold made automatic: the critical lambda0 of the test gives, per
+   point, the largest surface variation a plane with this noise and this neighbourhood
+   size produces. A user threshold on ``SurfaceVariation`` overrides it.
+2. *Consistent curvature* (eq. 5) - where the plane is rejected, do the neighbours'
+   surface variations differ more than on the cloud's own accepted planes? The statistic
+   is the squared coefficient of variation ``R = var(SV) / mean(SV)^2`` over the
+   neighbourhood (eq. 5 divided by the squared mean, so that it does not grow with the
+   curvature itself). Its null distribution is taken from the data: log R is close to
+   normal, with mean and spread fitted to the median and lower quartile of log R over the
+   points whose plane test was accepted (smooth surfaces of this very scan, its sampling
+   and its neighbourhood size).
+   Accepted -> surface (curved or rough: pipes, corrugated roofs); rejected -> edge.
+   A user threshold on ``CurvatureVariance`` overrides it (the paper: 0.0001).
+3. *Boundary* (eq. 6-8) - is the index point the centre of its neighbourhood? Hotelling's
+   T^2 of the centroid against the index point in the tangent plane,
+   ``T2 = n (u^2 / lambda2 + v^2 / lambda1)``, with ``T2 (n - 2) / (2 (n - 1)) ~ F(2, n - 2)``
+   under the hypothesis (Johnson and Wichern 2002, the confidence region of a mean).
+   The paper's eq. 6 omits the factor n (a prediction region for one point, which no
+   boundary point leaves); rejected surface points -> boundary.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import numpy as np
+from scipy import special as _sp
+
+from .._shared.validation import check_scalar
+from ..errors import InvalidParameterError
+
+#: Per-point output fields of the classification, name -> (dtype, description).
+FIELDS = {
+    "point_class": ("uint8", "0 undetermined,1 surface,2 edge,3 boundary"),
+    "plane_p": ("float64", "p-value of the chi-square plane (low curvature) test"),
+    "variation_p": ("float64", "p-value of the consistent-curvature test"),
+    "boundary_T2": ("float64", "Hotelling T2 of the centroid offset"),
+    "boundary_p": ("float64", "p-value of the boundary test"),
+}
+
+
+class PointClass(IntEnum):
+    """Codes of ``point_class``."""
+
+    UNDETERMINED = 0
+    SURFACE = 1
+    EDGE = 2
+    BOUNDARY = 3
+
+
+@dataclass(frozen=True)
+class CovarianceClasses:
+    """Per-point classes and the tests behind them.
+
+    Attributes
+    ----------
+    fields : dict of str -> (N,) ndarray
+        ``point_class`` and the test fields (``FIELDS``), input order.
+    sigma : float or ndarray
+        Noise standard deviation used by the plane test (given or estimated).
+    sigma_estimated : bool
+    alpha, boundary_alpha : float
+    curvature_threshold, variance_threshold : float or None
+        User thresholds, when given (they replace tests 1 and 2).
+    """
+
+    fields: dict
+    sigma: float | np.ndarray
+    sigma_estimated: bool
+    alpha: float
+    boundary_alpha: float
+    curvature_threshold: float | None = None
+    variance_threshold: float | None = None
+    meta: dict = field(default_factory=dict)
+
+    def __getitem__(self, name):
+        return self.fields[name]
+
+    @property
+    def point_class(self) -> np.ndarray:
+        return self.fields["point_class"]
+
+    def to_fields(self):
+        return {k: np.asarray(v, dtype=FIELDS[k][0]) for k, v in self.fields.items()}
+
+    def counts(self) -> dict:
+        pc = self.point_class
+        return {c.name.lower(): int(np.count_nonzero(pc == c)) for c in PointClass}
+
+    def summary(self) -> str:
+        n = self.point_class.size
+        sig = (f"{self.sigma:.6g}" if np.ndim(self.sigma) == 0 else
+               f"per point (median {np.median(self.sigma):.6g})")
+        lines = [f"{n} points, sigma {sig}" + (" (estimated)" if self.sigma_estimated else "")
+                 + f", alpha {self.alpha}, boundary alpha {self.boundary_alpha}"]
+        if self.curvature_threshold is not None:
+            lines.append(f"SurfaceVariation threshold {self.curvature_threshold} (user)")
+        if self.variance_threshold is not None:
+            lines.append(f"CurvatureVariance threshold {self.variance_threshold} (user)")
+        for name, k in self.counts().items():
+            lines.append(f"  {name:<13s} {k:>10d} {100.0 * k / max(n, 1):6.2f}%")
+        return "\n".join(lines)
+
+
+def estimate_plane_sigma(evals, counts):
+    """Robust noise estimate: ``sigma^2 = median((n-1) lambda0) / median(chi2(n-3))``.
+
+    Valid when most neighbourhoods are planar (the median ignores edges and curved parts).
+    Uses the median neighbourhood size for the chi-square median.
+
+    Returns
+    -------
+    float
+    """
+    n = np.asarray(counts, dtype=np.float64)
+    l0 = np.asarray(evals)[:, 0]
+    ok = (n >= 4) & np.isfinite(l0)
+    if not ok.any():
+        raise InvalidParameterError("cannot estimate sigma: no neighbourhood has 4 points")
+    ss = (n[ok] - 1) * l0[ok]
+    df = float(np.median(n[ok])) - 3
+    med = _sp.chdtri(df, 0.5)  # median of chi2(df)
+    return float(np.sqrt(np.median(ss) / med))
+
+
+def plane_test(evals, counts, sigma):
+    """p-value of ``(n - 1) lambda0 / sigma^2 ~ chi2(n - 3)`` (upper tail)."""
+    n = np.asarray(counts, dtype=np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        stat = (n - 1) * evals[:, 0] / np.asarray(sigma, dtype=np.float64) ** 2
+        df = np.where(n > 3, n - 3, np.nan)
+        return _sp.chdtrc(df, stat)
+
+
+def variation_ratio(mean_sv, var_sv):
+    """Squared coefficient of variation of SurfaceVariation over each neighbourhood."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return var_sv / (mean_sv * mean_sv)
+
+
+def fit_variation_null(ratio, null):
+    """Normal model of ``log(ratio)`` on the `null` points: ``(mu, sd)`` from lower quantiles.
+
+    ``mu`` is the median and ``sd = (median - q25) / 0.6745``: the lower half is used
+    because the contamination of `null` (plane-accepted points whose neighbourhood reaches
+    an edge) lies in the upper tail. On planes of many sizes and noise levels log R is
+    close to normal (skewness and excess kurtosis below 0.15). Returns NaN when fewer
+    than 30 null points.
+    """
+    r = ratio[null & np.isfinite(ratio) & (ratio > 0)]
+    if r.size < 30:
+        return np.nan, np.nan
+    q25, q50 = np.quantile(np.log(r), [0.25, 0.5])
+    return float(q50), float((q50 - q25) / 0.6744897501960817)
+
+
+def variation_test(ratio, mu, sd):
+    """p-value of the consistent-curvature test: ``(log ratio - mu) / sd ~ N(0, 1)``, upper tail."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return _sp.ndtr(-(np.log(ratio) - mu) / sd)
+
+
+def boundary_test(offset_uv, evals, counts):
+    """Hotelling T^2 of the centroid against the index point, and its F p-value."""
+    n = np.asarray(counts, dtype=np.float64)
+    u, v = offset_uv[:, 0], offset_uv[:, 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t2 = n * (u * u / evals[:, 2] + v * v / evals[:, 1])
+        f = t2 * (n - 2) / (2 * (n - 1))
+        p = _sp.fdtrc(2.0, np.where(n > 2, n - 2, np.nan), f)
+    return t2, p
+
+
+#: Default level of the boundary test: it runs on every surface point, so a small level
+#: keeps false boundary points rare (alpha = 0.05 would flag 5 % of interior points).
+BOUNDARY_ALPHA = 0.001
+
+
+def classify_covariance(features, *, sigma=None, alpha=0.05, boundary_alpha=BOUNDARY_ALPHA,
+                        curvature_threshold=None, variance_threshold=None) -> CovarianceClasses:
+    """Label every point surface, edge or boundary from its covariance features.
+
+    Parameters
+    ----------
+    features : CovarianceResult
+        From :func:`lidarstat.features.covariance_features`.
+    sigma : float or (N,) array_like, optional
+        Noise standard deviation across the surface (per point allowed, e.g. from a range
+        model). Default: estimated by :func:`estimate_plane_sigma`.
+    alpha : float
+        Level of the plane and consistent-curvature tests.
+    boundary_alpha : float
+        Level of the boundary test (default 0.001: it runs on every surface point).
+    curvature_threshold : float, optional
+        Paper mode: SurfaceVariation above this is "high curvature" (replaces test 1).
+    variance_threshold : float, optional
+        Paper mode: CurvatureVariance above this is an edge (replaces test 2; the
+        paper used 0.0001).
+
+    Returns
+    -------
+    CovarianceClasses
+
+    Notes
+    -----
+    Points with fewer than 4 neighbours stay undetermined (0).
+    """
+    func = "classify_covariance"
+    alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0)
+    boundary_alpha = check_scalar(boundary_alpha, "boundary_alpha", func=func, low=0.0, high=1.0)
+    if curvature_threshold is not None:
+        curvature_threshold = check_scalar(curvature_threshold, "curvature_threshold",
+                                           func=func, low=0.0)
+    if variance_threshold is not None:
+        variance_threshold = check_scalar(variance_threshold, "variance_threshold", func=func,
+                                          low=0.0)
+    f = features.fields
+    evals = features.eigenvalues
+    counts = f["neighbors"].astype(np.float64)
+    n = counts.size
+    estimated = sigma is None
+    if estimated:
+        sigma = estimate_plane_sigma(evals, counts)
+        if not sigma > 0:
+            raise InvalidParameterError(
+                f"{func}: the estimated noise is 0 (exact planes); give `sigma` or thresholds")
+    elif np.ndim(sigma) == 0:
+        sigma = check_scalar(sigma, "sigma", func=func, low=0.0)
+    else:
+        sigma = np.asarray(sigma, dtype=np.float64)
+        if sigma.shape != (n,) or not (np.isfinite(sigma).all() and (sigma > 0).all()):
+            raise InvalidParameterError(
+                f"The 'sigma' parameter of {func} must be a positive float or {n} positive "
+                "values.")
+    valid = (counts >= 4) & np.isfinite(evals).all(axis=1)
+    plane_p = plane_test(evals, counts, sigma)
+    t2, boundary_p = boundary_test(features.offset_uv, evals, counts)
+    if curvature_threshold is None:
+        low = plane_p >= alpha
+    else:
+        low = f["SurfaceVariation"] <= curvature_threshold
+    ratio = variation_ratio(features.mean_variation, f["CurvatureVariance"])
+    g, h = fit_variation_null(ratio, valid & low)
+    variation_p = variation_test(ratio, g, h)
+    if variance_threshold is None:
+        consistent = variation_p >= alpha
+    else:
+        consistent = f["CurvatureVariance"] <= variance_threshold
+    surface = valid & (low | consistent)
+    boundary = surface & (boundary_p < boundary_alpha)
+    pc = np.zeros(n, dtype=np.uint8)
+    pc[valid] = PointClass.EDGE
+    pc[surface] = PointClass.SURFACE
+    pc[boundary] = PointClass.BOUNDARY
+    fields = {"point_class": pc, "plane_p": plane_p, "variation_p": variation_p,
+              "boundary_T2": t2, "boundary_p": boundary_p}
+    return CovarianceClasses(fields=fields, sigma=sigma, sigma_estimated=estimated, alpha=alpha,
+                             boundary_alpha=boundary_alpha,
+                             curvature_threshold=curvature_threshold,
+                             variance_threshold=variance_threshold)
+
+
+@dataclass(frozen=True)
+class CovarianceClassification:
+    """Features and classes of :func:`covariance` (what ``lidarstat covariance`` writes).
+
+    Attributes
+    ----------
+    features : CovarianceResult
+    classes : CovarianceClasses
+    """
+
+    features: object
+    classes: CovarianceClasses
+
+    def __getitem__(self, name):
+        if name in self.classes.fields:
+            return self.classes.fields[name]
+        return self.features.fields[name]
+
+    @property
+    def point_class(self) -> np.ndarray:
+        return self.classes.point_class
+
+    def to_fields(self):
+        """Every per-point field with its file dtype: ``point_class`` first."""
+        c = self.classes.to_fields()
+        return {"point_class": c.pop("point_class"), **self.features.to_fields(), **c}
+
+    def summary(self) -> str:
+        f = self.features
+        nb = f.k if f.k is not None else f"radius {f.radius}"
+        return (f"neighbourhoods: {'k ' + str(nb) if f.k is not None else nb}, median "
+                f"{np.median(f.counts):.0f} points\n" + self.classes.summary())
+
+
+def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, alpha=0.05,
+               boundary_alpha=BOUNDARY_ALPHA, curvature_threshold=None, variance_threshold=None,
+               eigen_mode="raw", keep_neighbors=False, progress=None):
+    """Covariance features and surface / edge / boundary classes of every point (seed 003).
+
+    One call of :func:`lidarstat.features.covariance_features` and
+    :func:`classify_covariance`; see them for the parameters.
+
+    Returns
+    -------
+    CovarianceClassification
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lidarstat.classify import covariance
+    >>> rng = np.random.default_rng(0)
+    >>> xy = rng.uniform(0, 10, (5000, 2))
+    >>> pts = np.c_[xy, rng.normal(0, 0.002, 5000)]
+    >>> res = covariance(pts, k=30)
+    >>> inside = (np.abs(xy - 5) < 4).all(axis=1)
+    >>> bool((res.point_class[inside] == 1).mean() > 0.85)
+    True
+    """
+    from ..features import covariance_features
+
+    feats = covariance_features(points, k=k, radius=radius, sensor=sensor,
+                                eigen_mode=eigen_mode, keep_neighbors=keep_neighbors,
+                                progress=progress)
+    classes = classify_covariance(feats, sigma=sigma, alpha=alpha, boundary_alpha=boundary_alpha,
+                                  curvature_threshold=curvature_threshold,
+                                  variance_threshold=variance_threshold)
+    return CovarianceClassification(features=feats, classes=classes)

@@ -1,0 +1,77 @@
+"""``lidarstat covariance IN OUT``: covariance features and surface / edge / boundary classes."""
+
+from __future__ import annotations
+
+import json
+import time
+
+from ._app import check_output, progress
+
+
+def add_neighbourhood_arguments(s, *, k_default=50):
+    """Options shared by ``covariance`` and ``segment --method covariance``."""
+    s.add_argument("--eigen-mode", choices=("raw", "sqrt", "normalized"), default="raw",
+                   help="eigen features from eigenvalues, their square roots (PDAL's default) "
+                   "or normalised eigenvalues")
+    s.add_argument("--boundary-alpha", type=float, default=0.001,
+                   help="level of the boundary (centroid) test [0.001]")
+    s.add_argument("--curvature-threshold", type=float, default=None,
+                   help="SurfaceVariation above this is high curvature (replaces the "
+                   "automatic plane test)")
+    s.add_argument("--variance-threshold", type=float, default=None,
+                   help="CurvatureVariance above this is an edge (replaces the automatic "
+                   "test; the paper used 0.0001)")
+
+
+def cmd_covariance(args):
+    from ..classify import covariance
+    from ..io import read, write
+
+    out = check_output(args.output, args.input)
+    cloud = read(args.input)
+    t0 = time.perf_counter()
+    res = covariance(cloud.xyz, k=args.k, radius=args.radius, sensor=args.sensor,
+                     sigma=args.sigma, alpha=args.alpha, boundary_alpha=args.boundary_alpha,
+                     curvature_threshold=args.curvature_threshold,
+                     variance_threshold=args.variance_threshold, eigen_mode=args.eigen_mode,
+                     progress=progress(args.quiet))
+    elapsed = time.perf_counter() - t0
+    write(out, cloud, fields=res.to_fields())
+    if not args.quiet:
+        print(f"{args.input} -> {out}  ({elapsed:.2f} s)")
+        print(res.summary())
+    if args.summary_json:
+        from .._shared._atomic import atomic_path
+
+        c = res.classes
+        meta = {"input": str(args.input), "output": str(out), "seconds": elapsed,
+                "k": res.features.k, "radius": res.features.radius,
+                "sigma": c.sigma if isinstance(c.sigma, float) else None,
+                "sigma_estimated": c.sigma_estimated, "alpha": c.alpha,
+                "boundary_alpha": c.boundary_alpha, "point_class": c.counts()}
+        with atomic_path(args.summary_json) as tmp:
+            tmp.write_text(json.dumps(meta, indent=2))
+    return 0
+
+
+def register(sub):
+    """Add the ``covariance`` subcommand."""
+    s = sub.add_parser(
+        "covariance", help="covariance features; surface, edge and boundary points",
+        description="Covariance of every point's neighbourhood (k nearest or a sphere), its "
+        "eigen features, and a tested surface / edge / boundary class (Bae and Lichti).")
+    s.add_argument("input")
+    s.add_argument("output", help="output file; format from the suffix")
+    g = s.add_mutually_exclusive_group()
+    g.add_argument("--k", type=int, default=50, help="neighbours per point, itself included [50]")
+    g.add_argument("--radius", type=float, default=None, help="sphere radius instead of kNN")
+    s.add_argument("--sensor", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
+                   help="scanner position (normals point to it; default up)")
+    s.add_argument("--sigma", type=float, default=None,
+                   help="noise std across surfaces (default: estimated from the data)")
+    s.add_argument("--alpha", type=float, default=0.05,
+                   help="level of the plane and consistent-curvature tests [0.05]")
+    add_neighbourhood_arguments(s)
+    s.add_argument("--summary-json", default=None, help="write the summary as JSON here")
+    s.add_argument("-q", "--quiet", action="store_true")
+    s.set_defaults(func=cmd_covariance)
