@@ -13,9 +13,9 @@ Three tests, each written beside the label as a p-value (see docs/methods/covari
    is the squared coefficient of variation ``R = var(SV) / mean(SV)^2`` over the
    neighbourhood (eq. 5 divided by the squared mean, so that it does not grow with the
    curvature itself). Its null distribution is taken from the data: log R is close to
-   normal, with mean and spread fitted to the median and lower quartile of log R over the
-   points whose plane test was accepted (smooth surfaces of this very scan, its sampling
-   and its neighbourhood size).
+   normal, with mean and spread fitted to the median and lower quartile of log R over all
+   points (the lower half of the distribution is the smooth surfaces of this very scan,
+   its sampling and its neighbourhood size; edges only populate the upper tail).
    Accepted -> surface (curved or rough: pipes, corrugated roofs); rejected -> edge.
    A user threshold on ``CurvatureVariance`` overrides it (the paper: 0.0001).
 3. *Boundary* (eq. 6-8) - is the index point the centre of its neighbourhood? Hotelling's
@@ -150,8 +150,8 @@ def fit_variation_null(ratio, null):
     """Normal model of ``log(ratio)`` on the `null` points: ``(mu, sd)`` from lower quantiles.
 
     ``mu`` is the median and ``sd = (median - q25) / 0.6745``: the lower half is used
-    because the contamination of `null` (plane-accepted points whose neighbourhood reaches
-    an edge) lies in the upper tail. On planes of many sizes and noise levels log R is
+    because the contamination of `null` (neighbourhoods reaching an edge) lies in the
+    upper tail, so the fit holds while smooth surfaces are the majority. On planes of many sizes and noise levels log R is
     close to normal (skewness and excess kurtosis below 0.15). Returns NaN when fewer
     than 30 null points.
     """
@@ -218,10 +218,10 @@ def classify_covariance(features, *, sigma=None, alpha=0.05, boundary_alpha=BOUN
     boundary_alpha = check_scalar(boundary_alpha, "boundary_alpha", func=func, low=0.0, high=1.0)
     if curvature_threshold is not None:
         curvature_threshold = check_scalar(curvature_threshold, "curvature_threshold",
-                                           func=func, low=0.0)
+                                           func=func, low=0.0, closed="left")
     if variance_threshold is not None:
         variance_threshold = check_scalar(variance_threshold, "variance_threshold", func=func,
-                                          low=0.0)
+                                          low=0.0, closed="left")
     f = features.fields
     evals = features.eigenvalues
     counts = f["neighbors"].astype(np.float64)
@@ -248,8 +248,8 @@ def classify_covariance(features, *, sigma=None, alpha=0.05, boundary_alpha=BOUN
     else:
         low = f["SurfaceVariation"] <= curvature_threshold
     ratio = variation_ratio(features.mean_variation, f["CurvatureVariance"])
-    g, h = fit_variation_null(ratio, valid & low)
-    variation_p = variation_test(ratio, g, h)
+    mu, sd = fit_variation_null(ratio, valid)
+    variation_p = variation_test(ratio, mu, sd)
     if variance_threshold is None:
         consistent = variation_p >= alpha
     else:

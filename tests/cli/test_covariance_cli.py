@@ -1,0 +1,63 @@
+"""``lidarstat covariance``: fields written, original fields kept, one-line errors."""
+
+import numpy as np
+import pytest
+
+from lidarstat.cli import main
+from lidarstat.io import PointCloud, read, write
+
+FIELDS = ["point_class", "NormalX", "NormalY", "NormalZ", "Eigenvalue0", "Eigenvalue1",
+          "Eigenvalue2", "SurfaceVariation", "CurvatureVariance", "Linearity", "Planarity",
+          "Scattering", "Verticality", "Omnivariance", "Anisotropy", "Eigenentropy",
+          "plane_p", "variation_p", "boundary_T2", "boundary_p"]
+
+
+@pytest.fixture
+def box_las(tmp_path):
+    rng = np.random.default_rng(3)
+    n = 3000
+    xy = rng.uniform(0, 4, (n, 2))
+    z = 2 - 0.5 * np.abs(xy[:, 0] - 2) + rng.normal(0, 0.003, n)  # a gable roof
+    path = tmp_path / "roof.las"
+    write(path, PointCloud(xyz=np.c_[xy, z] + [6e5, 5.2e6, 0],
+                           attributes={"intensity": np.arange(n) % 4096}))
+    return path
+
+
+@pytest.mark.parametrize("suffix", [".laz", ".npz"])
+def test_covariance_writes_fields(box_las, tmp_path, capsys, suffix):
+    out = tmp_path / f"out{suffix}"
+    summary = tmp_path / "s.json"
+    code = main(["covariance", str(box_las), str(out), "--k", "30", "--summary-json",
+                 str(summary)])
+    stdout = capsys.readouterr().out
+    assert code == 0 and "surface" in stdout and "boundary" in stdout
+    res = read(out)
+    for f in FIELDS:
+        assert f in res.field_names, f
+    pc = np.asarray(res["point_class"])
+    assert set(np.unique(pc)) <= {0, 1, 2, 3} and (pc == 1).mean() > 0.6 and (pc == 2).any()
+    assert np.array_equal(np.asarray(res["intensity"]), np.asarray(read(box_las)["intensity"]))
+    assert summary.exists()
+
+
+def test_covariance_radius_and_paper_thresholds(box_las, tmp_path, capsys):
+    out = tmp_path / "out.npz"
+    code = main(["covariance", str(box_las), str(out), "--radius", "0.3",
+                 "--variance-threshold", "0.0001", "--eigen-mode", "sqrt", "-q"])
+    assert code == 0
+    assert "CurvatureVariance" in read(out).field_names
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["covariance", "missing.laz", "out.laz"], "missing.laz"),
+    (["covariance", "IN", "out.xyz"], "unknown point-cloud format"),
+    (["covariance", "IN", "out.laz", "--k", "1"], "'k' parameter"),
+])
+def test_covariance_errors(box_las, tmp_path, capsys, argv, message):
+    argv = [str(box_las) if a == "IN" else (str(tmp_path / a) if a.startswith("out") else a)
+            for a in argv]
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and err.count("\n") == 1
+    assert not (tmp_path / "out.laz").exists()
