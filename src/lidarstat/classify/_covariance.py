@@ -99,6 +99,9 @@ class CovarianceClasses:
         n = self.point_class.size
         sig = (f"{self.sigma:.6g}" if np.ndim(self.sigma) == 0 else
                f"per point (median {np.median(self.sigma):.6g})")
+        if "range_noise" in self.meta:
+            a, b = self.meta["range_noise"]
+            sig = f"along the rays {a:.3g} + {b:.3g} r"
         lines = [f"{n} points, sigma {sig}" + (" (estimated)" if self.sigma_estimated else "")
                  + f", alpha {self.alpha}, boundary alpha {self.boundary_alpha}"]
         if self.curvature_threshold is not None:
@@ -129,6 +132,43 @@ def estimate_plane_sigma(evals, counts):
     df = float(np.median(n[ok])) - 3
     med = _sp.chdtri(df, 0.5)  # median of chi2(df)
     return float(np.sqrt(np.median(ss) / med))
+
+
+def estimate_range_noise(evals, counts, ray_range, ray_cos, *, bins=8):
+    """Range-noise model ``sigma_r(r) = a + b r`` of a terrestrial scan, from the data.
+
+    Per point, ``(n-1) lambda0 / cos^2(theta)`` estimates ``sigma_r^2 chi2(n-3)`` on planes
+    (theta: angle between ray and normal). Medians in range quantile bins, divided by the
+    chi-square median, give ``sigma_r`` per bin; a least-squares line through them gives
+    ``a, b`` (b clipped at 0). Points at grazing incidence (cos < 0.2) are left out.
+
+    Returns
+    -------
+    a, b : float
+    """
+    n = np.asarray(counts, dtype=np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = (n - 1) * evals[:, 0] / ray_cos ** 2
+    ok = (n >= 4) & np.isfinite(rho) & (ray_cos >= 0.2)
+    if ok.sum() < 20:
+        raise InvalidParameterError("cannot estimate the range noise: too few usable points")
+    med = _sp.chdtri(float(np.median(n[ok])) - 3, 0.5)
+    r = ray_range[ok]
+    edges = np.unique(np.quantile(r, np.linspace(0, 1, bins + 1)))
+    which = np.clip(np.searchsorted(edges, r, side="right") - 1, 0, edges.size - 2)
+    rc, sc = [], []
+    for b in range(edges.size - 1):
+        sel = which == b
+        if sel.sum() >= 10:
+            rc.append(np.median(r[sel]))
+            sc.append(np.sqrt(np.median(rho[ok][sel]) / med))
+    rc, sc = np.asarray(rc), np.asarray(sc)
+    if rc.size < 2 or np.ptp(rc) == 0:
+        return float(np.median(sc)), 0.0
+    b, a = np.polyfit(rc, sc, 1)
+    if b < 0:
+        return float(np.median(sc)), 0.0
+    return float(a), float(b)
 
 
 def plane_test(evals, counts, sigma):
@@ -184,8 +224,12 @@ def boundary_test(offset_uv, evals, counts):
 BOUNDARY_ALPHA = 0.001
 
 
-def classify_covariance(features, *, sigma=None, alpha=0.05, boundary_alpha=BOUNDARY_ALPHA,
-                        curvature_threshold=None, variance_threshold=None) -> CovarianceClasses:
+NOISE = ("normal", "range")
+
+
+def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
+                        boundary_alpha=BOUNDARY_ALPHA, curvature_threshold=None,
+                        variance_threshold=None) -> CovarianceClasses:
     """Label every point surface, edge or boundary from its covariance features.
 
     Parameters
@@ -193,8 +237,15 @@ def classify_covariance(features, *, sigma=None, alpha=0.05, boundary_alpha=BOUN
     features : CovarianceResult
         From :func:`lidarstat.features.covariance_features`.
     sigma : float or (N,) array_like, optional
-        Noise standard deviation across the surface (per point allowed, e.g. from a range
-        model). Default: estimated by :func:`estimate_plane_sigma`.
+        Noise standard deviation (per point allowed): across the surface
+        (``noise='normal'``) or along the ray (``'range'``). Default: estimated, by
+        :func:`estimate_plane_sigma` or, for ``'range'``, as the model ``a + b r`` of
+        :func:`estimate_range_noise`.
+    noise : {'normal', 'range'}, optional
+        ``'range'`` (default when the features were computed with a sensor): the noise
+        runs along the scanner's rays, so across a surface seen at incidence theta it is
+        ``sigma |cos theta|`` - terrestrial scans, where a single normal sigma would call
+        the walls facing the scanner rough and the grazing ground smooth.
     alpha : float
         Level of the plane and consistent-curvature tests.
     boundary_alpha : float
@@ -226,8 +277,24 @@ def classify_covariance(features, *, sigma=None, alpha=0.05, boundary_alpha=BOUN
     evals = features.eigenvalues
     counts = f["neighbors"].astype(np.float64)
     n = counts.size
+    if noise is None:
+        noise = "range" if features.sensor is not None else "normal"
+    if noise not in NOISE:
+        raise InvalidParameterError(
+            f"The 'noise' parameter of {func} must be one of 'normal', 'range'. "
+            f"Got {noise!r} instead.")
+    if noise == "range" and features.sensor is None:
+        raise InvalidParameterError(f"{func}: noise='range' needs features computed with a sensor")
     estimated = sigma is None
-    if estimated:
+    meta = {"noise": noise}
+    if estimated and noise == "range":
+        a, b = estimate_range_noise(evals, counts, features.ray_range, features.ray_cos)
+        meta["range_noise"] = (a, b)
+        sigma = a + b * features.ray_range
+        if not np.all(sigma > 0):
+            raise InvalidParameterError(
+                f"{func}: the estimated noise is 0 (exact planes); give `sigma` or thresholds")
+    elif estimated:
         sigma = estimate_plane_sigma(evals, counts)
         if not sigma > 0:
             raise InvalidParameterError(
@@ -241,7 +308,8 @@ def classify_covariance(features, *, sigma=None, alpha=0.05, boundary_alpha=BOUN
                 f"The 'sigma' parameter of {func} must be a positive float or {n} positive "
                 "values.")
     valid = (counts >= 4) & np.isfinite(evals).all(axis=1)
-    plane_p = plane_test(evals, counts, sigma)
+    across = sigma if noise == "normal" else sigma * features.ray_cos
+    plane_p = plane_test(evals, counts, across)
     t2, boundary_p = boundary_test(features.offset_uv, evals, counts)
     if curvature_threshold is None:
         low = plane_p >= alpha
@@ -265,7 +333,7 @@ def classify_covariance(features, *, sigma=None, alpha=0.05, boundary_alpha=BOUN
     return CovarianceClasses(fields=fields, sigma=sigma, sigma_estimated=estimated, alpha=alpha,
                              boundary_alpha=boundary_alpha,
                              curvature_threshold=curvature_threshold,
-                             variance_threshold=variance_threshold)
+                             variance_threshold=variance_threshold, meta=meta)
 
 
 @dataclass(frozen=True)
@@ -302,7 +370,7 @@ class CovarianceClassification:
                 f"{np.median(f.counts):.0f} points\n" + self.classes.summary())
 
 
-def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, alpha=0.05,
+def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None, alpha=0.05,
                boundary_alpha=BOUNDARY_ALPHA, curvature_threshold=None, variance_threshold=None,
                eigen_mode="raw", keep_neighbors=False, progress=None):
     """Covariance features and surface / edge / boundary classes of every point (seed 003).
@@ -331,7 +399,8 @@ def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, alpha=0.05
     feats = covariance_features(points, k=k, radius=radius, sensor=sensor,
                                 eigen_mode=eigen_mode, keep_neighbors=keep_neighbors,
                                 progress=progress)
-    classes = classify_covariance(feats, sigma=sigma, alpha=alpha, boundary_alpha=boundary_alpha,
+    classes = classify_covariance(feats, sigma=sigma, noise=noise, alpha=alpha,
+                                  boundary_alpha=boundary_alpha,
                                   curvature_threshold=curvature_threshold,
                                   variance_threshold=variance_threshold)
     return CovarianceClassification(features=feats, classes=classes)

@@ -61,6 +61,11 @@ class CovarianceResult:
     neighborhoods : Neighborhoods or None
         The neighbourhoods (original indices, rows sorted by distance for kNN), when
         ``keep_neighbors`` was asked.
+    sensor : (3,) ndarray or None
+        Scanner position, when given.
+    ray_range, ray_cos : (N,) ndarray or None
+        With a sensor: distance from it and |cos| of the angle between the ray and the
+        normal (the share of range noise that falls across the surface).
     """
 
     fields: dict
@@ -72,6 +77,9 @@ class CovarianceResult:
     radius: float | None
     eigen_mode: str = "raw"
     neighborhoods: Neighborhoods | None = None
+    sensor: np.ndarray | None = None
+    ray_range: np.ndarray | None = None
+    ray_cos: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
 
     def __getitem__(self, name):
@@ -352,8 +360,17 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         raw = raw[inverse]
         mean_sv = mean_sv[inverse]
         var_sv = var_sv[inverse]
-    return _assemble(raw, mean_sv, var_sv, origin, k=k, radius=radius, eigen_mode=eigen_mode,
-                     neighborhoods=keep)
+    res = _assemble(raw, mean_sv, var_sv, origin, k=k, radius=radius, eigen_mode=eigen_mode,
+                    neighborhoods=keep)
+    if sensor is not None:
+        ray = pts - sensor
+        rng_ = np.linalg.norm(ray, axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cos = np.abs(np.einsum("ij,ij->i", ray, res.normals)) / rng_
+        object.__setattr__(res, "sensor", sensor)
+        object.__setattr__(res, "ray_range", rng_)
+        object.__setattr__(res, "ray_cos", cos)
+    return res
 
 
 def _table_to_csr(table, dist, order, k):
