@@ -267,3 +267,25 @@ def test_invalid_parameters():
 def test_registered_scenes():
     assert SCENES["tls_building"] is make_tls_building
     assert SCENES["tls_plant"] is make_tls_plant
+
+
+def test_intensity_and_point_classes(building):
+    from lidarstat.synth import point_class_truth
+
+    c = building
+    inten = c.attributes["intensity"].astype(float)
+    assert np.all(c.attributes["return_number"] == 1)
+    refl = np.array([f["reflectance"] for f in c.meta["faces"]])[c.face]
+    # intensity / (reflectance cos i) follows 1 / (1 + (r / 30)^2) up to the 10 % speckle
+    ratio = inten / (50000 * refl * np.cos(c.fields["incidence"])
+                     / (1 + (c.fields["range"] / 30) ** 2))
+    ok = inten > 100  # away from the uint16 rounding
+    assert abs(np.log(ratio[ok]).std() - 0.1) < 0.01
+    assert abs(np.median(ratio[ok]) - 1) < 0.01
+    names = np.array(c.meta["face_names"])[c.face]
+    assert np.median(inten[names == "house_win1_+y"]) < 0.4 * np.median(
+        inten[names == "house_wall_-y"])
+    cls = point_class_truth(c, 0.1)
+    assert set(np.unique(cls)) == {1, 2, 3}
+    assert np.array_equal(cls == 3, c.fields["boundary_distance"] < 0.1)
+    assert np.all(cls[(c.edge_distance < 0.1) & (c.fields["boundary_distance"] >= 0.1)] == 2)

@@ -39,12 +39,14 @@ from ._tls import make_tls_building, make_tls_plant, scan_spherical
 from ._truth import (
     SURFACE_TYPE_NAMES,
     SyntheticCloud,
+    point_class_truth,
     principal_curvatures,
     surface_type_from_curvature,
 )
 
 __all__ = [
     "SyntheticCloud",
+    "point_class_truth",
     "SURFACE_TYPE_NAMES",
     "SURFACE_KINDS",
     "SCENES",

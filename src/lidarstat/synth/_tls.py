@@ -196,7 +196,7 @@ def _pair_arg(value, name, func):
 
 def scan_spherical(solid, *, scanner, azimuth=(-np.pi, np.pi), elevation=(-0.6, 0.6),
                    step=0.003, range_sigma=(0.002, 0.0), max_range=150.0, rng=None,
-                   name="tls_scan", meta=None) -> SyntheticCloud:
+                   reflectance=None, name="tls_scan", meta=None) -> SyntheticCloud:
     """Terrestrial laser scan of a CSG solid from one or several scanner stations.
 
     Parameters
@@ -218,7 +218,10 @@ def scan_spherical(solid, *, scanner, azimuth=(-np.pi, np.pi), elevation=(-0.6, 
     max_range : float
         Hits farther than this are dropped (no return).
     rng : numpy.random.Generator or int or None
-        Random source of the range noise.
+        Random source of the range noise and the intensity speckle.
+    reflectance : dict of str to float, optional
+        Reflectance (0-1) of the faces whose name starts with a key (the longest matching
+        key wins); 0.4 for the others.  Used for the simulated ``intensity``.
     name : str
         Scene name stored in the result.
     meta : dict, optional
@@ -239,7 +242,9 @@ def scan_spherical(solid, *, scanner, azimuth=(-np.pi, np.pi), elevation=(-0.6, 
         ((S, 2)), ``scanners``, ``grids`` (per station: ``azimuth0``, ``elevation0``,
         ``step_azimuth``, ``step_elevation``, ``shape``, ``wrap``), ``xyz_true``,
         ``range_sigma``, ``solid`` (the scene itself: ``solid.contains(p)``,
-        ``solid.ray_intervals(o, d)``).
+        ``solid.ray_intervals(o, d)``).  ``attributes``: ``intensity`` (uint16,
+        ``50000 reflectance cos(incidence) / (1 + (range / 30)^2)`` times a lognormal
+        speckle of 10 %), ``return_number`` = ``number_of_returns`` = 1.
 
     Notes
     -----
@@ -317,6 +322,20 @@ def scan_spherical(solid, *, scanner, azimuth=(-np.pi, np.pi), elevation=(-0.6, 
     xyz = cat["xyz_true"] + noise[:, None] * cat["direction"]
     counts = np.bincount(cat["face"], minlength=len(faces.faces))
     face_info = [dict(f, id=i, n_points=int(counts[i])) for i, f in enumerate(faces.faces)]
+    refl = np.full(len(faces.faces), 0.4)
+    for i, f in enumerate(faces.faces):
+        keys = [k for k in (reflectance or {}) if f["name"].startswith(k)]
+        if keys:
+            refl[i] = float(reflectance[max(keys, key=len)])
+    for i, f in enumerate(face_info):
+        f["reflectance"] = float(refl[i])
+    inten = (50000.0 * refl[cat["face"]] * np.cos(cat["incidence"])
+             / (1.0 + (cat["range"] / 30.0) ** 2) * rng.lognormal(0.0, 0.1, sig.size))
+    attributes = {
+        "intensity": np.clip(np.round(inten), 0, 65535).astype(np.uint16),
+        "return_number": np.ones(sig.size, np.uint8),
+        "number_of_returns": np.ones(sig.size, np.uint8),
+    }
     segs = [c for c in creases if c["kind"] == "segment"]
     m = dict(meta or {})
     m.update({
@@ -342,7 +361,8 @@ def scan_spherical(solid, *, scanner, azimuth=(-np.pi, np.pi), elevation=(-0.6, 
         xyz=xyz, normal=cat["normal"], K=K, H=H, kmin=cat["kmin"] + 0.0,
         kmax=cat["kmax"] + 0.0, surface_type=surface_type_from_curvature(K, H),
         face=cat["face"], edge_distance=edge, sigma=float(rs[0]),
-        scanner=sc[0] if S == 1 else None, name=name, meta=m, fields=fields)
+        scanner=sc[0] if S == 1 else None, name=name, meta=m, fields=fields,
+        attributes=attributes)
 
 
 # ---------------------------------------------------------------------------- scenes
@@ -449,9 +469,11 @@ def make_tls_building(*, step=0.0025, stations=1, range_sigma=(0.002, 5e-5), sig
     meta = {"scene": "tls_building", "house": {"x": (x0, x1), "y": (y0, y1), "eaves": 6.0,
                                                "ridge": 9.2, "wall": 0.3},
             "openings": {o[0]: (o[1], o[2]) for o in ops}}
+    refl = {"ground": 0.25, "house_wall": 0.55, "house_room": 0.6, "house_roof": 0.2,
+            "house_door": 0.35, "garage": 0.45, **{f"house_win{k}": 0.1 for k in range(1, 7)}}
     return scan_spherical(solid, scanner=sc, azimuth=az, elevation=el, step=step,
                           range_sigma=range_sigma, max_range=max_range, rng=rng,
-                          name="tls_building", meta=meta)
+                          reflectance=refl, name="tls_building", meta=meta)
 
 
 def make_tls_plant(*, step=0.0025, stations=1, range_sigma=(0.002, 5e-5), sigma=None,
@@ -512,6 +534,7 @@ def make_tls_plant(*, step=0.0025, stations=1, range_sigma=(0.002, 5e-5), sigma=
             "cylinders": {c.name: {"center": c.center.tolist(), "axis": c.axis.tolist(),
                                    "radius": c.radius, "length": c.length}
                           for c in (tank1, tank2, pipe_a, pipe_b, pipe_c, pipe_d)}}
+    refl = {"ground": 0.25, "tank": 0.65, "pipe": 0.5, "pump": 0.3, "support": 0.35}
     return scan_spherical(solid, scanner=sc, azimuth=az, elevation=el, step=step,
                           range_sigma=range_sigma, max_range=max_range, rng=rng,
-                          name="tls_plant", meta=meta)
+                          reflectance=refl, name="tls_plant", meta=meta)
