@@ -366,6 +366,15 @@ def scan_spherical(solid, *, scanner, azimuth=(-np.pi, np.pi), elevation=(-0.6, 
 
 
 # ---------------------------------------------------------------------------- scenes
+def _scene_args(func, stations, sigma, range_sigma):
+    """Validated station count and noise model of a TLS scene (`sigma` overrides)."""
+    stations = check_scalar(stations, "stations", func=func, low=1, high=2, closed="both",
+                            integer=True)
+    if sigma is not None:
+        range_sigma = (check_scalar(sigma, "sigma", func=func, low=0.0, closed="left"), 0.0)
+    return stations, range_sigma
+
+
 def _ground(reg, half=80.0):
     return Box(reg, "ground", (0.0, 0.0, -0.5), np.eye(3), (half, half, 0.5))
 
@@ -446,11 +455,7 @@ def make_tls_building(*, step=0.0025, stations=1, range_sigma=(0.002, 5e-5), sig
     >>> "house_roof_south" in {c.meta["face_names"][f] for f in c.face}
     True
     """
-    func = "make_tls_building"
-    stations = check_scalar(stations, "stations", func=func, low=1, high=2, closed="both",
-                            integer=True)
-    if sigma is not None:
-        range_sigma = (check_scalar(sigma, "sigma", func=func, low=0.0, closed="left"), 0.0)
+    stations, range_sigma = _scene_args("make_tls_building", stations, sigma, range_sigma)
     reg = FaceRegistry()
     x0, x1, y0, y1 = -6.0, 6.0, 10.0, 18.0
     ops = [("win1", (-4.5, y0 - 0.1, 1.0), (-3.3, y0 + 0.15, 2.4)),
@@ -507,11 +512,7 @@ def make_tls_plant(*, step=0.0025, stations=1, range_sigma=(0.002, 5e-5), sigma=
     >>> "tank1_side" in {c.meta["face_names"][f] for f in c.face}
     True
     """
-    func = "make_tls_plant"
-    stations = check_scalar(stations, "stations", func=func, low=1, high=2, closed="both",
-                            integer=True)
-    if sigma is not None:
-        range_sigma = (check_scalar(sigma, "sigma", func=func, low=0.0, closed="left"), 0.0)
+    stations, range_sigma = _scene_args("make_tls_plant", stations, sigma, range_sigma)
     reg = FaceRegistry()
     ex, ey = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
     ez = np.array([0, 0, 1.0])
