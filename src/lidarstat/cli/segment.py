@@ -22,6 +22,7 @@ from ._app import check_output
 SEGMENT_METHODS: dict[str, str] = {
     "sar": "lidarstat.cli._segment_sar",
     "curvature": "lidarstat.cli._segment_curvature",
+    "covariance": "lidarstat.cli._segment_covariance",
 }
 
 

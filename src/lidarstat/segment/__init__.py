@@ -15,10 +15,13 @@ from ._sar_refine import SurfaceUnit, refine_cluster
 from ._intersect import intersection_lines
 from ._sar import refine_raw_clusters, segment_sar
 from ._curvature_units import curvature_units, segment_curvature
+from ._covariance_segments import (fit_lines, local_intersections, reintegrate, segment_covariance,
+                                   segment_planes)
 
 __all__ = ["Segmentation", "Polylines", "segment_table", "components", "grow_regions",
            "relabel", "adjacency", "hoover", "HooverScore", "binary_scores",
            "ForwardSearchResult", "forward_search", "SearchAreas", "delaunay_graph",
            "search_areas", "RawClusters", "plane_edges", "raw_clusters", "SurfaceUnit",
            "refine_cluster", "intersection_lines", "refine_raw_clusters", "segment_sar",
-           "curvature_units", "segment_curvature"]
+           "curvature_units", "segment_curvature", "segment_covariance", "segment_planes",
+           "local_intersections", "fit_lines", "reintegrate"]

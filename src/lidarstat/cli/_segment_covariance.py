@@ -1,0 +1,31 @@
+"""``lidarstat segment IN OUT --method covariance`` (seed 003)."""
+
+from __future__ import annotations
+
+
+def add_arguments(group):
+    """Options only the covariance method has."""
+    from .covariance import add_neighbourhood_arguments
+
+    add_neighbourhood_arguments(group)
+    group.add_argument("--grow-k", type=int, default=20,
+                       help="neighbours region growing looks at, nearest first [20]")
+    group.add_argument("--seeds", choices=("curvature", "index"), default="curvature",
+                       help="seed order: lowest surface variation first, or file order")
+    group.add_argument("--min-angle", type=float, default=20.0,
+                       help="smallest angle (degrees) between normals for an intersection")
+    group.add_argument("--no-reintegration", action="store_true",
+                       help="leave edge points out of the segments")
+
+
+def run(args, cloud):
+    """Segment `cloud` by :func:`lidarstat.segment.segment_covariance`."""
+    from ..segment import segment_covariance
+
+    return segment_covariance(
+        cloud.xyz, k=args.k or 50, radius=args.radius, sensor=args.sensor, sigma=args.sigma,
+        alpha=args.alpha, boundary_alpha=args.boundary_alpha,
+        curvature_threshold=args.curvature_threshold,
+        variance_threshold=args.variance_threshold, min_size=args.min_size or 50,
+        grow_k=args.grow_k, seeds=args.seeds, min_angle=args.min_angle,
+        reintegration=not args.no_reintegration)

@@ -1,0 +1,391 @@
+"""Region growing on covariance classes, local surface intersections, reintegration (seed 003).
+
+* Region growing (Fig. 4): from every surface point, its neighbours are taken in order of
+  distance and join its region until the first non-surface neighbour (the "cut plane"
+  of edge and boundary points); a point already in another region merges the two
+  (union-find). This is :func:`lidarstat.segment.grow_regions` with ``merge=True`` over
+  the CSR edges before the first non-surface neighbour of each row; boundary points join
+  a region but do not grow it. Seeds in order of increasing surface variation (option).
+* Local intersections (eq. 9-17): for neighbouring points of two segments whose normals
+  differ by more than ``min_angle``, the planes through their neighbourhood centroids
+  meet in the line ``l(t) = x0 + t a`` with ``a = n1 x n2``; the point of the line that
+  minimises ``|l(t) - p1|^2 + |l(t) - p2|^2`` (eq. 17) is the line's point closest to the
+  midpoint of p1 and p2. Points farther than ``max_distance`` from p1 or p2 are rejected
+  (parallel surfaces, step edges). Per segment pair the points are fitted by a line
+  (principal axis, one round of 3-MAD trimming) with its extent.
+* Reintegration: an edge point joins the segment of a neighbour whose local plane (centroid
+  and normal of that neighbour's neighbourhood) it lies on within 3 sigma; the closest
+  such plane wins.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._shared.validation import check_points, check_scalar
+from ..errors import InvalidParameterError
+from ..neighbors import Neighborhoods
+from ._grow import grow_regions
+from ._result import Polylines, Segmentation
+
+
+def surface_prefix_edges(nbh: Neighborhoods, surface):
+    """CSR edges before the first non-surface neighbour of each row (rows sorted by distance).
+
+    The row's own point (distance 0) is skipped when looking for the first non-surface one.
+    """
+    surface = np.asarray(surface, dtype=bool)
+    src, dst = nbh.edges()
+    bad = (~surface[dst]) & (dst != src)
+    cs = np.cumsum(bad)
+    start = nbh.indptr[:-1]
+    before = np.where(start > 0, cs[np.maximum(start - 1, 0)], 0)
+    return (cs - np.repeat(before, nbh.counts)) == 0
+
+
+def truncate_rows(nbh: Neighborhoods, m: int) -> Neighborhoods:
+    """The first `m` neighbours of every row of fixed-size (kNN) neighbourhoods."""
+    k = nbh.k
+    if nbh.kind != "knn" or k is None or m >= k:
+        return nbh
+    n = len(nbh)
+    idx = nbh.indices.reshape(n, k)[:, :m].ravel()
+    d = nbh.distances.reshape(n, k)[:, :m].ravel()
+    return Neighborhoods(np.arange(n + 1, dtype=np.int64) * m, idx, d, nbh.n_points,
+                         kind="knn", k=m, query=nbh.query)
+
+
+def segment_planes(points, labels):
+    """Per segment: size, centroid, total-least-squares plane (normal, d) and RMS.
+
+    Returns
+    -------
+    dict of str -> (S,) ndarray
+        ``segment_id, n_points, centroid_x/y/z, normal_x/y/z, d`` (plane ``n . x + d = 0``),
+        ``rms`` (orthogonal residuals), ``surface_variation`` (lambda0 / sum).
+    """
+    labels = np.asarray(labels)
+    s = int(labels.max()) if labels.size else 0
+    cnt = np.bincount(labels, minlength=s + 1)[1:].astype(np.float64)
+    origin = points.mean(axis=0) if len(points) else np.zeros(3)
+    x = points - origin
+    safe = np.maximum(cnt, 1)
+    cen = np.stack([np.bincount(labels, weights=x[:, j], minlength=s + 1)[1:] / safe
+                    for j in range(3)], axis=1)
+    inseg = labels > 0
+    d = x[inseg] - cen[labels[inseg] - 1]
+    cov = np.zeros((s, 3, 3))
+    for a in range(3):
+        for b in range(a, 3):
+            v = np.bincount(labels[inseg] - 1, weights=d[:, a] * d[:, b], minlength=s) / safe
+            cov[:, a, b] = v
+            cov[:, b, a] = v
+    w, v = np.linalg.eigh(cov)
+    normal = v[:, :, 0]
+    normal *= np.where(normal[:, 2] < 0, -1.0, 1.0)[:, None]
+    cen_file = cen + origin
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sv = w[:, 0] / w.sum(axis=1)
+    return {
+        "segment_id": np.arange(1, s + 1, dtype=np.int32), "n_points": cnt.astype(np.int64),
+        "centroid_x": cen_file[:, 0], "centroid_y": cen_file[:, 1], "centroid_z": cen_file[:, 2],
+        "normal_x": normal[:, 0], "normal_y": normal[:, 1], "normal_z": normal[:, 2],
+        "d": -np.einsum("ij,ij->i", normal, cen_file),
+        "rms": np.sqrt(np.maximum(w[:, 0], 0.0)), "surface_variation": sv,
+    }
+
+
+def clean_plane_points(labels, clean, nbh):
+    """For every point, the nearest neighbour in its own segment whose plane test passed.
+
+    Points next to a crease have neighbourhoods that straddle it, so their normals and
+    centroids are biased toward the other face; the local plane of the nearest clean
+    point of the same segment (``clean``: surface or boundary class) is not. Rows must be
+    sorted by distance (kNN); a point without such a neighbour keeps its own.
+    """
+    n = labels.size
+    ref = np.arange(n)
+    if nbh.kind != "knn" or nbh.k is None:
+        return ref
+    idx = nbh.indices.reshape(n, nbh.k)
+    ok = clean[idx] & (labels[idx] == labels[:, None])
+    first = np.argmax(ok, axis=1)
+    has = ok[np.arange(n), first]
+    ref[has] = idx[has, first[has]]
+    return ref
+
+
+def local_intersections(points, labels, normals, centroids, nbh, *, min_angle=20.0,
+                        max_distance):
+    """Local intersection points of neighbouring points on different segments (eq. 9-17).
+
+    Returns
+    -------
+    x0 : (P, 3) ndarray
+        Intersection points (eq. 17), one per accepted pair.
+    seg : (P, 2) ndarray of int
+        The two segments (smaller id first).
+    """
+    src, dst = nbh.edges()
+    la, lb = labels[src], labels[dst]
+    keep = (la > 0) & (lb > 0) & (la < lb)
+    i, j = src[keep], dst[keep]
+    n1, n2 = normals[i], normals[j]
+    cosang = np.abs(np.einsum("ij,ij->i", n1, n2))
+    ok = cosang < np.cos(np.radians(min_angle))  # eq. 9: not parallel
+    i, j, n1, n2 = i[ok], j[ok], n1[ok], n2[ok]
+    a = np.cross(n1, n2)
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    origin = points.mean(axis=0) if len(points) else np.zeros(3)
+    p1, p2 = points[i] - origin, points[j] - origin
+    c1, c2 = centroids[i] - origin, centroids[j] - origin
+    m = 0.5 * (p1 + p2)
+    A = np.stack([n1, n2, a], axis=1)  # eq. 10-14 plus the line's closest point to m
+    rhs = np.stack([np.einsum("ij,ij->i", n1, c1), np.einsum("ij,ij->i", n2, c2),
+                    np.einsum("ij,ij->i", a, m)], axis=1)
+    x0 = np.linalg.solve(A, rhs[:, :, None])[:, :, 0]
+    far = np.maximum(np.linalg.norm(x0 - p1, axis=1), np.linalg.norm(x0 - p2, axis=1))
+    good = far <= max_distance
+    seg = np.stack([labels[i[good]], labels[j[good]]], axis=1)
+    return x0[good] + origin, seg
+
+
+def fit_lines(x0, seg, *, min_points=5):
+    """A straight line per segment pair through its local intersection points.
+
+    Principal axis of the points, one round of trimming at 3 MAD of the distances to the
+    line, extent = the trimmed points' projections.
+
+    Returns
+    -------
+    Polylines
+        Attributes ``segment_a``, ``segment_b``, ``n_points``, ``rms`` (distance of the
+        trimmed points to the line).
+    """
+    starts, ends, attr = [], [], {"segment_a": [], "segment_b": [], "n_points": [], "rms": []}
+    if len(seg):
+        key = seg[:, 0].astype(np.int64) * (int(seg.max()) + 1) + seg[:, 1]
+        order = np.argsort(key, kind="stable")
+        key, x0s, segs = key[order], x0[order], seg[order]
+        bounds = np.flatnonzero(np.diff(key)) + 1
+        for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, key.size]):
+            pts = x0s[lo:hi]
+            if len(pts) < min_points:
+                continue
+            for _ in range(2):
+                c = pts.mean(axis=0)
+                _, _, vt = np.linalg.svd(pts - c, full_matrices=False)
+                u = vt[0]
+                r = pts - c - np.outer((pts - c) @ u, u)
+                dist = np.linalg.norm(r, axis=1)
+                med = np.median(dist)
+                mad = np.median(np.abs(dist - med)) * 1.4826
+                inl = dist <= med + 3 * mad + 1e-12
+                if inl.all() or inl.sum() < min_points:
+                    break
+                pts = pts[inl]
+            t = (pts - c) @ u
+            starts.append(c + t.min() * u)
+            ends.append(c + t.max() * u)
+            attr["segment_a"].append(segs[lo, 0])
+            attr["segment_b"].append(segs[lo, 1])
+            attr["n_points"].append(len(pts))
+            attr["rms"].append(float(np.sqrt(np.mean(dist[inl] ** 2))) if len(dist) else 0.0)
+    attr = {"segment_a": np.asarray(attr["segment_a"], dtype=np.int32),
+            "segment_b": np.asarray(attr["segment_b"], dtype=np.int32),
+            "n_points": np.asarray(attr["n_points"], dtype=np.int64),
+            "rms": np.asarray(attr["rms"], dtype=np.float64)}
+    if not starts:
+        return Polylines([], attr)
+    return Polylines.from_segments(np.array(starts), np.array(ends), attr)
+
+
+def reintegrate(points, labels, candidates, normals, centroids, nbh, sigma, *, nsigma=3.0):
+    """Give each candidate point the segment of the neighbour whose local plane it fits best.
+
+    Returns
+    -------
+    (N,) ndarray of int32
+        Labels with the reintegrated points set; unchanged elsewhere.
+    """
+    out = labels.copy()
+    src, dst = nbh.edges()
+    use = candidates[src] & (labels[dst] > 0) & (labels[src] == 0)
+    s, t = src[use], dst[use]
+    sig = np.broadcast_to(np.asarray(sigma, dtype=np.float64), labels.shape)[t]
+    dist = np.abs(np.einsum("ij,ij->i", points[s] - centroids[t], normals[t])) / sig
+    fit = dist <= nsigma
+    s, t, dist = s[fit], t[fit], dist[fit]
+    order = np.lexsort((dist, s))
+    s, t = s[order], t[order]
+    first = np.r_[True, s[1:] != s[:-1]]
+    out[s[first]] = labels[t[first]]
+    return out
+
+
+def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=None,
+                   centroids=None):
+    """Merge touching segments that are one surface (split by a window, a pipe in front, ...).
+
+    Two segments that share neighbour pairs merge when their plane normals differ by less
+    than `max_angle` degrees and each centroid lies within `nsigma` times the other's RMS
+    (plus the first's) of the other's plane, or - with per-point `normals` - when the
+    median angle between the local normals of their touching points is below `max_angle`
+    and the touching points lie on each other's local planes (median distance within the
+    plane tolerance): a smooth continuation, as a pipe or tank cut by spurious edge
+    points. Ids are renumbered by size.
+    """
+    from ._grow import adjacency, relabel
+
+    pairs, _ = adjacency(nbh, labels)
+    if not len(pairs):
+        return labels
+    t = segment_planes(points, labels)
+    n = np.c_[t["normal_x"], t["normal_y"], t["normal_z"]]
+    c = np.c_[t["centroid_x"], t["centroid_y"], t["centroid_z"]]
+    a, b = pairs[:, 0] - 1, pairs[:, 1] - 1
+    cos = np.abs(np.einsum("ij,ij->i", n[a], n[b]))
+    tol = nsigma * (t["rms"][a] + t["rms"][b])
+    da = np.abs(np.einsum("ij,ij->i", c[b] - c[a], n[a]))
+    db = np.abs(np.einsum("ij,ij->i", c[a] - c[b], n[b]))
+    ok = (cos >= np.cos(np.radians(max_angle))) & (da <= tol) & (db <= tol)
+    if normals is not None:
+        src, dst = nbh.edges()
+        la, lb = labels[src], labels[dst]
+        touch = (la > 0) & (lb > 0) & (la < lb)
+        key = la[touch].astype(np.int64) * (int(labels.max()) + 1) + lb[touch]
+        si, di = src[touch], dst[touch]
+        c_local = np.abs(np.einsum("ij,ij->i", normals[si], normals[di]))
+        off = np.abs(np.einsum("ij,ij->i", points[di] - centroids[si], normals[si]))
+        order = np.argsort(key, kind="stable")
+        key, c_local, off = key[order], c_local[order], off[order]
+        uk, start = np.unique(key, return_index=True)
+        med = np.array([np.median(v) for v in np.split(c_local, start[1:])]) if uk.size else \
+            np.empty(0)
+        moff = np.array([np.median(v) for v in np.split(off, start[1:])]) if uk.size else \
+            np.empty(0)
+        pk = pairs[:, 0].astype(np.int64) * (int(labels.max()) + 1) + pairs[:, 1]
+        pos = np.searchsorted(uk, pk)
+        found = (pos < uk.size) & (uk[np.minimum(pos, uk.size - 1)] == pk)
+        smooth = np.zeros(len(pairs), dtype=bool)
+        smooth[found] = (med[pos[found]] >= np.cos(np.radians(max_angle))) & \
+            (moff[pos[found]] <= tol[found])
+        ok |= smooth
+    if not ok.any():
+        return labels
+    parent = np.arange(len(t["segment_id"]) + 1)
+
+    def find(x):
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for u, v in pairs[ok]:  # a few pairs per segment: a Python loop over segments is fine
+        ru, rv = find(u), find(v)
+        if ru != rv:
+            parent[max(ru, rv)] = min(ru, rv)
+    root = np.array([find(x) for x in range(parent.size)])
+    return relabel(root[labels] * (labels > 0))
+
+
+def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, alpha=0.05,
+                       boundary_alpha=0.001, curvature_threshold=None, variance_threshold=None,
+                       min_size=50, grow_k=20, seeds="curvature", min_angle=20.0,
+                       reintegration=True, lines=True, result=None) -> Segmentation:
+    """Covariance classification, region growing (Fig. 4), intersection lines (eq. 9-17).
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+    k, radius, sensor, sigma, alpha, boundary_alpha, curvature_threshold, variance_threshold
+        As for :func:`lidarstat.classify.covariance`.
+    min_size : int
+        Smallest segment kept (points).
+    grow_k : int
+        Region growing looks at the `grow_k` nearest neighbours of a point (kNN), in order
+        of distance, up to the first non-surface one.
+    seeds : {'curvature', 'index'}
+        Seed order: increasing surface variation (the flattest points first) or file order.
+        The final partition does not depend on it (label merging); segment ids do not
+        either (they are numbered by size).
+    min_angle : float
+        Smallest angle (degrees) between normals for a local intersection (eq. 9).
+    reintegration : bool
+        Give edge points the segment whose local plane they fit (within 3 sigma).
+    lines : bool
+        Compute the intersection lines.
+    result : CovarianceClassification, optional
+        A classification computed before with ``keep_neighbors=True`` (skips that step).
+
+    Returns
+    -------
+    Segmentation
+        ``labels``; ``table`` from :func:`segment_planes`; ``lines`` (Polylines);
+        ``fields``: ``point_class``, ``reintegrated``, ``NormalX/Y/Z``,
+        ``SurfaceVariation``.
+    """
+    from ..classify import PointClass, covariance
+
+    func = "segment_covariance"
+    pts = check_points(points)
+    min_size = check_scalar(min_size, "min_size", func=func, low=1, closed="left", integer=True)
+    grow_k = check_scalar(grow_k, "grow_k", func=func, low=2, closed="left", integer=True)
+    min_angle = check_scalar(min_angle, "min_angle", func=func, low=0.0, high=90.0)
+    if seeds not in ("curvature", "index"):
+        raise InvalidParameterError(
+            f"The 'seeds' parameter of {func} must be one of 'curvature', 'index'. "
+            f"Got {seeds!r} instead.")
+    if result is None:
+        result = covariance(pts, k=k, radius=radius, sensor=sensor, sigma=sigma, alpha=alpha,
+                            boundary_alpha=boundary_alpha,
+                            curvature_threshold=curvature_threshold,
+                            variance_threshold=variance_threshold, keep_neighbors=True)
+    feats, classes = result.features, result.classes
+    nbh = feats.neighborhoods
+    if nbh is None:
+        raise InvalidParameterError(f"{func}: `result` must be computed with keep_neighbors=True")
+    pc = classes.point_class
+    surface = pc == PointClass.SURFACE
+    boundary = pc == PointClass.BOUNDARY
+    grow_nbh = truncate_rows(nbh, grow_k)
+    # boundary points end a surface, they do not separate two: they may be joined (and do
+    # not grow), only edge and undetermined points cut the rows (Fig. 4)
+    edge_ok = surface_prefix_edges(grow_nbh, surface | boundary)
+    sv = feats["SurfaceVariation"]
+    order = np.argsort(np.where(np.isfinite(sv), sv, np.inf), kind="stable") \
+        if seeds == "curvature" else None
+    labels = grow_regions(grow_nbh, edge_ok, order=order, can_grow=surface,
+                          mask=surface | boundary, merge=True, min_size=min_size)
+    normals = feats.normals
+    centroids = feats.centroid
+    across = classes.sigma
+    if classes.meta.get("noise") == "range":
+        across = np.maximum(classes.sigma * feats.ray_cos, 1e-12)
+    reint = np.zeros(pts.shape[0], dtype=np.uint8)
+    if reintegration:
+        cand = (pc == PointClass.EDGE) | (pc == PointClass.UNDETERMINED)
+        new = reintegrate(pts, labels, cand & (labels == 0), normals, centroids, nbh, across)
+        reint[(new > 0) & (labels == 0)] = 1
+        labels = new
+    labels = merge_coplanar(pts, labels, grow_nbh, max_angle=min_angle / 4,
+                            normals=feats.normals, centroids=feats.centroid)
+    lines_out = None
+    if lines:
+        rk = nbh.distances.reshape(len(nbh), -1)[:, -1] if nbh.kind == "knn" else \
+            np.full(len(nbh), nbh.radius)
+        ref = clean_plane_points(labels, surface | boundary, nbh)
+        x0, seg = local_intersections(pts, labels, normals[ref], centroids[ref], nbh,
+                                      min_angle=min_angle,
+                                      max_distance=2.0 * float(np.median(rk)))
+        lines_out = fit_lines(x0, seg)
+    table = segment_planes(pts, labels)
+    fields = {"point_class": pc.astype(np.uint8), "reintegrated": reint,
+              "NormalX": feats["NormalX"], "NormalY": feats["NormalY"],
+              "NormalZ": feats["NormalZ"], "SurfaceVariation": sv}
+    params = {"k": feats.k, "radius": feats.radius, "grow_k": grow_k, "min_size": min_size,
+              "seeds": seeds, "min_angle": min_angle, "alpha": classes.alpha,
+              "boundary_alpha": classes.boundary_alpha, "noise": classes.meta.get("noise"),
+              "sigma_estimated": classes.sigma_estimated}
+    return Segmentation(labels=labels, table=table, lines=lines_out, fields=fields,
+                        method="covariance", params=params)
