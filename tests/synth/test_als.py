@@ -219,3 +219,27 @@ def test_cli_writes_standard_las_fields(tmp_path):
     assert np.array_equal(np.asarray(las.return_number), c.attributes["return_number"])
     assert np.array_equal(np.asarray(las.roof_plane), c.fields["roof_plane"])
     assert np.allclose(las.x, c.xyz[:, 0], atol=1e-4)
+
+
+def test_surface_echoes_are_first_hits(hip):
+    """Between the aircraft and a last echo there is neither a solid nor the terrain
+    (independent point-in-solid tests along the pulse)."""
+    c = hip
+    last = (c.attributes["return_number"] == c.attributes["number_of_returns"]) & \
+        (c.attributes["classification"] != 7) & (c.fields["tree_id"] == 0)
+    idx = np.random.default_rng(0).choice(np.flatnonzero(last), 3000, replace=False)
+    p = c.meta["xyz_true"][idx]
+    o = c.meta["pulse_origin"][c.fields["pulse_id"][idx]]
+    ter = c.meta["terrain"]
+    for frac in np.linspace(0.9, 0.99999, 30):  # the last 10 % of the way down
+        q = o + frac * (p - o)
+        assert np.all(q[:, 2] > ter.z(q[:, 0], q[:, 1]))
+        for solid in c.meta["solids"]:
+            assert not solid.contains(q).any()
+    # and the echo lies on the terrain or on a face of a solid
+    on_face = c.face[idx] >= 0
+    assert np.allclose(p[~on_face, 2], ter.z(p[~on_face, 0], p[~on_face, 1]), atol=1e-9)
+    faces = c.meta["faces"]
+    res = [abs(np.dot(faces[f]["normal"], q - faces[f]["point"]))
+           for f, q in zip(c.face[idx][on_face], p[on_face])]
+    assert max(res) < 1e-8

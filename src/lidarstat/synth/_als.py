@@ -546,6 +546,7 @@ def _simulate(spec, *, density, sigma, rng, altitude, noise_fraction, name, extr
         "face_names": [f["name"] for f in faces], "faces": faces,
         "edges": creases, "materials": {k: v[0] for k, v in MATERIALS.items()},
         "classes": ASPRS_CLASSES, "terrain": terrain, "n_pulses": P,
+        "solids": objects, "pulse_origin": o, "pulse_direction": d,
         "xyz_true": xyz_true[order],
         "edge_distance": "building points: exact 3-D distance to the nearest crease of "
                          "their building (meta['edges'][building_id]); NaN elsewhere",
@@ -654,7 +655,10 @@ def make_als_town(*, extent=(160.0, 120.0), density=8.0, sigma=0.03, rng=None,
         ``footprint`` polygon (k, 2), heights, counts), ``footprints``, ``trees``
         (``center``, ``radius``, ``half_height``, ``overhangs`` = building ids),
         ``cars``, ``roads`` (``axis`` end points, ``width``), ``materials``,
-        ``classes``, ``edges`` (creases per building id), ``xyz_true``.
+        ``classes``, ``edges`` (creases per building id), ``xyz_true``, ``terrain``
+        (``terrain.z(x, y)``), ``solids`` (the CSG solids of the buildings, then the
+        cars), ``pulse_origin`` / ``pulse_direction`` (per ``pulse_id``, noise points
+        excluded).
 
     Examples
     --------
