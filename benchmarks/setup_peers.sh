@@ -8,6 +8,6 @@ cd "$(dirname "$0")/.."
 if command -v apt-get >/dev/null; then
     apt-get update -qq
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
-        cloudcompare xvfb libcgal-dev libeigen3-dev g++ >/dev/null
+        cloudcompare xvfb libcgal-dev libeigen3-dev g++ libusb-1.0-0 >/dev/null  # open3d needs libusb
 fi
 python -m pip install -q -e ".[bench]"

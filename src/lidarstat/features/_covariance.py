@@ -175,7 +175,7 @@ def _knn_cell_size(local, k, rng=0, sample=4000):
     n = local.shape[0]
     rng = np.random.default_rng(rng)
     pos = rng.choice(n, size=min(sample, n), replace=False)
-    tree = cKDTree(local)
+    tree = cKDTree(local, balanced_tree=False, compact_nodes=False)
     d, _ = tree.query(local[pos], k=k, workers=-1)
     d = np.asarray(d).reshape(pos.size, k)[:, -1]
     cell = float(np.quantile(d, 0.9))
