@@ -316,7 +316,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     else:
         low = f["SurfaceVariation"] <= curvature_threshold
     ratio = variation_ratio(features.mean_variation, f["CurvatureVariance"])
-    mu, sd = fit_variation_null(ratio, valid)
+    mu, sd = fit_variation_null(ratio, valid & low)
     variation_p = variation_test(ratio, mu, sd)
     if variance_threshold is None:
         consistent = variation_p >= alpha
