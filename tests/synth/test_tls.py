@@ -289,3 +289,15 @@ def test_intensity_and_point_classes(building):
     assert set(np.unique(cls)) == {1, 2, 3}
     assert np.array_equal(cls == 3, c.fields["boundary_distance"] < 0.1)
     assert np.all(cls[(c.edge_distance < 0.1) & (c.fields["boundary_distance"] >= 0.1)] == 2)
+
+
+def test_plant_platform_station_sees_tank_tops():
+    c = make_tls_plant(step=0.012, stations=2, rng=0)
+    names = np.array(c.meta["face_names"])[c.face]
+    st = c.fields["station"]
+    for tank, top in (("tank1", 6.0), ("tank2", 4.0)):
+        m = names == f"{tank}_cap_top"
+        assert m.sum() > 20 and np.all(st[m] == 1)
+        assert np.allclose(c.meta["xyz_true"][m, 2], top, atol=1e-9)
+        assert np.allclose(c.normal[m], [0, 0, 1])
+    assert _face_residual(c).max() < 1e-9

@@ -493,9 +493,10 @@ def make_tls_plant(*, step=0.0025, stations=1, range_sigma=(0.002, 5e-5), sigma=
     box supports (``support1``, ``support2``), and a small pipe of radius 0.1 m along y
     (``pipe_d``) resting 0.4 m above the ground between the pump and tank 2.  Cylinder
     faces carry K = 0, H = -1/(2R) (convex).  Creases include the circles where pipes
-    enter boxes and where the tanks meet the ground.  Station 0 at (-6, -8, 1.6), the
-    optional second at (14, -4, 1.6); about 70,000 points with one station and the
-    default step.
+    enter boxes and where the tanks meet the ground.  Station 0 stands on the ground at
+    (-6, -8, 1.6); the optional second is on a platform at (14, -4, 8.0) and looks down
+    on the flat tank tops (``tank1_cap_top``, ``tank2_cap_top``).  About 70,000 points
+    with one station and the default step, 141,000 with two.
 
     Parameters
     ----------
@@ -528,9 +529,9 @@ def make_tls_plant(*, step=0.0025, stations=1, range_sigma=(0.002, 5e-5), sigma=
     solid = _ground(reg)
     for prim in (tank1, tank2, pump, pipe_a, sup1, sup2, pipe_b, pipe_c, pipe_d):
         solid = union(solid, prim)
-    sc = [(-6.0, -8.0, 1.6), (14.0, -4.0, 1.6)][:stations]
+    sc = [(-6.0, -8.0, 1.6), (14.0, -4.0, 8.0)][:stations]
     az = [(0.45, 1.75), (1.3, 2.75)][:stations]
-    el = [(-0.25, 0.45), (-0.25, 0.45)][:stations]
+    el = [(-0.25, 0.45), (-0.4, 0.1)][:stations]
     meta = {"scene": "tls_plant",
             "cylinders": {c.name: {"center": c.center.tolist(), "axis": c.axis.tolist(),
                                    "radius": c.radius, "length": c.length}
