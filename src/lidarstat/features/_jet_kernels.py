@@ -1,0 +1,701 @@
+"""Numba kernels of jet fitting and Monge coefficients (Cazals and Pouget 2005).
+
+Per query point i, with neighbours j, offsets d_j = x_j - x_i and weights w_j (tricube of
+d_ij/b, or 1 for CGAL's unweighted fit), the four steps are:
+
+1. PCA frame: eigenvectors of the (weighted) covariance of the neighbourhood, e1 the
+   largest, n the smallest, n oriented toward the sensor or up, (e1, e2, n) direct.
+2. Polynomial fit of degree d in that frame, origin at the point: heights h_j on
+   ``J(u, v) = sum_k sum_i A[k(k+1)/2 + i] u^(k-i) v^i / ((k-i)! i!)`` (CGAL's ordering
+   and Taylor scaling: A holds the partial derivatives), by weighted least squares on
+   coordinates scaled by 1/b. The normal matrix ``N = X'WX`` is assembled from weighted
+   moment sums of the monomials ``U^a V^c`` (a + c <= 2d), equilibrated by its diagonal
+   and inverted by Cholesky.
+3. Monge basis: normal ``(-A1, -A2, 1)/s`` with ``s = sqrt(1 + A1^2 + A2^2)``; the second
+   fundamental form in an orthonormal tangent basis, diagonalised: k1 >= k2 with directions
+   d1, d2, (d1, d2, n) direct.
+4. Monge coefficients: the surface ``J(x, y) - z = 0`` written in the Monge frame
+   (origin at the fitted point (0, 0, A0)) is the graph ``Z(X, Y)``; its Taylor
+   coefficients follow order by order from ``A + B Z + C Z^2 = 0`` (see ``_monge``).
+
+Statistics as for the quadric: residual form ``Q = v'Wv``, ``tr(B)`` and ``tr(B^2)`` with
+``B = W - W X N^-1 X'W`` for the Satterthwaite chi-square; cofactor of A the sandwich
+``N^-1 X'W^2X N^-1``; the Monge coefficients' cofactors by first-order propagation with a
+forward-difference Jacobian (the PCA frame held fixed).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import prange
+
+from .._shared._jit import njit, njit_parallel
+from ..neighbors._kernels import _cell_ranges, _scan
+from ._quadric_kernels import _eigh3
+
+OK = 0
+TOO_FEW = 1
+SINGULAR = 2
+SKIPPED = 255
+
+#: Monge outputs: k1, k2, b0..b3, c0..c4
+NMONGE = 11
+#: stats columns: Q, sum w, tr(B), tr(B^2), sqrt cond_1(equilibrated N), bandwidth, A0
+NSTAT = 7
+_CHUNK = 64
+_CELL_CHUNK = 64
+_MAXD = 4
+_MAXM = 15  # coefficients of a degree-4 jet
+_MAXMOM = 45  # monomials of degree <= 8
+_N_MONGE_OF = (0, 0, 2, 6, 11)  # Monge coefficients up to degree dm
+
+
+def _tables():
+    """Index tables: column (k, i) of the design <-> monomial U^(k-i) V^i; pair products."""
+    mono_k, mono_i = [], []
+    for k in range(2 * _MAXD + 1):
+        for i in range(k + 1):
+            mono_k.append(k)
+            mono_i.append(i)
+    col_fact = np.empty(_MAXM)
+    col_deg = np.empty(_MAXM, np.int64)
+    pair = np.empty((_MAXM, _MAXM), np.int64)
+    for k in range(_MAXD + 1):
+        for i in range(k + 1):
+            a = k * (k + 1) // 2 + i
+            col_fact[a] = math.factorial(k - i) * math.factorial(i)
+            col_deg[a] = k
+    for a in range(_MAXM):
+        ka = int(col_deg[a])
+        ia = a - ka * (ka + 1) // 2
+        for c in range(_MAXM):
+            kc = int(col_deg[c])
+            ic = c - kc * (kc + 1) // 2
+            kk = ka + kc
+            pair[a, c] = kk * (kk + 1) // 2 + ia + ic
+    return np.array(mono_k, np.int64), np.array(mono_i, np.int64), col_fact, col_deg, pair
+
+
+MONO_K, MONO_I, COL_FACT, COL_DEG, PAIR = _tables()
+
+
+@njit
+def n_coef(d):
+    return (d + 1) * (d + 2) // 2
+
+
+@njit
+def _monomials(u, v, nmom_deg, out):
+    """out[k(k+1)/2 + i] = u^(k-i) v^i for k <= nmom_deg."""
+    out[0] = 1.0
+    t = 1
+    for k in range(1, nmom_deg + 1):
+        # row k from row k-1: multiply by u, the last one by v too
+        s = t - k  # start of row k-1
+        for i in range(k):
+            out[t + i] = out[s + i] * u
+        out[t + k] = out[s + k - 1] * v
+        t += k + 1
+
+
+@njit
+def _cholesky_inv(a, m, L, inv):
+    """Inverse of the SPD leading m x m block of `a` via Cholesky; False if not safely SPD."""
+    scale = 0.0
+    for k in range(m):
+        if a[k, k] > scale:
+            scale = a[k, k]
+    if not scale > 0.0:
+        return False
+    tol = 1e-13 * scale
+    for j in range(m):
+        sjj = a[j, j]
+        for k in range(j):
+            sjj -= L[j, k] * L[j, k]
+        if not sjj > tol:
+            return False
+        L[j, j] = math.sqrt(sjj)
+        for r in range(j + 1, m):
+            s = a[r, j]
+            for k in range(j):
+                s -= L[r, k] * L[j, k]
+            L[r, j] = s / L[j, j]
+    # inverse of L (lower) in place into the upper... use inv as scratch for Linv (lower)
+    for j in range(m):
+        for r in range(m):
+            inv[r, j] = 0.0
+    for j in range(m):
+        inv[j, j] = 1.0 / L[j, j]
+        for r in range(j + 1, m):
+            acc = 0.0
+            for k in range(j, r):
+                acc -= L[r, k] * inv[k, j]
+            inv[r, j] = acc / L[r, r]
+    # N^-1 = Linv' Linv, computed into L's storage then copied (L no longer needed)
+    for r in range(m):
+        for c in range(r, m):
+            acc = 0.0
+            for k in range(c, m):
+                acc += inv[k, r] * inv[k, c]
+            L[r, c] = acc
+    for r in range(m):
+        for c in range(r, m):
+            inv[r, c] = L[r, c]
+            inv[c, r] = L[r, c]
+    return True
+
+
+# ----------------------------------------------------------------------- Monge coefficients
+
+@njit
+def _hom_mul(p, dp, q, dq, out):
+    """out (degree dp + dq) = p (degree dp) * q (degree dq); coefficients of X^(d-i) Y^i."""
+    for t in range(dp + dq + 1):
+        out[t] = 0.0
+    for a in range(dp + 1):
+        pa = p[a]
+        if pa == 0.0:
+            continue
+        for c in range(dq + 1):
+            out[a + c] += pa * q[c]
+
+
+@njit
+def _compose(A, kdeg, px, py, tmp, out):
+    """Homogeneous part of degree kdeg of J(Lx, Ly) (plain coefficients).
+
+    ``px[e]``, ``py[e]`` hold the powers Lx^e, Ly^e (degree e); A uses CGAL's ordering
+    with Taylor scaling.
+    """
+    for t in range(kdeg + 1):
+        out[t] = 0.0
+    base = kdeg * (kdeg + 1) // 2
+    for i in range(kdeg + 1):
+        coef = A[base + i] / COL_FACT[base + i]
+        if coef == 0.0:
+            continue
+        _hom_mul(px[kdeg - i], kdeg - i, py[i], i, tmp)
+        for t in range(kdeg + 1):
+            out[t] += coef * tmp[t]
+
+
+@njit
+def _monge(A, d, dm, ws, out, basis):
+    """Monge form of the jet A (degree d) up to degree dm (2..4), in the fitting frame.
+
+    out: k1, k2, b0..b3, c0..c4 (zeros above dm). basis rows: d1, d2, n (fitting frame).
+    Returns False if the normal is undefined.
+    """
+    px, py, tmp, h2, h3, h4, b1p, b2p, z2, z3, z4 = ws
+    for t in range(NMONGE):
+        out[t] = 0.0
+    a1 = A[1]
+    a2 = A[2]
+    s = math.sqrt(1.0 + a1 * a1 + a2 * a2)
+    n0 = -a1 / s
+    n1 = -a2 / s
+    n2 = 1.0 / s
+    # orthonormal tangent basis t1 = (1, 0, a1)/|.|, t2 = n x t1
+    nt = math.sqrt(1.0 + a1 * a1)
+    t10 = 1.0 / nt
+    t11 = 0.0
+    t12 = a1 / nt
+    t20 = n1 * t12 - n2 * t11
+    t21 = n2 * t10 - n0 * t12
+    t22 = n0 * t11 - n1 * t10
+    A3 = A[3] if d >= 2 else 0.0
+    A4 = A[4] if d >= 2 else 0.0
+    A5 = A[5] if d >= 2 else 0.0
+    # second fundamental form in (t1, t2): P' H P / s, P = [[t10, t20], [t11, t21]]
+    m00 = (t10 * (A3 * t10 + A4 * t11) + t11 * (A4 * t10 + A5 * t11)) / s
+    m01 = (t10 * (A3 * t20 + A4 * t21) + t11 * (A4 * t20 + A5 * t21)) / s
+    m11 = (t20 * (A3 * t20 + A4 * t21) + t21 * (A4 * t20 + A5 * t21)) / s
+    tr = 0.5 * (m00 + m11)
+    df = 0.5 * (m00 - m11)
+    rad = math.sqrt(df * df + m01 * m01)
+    k1 = tr + rad
+    k2 = tr - rad
+    # eigenvector of k1: angle theta with tan(2 theta) = 2 m01 / (m00 - m11)
+    th = 0.5 * math.atan2(m01, df)
+    c = math.cos(th)
+    sn = math.sin(th)
+    d10 = c * t10 + sn * t20
+    d11 = c * t11 + sn * t21
+    d12 = c * t12 + sn * t22
+    # d2 = n x d1 makes (d1, d2, n) direct
+    d20 = n1 * d12 - n2 * d11
+    d21 = n2 * d10 - n0 * d12
+    d22 = n0 * d11 - n1 * d10
+    basis[0, 0] = d10
+    basis[0, 1] = d11
+    basis[0, 2] = d12
+    basis[1, 0] = d20
+    basis[1, 1] = d21
+    basis[1, 2] = d22
+    basis[2, 0] = n0
+    basis[2, 1] = n1
+    basis[2, 2] = n2
+    out[0] = k1
+    out[1] = k2
+    if dm < 3:
+        return True
+    # powers of Lx = d10 X + d20 Y and Ly = d11 X + d21 Y
+    px[0, 0] = 1.0
+    py[0, 0] = 1.0
+    px[1, 0] = d10
+    px[1, 1] = d20
+    py[1, 0] = d11
+    py[1, 1] = d21
+    for e in range(2, dm + 1):
+        _hom_mul(px[e - 1], e - 1, px[1], 1, px[e])
+        _hom_mul(py[e - 1], e - 1, py[1], 1, py[e])
+    # A_k = J_k(L) (the degree-2 part is diagonal by construction: Z2 = (k1 X^2 + k2 Y^2)/2)
+    z2[0] = 0.5 * k1
+    z2[1] = 0.0
+    z2[2] = 0.5 * k2
+    if d >= 3:
+        _compose(A, 3, px, py, tmp, h3)
+    else:
+        for t in range(4):
+            h3[t] = 0.0
+    # B'_1 = n_x (dJ/dx)_1(L) + n_y (dJ/dy)_1(L); (dJ/dx)_1 = A3 x + A4 y, (dJ/dy)_1 = A4 x + A5 y
+    b1p[0] = n0 * (A3 * d10 + A4 * d11) + n1 * (A4 * d10 + A5 * d11)
+    b1p[1] = n0 * (A3 * d20 + A4 * d21) + n1 * (A4 * d20 + A5 * d21)
+    # Z3 = (A_3 + B'_1 Z2) / s
+    _hom_mul(b1p, 1, z2, 2, tmp)
+    for t in range(4):
+        z3[t] = (h3[t] + tmp[t]) / s
+    out[2] = 6.0 * z3[0]
+    out[3] = 2.0 * z3[1]
+    out[4] = 2.0 * z3[2]
+    out[5] = 6.0 * z3[3]
+    if dm < 4:
+        return True
+    if d >= 4:
+        _compose(A, 4, px, py, tmp, h4)
+    else:
+        for t in range(5):
+            h4[t] = 0.0
+    # B'_2 = n_x (dJ/dx)_2(L) + n_y (dJ/dy)_2(L) with
+    # (dJ/dx)_2 = (A6 x^2 + 2 A7 xy + A8 y^2)/2, (dJ/dy)_2 = (A7 x^2 + 2 A8 xy + A9 y^2)/2
+    if d >= 3:
+        A6 = A[6]
+        A7 = A[7]
+        A8 = A[8]
+        A9 = A[9]
+        # x^2, xy, y^2 of L as degree-2 polynomials: px[2], (px[1] py[1]), py[2]
+        _hom_mul(px[1], 1, py[1], 1, tmp)
+        cx2 = 0.5 * (n0 * A6 + n1 * A7)
+        cxy = n0 * A7 + n1 * A8
+        cy2 = 0.5 * (n0 * A8 + n1 * A9)
+        for t in range(3):
+            b2p[t] = cx2 * px[2, t] + cxy * tmp[t] + cy2 * py[2, t]
+    else:
+        for t in range(3):
+            b2p[t] = 0.0
+    # C0 = n_xy' H0 n_xy / 2
+    c0 = 0.5 * (A3 * n0 * n0 + 2.0 * A4 * n0 * n1 + A5 * n1 * n1)
+    # Z4 = (A_4 + B'_1 Z3 + B'_2 Z2 + C0 Z2^2) / s
+    for t in range(5):
+        z4[t] = h4[t]
+    _hom_mul(b1p, 1, z3, 3, tmp)
+    for t in range(5):
+        z4[t] += tmp[t]
+    _hom_mul(b2p, 2, z2, 2, tmp)
+    for t in range(5):
+        z4[t] += tmp[t]
+    _hom_mul(z2, 2, z2, 2, tmp)
+    for t in range(5):
+        z4[t] = (z4[t] + c0 * tmp[t]) / s
+    out[6] = 24.0 * z4[0]
+    out[7] = 6.0 * z4[1]
+    out[8] = 4.0 * z4[2]
+    out[9] = 6.0 * z4[3]
+    out[10] = 24.0 * z4[4]
+    return True
+
+
+@njit
+def _monge_workspace():
+    return (np.zeros((5, 5)), np.zeros((5, 5)), np.zeros(9), np.zeros(3), np.zeros(4),
+            np.zeros(5), np.zeros(2), np.zeros(3), np.zeros(3), np.zeros(4), np.zeros(5))
+
+
+@njit_parallel
+def monge_from_jets(A, d, dm, monge, basis):
+    """Monge form of many jets (rows of A, fitting-frame coefficients); for tests/tools."""
+    for r in prange(A.shape[0]):
+        ws = _monge_workspace()
+        _monge(A[r], d, dm, ws, monge[r], basis[r])
+
+
+# ------------------------------------------------------------------------------ jet fit
+
+@njit
+def _workspace(m):
+    return (np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(_MAXMOM),
+            np.empty((3, _MAXMOM)), np.empty((m, m)), np.empty((m, m)), np.empty((m, m)),
+            np.empty((m, m)), np.empty((m, m)), np.empty(m), np.empty(m), np.empty(m),
+            np.empty(NMONGE), np.empty((3, 3)), _monge_workspace(), np.empty((NMONGE, _MAXM)))
+
+
+@njit
+def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, min_nb, want_se,
+             ws, buf, jet_out, monge_out, frame_out, stats_out, mcof_out):
+    """Fit the jet at point i. Returns (status, p).
+
+    frame_out rows: d1, d2, n in file coordinates. stats_out: see NSTAT. mcof_out: diagonal
+    cofactors of the Monge coefficients (times sigma^2: variances), NaN if not wanted.
+    """
+    (cov, ev, evec, mono, mom, N, N2, N3, L, Ninv, rhs, beta, dsc, mtmp, mbasis, mws,
+     jac) = ws
+    m = n_coef(d)
+    nmd = 2 * d
+    nmom = (nmd + 1) * (nmd + 2) // 2
+    b = bw
+    if b <= 0.0:
+        for t in range(s, e):
+            if dist[t] > b:
+                b = dist[t]
+    if not b > 0.0:
+        return TOO_FEW, 0
+    # pass 1: offsets and weights into buf; weighted mean
+    p = 0
+    sw = 0.0
+    mx = 0.0
+    my = 0.0
+    mz = 0.0
+    px0 = pts[i, 0]
+    py0 = pts[i, 1]
+    pz0 = pts[i, 2]
+    for t in range(s, e):
+        if weighted:
+            q = dist[t] / b
+            if q >= 1.0:
+                continue
+            q = 1.0 - q * q * q
+            w = q * q * q
+        else:
+            w = 1.0
+        j = idx[t]
+        dx = pts[j, 0] - px0
+        dy = pts[j, 1] - py0
+        dz = pts[j, 2] - pz0
+        buf[p, 0] = dx
+        buf[p, 1] = dy
+        buf[p, 2] = dz
+        buf[p, 3] = w
+        sw += w
+        mx += w * dx
+        my += w * dy
+        mz += w * dz
+        p += 1
+    if p < min_nb or p <= m:
+        return TOO_FEW, p
+    mx /= sw
+    my /= sw
+    mz /= sw
+    for a in range(3):
+        for c in range(3):
+            cov[a, c] = 0.0
+    for t in range(p):
+        w = buf[t, 3]
+        dx = buf[t, 0] - mx
+        dy = buf[t, 1] - my
+        dz = buf[t, 2] - mz
+        cov[0, 0] += w * dx * dx
+        cov[0, 1] += w * dx * dy
+        cov[0, 2] += w * dx * dz
+        cov[1, 1] += w * dy * dy
+        cov[1, 2] += w * dy * dz
+        cov[2, 2] += w * dz * dz
+    cov[1, 0] = cov[0, 1]
+    cov[2, 0] = cov[0, 2]
+    cov[2, 1] = cov[1, 2]
+    _eigh3(cov, ev, evec)
+    if not ev[1] > 0.0:
+        return SINGULAR, p
+    n0 = evec[0, 0]
+    n1 = evec[1, 0]
+    n2 = evec[2, 0]
+    if has_sensor:
+        flip = n0 * (sensor[0] - px0) + n1 * (sensor[1] - py0) + n2 * (sensor[2] - pz0) < 0.0
+    else:
+        flip = n2 < 0.0
+    if flip:
+        n0 = -n0
+        n1 = -n1
+        n2 = -n2
+    e0 = evec[0, 2]
+    e1 = evec[1, 2]
+    e2 = evec[2, 2]
+    f0 = n1 * e2 - n2 * e1
+    f1 = n2 * e0 - n0 * e2
+    f2 = n0 * e1 - n1 * e0
+    # pass 2: local coordinates (U, V scaled by 1/b), moments of the monomials
+    inv_b = 1.0 / b
+    weighted_stats = weighted
+    for k in range(nmom):
+        mom[0, k] = 0.0
+        mom[1, k] = 0.0
+        mom[2, k] = 0.0
+    for a in range(m):
+        rhs[a] = 0.0
+    for t in range(p):
+        dx = buf[t, 0]
+        dy = buf[t, 1]
+        dz = buf[t, 2]
+        w = buf[t, 3]
+        u = (e0 * dx + e1 * dy + e2 * dz) * inv_b
+        v = (f0 * dx + f1 * dy + f2 * dz) * inv_b
+        h = n0 * dx + n1 * dy + n2 * dz
+        buf[t, 0] = u
+        buf[t, 1] = v
+        buf[t, 2] = h
+        _monomials(u, v, nmd, mono)
+        wh = w * h
+        for a in range(m):
+            rhs[a] += wh * mono[a]
+        if weighted_stats:
+            w2 = w * w
+            w3 = w2 * w
+            for k in range(nmom):
+                mk = mono[k]
+                mom[0, k] += w * mk
+                mom[1, k] += w2 * mk
+                mom[2, k] += w3 * mk
+        else:
+            for k in range(nmom):
+                mom[0, k] += mono[k]
+    # normal matrices with the Taylor factorials, equilibrated by the diagonal of N
+    for a in range(m):
+        dsc[a] = math.sqrt(mom[0, PAIR[a, a]]) / COL_FACT[a]
+        if not dsc[a] > 0.0:
+            return SINGULAR, p
+    for a in range(m):
+        for c in range(a, m):
+            f = 1.0 / (COL_FACT[a] * COL_FACT[c])
+            k = PAIR[a, c]
+            sc = dsc[a] * dsc[c]
+            N[a, c] = f * mom[0, k] / sc
+            N[c, a] = N[a, c]
+            if weighted_stats:
+                N2[a, c] = f * mom[1, k] / sc
+                N3[a, c] = f * mom[2, k] / sc
+                N2[c, a] = N2[a, c]
+                N3[c, a] = N3[a, c]
+    # 1-norm of the equilibrated N (for the condition number)
+    norm1 = 0.0
+    for c in range(m):
+        acc = 0.0
+        for a in range(m):
+            acc += abs(N[a, c])
+        if acc > norm1:
+            norm1 = acc
+    if not _cholesky_inv(N, m, L, Ninv):
+        return SINGULAR, p
+    ninv1 = 0.0
+    for c in range(m):
+        acc = 0.0
+        for a in range(m):
+            acc += abs(Ninv[a, c])
+        if acc > ninv1:
+            ninv1 = acc
+    # beta (scaled, equilibrated) = Ninv D^-1 rhs / fact
+    for a in range(m):
+        rhs[a] = rhs[a] / (COL_FACT[a] * dsc[a])
+    for a in range(m):
+        acc = 0.0
+        for c in range(m):
+            acc += Ninv[a, c] * rhs[c]
+        beta[a] = acc / dsc[a]  # coefficient of U^(k-i) V^i / ((k-i)! i!)
+    # pass 3: explicit weighted residual sum of squares
+    q = 0.0
+    for t in range(p):
+        _monomials(buf[t, 0], buf[t, 1], d, mono)
+        fit = 0.0
+        for a in range(m):
+            fit += beta[a] * mono[a] / COL_FACT[a]
+        r = buf[t, 2] - fit
+        q += buf[t, 3] * r * r
+    # traces and the cofactor (in equilibrated units: cof = D^-1 S D^-1)
+    if weighted_stats:
+        sw2 = mom[1, 0]
+        t2 = 0.0
+        t3 = 0.0
+        for a in range(m):
+            for c in range(m):
+                t2 += Ninv[a, c] * N2[c, a]
+                t3 += Ninv[a, c] * N3[c, a]
+        for a in range(m):  # L := Ninv N2
+            for c in range(m):
+                acc = 0.0
+                for k in range(m):
+                    acc += Ninv[a, k] * N2[k, c]
+                L[a, c] = acc
+        trsn2 = 0.0  # tr((Ninv N2)^2) = tr(S N2)
+        for a in range(m):
+            for c in range(m):
+                trsn2 += L[a, c] * L[c, a]
+        if want_se:
+            for a in range(m):  # N3 := S = (Ninv N2) Ninv (N3 no longer needed)
+                for c in range(m):
+                    acc = 0.0
+                    for k in range(m):
+                        acc += L[a, k] * Ninv[k, c]
+                    N3[a, c] = acc
+        stats_out[2] = sw - t2
+        stats_out[3] = sw2 - 2.0 * t3 + trsn2
+    else:
+        for a in range(m):
+            for c in range(m):
+                N3[a, c] = Ninv[a, c]
+        stats_out[2] = p - m
+        stats_out[3] = p - m
+    stats_out[0] = q
+    stats_out[1] = sw
+    stats_out[4] = math.sqrt(norm1 * ninv1)
+    stats_out[5] = b
+    # physical units: A = beta / b^k; cofactor scaled with D and b
+    for a in range(m):
+        sa = inv_b ** COL_DEG[a]
+        jet_out[a] = beta[a] * sa
+        dsc[a] = sa / dsc[a]  # now maps equilibrated -> physical
+    for a in range(m, _MAXM):
+        jet_out[a] = 0.0
+    stats_out[6] = jet_out[0]
+    for a in range(m):
+        for c in range(m):
+            N3[a, c] *= dsc[a] * dsc[c]  # physical cofactor of A
+    if not _monge(jet_out, d, dm, mws, monge_out, mbasis):
+        return SINGULAR, p
+    # Monge basis to file coordinates: rows d1, d2, n
+    for r in range(3):
+        x0 = mbasis[r, 0]
+        x1 = mbasis[r, 1]
+        x2 = mbasis[r, 2]
+        frame_out[r, 0] = x0 * e0 + x1 * f0 + x2 * n0
+        frame_out[r, 1] = x0 * e1 + x1 * f1 + x2 * n1
+        frame_out[r, 2] = x0 * e2 + x1 * f2 + x2 * n2
+    for t in range(_N_MONGE_OF[dm], NMONGE):
+        monge_out[t] = np.nan
+    if not want_se:
+        for t in range(NMONGE):
+            mcof_out[t] = np.nan
+        return OK, p
+    # first-order propagation: forward differences of the Monge map in A (frame fixed)
+    for t in range(NMONGE):
+        mcof_out[t] = 0.0
+    for a in range(m):
+        sd = math.sqrt(max(N3[a, a], 0.0))
+        if not sd > 0.0:
+            for t in range(NMONGE):
+                jac[t, a] = 0.0
+            continue
+        step = 1e-4 * sd
+        keep = jet_out[a]
+        jet_out[a] = keep + step
+        _monge(jet_out, d, dm, mws, mtmp, mbasis)
+        jet_out[a] = keep
+        for t in range(NMONGE):
+            jac[t, a] = (mtmp[t] - monge_out[t]) / step
+    for t in range(NMONGE):
+        acc = 0.0
+        for a in range(m):
+            ja = jac[t, a]
+            if ja == 0.0:
+                continue
+            inner = 0.0
+            for c in range(m):
+                inner += N3[a, c] * jac[t, c]
+            acc += ja * inner
+        mcof_out[t] = acc
+    for t in range(_N_MONGE_OF[dm], NMONGE):
+        mcof_out[t] = np.nan
+    return OK, p
+
+
+@njit
+def _fail(r, st, p, status, npts, jet, monge, frames, stats, mcof):
+    status[r] = st
+    npts[r] = p
+    for a in range(_MAXM):
+        jet[r, a] = np.nan
+    for a in range(NMONGE):
+        monge[r, a] = np.nan
+        mcof[r, a] = np.nan
+    for a in range(3):
+        for c in range(3):
+            frames[r, a, c] = np.nan
+    for a in range(NSTAT):
+        stats[r, a] = np.nan
+
+
+@njit_parallel
+def fit_jets_block(pts, query, indptr, idx, dist, bandwidth, d, dm, weighted, sensor, has_sensor,
+                   min_nb, want_se, status, npts, jet, monge, frames, stats, mcof):
+    """Fit the jet at every query point (positions into `pts`) of CSR rows."""
+    mq = query.size
+    nchunks = (mq + _CHUNK - 1) // _CHUNK
+    longest = 0
+    for r in range(mq):
+        longest = max(longest, indptr[r + 1] - indptr[r])
+    m = n_coef(d)
+    for ch in prange(nchunks):
+        ws = _workspace(m)
+        buf = np.empty((max(longest, 1), 4))
+        for r in range(ch * _CHUNK, min(mq, (ch + 1) * _CHUNK)):
+            st, p = _jet_one(query[r], pts, idx, dist, indptr[r], indptr[r + 1], bandwidth, d,
+                             dm, weighted, sensor, has_sensor, min_nb, want_se, ws, buf, jet[r],
+                             monge[r], frames[r], stats[r], mcof[r])
+            if st != OK:
+                _fail(r, st, p, status, npts, jet, monge, frames, stats, mcof)
+            else:
+                status[r] = st
+                npts[r] = p
+
+
+@njit_parallel
+def fit_jets_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, bandwidth, d, dm, weighted,
+                   sensor, has_sensor, min_nb, want_se, status, npts, jet, monge, frames, stats,
+                   mcof):
+    """Fused neighbour search (3-D sphere of `radius`) and jet fit, cells ``c0..c1-1``.
+
+    Output row r is sorted position ``cell_start[c0] + r`` (as ``fit_quadrics_cells``).
+    """
+    base = cell_start[c0]
+    r2 = radius * radius
+    ncell = c1 - c0
+    nchunks = (ncell + _CELL_CHUNK - 1) // _CELL_CHUNK
+    m = n_coef(d)
+    for ch in prange(nchunks):
+        ws = _workspace(m)
+        ranges = np.empty((9, 2), dtype=np.int64)
+        cap = 256
+        idx_buf = np.empty(cap, dtype=np.int64)
+        dist_buf = np.empty(cap)
+        buf = np.empty((cap, 4))
+        for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
+            nr = _cell_ranges(c, cell_keys, cell_start, dims, 3, ranges)
+            need = 0
+            for t in range(nr):
+                need += ranges[t, 1] - ranges[t, 0]
+            if need > cap:
+                cap = max(need, 2 * cap)
+                idx_buf = np.empty(cap, dtype=np.int64)
+                dist_buf = np.empty(cap)
+                buf = np.empty((cap, 4))
+            for i in range(cell_start[c], cell_start[c + 1]):
+                r = i - base
+                n = _scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, 3, idx_buf,
+                          dist_buf, 0, False)
+                st, p = _jet_one(i, pts, idx_buf, dist_buf, 0, n, bandwidth, d, dm, weighted,
+                                 sensor, has_sensor, min_nb, want_se, ws, buf, jet[r], monge[r],
+                                 frames[r], stats[r], mcof[r])
+                if st != OK:
+                    _fail(r, st, p, status, npts, jet, monge, frames, stats, mcof)
+                else:
+                    status[r] = st
+                    npts[r] = p
