@@ -23,6 +23,7 @@ SEGMENT_METHODS: dict[str, str] = {
     "sar": "lidarstat.cli._segment_sar",
     "curvature": "lidarstat.cli._segment_curvature",
     "covariance": "lidarstat.cli._segment_covariance",
+    "ridges": "lidarstat.cli._segment_ridges",
 }
 
 

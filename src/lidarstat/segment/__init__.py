@@ -17,6 +17,7 @@ from ._sar import refine_raw_clusters, segment_sar
 from ._curvature_units import curvature_units, segment_curvature
 from ._covariance_segments import (fit_lines, local_intersections, reintegrate, segment_covariance,
                                    segment_planes)
+from ._ridges import RIDGE_FIELDS, RidgeResult, ridge_segments, ridges
 
 __all__ = ["Segmentation", "Polylines", "segment_table", "components", "grow_regions",
            "relabel", "adjacency", "hoover", "HooverScore", "binary_scores",
@@ -24,4 +25,5 @@ __all__ = ["Segmentation", "Polylines", "segment_table", "components", "grow_reg
            "search_areas", "RawClusters", "plane_edges", "raw_clusters", "SurfaceUnit",
            "refine_cluster", "intersection_lines", "refine_raw_clusters", "segment_sar",
            "curvature_units", "segment_curvature", "segment_covariance", "segment_planes",
-           "local_intersections", "fit_lines", "reintegrate"]
+           "local_intersections", "fit_lines", "reintegrate", "ridges", "ridge_segments",
+           "RidgeResult", "RIDGE_FIELDS"]

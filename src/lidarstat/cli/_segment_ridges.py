@@ -1,0 +1,31 @@
+"""``lidarstat segment --method ridges``: surface units cut along the ridge lines."""
+
+from __future__ import annotations
+
+
+def add_arguments(group):
+    """Options of the ridges method (the shared ones live in cli/segment.py)."""
+    from .ridges import add_jet_arguments
+
+    group.add_argument("--jet-radius", type=float, default=None,
+                       help="radius of the jets (default --radius; or --k neighbours)")
+    group.add_argument("--grow-k", type=int, default=8,
+                       help="neighbours of the region-growing graph")
+    group.add_argument("--band", type=float, default=None,
+                       help="half-width of the barrier band around ridge lines")
+    add_jet_arguments(group)
+
+
+def run(args, cloud):
+    """Ridges, then region growing with the ridge band as a barrier."""
+    from ..errors import InvalidParameterError
+    from ..segment import ridge_segments, ridges
+
+    radius = args.jet_radius if args.jet_radius is not None else args.radius
+    if radius is None and args.k is None:
+        raise InvalidParameterError("segment --method ridges needs --radius, --jet-radius or --k")
+    res = ridges(cloud.xyz, radius=radius, k=None if radius is not None else args.k,
+                 sigma=args.sigma, alpha=args.alpha, weight=args.weight, sensor=args.sensor,
+                 noise=args.noise, ratio=args.ratio, min_length=args.min_length)
+    min_size = args.min_size if args.min_size is not None else 50
+    return ridge_segments(cloud.xyz, res, k=args.grow_k, width=args.band, min_size=min_size)

@@ -1,0 +1,91 @@
+"""``lidarstat ridges IN OUT``: Monge coefficients, crest/ravine points and ridge lines."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from ._app import check_output, progress
+
+
+def _lines_path(args, out: Path) -> Path:
+    return Path(args.lines) if args.lines else out.with_name(out.stem + ".ridges.geojson")
+
+
+def cmd_ridges(args):
+    """Fit degree-4 jets, detect ridges, write OUT and the ridge lines."""
+    from ..io import read, write
+    from ..segment import ridges
+
+    out = check_output(args.output, args.input)
+    lines_path = _lines_path(args, out)
+    if lines_path.suffix.lower() not in (".geojson", ".json", ".csv", ".las", ".laz", ".ply",
+                                         ".npz", ".txt"):
+        from ..errors import UnknownFormatError
+
+        raise UnknownFormatError(f"{lines_path}: unknown format for the ridge lines "
+                                 "(use .geojson, .csv or .las/.laz)")
+    cloud = read(args.input)
+    t0 = time.perf_counter()
+    res = ridges(cloud.xyz, radius=args.radius, k=args.k, sigma=args.sigma, alpha=args.alpha,
+                 weight=args.weight, sensor=args.sensor, noise=args.noise, ratio=args.ratio,
+                 min_length=args.min_length, progress=progress(args.quiet))
+    elapsed = time.perf_counter() - t0
+    write(out, cloud, fields=res.to_fields())
+    res.lines.write(lines_path, crs=cloud.crs)
+    if not args.quiet:
+        print(f"{args.input} -> {out}  ({elapsed:.2f} s)")
+        print(res.summary())
+        print(f"  lines: {lines_path}")
+    if args.summary_json:
+        from .._shared._atomic import atomic_path
+
+        r = res.fields["ridge"]
+        meta = {"input": str(args.input), "output": str(out), "lines": str(lines_path),
+                "seconds": elapsed, "sigma": res.jets.sigma,
+                "sigma_estimated": res.jets.sigma_estimated, "crest_points": int((r == 1).sum()),
+                "ravine_points": int((r == 2).sum()), "n_lines": len(res.lines),
+                "params": res.params}
+        with atomic_path(args.summary_json) as tmp:
+            tmp.write_text(json.dumps(meta, indent=2, default=str))
+    return 0
+
+
+def add_jet_arguments(s):
+    """Options shared by ``ridges`` and ``segment --method ridges``."""
+    s.add_argument("--weight", choices=("tricube", "none"), default="tricube",
+                   help="tricube weights or CGAL's unweighted jet fit")
+    s.add_argument("--noise", choices=("z", "range", "normal"), default=None,
+                   help="direction of the noise sigma (default: range with --sensor, else z)")
+    s.add_argument("--ratio", type=float, default=2.0,
+                   help="a ridge's curvature must exceed RATIO times the other")
+    s.add_argument("--min-length", type=float, default=None,
+                   help="shorter ridge lines are dropped (default: twice the jet radius)")
+
+
+def register(sub):
+    """Add the ``ridges`` subcommand."""
+    s = sub.add_parser(
+        "ridges", help="fourth-order Monge jets, crest/ravine points and ridge lines",
+        description="Fit degree-4 jets in the Monge frame of every point, write k1, k2, "
+        "their directions, b0..b3, c0..c4 with standard deviations, a chi-square test of "
+        "the jet, the ridge class (1 crest, 2 ravine) and umbilics, and trace ridge lines.")
+    s.add_argument("input")
+    s.add_argument("output", help="output file; format from the suffix")
+    g = s.add_mutually_exclusive_group(required=True)
+    g.add_argument("--radius", type=float, default=None, help="sphere radius (bandwidth)")
+    g.add_argument("--k", type=int, default=None, help="k nearest neighbours")
+    s.add_argument("--sigma", type=float, default=None,
+                   help="measurement noise std (default: estimated from the data)")
+    s.add_argument("--alpha", type=float, default=0.01,
+                   help="level of the jet, curvature and k'' tests")
+    s.add_argument("--sensor", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
+                   help="scanner position (orients normals; noise along the ray)")
+    add_jet_arguments(s)
+    s.add_argument("--lines", default=None,
+                   help="ridge lines (.geojson, .csv, .las/.laz; default OUT stem + "
+                   ".ridges.geojson)")
+    s.add_argument("--summary-json", default=None, help="write a run summary as JSON here")
+    s.add_argument("-q", "--quiet", action="store_true")
+    s.set_defaults(func=cmd_ridges)

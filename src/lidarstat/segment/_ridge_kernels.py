@@ -1,0 +1,255 @@
+"""Numba kernels of ridge detection (zero crossings of the extremalities) and tracing.
+
+Per point the Monge form gives, for each principal curvature k_a with direction d_a, the
+extremality e_a (b0 for k1 along d1, b3 for k2 along d2: the derivative of k_a along its
+own line) and the second derivative of k_a along that line (Cazals and Pouget 2005):
+
+    k1'' = c0 - 3 k1^3 + 3 b1^2 / (k1 - k2)      (P1 / (k1 - k2))
+    k2'' = c4 - 3 k2^3 - 3 b2^2 / (k1 - k2)      (P2 / (k2 - k1))
+
+A crest (``ridge`` 1) is a ridge of the convex curvature k2 < 0 where |k2| is maximal
+across the line (k2 minimal: e2 crosses zero from - to + along d2, k2'' > 0); a ravine
+(2) a ridge of the concave k1 > 0 where k1 is maximal (e1 from + to -, k1'' < 0). The
+normal points up or to the sensor, so convex means negative curvature.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import prange
+
+from .._shared._jit import njit, njit_parallel
+
+CREST = 1
+RAVINE = 2
+
+# per-point candidate columns: k, e (extremality), kpp (k''), kpp_sd, dir (3), tan (3), e_sd
+# candidate = the dominant curvature is significant, dominant and of the right sign
+
+
+@njit_parallel
+def candidates(monge, sd, frames, ok, ratio, z, ctype, cval):
+    """Which ridge each point may lie on, and the quantities the crossing test needs.
+
+    ctype[i]: 0 none, CREST, RAVINE. cval[i]: k, e, k'', sd(k''), direction (3),
+    tangent of the ridge (3) (the other principal direction), sd(e), sd(k).
+    """
+    n = monge.shape[0]
+    for i in prange(n):
+        ctype[i] = 0
+        for t in range(cval.shape[1]):
+            cval[i, t] = np.nan
+        if not ok[i]:
+            continue
+        k1 = monge[i, 0]
+        k2 = monge[i, 1]
+        gap = k1 - k2
+        if not gap > 0.0:
+            continue
+        if -k2 > ratio * abs(k1) and -k2 > z * sd[i, 1]:
+            ctype[i] = CREST
+            e = monge[i, 5]
+            kpp = monge[i, 10] - 3.0 * k2 * k2 * k2 - 3.0 * monge[i, 4] ** 2 / gap
+            cval[i, 0] = k2
+            cval[i, 1] = e
+            cval[i, 2] = kpp
+            cval[i, 3] = sd[i, 10]
+            cval[i, 10] = sd[i, 5]
+            cval[i, 11] = sd[i, 1]
+            for c in range(3):
+                cval[i, 4 + c] = frames[i, 1, c]
+                cval[i, 7 + c] = frames[i, 0, c]
+        elif k1 > ratio * abs(k2) and k1 > z * sd[i, 0]:
+            ctype[i] = RAVINE
+            e = monge[i, 2]
+            kpp = monge[i, 6] - 3.0 * k1 * k1 * k1 + 3.0 * monge[i, 3] ** 2 / gap
+            cval[i, 0] = k1
+            cval[i, 1] = e
+            cval[i, 2] = kpp
+            cval[i, 3] = sd[i, 6]
+            cval[i, 10] = sd[i, 2]
+            cval[i, 11] = sd[i, 0]
+            for c in range(3):
+                cval[i, 4 + c] = frames[i, 0, c]
+                cval[i, 7 + c] = frames[i, 1, c]
+
+
+@njit_parallel
+def crossings(pts, indptr, idx, ctype, cval, z4, cos_max, ridge, where, count):
+    """Zero crossings of the extremality between neighbours, along the principal direction.
+
+    For each candidate i and candidate neighbour q of the same type: orient q's direction
+    like i's (the extremality flips with it), require the offset to run mostly along the
+    direction (|cos| >= cos_max), opposite signs in the sense of an extremum of the right
+    kind (crest: e goes from - to + along the direction; ravine: + to -), and the mean
+    k'' of the two of the right sign and significant (one-sided z4). Point i is marked
+    when it is the nearer end of a crossing; ``where`` accumulates the interpolated
+    crossing positions (their mean is the ridge vertex), ``count`` their number.
+    """
+    n = ctype.size
+    for i in prange(n):
+        ridge[i] = 0
+        count[i] = 0
+        for c in range(3):
+            where[i, c] = 0.0
+        t = ctype[i]
+        if t == 0:
+            continue
+        ei = cval[i, 1]
+        for s in range(indptr[i], indptr[i + 1]):
+            q = idx[s]
+            if q == i or ctype[q] != t:
+                continue
+            dot = 0.0
+            for c in range(3):
+                dot += cval[i, 4 + c] * cval[q, 4 + c]
+            sgn = 1.0 if dot >= 0.0 else -1.0
+            eq = sgn * cval[q, 1]
+            # offset along the direction of i
+            dx = pts[q, 0] - pts[i, 0]
+            dy = pts[q, 1] - pts[i, 1]
+            dz = pts[q, 2] - pts[i, 2]
+            dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if not dist > 0.0:
+                continue
+            along = dx * cval[i, 4] + dy * cval[i, 5] + dz * cval[i, 6]
+            if abs(along) < cos_max * dist:
+                continue
+            # values at the back (b) and front (f) end along the direction
+            if along > 0:
+                eb = ei
+                ef = eq
+            else:
+                eb = eq
+                ef = ei
+            if t == CREST:
+                if not (eb < 0.0 and ef > 0.0):
+                    continue
+            else:
+                if not (eb > 0.0 and ef < 0.0):
+                    continue
+            kpp = 0.5 * (cval[i, 2] + cval[q, 2])
+            sdk = 0.5 * (cval[i, 3] + cval[q, 3])
+            if t == CREST:
+                if not kpp > z4 * sdk:
+                    continue
+            else:
+                if not -kpp > z4 * sdk:
+                    continue
+            if abs(ei) > abs(eq):
+                continue  # the other end is nearer to the crossing
+            f = ei / (ei - eq)
+            ridge[i] = t
+            where[i, 0] += pts[i, 0] + f * dx
+            where[i, 1] += pts[i, 1] + f * dy
+            where[i, 2] += pts[i, 2] + f * dz
+            count[i] += 1
+        if count[i] > 0:
+            for c in range(3):
+                where[i, c] /= count[i]
+
+
+@njit
+def trace(indptr, idx, ridge, vert, tangent, step, cos_min, order, line_of,
+          out_pts, out_start):
+    """Chain ridge points into polylines (sequential, deterministic).
+
+    From each unvisited ridge point in `order`, walk both ways along the ridge tangent:
+    the next vertex is the unvisited neighbour of the same type whose offset from the
+    current vertex runs forward within the cone cos_min and is the farthest forward
+    within `step`; every same-type neighbour within `step` of the current vertex and not
+    behind it is absorbed into the line (the band of the ridge). Returns the number of lines; vertex
+    point ids in ``out_pts[out_start[l]:out_start[l + 1]]``; ``line_of`` per point (0 none).
+    """
+    n = ridge.size
+    nv = 0
+    nl = 0
+    back = np.empty(n, dtype=np.int64)
+    for oi in range(order.size):
+        seed = order[oi]
+        if ridge[seed] == 0 or line_of[seed] != 0:
+            continue
+        nl += 1
+        line_of[seed] = nl
+        t = ridge[seed]
+        nb = 0
+        nf_start = -1
+        for direction in range(2):
+            cur = seed
+            sg = 1.0 if direction == 0 else -1.0
+            tx = sg * tangent[seed, 0]
+            ty = sg * tangent[seed, 1]
+            tz = sg * tangent[seed, 2]
+            if direction == 0:
+                out_start[nl - 1] = nv
+                # forward vertices are written after the backward ones: store later
+                nf_start = nv
+            while True:
+                best = -1
+                best_p = 0.0
+                for s in range(indptr[cur], indptr[cur + 1]):
+                    q = idx[s]
+                    if ridge[q] != t or (line_of[q] != 0 and line_of[q] != nl) or q == cur:
+                        continue
+                    dx = vert[q, 0] - vert[cur, 0]
+                    dy = vert[q, 1] - vert[cur, 1]
+                    dz = vert[q, 2] - vert[cur, 2]
+                    d = math.sqrt(dx * dx + dy * dy + dz * dz)
+                    if d > step or not d > 0.0:
+                        continue
+                    p = dx * tx + dy * ty + dz * tz
+                    if line_of[q] == 0 and p >= cos_min * d and p > best_p:
+                        best_p = p
+                        best = q
+                # absorb the band around the current vertex
+                for s in range(indptr[cur], indptr[cur + 1]):
+                    q = idx[s]
+                    if ridge[q] == t and line_of[q] == 0 and q != best:
+                        dx = vert[q, 0] - vert[cur, 0]
+                        dy = vert[q, 1] - vert[cur, 1]
+                        dz = vert[q, 2] - vert[cur, 2]
+                        if (dx * dx + dy * dy + dz * dz <= step * step
+                                and dx * tx + dy * ty + dz * tz >= 0.0):
+                            line_of[q] = nl
+                if best < 0:
+                    break
+                line_of[best] = nl
+                # orient the next tangent like the current walking direction
+                ux = tangent[best, 0]
+                uy = tangent[best, 1]
+                uz = tangent[best, 2]
+                if ux * tx + uy * ty + uz * tz < 0.0:
+                    ux = -ux
+                    uy = -uy
+                    uz = -uz
+                tx = ux
+                ty = uy
+                tz = uz
+                cur = best
+                if direction == 0:
+                    out_pts[nv] = best
+                    nv += 1
+                else:
+                    back[nb] = best
+                    nb += 1
+        # assemble: reversed backward walk, seed, forward walk
+        nfw = nv - nf_start
+        for a in range(nfw - 1, -1, -1):
+            out_pts[nf_start + nb + 1 + a] = out_pts[nf_start + a]
+        for a in range(nb):
+            out_pts[nf_start + a] = back[nb - 1 - a]
+        out_pts[nf_start + nb] = seed
+        nv = nf_start + nb + 1 + nfw
+        out_start[nl] = nv
+    return nl
+
+
+@njit_parallel
+def band_edges(indptr, idx, band, ok):
+    """Edges usable by region growing: both ends outside the ridge band."""
+    n = indptr.size - 1
+    for i in prange(n):
+        for s in range(indptr[i], indptr[i + 1]):
+            ok[s] = not band[i] and not band[idx[s]]

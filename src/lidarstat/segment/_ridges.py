@@ -1,0 +1,364 @@
+"""Ridges of point clouds from fourth-order jets, ridge lines, and the direct segmentation."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats as _st
+
+from .._shared.validation import check_points, check_scalar
+from ..errors import InvalidParameterError
+from ..features import FitStatus, jets
+from ..features._jets import MONGE_NAMES, JET_FIELDS
+from ..neighbors import knn_neighbors, radius_neighbors
+from . import _ridge_kernels as _rk
+from ._grow import grow_regions
+from ._result import Polylines, Segmentation, segment_table
+
+#: Per-point fields added by :func:`ridges` to those of :func:`lidarstat.features.jets`.
+RIDGE_FIELDS = {
+    "ridge": ("uint8", "0 none, 1 crest (convex), 2 ravine (concave)"),
+    "ridge_line": ("int32", "id of the ridge line (0 none)"),
+    "umbilic": ("uint8", "1 where k1 - k2 is not significant"),
+    "extremality": ("float64", "derivative of the dominant k along its line"),
+}
+#: Attributes of each ridge line.
+LINE_ATTRIBUTES = ("line_id", "ridge", "n_vertices", "n_points", "length", "strength",
+                   "sharpness", "mean_k", "position_sd", "k_z")
+
+
+@dataclass(frozen=True)
+class RidgeResult:
+    """Per-point Monge coefficients and ridge labels, and the traced ridge lines.
+
+    Attributes
+    ----------
+    fields : dict of str -> (N,) ndarray
+        The fields of :func:`lidarstat.features.jets` plus ``ridge``, ``ridge_line``,
+        ``umbilic``, ``extremality`` (input order).
+    lines : lidarstat.segment.Polylines
+        Ridge lines; vertices are interpolated zero crossings of the extremality;
+        attributes ``line_id``, ``ridge`` (1 crest, 2 ravine), ``n_vertices``, ``n_points``
+        (points absorbed), ``length``, ``strength`` (integral of |k| ds), ``sharpness``
+        (integral of |k''| ds, k'' the second derivative of k along its line),
+        ``mean_k`` and ``position_sd`` (median over vertices of sd(e)/|k''|: the standard
+        deviation of a crossing's position across the line), ``k_z`` (median over the
+        vertices of |k| / sd(k)).
+    jets : lidarstat.features.JetResult
+    params : dict
+    """
+
+    fields: dict
+    lines: Polylines
+    jets: object
+    params: dict = field(default_factory=dict)
+
+    def __getitem__(self, name):
+        return self.fields[name]
+
+    def to_fields(self):
+        """Per-point arrays with their file dtypes."""
+        spec = {**JET_FIELDS, **RIDGE_FIELDS}
+        return {k: np.asarray(v, dtype=spec[k][0]) for k, v in self.fields.items()}
+
+    def summary(self) -> str:
+        r = self.fields["ridge"]
+        n = r.size
+        lines = [f"{n} points, jets of degree {self.params.get('degree')}, sigma "
+                 f"{self.jets.sigma:.6g}" + (" (estimated)" if self.jets.sigma_estimated else ""),
+                 f"  crest points  {int((r == 1).sum()):>9d}",
+                 f"  ravine points {int((r == 2).sum()):>9d}",
+                 f"  umbilic       {int(self.fields['umbilic'].sum()):>9d}",
+                 f"  ridge lines   {len(self.lines):>9d}"]
+        if len(self.lines):
+            a = self.lines.attributes
+            lines.append(f"    crests {int((a['ridge'] == 1).sum())}, ravines "
+                         f"{int((a['ridge'] == 2).sum())}, total length "
+                         f"{float(a['length'].sum()):.6g}")
+        return "\n".join(lines)
+
+
+def _sd_matrix(fields, n):
+    sd = np.full((n, 11), np.nan)
+    for j, name in enumerate(MONGE_NAMES):
+        if f"{name}_sd" in fields:
+            sd[:, j] = fields[f"{name}_sd"]
+    return sd
+
+
+def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricube",
+           sensor=None, noise=None, ratio=2.0, cross_k=16, min_length=None, min_vertices=3,
+           smooth=5, jet_result=None, progress=None) -> RidgeResult:
+    """Crest and ravine points and lines from the fourth-order Monge form of every point.
+
+    Steps (docs/methods/jets.md): jets of degree 4 (:func:`lidarstat.features.jets`);
+    candidates where one principal curvature is significant (z test at `alpha`) and
+    dominates the other (|k| > `ratio` |k_other|): convex k2 < 0 for crests, concave
+    k1 > 0 for ravines; zero crossings of the extremality (b3 along d2, b0 along d1)
+    between neighbours lying along the direction, with the directions oriented
+    consistently, and a significant second derivative k'' of the right sign from the
+    fourth-order terms (a maximum of |k|); points nearer the crossing are ridge points;
+    tracing chains them into lines, joins pieces across small aligned gaps, and keeps
+    lines at least `min_length` long whose median |k|/sd(k) passes a Bonferroni test at
+    level `alpha` over the cloud's independent neighbourhoods (N / median neighbours).
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+    radius, k : float, int
+        Jet neighbourhood (exactly one), as :func:`lidarstat.features.jets`.
+    sigma : float, optional
+        Measurement noise std (estimated when omitted).
+    alpha : float
+        Level of the curvature and k'' tests (one-sided).
+    weight, sensor, noise
+        As :func:`lidarstat.features.jets`.
+    ratio : float
+        Dominance of the ridge's curvature over the other (>= 1).
+    cross_k : int
+        Neighbours examined for crossings and tracing.
+    min_length : float, optional
+        Lines shorter than this are dropped with their points. Default: twice the jet
+        radius (for `k`, twice the median distance to the k-th neighbour): neighbouring
+        jets share most of their points, so noise makes correlated patches about one
+        radius wide where a test passes by chance; a line must outrun them.
+    min_vertices : int
+        Lines with fewer vertices are dropped too.
+    smooth : int
+        Line vertices are the moving average over this many consecutive crossings (the
+        crossings scatter across the line by ``position_sd``; 1 keeps them raw).
+    jet_result : JetResult, optional
+        Reuse jets already computed on `points`.
+    progress : callable, optional
+
+    Returns
+    -------
+    RidgeResult
+    """
+    func = "ridges"
+    pts = check_points(points)
+    ratio = check_scalar(ratio, "ratio", func=func, low=1.0, closed="left")
+    alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0)
+    cross_k = check_scalar(cross_k, "cross_k", func=func, low=3, closed="left", integer=True)
+    min_vertices = check_scalar(min_vertices, "min_vertices", func=func, low=1, closed="left",
+                                integer=True)
+    smooth = check_scalar(smooth, "smooth", func=func, low=1, closed="left", integer=True)
+    if jet_result is None:
+        jet_result = jets(pts, radius=radius, k=k, sigma=sigma, alpha=alpha, degree=4,
+                          weight=weight, sensor=sensor, noise=noise, progress=progress)
+    elif len(jet_result) != pts.shape[0] or jet_result.fit.monge_degree != 4:
+        raise InvalidParameterError(f"{func}: `jet_result` has {len(jet_result)} points, "
+                                    f"`points` {pts.shape[0]}, or is not of Monge degree 4")
+    fit = jet_result.fit
+    n = pts.shape[0]
+    fitted = np.isin(jet_result["status"], (FitStatus.OK, FitStatus.MODEL_REJECTED))
+    z1 = float(_st.norm.isf(alpha))
+    zk = float(_st.norm.isf(alpha / 2))  # k1 and k2 both looked at: Bonferroni
+    sd = _sd_matrix(jet_result.fields, n)
+    monge = np.ascontiguousarray(fit.monge)
+    ctype = np.zeros(n, np.uint8)
+    cval = np.empty((n, 12))
+    _rk.candidates(monge, np.nan_to_num(sd, nan=np.inf), np.ascontiguousarray(fit.frame),
+                   fitted, ratio, zk, ctype, cval)
+    origin = pts.mean(axis=0)
+    local = pts - origin
+    nb = knn_neighbors(local, min(cross_k, n))
+    ridge = np.zeros(n, np.uint8)
+    where = np.zeros((n, 3))
+    count = np.zeros(n, np.int64)
+    cos_max = np.cos(np.radians(45.0))
+    _rk.crossings(local, nb.indptr, nb.indices, ctype, cval, z1, cos_max, ridge, where, count)
+    # tracing over the same neighbourhoods; step: median distance to the farthest of them
+    step = float(np.median(nb.distances[nb.indptr[1:] - 1])) if n else 0.0
+    kabs = np.abs(cval[:, 0])
+    order = np.argsort(-np.where(ridge > 0, kabs, -1.0), kind="stable").astype(np.int64)
+    order = order[: int((ridge > 0).sum())]
+    line_of = np.zeros(n, np.int64)
+    out_pts = np.zeros(n, np.int64)
+    out_start = np.zeros(n + 1, np.int64)
+    tangent = np.ascontiguousarray(np.nan_to_num(cval[:, 7:10]))
+    vert = np.where(count[:, None] > 0, where, local)
+    nl = _rk.trace(nb.indptr, nb.indices, ridge, vert, tangent, step * 1.0001,
+                   np.cos(np.radians(50.0)), order, line_of, out_pts, out_start)
+    if min_length is None:
+        scale = radius if radius is not None else float(np.median(fit.bandwidth[fitted]))
+        min_length = 2.0 * float(scale)
+    min_length = check_scalar(min_length, "min_length", func=func, low=0.0, closed="left")
+    # line test: the curvature along the line significant at family-wise level alpha over
+    # the cloud's ~N / median(neighbours) independent neighbourhoods (Bonferroni)
+    n_eff = max(1.0, n / max(1.0, float(np.median(fit.neighbors[fitted])) if fitted.any()
+                             else 1.0))
+    z_line = float(_st.norm.isf(alpha / (2.0 * n_eff)))
+    lines, new_id = _build_lines(nl, out_pts, out_start, line_of, vert + origin, ridge, cval,
+                                 min_vertices, smooth, min_length, 4.0 * step, z_line)
+    line_of = new_id[line_of]
+    ridge[line_of == 0] = 0
+    ridge_line = line_of.astype(np.int32)
+    with np.errstate(invalid="ignore"):
+        z2 = float(_st.norm.isf(alpha / 2))
+        gap_sd = np.sqrt(sd[:, 0] ** 2 + sd[:, 1] ** 2)
+        umbilic = fitted & ((jet_result["k1"] - jet_result["k2"]) <= z2 * gap_sd)
+    fields = dict(jet_result.fields)
+    fields.update(ridge=ridge, ridge_line=ridge_line, umbilic=umbilic.astype(np.uint8),
+                  extremality=cval[:, 1])
+    params = dict(radius=radius, k=k, alpha=alpha, degree=4, z_line=z_line, weight=weight, ratio=ratio,
+                  cross_k=cross_k, min_length=min_length, min_vertices=min_vertices,
+                  smooth=smooth, step=step)
+    return RidgeResult(fields=fields, lines=lines, jets=jet_result, params=params)
+
+
+def _smooth(v, w):
+    """Moving average of polyline vertices over `w` vertices (shrinking at the ends)."""
+    if w <= 1 or len(v) < 3:
+        return v
+    h = w // 2
+    c = np.vstack([np.zeros((1, 3)), np.cumsum(v, axis=0)])
+    i = np.arange(len(v))
+    lo = np.maximum(i - np.minimum(h, np.minimum(i, len(v) - 1 - i)), 0)
+    hi = np.minimum(i + (i - lo), len(v) - 1) + 1
+    return (c[hi] - c[lo]) / (hi - lo)[:, None]
+
+
+def _join_lines(chains, vert, ridge, join):
+    """Greedily join chains of the same type whose ends are within `join` and aligned.
+
+    Tracing stops at gaps of a few points where a test failed by chance; two pieces are
+    joined when the gap vector continues both end directions (cosines above 0.7). Runs
+    once per pair of lines, not per point. Returns the joined chains and, per input chain,
+    the index of the chain it ended in.
+    """
+    chains = [c for c in chains]
+    owner = list(range(len(chains)))
+    alive = [len(c) >= 2 for c in chains]
+
+    def end(c, first):
+        a, b = (c[0], c[1]) if first else (c[-1], c[-2])
+        t = vert[a] - vert[b]
+        n = np.linalg.norm(t)
+        return vert[a], (t / n if n > 0 else t)
+
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(chains)):
+            if not alive[i]:
+                continue
+            for j in range(i + 1, len(chains)):
+                if not alive[j] or ridge[chains[i][0]] != ridge[chains[j][0]]:
+                    continue
+                for fi in (False, True):
+                    for fj in (True, False):
+                        pi, ti = end(chains[i], fi)
+                        pj, tj = end(chains[j], fj)
+                        gap = pj - pi
+                        d = np.linalg.norm(gap)
+                        if not 0 < d <= join:
+                            continue
+                        g = gap / d
+                        if g @ ti > 0.7 and -(g @ tj) > 0.7:
+                            ci = chains[i][::-1] if fi else chains[i]
+                            cj = chains[j] if fj else chains[j][::-1]
+                            chains[i] = np.concatenate([ci, cj])
+                            alive[j] = False
+                            owner = [i if o == j else o for o in owner]
+                            merged = True
+                            break
+                    if not alive[j]:
+                        break
+    return chains, alive, owner
+
+
+def _build_lines(nl, out_pts, out_start, line_of, vert, ridge, cval, min_vertices, smooth,
+                 min_length, join, z_line):
+    members = np.bincount(line_of, minlength=nl + 1)[1:]
+    chains = [out_pts[out_start[li]:out_start[li + 1]] for li in range(nl)]
+    chains, alive, owner = _join_lines(chains, vert, ridge, join)
+    verts, attrs = [], {name: [] for name in LINE_ATTRIBUTES}
+    new_id = np.zeros(nl + 1, np.int64)
+    final = {}
+    for li in range(nl):  # one iteration per line, not per point
+        if not alive[li]:
+            continue
+        ids = chains[li]
+        if ids.size < min_vertices:
+            continue
+        v = _smooth(vert[ids], smooth)
+        seg = np.linalg.norm(np.diff(v, axis=0), axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            kz = float(np.median(np.abs(cval[ids, 0]) / cval[ids, 11]))
+        if seg.sum() < min_length or not kz > z_line:
+            continue
+        final[li] = len(verts) + 1
+        kk = np.abs(cval[ids, 0])
+        kpp = np.abs(cval[ids, 2])
+        mid = lambda a: 0.5 * (a[1:] + a[:-1])  # noqa: E731
+        verts.append(v)
+        attrs["line_id"].append(final[li])
+        attrs["ridge"].append(int(ridge[ids[0]]))
+        attrs["n_vertices"].append(ids.size)
+        attrs["n_points"].append(int(sum(members[k] for k in range(nl) if owner[k] == li)))
+        attrs["length"].append(float(seg.sum()))
+        attrs["strength"].append(float((mid(kk) * seg).sum()))
+        attrs["sharpness"].append(float((mid(np.nan_to_num(kpp)) * seg).sum()))
+        attrs["mean_k"].append(float(np.mean(cval[ids, 0])))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            attrs["position_sd"].append(float(np.median(cval[ids, 10] / np.abs(cval[ids, 2]))))
+        attrs["k_z"].append(kz)
+    for k in range(nl):
+        new_id[k + 1] = final.get(owner[k], 0)
+    dtypes = dict(line_id=np.int32, ridge=np.uint8, n_vertices=np.int32, n_points=np.int32)
+    attributes = {k: np.asarray(v, dtype=dtypes.get(k, np.float64)) for k, v in attrs.items()}
+    return Polylines(verts, attributes), new_id
+
+
+def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_size=50):
+    """Direct segmentation: surface units are the regions that ridge lines separate.
+
+    Points within `width` of a ridge line (sampled every width/4) form a barrier band;
+    regions grow over the k-nearest-neighbour graph through the other points
+    (:func:`lidarstat.segment.grow_regions`), band points join the first region that
+    reaches them but never expand it, so regions cannot leak across a ridge as long as
+    the band is wider than a neighbour step.
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+    ridge_result : RidgeResult
+        From :func:`ridges` on the same points.
+    k : int
+        Neighbours of the growing graph.
+    width : float, optional
+        Half-width of the barrier band; default the median distance to the k-th
+        neighbour (so that no edge jumps over the band).
+    min_size : int
+        Smaller regions get 0.
+
+    Returns
+    -------
+    lidarstat.segment.Segmentation
+        ``segment_id`` plus the per-point ``ridge`` field; lines = the ridge lines.
+    """
+    from scipy.spatial import cKDTree
+
+    func = "ridge_segments"
+    pts = check_points(points)
+    k = check_scalar(k, "k", func=func, low=2, closed="left", integer=True)
+    min_size = check_scalar(min_size, "min_size", func=func, low=1, closed="left", integer=True)
+    origin = pts.mean(axis=0)
+    local = pts - origin
+    nb = knn_neighbors(local, min(k, pts.shape[0]))
+    if width is None:
+        width = float(np.median(nb.distances[nb.indptr[1:] - 1]))
+    width = check_scalar(width, "width", func=func, low=0.0)
+    lines = ridge_result.lines
+    band = ridge_result.fields["ridge"] > 0
+    if len(lines):
+        sampled, _ = lines.sample(width / 4.0)
+        dist, _ = cKDTree(sampled - origin).query(local, k=1)
+        band |= dist < width
+    labels = grow_regions(nb, can_grow=~band, min_size=min_size)
+    return Segmentation(labels=labels, table=segment_table(labels, pts), lines=lines,
+                        fields={"ridge": ridge_result.fields["ridge"]}, method="ridges",
+                        params={**ridge_result.params, "grow_k": k, "width": width,
+                                "min_size": min_size})
