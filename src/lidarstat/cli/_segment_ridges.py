@@ -9,7 +9,7 @@ def add_arguments(group):
 
     group.add_argument("--jet-radius", type=float, default=None,
                        help="radius of the jets (default --radius; or --k neighbours)")
-    group.add_argument("--grow-k", type=int, default=8,
+    group.add_argument("--ridge-grow-k", type=int, default=8,
                        help="neighbours of the region-growing graph")
     group.add_argument("--band", type=float, default=None,
                        help="half-width of the barrier band around ridge lines")
@@ -28,4 +28,4 @@ def run(args, cloud):
                  sigma=args.sigma, alpha=args.alpha, weight=args.weight, sensor=args.sensor,
                  noise=args.noise, ratio=args.ratio, min_length=args.min_length)
     min_size = args.min_size if args.min_size is not None else 50
-    return ridge_segments(cloud.xyz, res, k=args.grow_k, width=args.band, min_size=min_size)
+    return ridge_segments(cloud.xyz, res, k=args.ridge_grow_k, width=args.band, min_size=min_size)
