@@ -186,3 +186,21 @@ def test_duplicates_and_tiny_neighbourhoods_are_nan_not_errors():
     pts = np.array([[0.0, 0, 0], [1, 0, 0], [5, 5, 5], [9, 9, 9]])
     res = covariance_features(pts, radius=1.5)
     assert np.isnan(res["Eigenvalue0"]).all() and res["neighbors"].tolist() == [2, 2, 1, 1]
+
+
+@pytest.mark.parametrize("how", ["knn", "radius"])
+def test_principal_direction_across_a_cylinder(rng, how):
+    """Section 5: the normal turns fastest across a pipe; n x direction is its axis."""
+    n = 12000
+    t = rng.uniform(0, 2 * np.pi, n)
+    h = rng.uniform(0, 6, n)
+    pts = np.c_[0.5 * np.cos(t), 0.5 * np.sin(t), h] + rng.normal(0, 0.001, (n, 3))
+    res = covariance_features(pts, **({"k": 30} if how == "knn" else {"radius": 0.2}))
+    d = np.c_[res["PrincipalDirX"], res["PrincipalDirY"], res["PrincipalDirZ"]]
+    inner = (h > 0.5) & (h < 5.5)
+    axis = np.cross(res.normals, d)
+    assert np.median(np.abs(axis[inner, 2])) > 0.999
+    assert np.percentile(np.abs(d[inner, 2]), 90) < 0.1
+    # a plane: no preferred direction, no normal variation beyond noise
+    flat = covariance_features(np.c_[rng.uniform(0, 5, (3000, 2)), np.zeros(3000)], k=20)
+    assert np.nanmax(flat["NormalVariation"]) < 1e-20

@@ -36,6 +36,10 @@ FIELDS = {
     "Eigenentropy": ("float64", "-sum l ln l"),
     "EigenvalueSum": ("float64", "l0+l1+l2"),
     "DemantkeVerticality": ("float64", "1-|NormalZ|"),
+    "PrincipalDirX": ("float64", "max-curvature direction x (normals)"),
+    "PrincipalDirY": ("float64", "max-curvature direction y"),
+    "PrincipalDirZ": ("float64", "max-curvature direction z"),
+    "NormalVariation": ("float64", "variance of normals along PrincipalDir"),
     "neighbors": ("int32", "points in the neighbourhood"),
 }
 
@@ -229,7 +233,8 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
     neighbourhood mean (two passes, divided by n - 1), and eigen-decomposed:
     eigenvalues ``l0 <= l1 <= l2``, the normal (eigenvector of ``l0``, oriented toward
     `sensor` or else up), the surface variation ``l0 / (l0 + l1 + l2)`` (eq. 4), its
-    variance over the neighbourhood (eq. 5) and PDAL's eigen features.
+    variance over the neighbourhood (eq. 5), PDAL's eigen features and the principal
+    curvature direction from the covariance of the neighbours' normals (section 5).
 
     Parameters
     ----------
@@ -303,6 +308,9 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         sens = None if sensor is None else sensor - origin
         raw = _rows(local, np.arange(n), neighborhoods.indptr, neighborhoods.indices, sens)
         mean_sv, var_sv = _variance_csr(raw, neighborhoods.indptr, neighborhoods.indices)
+        spread = np.empty((n, 4))
+        _ck.normal_spread_rows_offset(np.ascontiguousarray(raw[:, _ck.C_NX:_ck.C_NZ + 1]), 0,
+                                      neighborhoods.indptr, neighborhoods.indices, spread)
         order = None
         keep = neighborhoods if keep_neighbors else None
         k, radius = neighborhoods.k, neighborhoods.radius
@@ -321,10 +329,13 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         sv = _surface_variation(raw)
         mean_sv = np.empty(n)
         var_sv = np.empty(n)
+        spread = np.empty((n, 4))
+        nrm = np.ascontiguousarray(raw[:, _ck.C_NX:_ck.C_NZ + 1])
         for c0, c1 in blocks:
             s0, s1 = index.cell_start[c0], index.cell_start[c1]
             indptr, idx, _ = index.query_cells(c0, c1)
             _ck.neighbourhood_variance(sv, indptr, idx, mean_sv[s0:s1], var_sv[s0:s1])
+            _spread_block(nrm, s0, s1, indptr, idx, spread)
             if progress is not None:
                 progress(int(n + s1), 2 * n)
         order = index.order
@@ -347,6 +358,9 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         mean_sv = np.empty(n)
         var_sv = np.empty(n)
         _ck.table_variance(sv, table, mean_sv, var_sv)
+        spread = np.empty((n, 4))
+        _ck.normal_spread_table(np.ascontiguousarray(raw[:, _ck.C_NX:_ck.C_NZ + 1]), table,
+                                spread)
         if progress is not None:
             progress(2 * n, 2 * n)
         order = index.order
@@ -360,8 +374,9 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         raw = raw[inverse]
         mean_sv = mean_sv[inverse]
         var_sv = var_sv[inverse]
-    res = _assemble(raw, mean_sv, var_sv, origin, k=k, radius=radius, eigen_mode=eigen_mode,
-                    neighborhoods=keep)
+        spread = spread[inverse]
+    res = _assemble(raw, mean_sv, var_sv, spread, origin, k=k, radius=radius,
+                    eigen_mode=eigen_mode, neighborhoods=keep)
     if sensor is not None:
         ray = pts - sensor
         rng_ = np.linalg.norm(ray, axis=1)
@@ -405,7 +420,12 @@ def _variance_csr(raw, indptr, idx):
     return mean_sv, var_sv
 
 
-def _assemble(raw, mean_sv, var_sv, origin, *, k, radius, eigen_mode, neighborhoods):
+def _spread_block(nrm, s0, s1, indptr, idx, spread):
+    """Normal spread of rows s0..s1 (sorted positions) from a block's CSR (row r = s0 + r)."""
+    _ck.normal_spread_rows_offset(nrm, s0, indptr, idx, spread[s0:s1])
+
+
+def _assemble(raw, mean_sv, var_sv, spread, origin, *, k, radius, eigen_mode, neighborhoods):
     evals = raw[:, _ck.C_L0:_ck.C_L2 + 1]
     normal = raw[:, _ck.C_NX:_ck.C_NZ + 1]
     major = np.ascontiguousarray(raw[:, _ck.C_AX:_ck.C_AZ + 1])
@@ -419,6 +439,10 @@ def _assemble(raw, mean_sv, var_sv, origin, *, k, radius, eigen_mode, neighborho
         "CurvatureVariance": var_sv,
     }
     fields.update(feats)
+    fields["PrincipalDirX"] = spread[:, 0].copy()
+    fields["PrincipalDirY"] = spread[:, 1].copy()
+    fields["PrincipalDirZ"] = spread[:, 2].copy()
+    fields["NormalVariation"] = spread[:, 3].copy()
     fields["neighbors"] = raw[:, _ck.C_N].astype(np.int32)
     return CovarianceResult(
         fields=fields, centroid=raw[:, _ck.C_CX:_ck.C_CZ + 1] + origin, major=major,

@@ -431,3 +431,105 @@ def table_variance(values, nbr, mean_out, var_out):
                 acc += (v - mu) * (v - mu)
         mean_out[r] = mu
         var_out[r] = acc / n
+
+
+# ------------------------------------------------------------------ principal directions
+@njit
+def _normal_spread_one(i, normals, idx, s, e, cov, evals, evecs, out):
+    """Direction of largest change of the normal over one neighbourhood (section 5).
+
+    The neighbours' normals, flipped to the index normal's side and projected on its
+    tangent plane, have a covariance whose largest eigenvector is the direction in which
+    the normal turns fastest: the maximum curvature direction. out = [dx, dy, dz, lmax].
+    """
+    n0 = normals[i, 0]
+    n1 = normals[i, 1]
+    n2 = normals[i, 2]
+    if not (n0 == n0):
+        for a in range(4):
+            out[a] = np.nan
+        return
+    m0 = m1 = m2 = 0.0
+    cnt = 0
+    for t in range(s, e):
+        j = idx[t]
+        a0 = normals[j, 0]
+        if not (a0 == a0):
+            continue
+        a1 = normals[j, 1]
+        a2 = normals[j, 2]
+        dot = a0 * n0 + a1 * n1 + a2 * n2
+        if dot < 0.0:
+            a0 = -a0
+            a1 = -a1
+            a2 = -a2
+            dot = -dot
+        m0 += a0 - dot * n0
+        m1 += a1 - dot * n1
+        m2 += a2 - dot * n2
+        cnt += 1
+    if cnt < 3:
+        for a in range(4):
+            out[a] = np.nan
+        return
+    m0 /= cnt
+    m1 /= cnt
+    m2 /= cnt
+    for a in range(3):
+        for b in range(3):
+            cov[a, b] = 0.0
+    for t in range(s, e):
+        j = idx[t]
+        a0 = normals[j, 0]
+        if not (a0 == a0):
+            continue
+        a1 = normals[j, 1]
+        a2 = normals[j, 2]
+        dot = a0 * n0 + a1 * n1 + a2 * n2
+        if dot < 0.0:
+            a0 = -a0
+            a1 = -a1
+            a2 = -a2
+            dot = -dot
+        d0 = a0 - dot * n0 - m0
+        d1 = a1 - dot * n1 - m1
+        d2 = a2 - dot * n2 - m2
+        cov[0, 0] += d0 * d0
+        cov[0, 1] += d0 * d1
+        cov[0, 2] += d0 * d2
+        cov[1, 1] += d1 * d1
+        cov[1, 2] += d1 * d2
+        cov[2, 2] += d2 * d2
+    cov[1, 0] = cov[0, 1]
+    cov[2, 0] = cov[0, 2]
+    cov[2, 1] = cov[1, 2]
+    _eigh3(cov, evals, evecs)
+    out[0] = evecs[0, 2]
+    out[1] = evecs[1, 2]
+    out[2] = evecs[2, 2]
+    out[3] = max(evals[2], 0.0) / (cnt - 1)
+
+
+@njit_parallel
+def normal_spread_rows_offset(normals, row0, indptr, idx, out):
+    """:func:`_normal_spread_one` for every CSR row; row r is point ``row0 + r``."""
+    m = indptr.size - 1
+    for r in prange(m):
+        cov = np.empty((3, 3))
+        evals = np.empty(3)
+        evecs = np.empty((3, 3))
+        _normal_spread_one(row0 + r, normals, idx, indptr[r], indptr[r + 1], cov, evals,
+                           evecs, out[r])
+
+
+
+@njit_parallel
+def normal_spread_table(normals, nbr, out):
+    """:func:`_normal_spread_one` over a dense (N, k) neighbour table."""
+    m = nbr.shape[0]
+    k = nbr.shape[1]
+    for r in prange(m):
+        cov = np.empty((3, 3))
+        evals = np.empty(3)
+        evecs = np.empty((3, 3))
+        _normal_spread_one(r, normals, nbr[r], 0, k, cov, evals, evecs, out[r])
