@@ -435,6 +435,21 @@ def table_variance(values, nbr, mean_out, var_out):
 
 # ------------------------------------------------------------------ principal directions
 @njit
+def _tangent(normals, j, n0, n1, n2):
+    """Neighbour j's normal, flipped to n's side, projected on n's tangent plane."""
+    a0 = normals[j, 0]
+    a1 = normals[j, 1]
+    a2 = normals[j, 2]
+    dot = a0 * n0 + a1 * n1 + a2 * n2
+    if dot < 0.0:
+        a0 = -a0
+        a1 = -a1
+        a2 = -a2
+        dot = -dot
+    return a0 - dot * n0, a1 - dot * n1, a2 - dot * n2
+
+
+@njit
 def _normal_spread_one(i, normals, idx, s, e, cov, evals, evecs, out):
     """Direction of largest change of the normal over one neighbourhood (section 5).
 
@@ -445,29 +460,17 @@ def _normal_spread_one(i, normals, idx, s, e, cov, evals, evecs, out):
     n0 = normals[i, 0]
     n1 = normals[i, 1]
     n2 = normals[i, 2]
-    if not (n0 == n0):
-        for a in range(4):
-            out[a] = np.nan
-        return
     m0 = m1 = m2 = 0.0
     cnt = 0
-    for t in range(s, e):
-        j = idx[t]
-        a0 = normals[j, 0]
-        if not (a0 == a0):
-            continue
-        a1 = normals[j, 1]
-        a2 = normals[j, 2]
-        dot = a0 * n0 + a1 * n1 + a2 * n2
-        if dot < 0.0:
-            a0 = -a0
-            a1 = -a1
-            a2 = -a2
-            dot = -dot
-        m0 += a0 - dot * n0
-        m1 += a1 - dot * n1
-        m2 += a2 - dot * n2
-        cnt += 1
+    if n0 == n0:
+        for t in range(s, e):
+            j = idx[t]
+            if normals[j, 0] == normals[j, 0]:
+                t0, t1, t2 = _tangent(normals, j, n0, n1, n2)
+                m0 += t0
+                m1 += t1
+                m2 += t2
+                cnt += 1
     if cnt < 3:
         for a in range(4):
             out[a] = np.nan
@@ -480,20 +483,12 @@ def _normal_spread_one(i, normals, idx, s, e, cov, evals, evecs, out):
             cov[a, b] = 0.0
     for t in range(s, e):
         j = idx[t]
-        a0 = normals[j, 0]
-        if not (a0 == a0):
+        if not (normals[j, 0] == normals[j, 0]):
             continue
-        a1 = normals[j, 1]
-        a2 = normals[j, 2]
-        dot = a0 * n0 + a1 * n1 + a2 * n2
-        if dot < 0.0:
-            a0 = -a0
-            a1 = -a1
-            a2 = -a2
-            dot = -dot
-        d0 = a0 - dot * n0 - m0
-        d1 = a1 - dot * n1 - m1
-        d2 = a2 - dot * n2 - m2
+        t0, t1, t2 = _tangent(normals, j, n0, n1, n2)
+        d0 = t0 - m0
+        d1 = t1 - m1
+        d2 = t2 - m2
         cov[0, 0] += d0 * d0
         cov[0, 1] += d0 * d1
         cov[0, 2] += d0 * d2
