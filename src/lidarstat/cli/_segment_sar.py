@@ -16,8 +16,8 @@ def add_arguments(group):
     group.add_argument("--sar-degree", default="1",
                        help="polynomial order of the units: 1 (planes), 2, 3 or 'auto' "
                        "(t tests up to 3)")
-    group.add_argument("--edge-alpha", type=float, default=0.01,
-                       help="level of the height/slope tests of region growing")
+    group.add_argument("--edge-alpha", type=float, default=0.05,
+                       help="level of the height/slope tests of region growing (0.05)")
     group.add_argument("--search", type=float, default=None,
                        help="search-area distance from a raw cluster (default 3 b)")
     group.add_argument("--w-radius", type=float, default=None,

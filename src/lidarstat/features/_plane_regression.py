@@ -366,8 +366,8 @@ def _mean_spacing(points):
     return float(np.sqrt(occupied * cell * cell / points.shape[0]))
 
 
-def select_plane_bandwidth(points, candidates=None, *, criterion="rice", sample=20000,
-                           min_neighbors=6, rng=None):
+def select_plane_bandwidth(points, candidates=None, *, criterion="rice", trim=0.25,
+                           sample=20000, min_neighbors=6, rng=None):
     """Choose the plane-regression bandwidth by PRESS or a penalised selector.
 
     Parameters
@@ -383,6 +383,11 @@ def select_plane_bandwidth(points, candidates=None, *, criterion="rice", sample=
         error ``p = n^-1 sum (z_i - z0_i)^2`` with ``Xi(u)``, ``u`` the mean leverage:
         ``gcv``: ``(1 - u)^-2``; ``rice``: ``(1 - 2u)^-1`` (the strongest; infinite when
         ``u >= 1/2``, i.e. for bandwidths holding about two points or fewer).
+    trim : float
+        Fraction of the largest squared residuals left out of every mean (a trimmed,
+        least-trimmed-squares-like loss): vegetation, walls and wires are not surfaces,
+        and without trimming they, not the surfaces, set the bandwidth. 0: the plain
+        criteria.
     sample : int
         Points used for the score (a seeded random subset of larger clouds).
     min_neighbors : int
@@ -429,9 +434,11 @@ def select_plane_bandwidth(points, candidates=None, *, criterion="rice", sample=
             continue
         h = st[ok, 3]
         r = st[ok, 4]
-        u = float(h.mean())
-        p = float(np.mean(r ** 2))
-        press[k] = float(np.mean((r / (1.0 - h)) ** 2))
+        loo = (r / (1.0 - h)) ** 2
+        keep = loo <= np.quantile(loo, 1.0 - trim) if trim > 0 else np.ones(loo.size, bool)
+        u = float(h[keep].mean())
+        p = float(np.mean(r[keep] ** 2))
+        press[k] = float(np.mean(loo[keep]))
         if criterion == "press":
             scores[k] = press[k]
         elif criterion == "gcv":

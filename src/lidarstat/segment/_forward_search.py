@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import special
 from scipy import stats as _st
 
 from .._shared.validation import check_option, check_scalar
@@ -37,11 +38,12 @@ class ForwardSearchResult:
         Subset size after each step.
     rmin : (T,) ndarray
         Smallest deletion residual outside the subset at the start of each step, rescaled
-        for the truncation of the subset variance (consistency factor, Riani and Atkinson
-        2007).
+        for the truncation of the subset variance (consistency factor for a subset of m
+        of the m* good observations, Riani and Atkinson 2007).
     envelope : (T,) ndarray
-        Its ``1 - alpha_residual`` envelope: the quantile of the (m+1)-th order statistic
-        of n absolute normal deviates, ``Phi^-1((1 + B)/2)``, ``B ~ Beta(m + 1, n - m)``.
+        Its ``1 - alpha_residual`` envelope for m* observations: the quantile of the
+        (m+1)-th order statistic of m* absolute normal deviates, ``Phi^-1((1 + B)/2)``,
+        ``B ~ Beta(m + 1, m* - m)`` (NaN for m >= m*).
     fstat, fpvalue, frank : (T,) ndarray
         F statistic of ``theta(m) - theta(m0)`` with the covariance of the difference
         (``sigma^2 (P0 - P_m)``, nested least squares) divided by its rank, its p-value
@@ -85,6 +87,64 @@ def _truncation_factor(p):
     return 1.0 - 2.0 * q * _st.norm.pdf(q) / p
 
 
+def _envelope(m, n, alpha):
+    """``1 - alpha`` quantile of the (m+1)-th smallest of n absolute standard normals."""
+    m = np.asarray(m, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        bq = special.betaincinv(m + 1, np.maximum(n - m, 1e-9), 1 - alpha)
+    env = _st.norm.ppf((1 + bq) / 2)
+    return np.where(m < n, env, np.nan)
+
+
+def _first_signal(rmin, m_before, n, alpha, persistence):
+    """First step whose truncation-corrected deletion residual leaves the envelope for n
+    observations for `persistence` consecutive steps (steps with m < n only); -1: none."""
+    sel = np.flatnonzero(m_before < n)
+    if sel.size == 0:
+        return -1
+    mb = m_before[sel]
+    rc = rmin[sel] * np.sqrt(_truncation_factor(mb / n))
+    exceed = (rc > _envelope(mb, n, alpha)).astype(int)
+    if persistence > 1:
+        run = np.convolve(exceed, np.ones(persistence, int), "full")[:exceed.size]
+        hits = np.flatnonzero(run >= persistence) - (persistence - 1)
+        if exceed[-1]:  # the last entry (m = n - 1) cannot be followed: it alone signals
+            hits = np.r_[hits, exceed.size - 1]
+    else:
+        hits = np.flatnonzero(exceed)
+    return int(sel[hits[0]]) if hits.size else -1
+
+
+def _resuperimpose(rmin, m_before, m0, n, alpha, persistence):
+    """Size m* of the subset of good observations (Riani, Atkinson and Cerioli 2009).
+
+    With envelopes for all n observations, find the first signal at m'. Then
+    superimpose envelopes for n' = m', m' + 1, ... observations: m* is the largest n'
+    for which the monitored curve (for m < n') stays inside the envelope for n'.
+    Envelopes for all n assume that the search area is mostly the surface; when most of
+    it is other surfaces or clutter, the first signal comes early and the superimposed
+    envelopes recover the surface's true size.
+    """
+    t = _first_signal(rmin, m_before, n, alpha, persistence)
+    if t < 0:
+        return n
+    lo = int(m_before[t])
+    ok = lo
+    # coarse scan upwards, then a fine scan in the last coarse interval
+    stride = max(1, (n - lo) // 16)
+    cand = lo
+    while cand <= n:
+        if _first_signal(rmin, m_before, cand, alpha, persistence) >= 0:
+            break
+        ok = cand
+        cand += stride
+    for cand in range(ok + 1, min(ok + stride, n + 1)):
+        if _first_signal(rmin, m_before, cand, alpha, persistence) >= 0:
+            break
+        ok = cand
+    return max(ok, m0)
+
+
 def forward_search(A, y, initial, *, block=1, alpha=0.01, alpha_residual=0.001, stop="both",
                    persistence=2, max_steps=None, refresh=256):
     """Forward Search from an initial subset, monitoring the F test and deletion residuals.
@@ -104,8 +164,9 @@ def forward_search(A, y, initial, *, block=1, alpha=0.01, alpha_residual=0.001, 
     alpha_residual : float
         Level of the deletion-residual envelope.
     stop : {'both', 'f', 'residual'}
-        Stop at the first step where the F test rejects, where the smallest deletion
-        residual leaves its envelope for `persistence` consecutive steps, or either.
+        Stop at the first step where the F test rejects, at the size m* found by
+        superimposing deletion-residual envelopes (a signal: the curve leaves the
+        envelope for `persistence` consecutive steps), or at the smaller of the two.
     persistence : int
         Consecutive exceedances of the envelope needed to stop.
     max_steps : int, optional
@@ -159,29 +220,23 @@ def forward_search(A, y, initial, *, block=1, alpha=0.01, alpha_residual=0.001, 
         _k.forward_search(A, y, init, block, int(refresh), fstat, fpaper, frank, rmin, msize,
                           s2, order)
     m_before = np.concatenate(([m0], msize[:-1])) if steps else msize
-    rmin_c = rmin * np.sqrt(_truncation_factor(m_before / n))
-    beta_q = _st.beta.ppf(1 - alpha_residual, m_before + 1, np.maximum(n - m_before, 1))
-    envelope = _st.norm.ppf((1 + beta_q) / 2)
     with np.errstate(invalid="ignore"):
         fp = _st.f.sf(fstat, np.maximum(frank, 1), m0 - r)
     fp[frank == 0] = 1.0
-    stop_step, reason = -1, "exhausted"
-    f_rej = fp < alpha
-    exceed = rmin_c > envelope
-    if persistence > 1 and exceed.size:
-        run = np.convolve(exceed.astype(int), np.ones(persistence, int), "full")[:exceed.size]
-        # first step of a run of `persistence` exceedances
-        res_stop = np.flatnonzero(run >= persistence) - (persistence - 1)
+    f_rej = np.flatnonzero(fp < alpha)
+    m_f = int(m_before[f_rej[0]]) if (stop in ("both", "f") and f_rej.size) else n
+    m_res = n
+    if stop in ("both", "residual") and steps:
+        m_res = _resuperimpose(rmin, m_before, m0, n, alpha_residual, persistence)
+    m_star = min(m_f, m_res)
+    if m_star >= n:
+        stop_step, reason = -1, "exhausted"
     else:
-        res_stop = np.flatnonzero(exceed)
-    cands = []
-    if stop in ("both", "f") and f_rej.any():
-        cands.append((int(np.flatnonzero(f_rej)[0]), "f"))
-    if stop in ("both", "residual") and res_stop.size:
-        cands.append((int(res_stop[0]), "residual"))
-    if cands:
-        stop_step, reason = min(cands)
-    added = total if stop_step < 0 else (int(m_before[stop_step]) - m0)
+        stop_step = int(np.searchsorted(m_before, m_star, side="left"))
+        reason = "f" if m_f <= m_res else "residual"
+    added = m_star - m0
+    rmin_c = rmin * np.sqrt(_truncation_factor(m_before / max(m_star, 1)))
+    envelope = _envelope(m_before, max(m_star, m0 + 1), alpha_residual)
     accepted = init.copy()
     accepted[order[:added]] = True
     theta = np.linalg.lstsq(A[accepted], y[accepted], rcond=None)[0]

@@ -14,12 +14,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import warnings
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
+from scipy import stats as _st
 
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatWarning
@@ -34,7 +36,7 @@ from ._search_area import delaunay_graph, search_areas
 logger = logging.getLogger(__name__)
 
 #: Forward Search stop reasons written to the table (``fs_stop``).
-STOP_CODES = {"exhausted": 0, "f": 1, "residual": 2}
+STOP_CODES = {"exhausted": 0, "f": 1, "residual": 2, "not searched": 3}
 
 
 def _mean_spacing(points):
@@ -66,7 +68,7 @@ def _assign(units, n):
         who.append(np.full(unit.accepted.size, u))
         sd = max(unit.sigma, 1e-12)
         sc = np.abs(unit.residuals) / sd
-        sc[np.isin(unit.accepted, unit.raw)] = -1.0  # raw clusters keep their points
+        sc[:unit.n_s] = -1.0  # raw clusters keep their points (listed first)
         score.append(sc)
     labels = np.zeros(n, dtype=np.int64)
     if not pts:
@@ -116,10 +118,72 @@ def _table(points, labels, units, keep_units):
     return table
 
 
+def _chow_pvalue(points, ia, ib, degree):
+    """p-value of the Chow F test that two point sets lie on one polynomial surface."""
+    from ..stats._sar import PolynomialBasis
+
+    def rss(idx):
+        xy = points[idx, :2]
+        A = PolynomialBasis.fit(xy, degree)(xy)
+        z = points[idx, 2]
+        coef, *_ = np.linalg.lstsq(A, z - z.mean(), rcond=None)
+        e = z - z.mean() - A @ coef
+        return float(e @ e), A.shape[1]
+
+    ra, r = rss(ia)
+    rb, _ = rss(ib)
+    rab, _ = rss(np.concatenate([ia, ib]))
+    df2 = ia.size + ib.size - 2 * r
+    if df2 <= 0 or ra + rb <= 0:
+        return 1.0
+    f = ((rab - ra - rb) / r) / ((ra + rb) / df2)
+    return float(_st.f.sf(f, r, df2))
+
+
+def _merge_groups(points, unit_labels, units, graph, alpha):
+    """Union of adjacent units whose surfaces do not differ (Chow test at `alpha`)."""
+    n_units = len(units)
+    parent = np.arange(n_units + 1)
+
+    def find(u):
+        while parent[u] != u:
+            parent[u] = parent[parent[u]]
+            u = parent[u]
+        return u
+
+    if n_units < 2:
+        return parent
+    pts_c, seg_c = _two_hop_contacts(graph, unit_labels)
+    a = unit_labels[pts_c]
+    lo, hi = np.minimum(a, seg_c), np.maximum(a, seg_c)
+    base = n_units + 1
+    keys, counts = np.unique(lo.astype(np.int64) * base + hi, return_counts=True)
+    members = {u: np.flatnonzero(unit_labels == u) for u in range(1, n_units + 1)}
+    for key in keys[counts >= 4]:
+        ua, ub = int(key // base), int(key % base)
+        if units[ua - 1].degree != units[ub - 1].degree:
+            continue
+        if _chow_pvalue(points, members[ua], members[ub], units[ua - 1].degree) >= alpha:
+            ra, rb = find(ua), find(ub)
+            if ra != rb:
+                parent[max(ra, rb)] = min(ra, rb)
+    return np.array([find(u) for u in range(n_units + 1)])
+
+
+def _merged_unit(points, idx, group, w_radius, degree):
+    """One unit over the union of a group's points, Table 6 sizes summed."""
+    unit = refine_cluster(points, idx, np.empty(0, np.int64), w_radius=w_radius,
+                          degree=degree)
+    big = max(group, key=lambda u: u.m)
+    return dataclasses.replace(unit, n_s=sum(u.n_s for u in group),
+                               n_sa=sum(u.n_sa for u in group), m=sum(u.m for u in group),
+                               fs=big.fs, raw=np.concatenate([u.raw for u in group]))
+
+
 def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, max_degree=3,
                         alpha=0.01, alpha_residual=0.001, stop="both", block=1,
-                        max_steps=500, min_size=10, graph=None, diagnostics=None,
-                        progress=None):
+                        max_steps=500, min_size=10, merge_alpha=0.01, graph=None,
+                        diagnostics=None, progress=None):
     """SAR-FS refinement of given raw clusters; returns a :class:`Segmentation`.
 
     Parameters
@@ -138,6 +202,11 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
         Forward Search settings (:func:`forward_search`).
     min_size : int
         Smallest raw cluster refined and smallest final segment.
+    merge_alpha : float or None
+        Adjacent units of the same order are merged when the Chow F test does not reject
+        one common surface at this level (a plane split into two raw clusters by a dormer
+        or a chimney becomes one unit again; their Table 6 sizes are summed). None: no
+        merging.
     graph : tuple, optional
         Precomputed :func:`delaunay_graph`.
     diagnostics : path, optional
@@ -158,7 +227,7 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
         extra = areas.indices[areas.indptr[c - 1]:areas.indptr[c]]
         deg = degrees if degrees is None or np.isscalar(degrees) else int(degrees[c - 1])
         try:
-            unit = refine_cluster(points, raw, np.concatenate([raw, extra]), w_radius=w_radius,
+            unit = refine_cluster(points, raw, extra, w_radius=w_radius,
                                   degree=deg, max_degree=max_degree, alpha=alpha,
                                   alpha_residual=alpha_residual, stop=stop, block=block,
                                   max_steps=max_steps)
@@ -172,6 +241,29 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
                       f"{skipped[0][0]}, {skipped[0][1]} points: {skipped[0][2]})",
                       LidarstatWarning, stacklevel=3)
     unit_labels = _assign(units, n)
+    if merge_alpha is not None and len(units) > 1:
+        root = _merge_groups(points, unit_labels, units, graph, merge_alpha)
+        groups = {}
+        for u in range(1, len(units) + 1):
+            groups.setdefault(int(root[u]), []).append(u)
+        new_units, new_of = [], np.zeros(len(units) + 1, dtype=np.int64)
+        for r_, members in sorted(groups.items()):
+            if len(members) == 1:
+                new_units.append(units[members[0] - 1])
+            else:
+                idx = np.flatnonzero(np.isin(unit_labels, members))
+                try:
+                    new_units.append(_merged_unit(points, idx, [units[u - 1] for u in members],
+                                                  w_radius, units[members[0] - 1].degree))
+                except (np.linalg.LinAlgError, InvalidParameterError, ValueError):
+                    new_units.extend(units[u - 1] for u in members)
+                    for u in members[1:]:
+                        new_of[u] = len(new_units) - len(members) + members.index(u) + 1
+                    new_of[members[0]] = len(new_units) - len(members) + 1
+                    continue
+            new_of[members] = len(new_units)
+        unit_labels = new_of[unit_labels]
+        units = new_units
     labels = relabel(unit_labels, max(int(min_size), 1))
     # segment s (1..S) -> unit index
     keep_units = []
@@ -205,7 +297,7 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
     return seg
 
 
-def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.01,
+def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.05,
                 fs_alpha=0.01, alpha_residual=0.001, stop="both", degree=1, max_degree=3,
                 adaptive=False, grow_radius=None, threshold=None, w_radius=None,
                 min_size=30, block=1, max_steps=500, diagnostics=None, progress=None,

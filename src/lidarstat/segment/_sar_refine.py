@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,6 +28,8 @@ from ._forward_search import ForwardSearchResult, forward_search
 #: Largest subset on which rho is estimated by full ML; larger clusters estimate rho on
 #: their `SAR_MAX` points nearest to the medoid (a contiguous patch) and theta on all.
 SAR_MAX = 3000
+#: Largest raw cluster the Forward Search grows (see :func:`refine_cluster`).
+MAX_SEARCH = 20000
 
 
 @dataclass(frozen=True)
@@ -134,8 +137,9 @@ def _conditional_fit(z, A, W, ref):
     return SARFit(theta, ref.rho, s2, cov, np.nan, resid, n, "conditional", ref.profile)
 
 
-def refine_cluster(points, raw, area, *, w_radius, degree=1, max_degree=3, alpha=0.01,
-                   alpha_residual=0.001, stop="both", block=1, max_steps=500):
+def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alpha=0.01,
+                   alpha_residual=0.001, stop="both", block=1, max_steps=500,
+                   max_search=MAX_SEARCH):
     """Refine one raw cluster by SAR-FS within its search area.
 
     Parameters
@@ -144,25 +148,31 @@ def refine_cluster(points, raw, area, *, w_radius, degree=1, max_degree=3, alpha
         Coordinates.
     raw : (n_s,) ndarray of int
         Indices of the raw cluster.
-    area : (n_sa,) ndarray of int
-        Indices of the search area (must contain `raw`).
+    extra : ndarray of int
+        Indices of the other points of its search area (disjoint from `raw`).
     w_radius : float
         Planimetric radius of the SAR adjacency W.
     degree : int or None
         Polynomial order; None chooses it by t tests up to `max_degree`.
     alpha, alpha_residual, stop, block, max_steps
         Forward Search settings (:func:`forward_search`).
+    max_search : int
+        Raw clusters larger than this (terrain, large flat roofs) are not searched: the
+        unit is the raw cluster (``m = n_s``, ``fs_stop`` 3), which bounds the cost of the
+        O(n_sa) steps.
 
     Returns
     -------
     SurfaceUnit
     """
     raw = np.asarray(raw, dtype=np.int64)
-    area = np.unique(np.concatenate([np.asarray(area, dtype=np.int64), raw]))
+    extra = np.asarray(extra, dtype=np.int64)
+    area = np.concatenate([raw, extra])
     origin = points[area].min(axis=0)
     xy_area = points[area, :2] - origin[:2]
     z_area = points[area, 2] - origin[2]
-    in_raw = np.isin(area, raw)
+    in_raw = np.zeros(area.size, dtype=bool)
+    in_raw[:raw.size] = True
     xy_raw, z_raw = xy_area[in_raw], z_area[in_raw]
     if degree is None:
         degree, _, basis = select_degree(z_raw, xy_raw, _weights(xy_raw, w_radius),
@@ -174,8 +184,16 @@ def refine_cluster(points, raw, area, *, w_radius, degree=1, max_degree=3, alpha
     fit0, rho_points = _ml_fit(z_raw, A_area[in_raw], xy_raw, w_radius)
     W_area = _weights(xy_area, w_radius)
     ystar = z_area - fit0.rho * (W_area @ z_area)
+    if raw.size > max_search:
+        in_raw = in_raw[:raw.size]
+        A_area, ystar, z_area, xy_area, area = (A_area[:raw.size], ystar[:raw.size],
+                                                z_area[:raw.size], xy_area[:raw.size],
+                                                area[:raw.size])
+        max_steps = 1
     fs = forward_search(A_area, ystar, in_raw, block=block, alpha=alpha,
                         alpha_residual=alpha_residual, stop=stop, max_steps=max_steps)
+    if raw.size > max_search:
+        fs = dataclasses.replace(fs, stop_reason="not searched")
     acc = fs.accepted
     W_acc = _weights(xy_area[acc], w_radius)
     fit = _conditional_fit(z_area[acc], A_area[acc], W_acc, fit0)
@@ -191,5 +209,5 @@ def refine_cluster(points, raw, area, *, w_radius, degree=1, max_degree=3, alpha
     surface_shift = origin[2]
     # the constant term: orthogonal column 0 is constant (= 1 / R00); add the origin height
     surface[0] += surface_shift * basis.R[0, 0]
-    return SurfaceUnit(area[acc], res, int(raw.size), int(area.size), int(acc.sum()), int(degree),
+    return SurfaceUnit(area[acc], res, int(raw.size), int(raw.size + extra.size), int(acc.sum()), int(degree),
                        basis, fit, surface, cov, sigma, fs, int(rho_points), raw)

@@ -13,6 +13,7 @@ import heapq
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.spatial import Delaunay
 
 from .._shared._jit import njit
@@ -39,15 +40,15 @@ def delaunay_graph(points):
     if tri.coplanar.size:
         a = np.concatenate([a, tri.coplanar[:, 0].astype(np.int64)])
         b = np.concatenate([b, tri.coplanar[:, 2].astype(np.int64)])
-    src = np.concatenate([a, b])
-    dst = np.concatenate([b, a])
-    key = np.unique(src * points.shape[0] + dst)
-    src, dst = key // points.shape[0], key % points.shape[0]
-    keep = src != dst
-    src, dst = src[keep], dst[keep]
-    indptr = np.zeros(points.shape[0] + 1, dtype=np.int64)
-    np.add.at(indptr, src + 1, 1)
-    np.cumsum(indptr, out=indptr)
+    n = points.shape[0]
+    keep = a != b
+    a, b = a[keep], b[keep]
+    g = sp.coo_matrix((np.ones(2 * a.size, dtype=np.int8), (np.r_[a, b], np.r_[b, a])),
+                      shape=(n, n)).tocsr()
+    g.sum_duplicates()
+    indptr = g.indptr.astype(np.int64)
+    dst = g.indices.astype(np.int64)
+    src = np.repeat(np.arange(n, dtype=np.int64), np.diff(indptr))
     lengths = np.hypot(*(xy[src] - xy[dst]).T)
     return indptr, dst.astype(np.int64), lengths
 

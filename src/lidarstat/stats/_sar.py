@@ -23,12 +23,12 @@ from scipy.sparse.linalg import splu
 from ..errors import InvalidParameterError
 
 #: Largest n for which log|I - rho W| uses the eigenvalues of W (dense O(n^3) once).
-EIG_MAX = 400
+EIG_MAX = 150
 #: Largest n for which the sparse LU is used (at grid nodes, then interpolated:
 #: method 'grid'); above, the Barry-Pace series.
 LU_MAX = 50000
 #: Largest n for which the information-matrix traces use a dense inverse.
-DENSE_TRACE_MAX = 400
+DENSE_TRACE_MAX = 150
 LOGDET_METHODS = ("auto", "eig", "lu", "grid", "series")
 #: Nodes of the 'grid' method on (-1, 1): denser towards +1 where log(1 - rho) bends.
 _GRID_NODES = np.r_[np.linspace(-0.99, 0.5, 16), 1.0 - np.geomspace(0.45, 1e-3, 18)]
@@ -364,6 +364,23 @@ def _information_cov(A, W, theta, rho, sigma2, ld, rng, probes=64):
         return np.full((r + 2, r + 2), np.nan)
 
 
+def _solve_lag(W, rho, b, tol=1e-12, max_terms=200):
+    """``(I - rho W)^-1 b`` by the power series ``sum (rho W)^k b`` (row-standardised W,
+    |rho| < 1), with a sparse LU when the series would converge slowly."""
+    W = sp.csr_matrix(W)
+    if abs(rho) <= 0.9:
+        x = b.copy()
+        term = b.copy()
+        scale = max(float(np.abs(b).max()), 1e-300)
+        for _ in range(max_terms):
+            term = rho * (W @ term)
+            x += term
+            if float(np.abs(term).max()) <= tol * scale:
+                return x
+    n = W.shape[0]
+    return splu(sp.csc_matrix(sp.identity(n, format="csc") - rho * W)).solve(b)
+
+
 def sar_mean_surface(fit, A, W):
     """Coefficients of the polynomial closest to the SAR mean ``(I - rho W)^-1 A theta``.
 
@@ -372,9 +389,7 @@ def sar_mean_surface(fit, A, W):
     surface itself (for normals, intersections) is the least-squares projection of the
     model mean on the trend basis, ``(A'A)^-1 A' (I - rho W)^-1 A theta``.
     """
-    n = A.shape[0]
-    M = sp.csc_matrix(sp.identity(n, format="csc") - fit.rho * sp.csr_matrix(W))
-    mean = splu(M).solve(A @ fit.theta)
+    mean = _solve_lag(W, fit.rho, A @ fit.theta)
     return np.linalg.lstsq(A, mean, rcond=None)[0]
 
 

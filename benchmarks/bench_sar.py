@@ -1,0 +1,154 @@
+"""Benchmark of ``segment --method sar`` (seed 002) and of the SAR fit against PySAL spreg.
+
+Full mode (run by the lead on a quiet machine; a few minutes):
+
+    python benchmarks/bench_sar.py
+
+* the whole ``segment_sar`` on a synthetic airborne town scaled to ~1 million points
+  (``make_als_town`` over 400 x 300 m at 8 pulses/m^2), with the time of each stage and
+  the Hoover scores of the roof planes;
+* on the same run, PySAL ``spreg.ML_Lag`` (methods 'full' and 'LU') and
+  ``lidarstat.stats.sar_fit`` on the same 5,000-point cluster with the same W: time ratio
+  and the agreement of rho and theta.
+
+Writes ``benchmarks/results_sar.json`` and prints a markdown table. ``--quick`` runs a
+small town and a 1,000-point cluster in seconds (to check the script works).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+
+def _town(extent, density, rng=1):
+    from lidarstat.synth import make_als_town
+
+    t = time.perf_counter()
+    cloud = make_als_town(extent=extent, density=density, rng=rng)
+    return cloud, time.perf_counter() - t
+
+
+def bench_segment(cloud, bandwidth):
+    from lidarstat.segment import hoover, segment_sar
+
+    t = time.perf_counter()
+    seg = segment_sar(cloud.xyz, bandwidth=bandwidth)
+    dt = time.perf_counter() - t
+    rp = cloud.fields["roof_plane"].astype(int)
+    h_all = hoover(seg.labels, rp, 0.8)
+    h30 = hoover(seg.labels, rp, 0.8, min_size=30)
+    return {"points": int(cloud.xyz.shape[0]), "seconds": round(dt, 2),
+            "bandwidth": seg.params["bandwidth"], "segments": seg.n_segments,
+            "roof_planes": int(np.unique(rp[rp > 0]).size),
+            "hoover_correct": h_all.correct, "hoover_missed": h_all.missed,
+            "hoover_correct_rate_min30": round(h30.correct_rate, 3),
+            "hoover_correct_min30": h30.correct}
+
+
+def _cluster(n, rng):
+    """A planar 5,000-point patch with SAR structure, and its row-standardised W."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spl
+
+    from lidarstat.neighbors import radius_neighbors
+    from lidarstat.stats import weights_matrix
+
+    side = np.sqrt(n / 8.0)
+    xy = rng.uniform(0, side, (n, 2))
+    nb = radius_neighbors(np.c_[xy, np.zeros(n)], 1.5 * np.sqrt(1 / 8.0), dim=2)
+    W = weights_matrix(nb.indptr, nb.indices, n)
+    A = np.c_[np.ones(n), xy]
+    z = spl.spsolve(sp.csc_matrix(sp.identity(n) - 0.2 * W),
+                    A @ [7.0, 0.4, -0.3] + rng.normal(0, 0.03, n))
+    return xy, z, A, W
+
+
+def bench_sar_fit(n, methods):
+    from lidarstat.stats import sar_fit
+
+    rng = np.random.default_rng(5)
+    xy, z, A, W = _cluster(n, rng)
+    sar_fit(z[:300], A[:300], W[:300, :300])  # warm-up
+    t = time.perf_counter()
+    ours = sar_fit(z, A, W)
+    t_ours = time.perf_counter() - t
+    out = {"n": n, "lidarstat_seconds": round(t_ours, 3), "lidarstat_logdet": ours.logdet_method,
+           "rho": ours.rho}
+    try:
+        import libpysal
+        import spreg
+    except ImportError:
+        out["spreg"] = "not installed"
+        return out
+    w = libpysal.weights.WSP(W.tocsr()).to_W(silence_warnings=True)
+    w.transform = "r"
+    for method in methods:
+        t = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ref = spreg.ML_Lag(z[:, None], xy, w, method=method)
+        dt = time.perf_counter() - t
+        out[f"spreg_{method}_seconds"] = round(dt, 3)
+        out[f"spreg_{method}_ratio"] = round(dt / t_ours, 1)
+        out[f"spreg_{method}_drho"] = float(abs(float(ref.rho) - ours.rho))
+        out[f"spreg_{method}_dtheta"] = float(np.max(np.abs(ref.betas.ravel()[:3] - ours.theta)))
+    return out
+
+
+def bench_forward_search(n=2000):
+    from lidarstat.segment import forward_search
+
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(0, 20, (n, 2))
+    y = 5 + 0.5 * xy[:, 0] + rng.normal(0, 0.05, n)
+    y[xy[:, 0] > 15] -= xy[xy[:, 0] > 15, 0] - 15
+    A = np.c_[np.ones(n), xy]
+    init = xy[:, 0] < 5
+    forward_search(A[:200], y[:200], init[:200])  # warm-up
+    t = time.perf_counter()
+    res = forward_search(A, y, init)
+    return {"n": n, "seconds": round(time.perf_counter() - t, 3), "m": res.m}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="seconds: small town and cluster")
+    ap.add_argument("--out", default=str(Path(__file__).with_name("results_sar.json")))
+    args = ap.parse_args(argv)
+    if args.quick:
+        extent, density, n_fit, methods = (70.0, 60.0), 8.0, 1000, ["full"]
+    else:
+        extent, density, n_fit, methods = (400.0, 300.0), 8.0, 5000, ["full", "LU"]
+    cloud, t_gen = _town(extent, density)
+    seg = bench_segment(cloud, 0.7)
+    fit = bench_sar_fit(n_fit, methods)
+    fs = bench_forward_search()
+    result = {"machine": platform.platform(), "python": platform.python_version(),
+              "quick": args.quick, "generate_seconds": round(t_gen, 1), "segment_sar": seg,
+              "sar_fit": fit, "forward_search_2000": fs}
+    print("| measure | value |\n|---|---|")
+    print(f"| segment_sar on {seg['points']:,} points | {seg['seconds']} s |")
+    print(f"| roof planes correct (Hoover 0.8, planes >= 30 points) | "
+          f"{seg['hoover_correct_min30']} ({seg['hoover_correct_rate_min30']:.1%}) |")
+    print(f"| sar_fit, {fit['n']} points ({fit['lidarstat_logdet']}) | "
+          f"{fit['lidarstat_seconds']} s |")
+    for m in methods:
+        if f"spreg_{m}_seconds" in fit:
+            print(f"| spreg ML_Lag '{m}' / lidarstat | {fit[f'spreg_{m}_ratio']}x "
+                  f"(|d rho| {fit[f'spreg_{m}_drho']:.1e}) |")
+    print(f"| Forward Search over {fs['n']} points | {fs['seconds']} s |")
+    if not args.quick:
+        Path(args.out).write_text(json.dumps(result, indent=2))
+        print(f"written {args.out}")
+    return result
+
+
+if __name__ == "__main__":
+    main()
