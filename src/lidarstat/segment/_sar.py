@@ -118,22 +118,43 @@ def _table(points, labels, units, keep_units):
     return table
 
 
-def _chow_pvalue(points, ia, ib, degree):
-    """p-value of the Chow F test that two point sets lie on one polynomial surface."""
-    from ..stats._sar import PolynomialBasis
+def _design(points, idx, degree, origin, scale):
+    """Monomials up to `degree` in coordinates relative to `origin`, divided by `scale`."""
+    u = (points[idx, :2] - origin) / scale
+    cols = [u[:, 0] ** (i - j) * u[:, 1] ** j for i in range(degree + 1) for j in range(i + 1)]
+    return np.column_stack(cols)
 
-    def rss(idx):
-        xy = points[idx, :2]
-        A = PolynomialBasis.fit(xy, degree)(xy)
-        z = points[idx, 2]
-        coef, *_ = np.linalg.lstsq(A, z - z.mean(), rcond=None)
-        e = z - z.mean() - A @ coef
-        return float(e @ e), A.shape[1]
 
-    ra, r = rss(ia)
-    rb, _ = rss(ib)
-    rab, _ = rss(np.concatenate([ia, ib]))
-    df2 = ia.size + ib.size - 2 * r
+def _moments(points, idx, degree, origin, scale):
+    """Normal-equation moments (A'A, A'z, z'z, n) of one point set."""
+    A = _design(points, idx, degree, origin, scale)
+    z = points[idx, 2] - origin_z(points)
+    return A.T @ A, A.T @ z, float(z @ z), idx.size
+
+
+def origin_z(points):
+    return float(points[:, 2].min())
+
+
+def _rss(mom):
+    ata, atz, zz, n = mom
+    try:
+        coef = np.linalg.solve(ata, atz)
+    except np.linalg.LinAlgError:
+        coef = np.linalg.lstsq(ata, atz, rcond=None)[0]
+    return max(zz - coef @ atz, 0.0), ata.shape[0], n
+
+
+def _chow_pvalue(ma, mb):
+    """p-value of the Chow F test that two point sets lie on one polynomial surface.
+
+    ``F = ((RSS_ab - RSS_a - RSS_b) / r) / ((RSS_a + RSS_b) / (n_a + n_b - 2r))`` from the
+    normal-equation moments of each set (the union's moments are their sums).
+    """
+    ra, r, na = _rss(ma)
+    rb, _, nb = _rss(mb)
+    rab, _, _ = _rss(tuple(x + y for x, y in zip(ma, mb)))
+    df2 = na + nb - 2 * r
     if df2 <= 0 or ra + rb <= 0:
         return 1.0
     f = ((rab - ra - rb) / r) / ((ra + rb) / df2)
@@ -158,12 +179,23 @@ def _merge_groups(points, unit_labels, units, graph, alpha):
     lo, hi = np.minimum(a, seg_c), np.maximum(a, seg_c)
     base = n_units + 1
     keys, counts = np.unique(lo.astype(np.int64) * base + hi, return_counts=True)
-    members = {u: np.flatnonzero(unit_labels == u) for u in range(1, n_units + 1)}
+    order = np.argsort(unit_labels, kind="stable")
+    starts = np.searchsorted(unit_labels[order], np.arange(n_units + 2))
+    origin = points[:, :2].min(axis=0)
+    scale = max(float(np.ptp(points[:, :2], axis=0).max()), 1.0)
+    moments = {}
+
+    def mom(u):
+        if u not in moments:
+            idx = order[starts[u]:starts[u + 1]]
+            moments[u] = _moments(points, idx, units[u - 1].degree, origin, scale)
+        return moments[u]
+
     for key in keys[counts >= 4]:
         ua, ub = int(key // base), int(key % base)
         if units[ua - 1].degree != units[ub - 1].degree:
             continue
-        if _chow_pvalue(points, members[ua], members[ub], units[ua - 1].degree) >= alpha:
+        if _chow_pvalue(mom(ua), mom(ub)) >= alpha:
             ra, rb = find(ua), find(ub)
             if ra != rb:
                 parent[max(ra, rb)] = min(ra, rb)

@@ -24,14 +24,12 @@ from ..errors import InvalidParameterError
 
 #: Largest n for which log|I - rho W| uses the eigenvalues of W (dense O(n^3) once).
 EIG_MAX = 150
-#: Largest n for which the sparse LU is used (at grid nodes, then interpolated:
-#: method 'grid'); above, the Barry-Pace series.
+#: Largest n for which the sparse LU is used at every evaluation; above, the
+#: Barry-Pace series.
 LU_MAX = 50000
 #: Largest n for which the information-matrix traces use a dense inverse.
 DENSE_TRACE_MAX = 150
-LOGDET_METHODS = ("auto", "eig", "lu", "grid", "series")
-#: Nodes of the 'grid' method on (-1, 1): denser towards +1 where log(1 - rho) bends.
-_GRID_NODES = np.r_[np.linspace(-0.99, 0.5, 16), 1.0 - np.geomspace(0.45, 1e-3, 18)]
+LOGDET_METHODS = ("auto", "eig", "lu", "series")
 
 
 def weights_matrix(neighbor_lists_indptr, neighbor_lists_indices, n, *, row_standardize=True):
@@ -71,12 +69,10 @@ class LogDet:
     ----------
     W : sparse matrix (n, n)
         Spatial weights.
-    method : {'auto', 'eig', 'lu', 'grid', 'series'}
+    method : {'auto', 'eig', 'lu', 'series'}
         ``eig``: exact from the eigenvalues of W; ``lu``: exact sparse LU at every
-        evaluation; ``grid``: sparse LU at fixed nodes and a cubic spline in between (Pace
-        and Barry 1997; interpolation error below 1e-6 per point away from rho = 1);
-        ``series``: see below. ``auto``: ``eig`` for n <= :data:`EIG_MAX`, ``grid`` for
-        n <= :data:`LU_MAX`, ``series`` above.
+        evaluation (``sum log|U_ii|``); ``series``: see below. ``auto``: ``eig`` for
+        n <= :data:`EIG_MAX`, ``lu`` for n <= :data:`LU_MAX`, ``series`` above.
     order, probes : int
         Terms and random probes of the series ``log|I - rho W| = -sum_k rho^k tr(W^k)/k``
         with ``tr(W^k)`` estimated by ``x'W^k x`` over Rademacher probes (Barry and Pace
@@ -91,7 +87,7 @@ class LogDet:
                                         f"{LOGDET_METHODS}. Got {method!r} instead.")
         n = W.shape[0]
         if method == "auto":
-            method = "eig" if n <= EIG_MAX else ("grid" if n <= LU_MAX else "series")
+            method = "eig" if n <= EIG_MAX else ("lu" if n <= LU_MAX else "series")
         self.method = method
         self.n = n
         self.W = sp.csc_matrix(W)
@@ -100,11 +96,6 @@ class LogDet:
             self.evals = _eigenvalues(W)
         elif method == "series":
             self.traces = _trace_powers(sp.csr_matrix(W), order, probes, rng)
-        elif method == "grid":
-            from scipy.interpolate import CubicSpline
-
-            vals = [self._lu(r) for r in _GRID_NODES]
-            self._spline = CubicSpline(_GRID_NODES, vals)
 
     def bounds(self):
         """Open interval of rho for which I - rho W is non-singular (for real eigenvalues)."""
@@ -125,10 +116,6 @@ class LogDet:
             return float(np.sum(np.log(np.abs(1.0 - rho * self.evals))))
         if self.method == "lu":
             return self._lu(rho)
-        if self.method == "grid":
-            if rho < _GRID_NODES[0] or rho > _GRID_NODES[-1]:
-                return self._lu(rho)
-            return float(self._spline(rho))
         k = np.arange(1, self.traces.size + 1)
         return float(-np.sum(rho ** k * self.traces / k))
 
@@ -235,7 +222,7 @@ class SARFit:
         return TestResult(t, p, float(df), p < alpha, float(alpha))
 
 
-def sar_fit(z, A, W, *, logdet="auto", grid=21, bounds=None, xatol=1e-10, covariance=True,
+def sar_fit(z, A, W, *, logdet="auto", grid=11, bounds=None, xatol=1e-8, covariance=True,
             rng=0):
     """Fit ``z = rho W z + A theta + eps`` by maximum likelihood (profile likelihood in rho).
 
@@ -258,7 +245,7 @@ def sar_fit(z, A, W, *, logdet="auto", grid=21, bounds=None, xatol=1e-10, covari
         Absolute tolerance of the refinement.
     covariance : bool
         Compute the information-matrix covariance (traces of ``W (I - rho W)^-1``:
-        dense for n <= :data:`DENSE_TRACE_MAX`, stochastic (Hutchinson, 64 probes) above).
+        dense for n <= :data:`DENSE_TRACE_MAX`, stochastic (Hutchinson, 32 probes) above).
     rng : Generator or int, optional
         Seed of stochastic traces.
 
@@ -325,7 +312,7 @@ def sar_fit(z, A, W, *, logdet="auto", grid=21, bounds=None, xatol=1e-10, covari
                   np.vstack([rhos, -vals - 0.5 * n * (np.log(2 * np.pi) + 1.0)]))
 
 
-def _information_cov(A, W, theta, rho, sigma2, ld, rng, probes=64):
+def _information_cov(A, W, theta, rho, sigma2, ld, rng, probes=32):
     n, r = A.shape
     I = sp.identity(n, format="csc")
     M = sp.csc_matrix(I - rho * W)
