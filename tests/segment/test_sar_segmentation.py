@@ -135,3 +135,38 @@ def test_curvature_units_and_refinement(rng):
     assert np.count_nonzero(ref.labels) > np.count_nonzero(raw.labels)
     assert len(ref.lines) == 1
     np.testing.assert_allclose(ref.lines.vertices[0][:, 0], 6.0, atol=0.02)
+
+
+def test_seed_002_hip_roof_scene_table_6():
+    """The paper's first data set: four hip planes beside a gable house, chimneys, a tree."""
+    from lidarstat.synth import make_hip_roof_scene
+
+    cloud = make_hip_roof_scene(rng=1)
+    seg = segment_sar(cloud.xyz)
+    rp = cloud.fields["roof_plane"].astype(int)
+    assert hoover(seg.labels, rp, 0.8).correct == int(np.unique(rp[rp > 0]).size)
+    planes = cloud.meta["roof_planes"]
+    normals = np.c_[seg.table["normal_x"], seg.table["normal_y"], seg.table["normal_z"]]
+    roof_units = set()
+    for name, pid in cloud.meta["hip_planes"].items():
+        lab = seg.labels[rp == pid]
+        s = np.bincount(lab[lab > 0]).argmax()
+        roof_units.add(s)
+        k = s - 1
+        assert seg.table["n_s"][k] < seg.table["m"][k] < seg.table["n_sa"][k], name
+        n_true = np.asarray(planes["normal"][list(planes["id"]).index(pid)])
+        assert np.degrees(np.arccos(min(1.0, abs(normals[k] @ n_true)))) < 0.5
+    cls = cloud.attributes["classification"]
+    clutter = ((cloud.fields["building_id"] > 0) & (rp == 0)) | np.isin(cls, [3, 4, 5])
+    assert not np.isin(seg.labels[clutter], list(roof_units)).any()
+
+
+def test_real_roofs_of_pdal_sample_c():
+    from conftest import shared_file
+    from lidarstat import read
+
+    cloud = read(shared_file("pdal_testdata/sample_c.las"))
+    seg = segment_sar(cloud.xyz)
+    building = cloud.attributes["classification"] == 6
+    assert np.mean(seg.labels[building] > 0) > 0.9
+    assert seg.n_segments >= 4 and len(seg.lines) >= 1

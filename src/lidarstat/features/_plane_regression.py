@@ -155,14 +155,25 @@ def _chunked(points, radius, bw, min_neighbors):
     return beta, cof, st, status
 
 
-def _robust_sigma2(local_sigma2, nu):
-    """Median of local variance estimates, corrected to a mean (Wilson-Hilferty median of chi2)."""
+#: Quantile of the local variances used for the noise estimate.
+SIGMA_QUANTILE = 0.25
+
+
+def _robust_sigma2(local_sigma2, nu, q=SIGMA_QUANTILE):
+    """Noise variance from the lower quartile of the local variance estimates.
+
+    Under planar noise ``s_i^2 ~ sigma^2 chi2(nu)/nu``, so the q-quantile of the ``s_i^2``
+    divided by ``chi2.ppf(q, nu)/nu`` estimates sigma^2. The lower quartile stays right
+    when up to three quarters of the points are not on planes (trees, walls, ridges, cars),
+    where the median (or the mean) is pulled up by the clutter.
+    """
+    from scipy import stats as _st
+
     good = np.isfinite(local_sigma2) & np.isfinite(nu) & (nu > 0)
     if not good.any():
         return np.nan
     med_nu = float(np.median(nu[good]))
-    corr = (1.0 - 2.0 / (9.0 * med_nu)) ** 3 if med_nu > 0.5 else 1.0
-    return float(np.median(local_sigma2[good]) / corr)
+    return float(np.quantile(local_sigma2[good], q) / (_st.chi2.ppf(q, med_nu) / med_nu))
 
 
 def _check_neighborhoods(nbh, n, radius, func):
@@ -188,8 +199,8 @@ def local_planes(points, bandwidth, *, sigma=None, alpha=0.05, adaptive=False,
     bandwidth : float
         Kernel half-width b (planimetric distance); see :func:`select_plane_bandwidth`.
     sigma : float, optional
-        Height noise (standard deviation). Default: estimated from the local fits as the
-        median of the local variances, corrected from median to mean.
+        Height noise (standard deviation). Default: estimated from the lower quartile of
+        the local variances (:data:`SIGMA_QUANTILE`), corrected by the chi-square quantile.
     alpha : float, optional
         Level of the planarity test.
     adaptive : bool, optional
