@@ -188,12 +188,14 @@ def _knn_cell_size(local, k, rng=0, sample=4000):
     return cell, float(np.median(d)) * 1.15
 
 
-def _knn_table(points, k, *, block_size, sort=True, progress=None, rng=0):
+def _knn_table(points, k, *, block_size, sort=True, sensor=None, progress=None, rng=0):
     """Exact kNN of every point with the grid kernel: (index, table, dist) in sorted order.
 
     ``table[r]`` lists the sorted positions of the k nearest neighbours of sorted position r
     (in ascending distance if `sort`, and then ``dist`` holds the distances, else None);
-    int32 when the cloud allows (4 k bytes per point).
+    int32 when the cloud allows (4 k bytes per point). ``raw`` holds the covariance
+    kernel's output per sorted position (computed in the same pass); `sensor` in file
+    coordinates.
     """
     origin = points.min(axis=0)
     cell, tau0 = _knn_cell_size(points - origin, k, rng=rng)
@@ -202,15 +204,17 @@ def _knn_table(points, k, *, block_size, sort=True, progress=None, rng=0):
     dtype = np.int32 if n < 2**31 - 1 else np.int64
     table = np.empty((n, k), dtype=dtype)
     dist = np.empty((n, k)) if sort else None  # kept (float64) only for the neighbourhoods
+    raw = np.empty((n, _ck.NCOL))
+    sens = np.zeros(3) if sensor is None else np.asarray(sensor, float) - index.origin
     for c0, c1 in index.cell_blocks(block_size):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
         dblock = dist[s0:s1] if sort else np.empty((s1 - s0, k))
         _ck.knn_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
                       index.dims, float(index.cell), int(k), tau0, sort, table[s0:s1],
-                      dblock)
+                      dblock, sens, sensor is not None, raw[s0:s1])
         if progress is not None:
             progress(int(s1), 2 * n)
-    return index, table, dist
+    return index, table, dist, raw
 
 
 def _check_sensor(sensor, func):
@@ -345,15 +349,10 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
             keep = radius_neighbors(pts, radius)
         k = None
     else:
-        index, table, dist = _knn_table(pts, k, block_size=block_size, sort=keep_neighbors,
-                                        progress=progress)
+        index, table, dist, raw = _knn_table(pts, k, block_size=block_size,
+                                             sort=keep_neighbors, sensor=sensor,
+                                             progress=progress)
         origin = index.origin
-        sens = None if sensor is None else sensor - origin
-        raw = np.empty((n, _ck.NCOL))
-        for s0 in range(0, n, block_size):
-            s1 = min(n, s0 + block_size)
-            _ck.covariance_table(index.sorted_points, s0, table[s0:s1], np.zeros(3) if sens is None else sens,
-                                 sens is not None, raw[s0:s1])
         sv = _surface_variation(raw)
         mean_sv = np.empty(n)
         var_sv = np.empty(n)

@@ -194,7 +194,7 @@ def _count(ranges, nr):
 
 @njit_parallel
 def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out_idx,
-              out_dist):
+              out_dist, sensor, has_sensor, out_feat):
     """Exact `k` nearest neighbours (self included) of the points of cells ``c0..c1-1``.
 
     `pts` are the grid's sorted local coordinates; output row r is sorted position
@@ -203,7 +203,9 @@ def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out
     ``k <= len(pts)``. `tau0` is a typical k-th neighbour distance: candidates farther
     than 1.15 times the previous point's k-th distance (tau0 for a cell's first point)
     are dropped before the selection, unless fewer than k remain (then all are kept), so
-    the pre-filter changes the speed, never the result.
+    the pre-filter changes the speed, never the result. The covariance features of each
+    point (:func:`_covariance_one`) are computed at once into ``out_feat`` (rows as
+    ``out_idx``) while its neighbours are in cache.
     """
     base = cell_start[c0]
     ncell = c1 - c0
@@ -214,6 +216,9 @@ def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out
         bd = np.empty(cap + 1)
         bi = np.empty(cap + 1, dtype=np.int64)
         ranges = np.empty((9, 2), dtype=np.int64)
+        cov = np.empty((3, 3))
+        evals = np.empty(3)
+        evecs = np.empty((3, 3))
         for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
             key = cell_keys[c]
             iz0 = key % dims[2]
@@ -258,6 +263,8 @@ def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out
                 for t in range(k):
                     out_idx[r, t] = bi[t]
                     out_dist[r, t] = np.sqrt(bd[t])
+                _covariance_one(i, pts, bi, 0, k, sensor, has_sensor, cov, evals, evecs,
+                                out_feat[r])
 
 
 @njit
@@ -366,21 +373,6 @@ def covariance_rows(pts, query, indptr, idx, sensor, has_sensor, out):
 
 
 @njit_parallel
-def covariance_table(pts, row0, nbr, sensor, has_sensor, out):
-    """:func:`covariance_rows` over a dense (M, k) neighbour table of rows ``row0..row0+M``."""
-    m = nbr.shape[0]
-    k = nbr.shape[1]
-    nchunks = (m + _ROW_CHUNK - 1) // _ROW_CHUNK
-    for ch in prange(nchunks):
-        cov = np.empty((3, 3))
-        evals = np.empty(3)
-        evecs = np.empty((3, 3))
-        for r in range(ch * _ROW_CHUNK, min(m, (ch + 1) * _ROW_CHUNK)):
-            _covariance_one(row0 + r, pts, nbr[r], 0, k, sensor, has_sensor, cov, evals,
-                            evecs, out[r])
-
-
-@njit_parallel
 def neighbourhood_variance(values, indptr, idx, mean_out, var_out):
     """Mean and population variance (eq. 5, 1/n) of `values` over each CSR row, NaN ignored."""
     m = indptr.size - 1
@@ -435,74 +427,85 @@ def table_variance(values, nbr, mean_out, var_out):
 
 # ------------------------------------------------------------------ principal directions
 @njit
-def _tangent(normals, j, n0, n1, n2):
-    """Neighbour j's normal, flipped to n's side, projected on n's tangent plane."""
-    a0 = normals[j, 0]
-    a1 = normals[j, 1]
-    a2 = normals[j, 2]
-    dot = a0 * n0 + a1 * n1 + a2 * n2
-    if dot < 0.0:
-        a0 = -a0
-        a1 = -a1
-        a2 = -a2
-        dot = -dot
-    return a0 - dot * n0, a1 - dot * n1, a2 - dot * n2
-
-
-@njit
-def _normal_spread_one(i, normals, idx, s, e, cov, evals, evecs, out):
+def _normal_spread_one(i, normals, idx, s, e, out):
     """Direction of largest change of the normal over one neighbourhood (section 5).
 
-    The neighbours' normals, flipped to the index normal's side and projected on its
-    tangent plane, have a covariance whose largest eigenvector is the direction in which
-    the normal turns fastest: the maximum curvature direction. out = [dx, dy, dz, lmax].
+    The neighbours' normals, flipped to the index normal's side, are expressed in a basis
+    (b1, b2) of its tangent plane; the larger eigenvector of their 2x2 covariance (closed
+    form) is the direction in which the normal turns fastest: the maximum curvature
+    direction. out = [dx, dy, dz, lmax].
     """
     n0 = normals[i, 0]
     n1 = normals[i, 1]
     n2 = normals[i, 2]
-    m0 = m1 = m2 = 0.0
+    if not (n0 == n0):
+        for a in range(4):
+            out[a] = np.nan
+        return
+    # tangent basis: b1 orthogonal to n from the coordinate axis least aligned with n
+    if abs(n0) <= abs(n1) and abs(n0) <= abs(n2):
+        b10, b11, b12 = 0.0, -n2, n1
+    elif abs(n1) <= abs(n2):
+        b10, b11, b12 = n2, 0.0, -n0
+    else:
+        b10, b11, b12 = -n1, n0, 0.0
+    nb = np.sqrt(b10 * b10 + b11 * b11 + b12 * b12)
+    b10 /= nb
+    b11 /= nb
+    b12 /= nb
+    b20 = n1 * b12 - n2 * b11
+    b21 = n2 * b10 - n0 * b12
+    b22 = n0 * b11 - n1 * b10
+    su = sv = suu = suv = svv = 0.0
     cnt = 0
-    if n0 == n0:
-        for t in range(s, e):
-            j = idx[t]
-            if normals[j, 0] == normals[j, 0]:
-                t0, t1, t2 = _tangent(normals, j, n0, n1, n2)
-                m0 += t0
-                m1 += t1
-                m2 += t2
-                cnt += 1
+    for t in range(s, e):
+        j = idx[t]
+        a0 = normals[j, 0]
+        if not (a0 == a0):
+            continue
+        a1 = normals[j, 1]
+        a2 = normals[j, 2]
+        if a0 * n0 + a1 * n1 + a2 * n2 < 0.0:
+            a0 = -a0
+            a1 = -a1
+            a2 = -a2
+        u = a0 * b10 + a1 * b11 + a2 * b12
+        v = a0 * b20 + a1 * b21 + a2 * b22
+        su += u
+        sv += v
+        suu += u * u
+        suv += u * v
+        svv += v * v
+        cnt += 1
     if cnt < 3:
         for a in range(4):
             out[a] = np.nan
         return
-    m0 /= cnt
-    m1 /= cnt
-    m2 /= cnt
-    for a in range(3):
-        for b in range(3):
-            cov[a, b] = 0.0
-    for t in range(s, e):
-        j = idx[t]
-        if not (normals[j, 0] == normals[j, 0]):
-            continue
-        t0, t1, t2 = _tangent(normals, j, n0, n1, n2)
-        d0 = t0 - m0
-        d1 = t1 - m1
-        d2 = t2 - m2
-        cov[0, 0] += d0 * d0
-        cov[0, 1] += d0 * d1
-        cov[0, 2] += d0 * d2
-        cov[1, 1] += d1 * d1
-        cov[1, 2] += d1 * d2
-        cov[2, 2] += d2 * d2
-    cov[1, 0] = cov[0, 1]
-    cov[2, 0] = cov[0, 2]
-    cov[2, 1] = cov[1, 2]
-    _eigh3(cov, evals, evecs)
-    out[0] = evecs[0, 2]
-    out[1] = evecs[1, 2]
-    out[2] = evecs[2, 2]
-    out[3] = max(evals[2], 0.0) / (cnt - 1)
+    # centred 2x2 covariance (the values are bounded by 1: no cancellation problem)
+    cuu = (suu - su * su / cnt) / (cnt - 1)
+    cuv = (suv - su * sv / cnt) / (cnt - 1)
+    cvv = (svv - sv * sv / cnt) / (cnt - 1)
+    half = 0.5 * (cuu - cvv)
+    root = np.sqrt(half * half + cuv * cuv)
+    lmax = 0.5 * (cuu + cvv) + root
+    # eigenvector of lmax: (cuv, lmax - cuu) or (lmax - cvv, cuv), the better conditioned
+    if half >= 0.0:
+        x = lmax - cvv
+        y = cuv
+    else:
+        x = cuv
+        y = lmax - cuu
+    nrm = np.sqrt(x * x + y * y)
+    if nrm == 0.0:  # isotropic: any tangent direction
+        x = 1.0
+        y = 0.0
+        nrm = 1.0
+    x /= nrm
+    y /= nrm
+    out[0] = x * b10 + y * b20
+    out[1] = x * b11 + y * b21
+    out[2] = x * b12 + y * b22
+    out[3] = max(lmax, 0.0)
 
 
 @njit_parallel
@@ -510,12 +513,7 @@ def normal_spread_rows_offset(normals, row0, indptr, idx, out):
     """:func:`_normal_spread_one` for every CSR row; row r is point ``row0 + r``."""
     m = indptr.size - 1
     for r in prange(m):
-        cov = np.empty((3, 3))
-        evals = np.empty(3)
-        evecs = np.empty((3, 3))
-        _normal_spread_one(row0 + r, normals, idx, indptr[r], indptr[r + 1], cov, evals,
-                           evecs, out[r])
-
+        _normal_spread_one(row0 + r, normals, idx, indptr[r], indptr[r + 1], out[r])
 
 
 @njit_parallel
@@ -524,7 +522,4 @@ def normal_spread_table(normals, nbr, out):
     m = nbr.shape[0]
     k = nbr.shape[1]
     for r in prange(m):
-        cov = np.empty((3, 3))
-        evals = np.empty(3)
-        evecs = np.empty((3, 3))
-        _normal_spread_one(r, normals, nbr[r], 0, k, cov, evals, evecs, out[r])
+        _normal_spread_one(r, normals, nbr[r], 0, k, out[r])
