@@ -170,3 +170,23 @@ def test_real_roofs_of_pdal_sample_c():
     building = cloud.attributes["classification"] == 6
     assert np.mean(seg.labels[building] > 0) > 0.9
     assert seg.n_segments >= 4 and len(seg.lines) >= 1
+
+
+def test_one_plane_in_two_raw_clusters_is_merged_two_planes_are_not(rng):
+    xy = rng.uniform(0, 20, (4000, 2))
+    z = 3 + 0.3 * xy[:, 0] + rng.normal(0, 0.02, 4000)
+    roof = xy[:, 1] > 10
+    z[roof] = 3 + 0.3 * xy[roof, 0] + 0.5 * (xy[roof, 1] - 10) + rng.normal(0, 0.02, roof.sum())
+    lab = np.zeros(4000, int)
+    lab[(xy[:, 0] < 8) & (xy[:, 1] < 9)] = 1     # two raw clusters of the first plane,
+    lab[(xy[:, 0] > 12) & (xy[:, 1] < 9)] = 2    # 4 m apart
+    lab[xy[:, 1] > 11] = 3                       # the second plane
+    pts = np.c_[xy, z]
+    seg = refine_raw_clusters(pts, lab, threshold=3.0, w_radius=0.5)
+    assert seg.n_segments == 2
+    first = seg.labels[(xy[:, 1] < 9)]
+    assert np.bincount(first[first > 0]).max() > 0.95 * (first > 0).sum()
+    k = np.bincount(first[first > 0]).argmax() - 1
+    assert seg.table["n_s"][k] == np.count_nonzero(np.isin(lab, [1, 2]))
+    apart = refine_raw_clusters(pts, lab, threshold=3.0, w_radius=0.5, merge_alpha=None)
+    assert apart.n_segments == 3

@@ -20,19 +20,11 @@ import numba
 import numpy as np
 
 from .._shared._jit import njit, njit_parallel
+from ._quadric_kernels import _tricube
 
 STATUS_OK = 0
 STATUS_TOO_FEW = 1
 STATUS_DEGENERATE = 2
-
-
-@njit
-def _tricube(d, b):
-    if d >= b:
-        return 0.0
-    t = d / b
-    t = 1.0 - t * t * t
-    return t * t * t
 
 
 @njit

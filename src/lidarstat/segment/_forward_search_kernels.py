@@ -34,6 +34,19 @@ def _pinv_form(d, m, tol):
 
 
 @njit
+def _solve_subset(A, y, ins, ata, aty):
+    """Exact P = (A_S'A_S)^-1, theta and RSS of the subset from its normal equations."""
+    P = np.linalg.inv(ata)
+    theta = P @ aty
+    rss = 0.0
+    for i in range(y.size):
+        if ins[i]:
+            e = y[i] - A[i] @ theta
+            rss += e * e
+    return P, theta, rss
+
+
+@njit
 def forward_search(A, y, in0, block, refresh, fstat, fpaper, frank, rmin, msize, s2, order):
     """Run the search to the end; returns the number of steps.
 
@@ -56,13 +69,7 @@ def forward_search(A, y, in0, block, refresh, fstat, fpaper, frank, rmin, msize,
                 aty[u] += A[i, u] * y[i]
                 for v in range(r):
                     ata[u, v] += A[i, u] * A[i, v]
-    P = np.linalg.inv(ata)
-    theta = P @ aty
-    rss = 0.0
-    for i in range(n):
-        if ins[i]:
-            e = y[i] - A[i] @ theta
-            rss += e * e
+    P, theta, rss = _solve_subset(A, y, ins, ata, aty)
     theta0 = theta.copy()
     P0 = P.copy()
     s0sq = rss / (m - r)
@@ -121,13 +128,7 @@ def forward_search(A, y, in0, block, refresh, fstat, fpaper, frank, rmin, msize,
             since += 1
         if since >= refresh:
             since = 0
-            P = np.linalg.inv(ata)
-            theta = P @ aty
-            rss = 0.0
-            for i in range(n):
-                if ins[i]:
-                    e = y[i] - A[i] @ theta
-                    rss += e * e
+            P, theta, rss = _solve_subset(A, y, ins, ata, aty)
         diff = theta - theta0
         val, rank = _pinv_form(diff, P0 - P, 1e-9)
         fstat[step] = val / max(rank, 1) / s0sq

@@ -125,15 +125,11 @@ def _design(points, idx, degree, origin, scale):
     return np.column_stack(cols)
 
 
-def _moments(points, idx, degree, origin, scale):
-    """Normal-equation moments (A'A, A'z, z'z, n) of one point set."""
+def _moments(points, idx, degree, origin, scale, z0):
+    """Normal-equation moments (A'A, A'z, z'z, n) of one point set (heights minus z0)."""
     A = _design(points, idx, degree, origin, scale)
-    z = points[idx, 2] - origin_z(points)
+    z = points[idx, 2] - z0
     return A.T @ A, A.T @ z, float(z @ z), idx.size
-
-
-def origin_z(points):
-    return float(points[:, 2].min())
 
 
 def _rss(mom):
@@ -183,12 +179,13 @@ def _merge_groups(points, unit_labels, units, graph, alpha):
     starts = np.searchsorted(unit_labels[order], np.arange(n_units + 2))
     origin = points[:, :2].min(axis=0)
     scale = max(float(np.ptp(points[:, :2], axis=0).max()), 1.0)
+    z0 = float(points[:, 2].min())
     moments = {}
 
     def mom(u):
         if u not in moments:
             idx = order[starts[u]:starts[u + 1]]
-            moments[u] = _moments(points, idx, units[u - 1].degree, origin, scale)
+            moments[u] = _moments(points, idx, units[u - 1].degree, origin, scale, z0)
         return moments[u]
 
     for key in keys[counts >= 4]:
@@ -279,21 +276,22 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
         for u in range(1, len(units) + 1):
             groups.setdefault(int(root[u]), []).append(u)
         new_units, new_of = [], np.zeros(len(units) + 1, dtype=np.int64)
-        for r_, members in sorted(groups.items()):
-            if len(members) == 1:
-                new_units.append(units[members[0] - 1])
-            else:
+        for _, members in sorted(groups.items()):
+            merged = None
+            if len(members) > 1:
                 idx = np.flatnonzero(np.isin(unit_labels, members))
                 try:
-                    new_units.append(_merged_unit(points, idx, [units[u - 1] for u in members],
-                                                  w_radius, units[members[0] - 1].degree))
+                    merged = _merged_unit(points, idx, [units[u - 1] for u in members],
+                                          w_radius, units[members[0] - 1].degree)
                 except (np.linalg.LinAlgError, InvalidParameterError, ValueError):
-                    new_units.extend(units[u - 1] for u in members)
-                    for u in members[1:]:
-                        new_of[u] = len(new_units) - len(members) + members.index(u) + 1
-                    new_of[members[0]] = len(new_units) - len(members) + 1
-                    continue
-            new_of[members] = len(new_units)
+                    merged = None  # keep the members apart
+            if merged is not None:
+                new_units.append(merged)
+                new_of[members] = len(new_units)
+            else:
+                for u in members:
+                    new_units.append(units[u - 1])
+                    new_of[u] = len(new_units)
         unit_labels = new_of[unit_labels]
         units = new_units
     labels = relabel(unit_labels, max(int(min_size), 1))
