@@ -33,7 +33,7 @@ from numba import prange
 
 from .._shared._jit import njit, njit_parallel
 from ..neighbors._kernels import _cell_ranges, _scan
-from ._quadric_kernels import _eigh3
+from ._quadric_kernels import _eigh3, cholesky_inverse_n
 
 OK = 0
 TOO_FEW = 1
@@ -98,53 +98,6 @@ def _monomials(u, v, nmom_deg, out):
             out[t + i] = out[s + i] * u
         out[t + k] = out[s + k - 1] * v
         t += k + 1
-
-
-@njit
-def _cholesky_inv(a, m, L, inv):
-    """Inverse of the SPD leading m x m block of `a` via Cholesky; False if not safely SPD."""
-    scale = 0.0
-    for k in range(m):
-        if a[k, k] > scale:
-            scale = a[k, k]
-    if not scale > 0.0:
-        return False
-    tol = 1e-13 * scale
-    for j in range(m):
-        sjj = a[j, j]
-        for k in range(j):
-            sjj -= L[j, k] * L[j, k]
-        if not sjj > tol:
-            return False
-        L[j, j] = math.sqrt(sjj)
-        for r in range(j + 1, m):
-            s = a[r, j]
-            for k in range(j):
-                s -= L[r, k] * L[j, k]
-            L[r, j] = s / L[j, j]
-    # inverse of L (lower) in place into the upper... use inv as scratch for Linv (lower)
-    for j in range(m):
-        for r in range(m):
-            inv[r, j] = 0.0
-    for j in range(m):
-        inv[j, j] = 1.0 / L[j, j]
-        for r in range(j + 1, m):
-            acc = 0.0
-            for k in range(j, r):
-                acc -= L[r, k] * inv[k, j]
-            inv[r, j] = acc / L[r, r]
-    # N^-1 = Linv' Linv, computed into L's storage then copied (L no longer needed)
-    for r in range(m):
-        for c in range(r, m):
-            acc = 0.0
-            for k in range(c, m):
-                acc += inv[k, r] * inv[k, c]
-            L[r, c] = acc
-    for r in range(m):
-        for c in range(r, m):
-            inv[r, c] = L[r, c]
-            inv[c, r] = L[r, c]
-    return True
 
 
 # ----------------------------------------------------------------------- Monge coefficients
@@ -494,7 +447,7 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
             acc += abs(N[a, c])
         if acc > norm1:
             norm1 = acc
-    if not _cholesky_inv(N, m, L, Ninv):
+    if not cholesky_inverse_n(N, m, 1e-13, L, Ninv):
         return SINGULAR, p
     ninv1 = 0.0
     for c in range(m):

@@ -13,7 +13,7 @@ from ..neighbors import CellIndex, Neighborhoods, knn_neighbors
 from ..stats import variance_test_satterthwaite
 from . import _jet_kernels as _jk
 from ._curvature import NOISE, height_variance
-from ._quadric import FitStatus, check_fit_options
+from ._quadric import FitStatus, check_fit_options, check_neighborhoods
 
 logger = logging.getLogger(__name__)
 
@@ -215,12 +215,7 @@ def fit_jets(points, neighborhoods: Neighborhoods, *, degree=4, monge_degree=Non
     """
     func = "fit_jets"
     pts = check_points(points)
-    if not isinstance(neighborhoods, Neighborhoods):
-        raise InvalidParameterError(f"{func}: `neighborhoods` must be a Neighborhoods instance")
-    if neighborhoods.n_points != pts.shape[0]:
-        raise InvalidParameterError(
-            f"{func}: neighbourhoods index {neighborhoods.n_points} points but `points` has "
-            f"{pts.shape[0]}")
+    check_neighborhoods(func, pts, neighborhoods)
     degree, monge_degree, min_neighbors = _check_options(func, degree, monge_degree, weight,
                                                          min_neighbors, sensor)
     if bandwidth is None:

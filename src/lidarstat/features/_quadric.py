@@ -137,6 +137,17 @@ def _to_fit(out, bandwidth, covariance):
     )
 
 
+def check_neighborhoods(func, pts, neighborhoods):
+    """Raise unless `neighborhoods` is a Neighborhoods over the cloud `pts`."""
+    if not isinstance(neighborhoods, Neighborhoods):
+        raise InvalidParameterError(f"{func}: `neighborhoods` must be a Neighborhoods instance")
+    if neighborhoods.n_points != pts.shape[0]:
+        raise InvalidParameterError(
+            f"{func}: neighbourhoods index {neighborhoods.n_points} points but `points` has "
+            f"{pts.shape[0]}"
+        )
+
+
 def check_fit_options(func, *, frame, covariance, min_neighbors, sensor):
     """Validate the options shared by the quadric-based functions."""
     check_option(frame, "frame", tuple(FRAMES), func=func)
@@ -193,13 +204,7 @@ def fit_quadrics(points, neighborhoods: Neighborhoods, *, bandwidth=None, frame=
     """
     func = "fit_quadrics"
     pts = check_points(points)
-    if not isinstance(neighborhoods, Neighborhoods):
-        raise InvalidParameterError(f"{func}: `neighborhoods` must be a Neighborhoods instance")
-    if neighborhoods.n_points != pts.shape[0]:
-        raise InvalidParameterError(
-            f"{func}: neighbourhoods index {neighborhoods.n_points} points but `points` has "
-            f"{pts.shape[0]}"
-        )
+    check_neighborhoods(func, pts, neighborhoods)
     check_fit_options(func, frame=frame, covariance=covariance, min_neighbors=min_neighbors,
                       sensor=sensor)
     if bandwidth is None:

@@ -224,48 +224,52 @@ def _local_frame(i, pts, idx, dist, s, e, b, frame, sensor, has_sensor, R, cov, 
 
 
 @njit
-def _cholesky_inverse(a, L, li, inv):
-    """Inverse of SPD 6x6 `a` via Cholesky; False if a pivot is not safely positive."""
-    n = 6
+def cholesky_inverse_n(a, m, rel_tol, L, inv):
+    """Inverse of the SPD leading m x m block of `a` via Cholesky (shared by the quadric
+    and jet kernels); False if a pivot is not above `rel_tol` times the largest diagonal.
+
+    `L` (m x m at least) is scratch; the inverse is written to `inv`.
+    """
     scale = 0.0
-    for k in range(n):
+    for k in range(m):
         if a[k, k] > scale:
             scale = a[k, k]
-    if scale <= 0.0:
+    if not scale > 0.0:
         return False
-    tol = 1e-12 * scale
-    for j in range(n):
+    tol = rel_tol * scale
+    for j in range(m):
         sjj = a[j, j]
         for k in range(j):
             sjj -= L[j, k] * L[j, k]
         if not sjj > tol:
             return False
         L[j, j] = np.sqrt(sjj)
-        for i in range(j + 1, n):
-            sij = a[i, j]
+        for r in range(j + 1, m):
+            s = a[r, j]
             for k in range(j):
-                sij -= L[i, k] * L[j, k]
-            L[i, j] = sij / L[j, j]
-        for i in range(j):
-            L[i, j] = 0.0
-    # inv(L) in place into inv (lower), then inv = Linv' Linv
-    for i in range(n):
-        for j in range(n):
-            li[i, j] = 0.0
-    for j in range(n):
-        li[j, j] = 1.0 / L[j, j]
-        for i in range(j + 1, n):
+                s -= L[r, k] * L[j, k]
+            L[r, j] = s / L[j, j]
+    # inv(L) (lower) into `inv`, then N^-1 = inv(L)' inv(L) via L's upper triangle
+    for j in range(m):
+        for r in range(m):
+            inv[r, j] = 0.0
+    for j in range(m):
+        inv[j, j] = 1.0 / L[j, j]
+        for r in range(j + 1, m):
             acc = 0.0
-            for k in range(j, i):
-                acc -= L[i, k] * li[k, j]
-            li[i, j] = acc / L[i, i]
-    for i in range(n):
-        for j in range(i, n):
+            for k in range(j, r):
+                acc -= L[r, k] * inv[k, j]
+            inv[r, j] = acc / L[r, r]
+    for r in range(m):
+        for c in range(r, m):
             acc = 0.0
-            for k in range(j, n):
-                acc += li[k, i] * li[k, j]
-            inv[i, j] = acc
-            inv[j, i] = acc
+            for k in range(c, m):
+                acc += inv[k, r] * inv[k, c]
+            L[r, c] = acc
+    for r in range(m):
+        for c in range(r, m):
+            inv[r, c] = L[r, c]
+            inv[c, r] = L[r, c]
     return True
 
 
@@ -474,7 +478,7 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
             N[c, a] = N[a, c]
             N2[c, a] = N2[a, c]
             N3[c, a] = N3[a, c]
-    if not _cholesky_inverse(N, L, LI, Ninv):
+    if not cholesky_inverse_n(N, 6, 1e-12, L, Ninv):
         return SINGULAR, p
     for a in range(6):
         acc = 0.0
