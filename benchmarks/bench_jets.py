@@ -116,7 +116,7 @@ def main():
 
     tmp = Path(args.tmp or tempfile.mkdtemp(prefix="bench_jets_"))
     tmp.mkdir(parents=True, exist_ok=True)
-    xyz = make_cloud(args.points)
+    xyz, _ = make_cloud(args.points)
     xyz = xyz - xyz.min(axis=0)  # local coordinates for both programs
     np.save(tmp / "xyz.npy", xyz)
     t = time.perf_counter()
