@@ -243,3 +243,23 @@ def test_surface_echoes_are_first_hits(hip):
     res = [abs(np.dot(faces[f]["normal"], q - faces[f]["point"]))
            for f, q in zip(c.face[idx][on_face], p[on_face])]
     assert max(res) < 1e-8
+
+
+def test_overlapping_strips():
+    c = make_als_town(extent=(80, 120), density=3, rng=0, strips=2)
+    psid = c.attributes["point_source_id"]
+    assert set(np.unique(psid)) == {1, 2}
+    (a0, a1, af), (b0, b1, bf) = c.meta["strips"]
+    assert a1 > b0  # the bands overlap
+    y = c.xyz[:, 1]
+    last = c.attributes["return_number"] == c.attributes["number_of_returns"]
+    both = last & (y > b0 + 2) & (y < a1 - 2)
+    one = last & (y < b0 - 2)
+    dens_both = both.sum() / (80 * (a1 - b0 - 4))
+    dens_one = one.sum() / (80 * (b0 - 2))
+    assert 1.7 < dens_both / dens_one < 2.3
+    # scan angles are measured from each strip's own flight line
+    ang = np.abs(c.attributes["scan_angle"] * 0.006)
+    assert ang.max() < 5.0
+    with pytest.raises(InvalidParameterError, match="strips"):
+        make_als_town(strips=0)

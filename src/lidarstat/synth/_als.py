@@ -12,8 +12,8 @@ The scene is geometry plus a scan simulation:
   points 1.5-8 m (along the pulse) below the terrain (multipath) or 15-60 m above the
   first surface (birds, haze).
 
-A single flight line along x at ``altitude`` above the mean terrain fires pulses on scan
-lines across the track (an oscillating mirror: the lines zig-zag), with a random phase
+One or several (``strips``, 30 % overlap) flight lines along x at ``altitude`` above the
+mean terrain fire pulses on scan lines across the track (an oscillating mirror: the lines zig-zag), with a random phase
 and along-track offset per line and a small jitter per pulse, at ``density`` pulses per
 square metre.  Each pulse is a ray from the aircraft: its last echo is the first hit on
 the terrain, a building or a car (exact ray casting); on its way it may cross tree
@@ -322,33 +322,48 @@ def _ellipsoid_hits(trees, index):
     return t_in, t_out, tid
 
 
-def _pulses(extent, density, altitude, terrain, rng, origin=(0.0, 0.0)):
-    """Aircraft positions and unit directions of the pulses (module docstring)."""
-    W, H = extent
-    x_org, y_org = origin
+def _strip_bands(height, strips, overlap):
+    """(y_start, y_end, y_flight) of each flight strip across [0, height]."""
+    if strips == 1:
+        return [(0.0, height, height / 2)]
+    delta = height / strips
+    out = []
+    for s in range(strips):
+        yc = (s + 0.5) * delta
+        half = 0.5 * delta * (1 + overlap)
+        out.append((max(0.0, yc - half), min(height, yc + half), yc))
+    return out
+
+
+def _pulses(extent, density, altitude, terrain, rng, strips=1, overlap=0.3):
+    """Aircraft positions, unit directions, GPS times and strip ids of the pulses."""
+    W, Htot = extent
     step = 1.0 / math.sqrt(density)
-    y_fl = y_org + H / 2
-    n_lines = int(math.ceil(W / step)) + 1
-    n_per = int(math.ceil(H / step)) + 1
-    line = np.repeat(np.arange(n_lines), n_per)
-    k = np.tile(np.arange(n_per), n_lines)
-    phase = rng.uniform(0, 1, n_lines)[line]
-    shift = rng.uniform(-0.25, 0.25, n_lines)[line] * step
-    y = y_org + (k + phase - 0.5) * step
-    frac = (y - y_org) / H
-    zig = np.where(line % 2 == 0, frac, 1 - frac) - 0.5
-    x = x_org + line * step + shift + zig * step * 0.5
-    x = x + rng.normal(0, 0.05 * step, x.size)
-    y = y + rng.normal(0, 0.05 * step, y.size)
-    keep = (x >= x_org) & (x <= x_org + W) & (y >= y_org) & (y <= y_org + H)
-    x, y, line = x[keep], y[keep], line[keep]
-    zm = terrain.z(np.array([x_org + W / 2]), np.array([y_org + H / 2]))[0]
-    plane = np.stack([x, y_fl + 0 * y, np.full(x.size, zm + altitude)], axis=1)
-    target = np.stack([x, y, np.full(x.size, zm)], axis=1)
-    d = target - plane
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    gps = line * 0.01 + (y - y_org) / H * 0.009
-    return plane, d, gps
+    zm = terrain.z(np.array([W / 2]), np.array([Htot / 2]))[0]
+    parts = []
+    for s, (y0, y1, y_fl) in enumerate(_strip_bands(Htot, strips, overlap)):
+        H = y1 - y0
+        n_lines = int(math.ceil(W / step)) + 1
+        n_per = int(math.ceil(H / step)) + 1
+        line = np.repeat(np.arange(n_lines), n_per)
+        k = np.tile(np.arange(n_per), n_lines)
+        phase = rng.uniform(0, 1, n_lines)[line]
+        shift = rng.uniform(-0.25, 0.25, n_lines)[line] * step
+        y = y0 + (k + phase - 0.5) * step
+        frac = (y - y0) / H
+        zig = np.where(line % 2 == 0, frac, 1 - frac) - 0.5
+        x = line * step + shift + zig * step * 0.5
+        x = x + rng.normal(0, 0.05 * step, x.size)
+        y = y + rng.normal(0, 0.05 * step, y.size)
+        keep = (x >= 0) & (x <= W) & (y >= y0) & (y <= y1)
+        x, y, line = x[keep], y[keep], line[keep]
+        plane = np.stack([x, np.full(x.size, y_fl), np.full(x.size, zm + altitude)], axis=1)
+        target = np.stack([x, y, np.full(x.size, zm)], axis=1)
+        d = target - plane
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        gps = 1000.0 * s + line * 0.01 + (y - y0) / H * 0.009
+        parts.append((plane, d, gps, np.full(x.size, s, dtype=np.int64)))
+    return tuple(np.concatenate(a) for a in zip(*parts))
 
 
 def _simulate(spec, *, density, sigma, rng, altitude, noise_fraction, name, extra_meta):
@@ -376,8 +391,8 @@ def _simulate(spec, *, density, sigma, rng, altitude, noise_fraction, name, extr
     for pid, fid in enumerate(roof_fids, start=1):
         plane_of_face[fid] = pid
     trees = spec["trees"]
-    o, d, gps = _pulses(spec["extent"], density, altitude, terrain, rng,
-                        spec.get("origin", (0.0, 0.0)))
+    o, d, gps, strip = _pulses(spec["extent"], density, altitude, terrain, rng,
+                               spec.get("strips", 1))
     P = o.shape[0]
     t_ter = terrain.hit(o, d)
     index = _RayIndex(o, d, float(np.median(o[:, 2] + t_ter * d[:, 2])))
@@ -497,6 +512,7 @@ def _simulate(spec, *, density, sigma, rng, altitude, noise_fraction, name, extr
     nor = np.concatenate([nor, np.ones(n_noise, np.uint8)])
     pulse_all = np.concatenate([pulse, P + np.arange(n_noise)])
     gps_all = np.concatenate([gps[pulse], gps[kk] + 1e-7])
+    strip_all = np.concatenate([strip[pulse], strip[kk]])
     org = np.concatenate([o[pulse], o[kk]])
     pad = np.full(n_noise, np.nan)
     normal = np.concatenate([normal, np.full((n_noise, 3), np.nan)])
@@ -562,7 +578,8 @@ def _simulate(spec, *, density, sigma, rng, altitude, noise_fraction, name, extr
         "return_number": ret_num[order], "number_of_returns": nor[order],
         "classification": cls[order],
         "scan_angle": np.round(scan_angle[order] / 0.006).astype(np.int16),
-        "gps_time": gps_all[order], "point_source_id": np.ones(t_all.size, np.uint16),
+        "gps_time": gps_all[order],
+        "point_source_id": (strip_all[order] + 1).astype(np.uint16),
     }
     Ko, Ho = K[order] + 0.0, H[order] + 0.0
     st = surface_type_from_curvature(Ko, Ho)
@@ -605,7 +622,8 @@ def _check_common(func, density, sigma, altitude, noise_fraction):
 
 
 def make_als_town(*, extent=(160.0, 120.0), density=8.0, sigma=0.03, rng=None,
-                  layout_seed=0, altitude=500.0, noise_fraction=0.002) -> SyntheticCloud:
+                  layout_seed=0, altitude=500.0, noise_fraction=0.002,
+                  strips=1) -> SyntheticCloud:
     """Airborne scan of a small town with exact truth (module docstring).
 
     The town: a main road along x through the middle (8 m wide) and a cross road along
@@ -629,10 +647,15 @@ def make_als_town(*, extent=(160.0, 120.0), density=8.0, sigma=0.03, rng=None,
     layout_seed : int
         Seed of the town layout: the same layout for every `rng`.
     altitude : float
-        Flying height above the mean terrain (m); the swath must cover the extent's
-        y size within +/- 20 degrees (checked).
+        Flying height above the mean terrain (m); every strip's swath must stay within
+        +/- 20 degrees of nadir (checked).
     noise_fraction : float
         Outlier points per echo (half far below the surface, half above).
+    strips : int
+        Number of parallel flight lines along x, evenly spread across y, each covering
+        its share of the extent plus 30 % overlap with its neighbours (overlap zones get
+        twice the density, as in real surveys); ``point_source_id`` is the strip
+        number (1, 2, ...), GPS times of strip s start at 1000 s.
 
     Returns
     -------
@@ -674,9 +697,16 @@ def make_als_town(*, extent=(160.0, 120.0), density=8.0, sigma=0.03, rng=None,
         raise InvalidParameterError(f"The 'extent' parameter of {func} must be a pair of "
                                     f"sizes in [60, 2000] m. Got {extent!r} instead.")
     W, Hy = float(ext[0]), float(ext[1])
-    if Hy / 2 > altitude * math.tan(math.radians(20.0)):
+    strips = check_scalar(strips, "strips", func=func, low=1, high=20, closed="both",
+                          integer=True)
+    half = max(max(yf - y0, y1 - yf) for y0, y1, yf in _strip_bands(Hy, strips, 0.3))
+    if half > altitude * math.tan(math.radians(20.0)):
         raise InvalidParameterError(f"{func}: the swath at altitude {altitude} m does not "
-                                    f"cover {Hy} m across the track within 20 degrees")
+                                    f"cover {Hy} m across the track within 20 degrees "
+                                    f"with {strips} strip(s)")
+    if W * Hy * density * (1 + 0.3 * (strips > 1)) > 3e7:
+        raise InvalidParameterError(f"{func}: {W:.0f} x {Hy:.0f} m at {density} pulses per "
+                                    "square metre is too many pulses (> 30 million)")
     lay = np.random.default_rng(layout_seed)
     terrain = _Terrain(100.0, 0.03, 0.01, 1.2, 140.0, 110.0)
     ym, xm = Hy / 2, W / 2
@@ -781,11 +811,13 @@ def make_als_town(*, extent=(160.0, 120.0), density=8.0, sigma=0.03, rng=None,
             cars.append({"center": (float(p[0]), float(p[1])), "half_size": (2.2, 0.9),
                          "height": float(lay.uniform(1.4, 1.7)), "angle": ang})
     spec = {"terrain": terrain, "extent": (W, Hy), "buildings": buildings, "trees": trees,
-            "cars": cars, "roads": roads, "road_mask": road_mask, "soil_mask": _soil_mask}
+            "cars": cars, "roads": roads, "road_mask": road_mask, "soil_mask": _soil_mask,
+            "strips": strips}
     rng = np.random.default_rng(rng)
     return _simulate(spec, density=density, sigma=sigma, rng=rng, altitude=altitude,
                      noise_fraction=noise_fraction, name="als_town",
-                     extra_meta={"extent": (W, Hy), "layout_seed": layout_seed})
+                     extra_meta={"extent": (W, Hy), "layout_seed": layout_seed,
+                                 "strips": _strip_bands(Hy, strips, 0.3)})
 
 
 def make_hip_roof_scene(*, density=15.0, sigma=0.03, rng=None, altitude=400.0,
