@@ -22,7 +22,7 @@ def add_arguments(group):
                        help="search-area distance from a raw cluster (default 3 b)")
     group.add_argument("--w-radius", type=float, default=None,
                        help="radius of the SAR adjacency W (default 1.5 x point spacing)")
-    group.add_argument("--fs-alpha", type=float, default=0.01,
+    group.add_argument("--fs-alpha", type=float, default=0.001,
                        help="level of the Forward Search F test")
     group.add_argument("--fs-envelope", type=float, default=0.001,
                        help="level of the deletion-residual envelope")

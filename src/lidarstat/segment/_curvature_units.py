@@ -63,7 +63,7 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_size=30):
 
 def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
                       grow_radius=None, min_size=30, refine=False, threshold=None,
-                      w_radius=None, fs_alpha=0.01, diagnostics=None, curv=None):
+                      w_radius=None, fs_alpha=0.001, diagnostics=None, curv=None):
     """Segment by tested curvature classes, optionally refined by SAR-FS (seed 000).
 
     Parameters

@@ -210,7 +210,7 @@ def _merged_unit(points, idx, group, w_radius, degree):
 
 
 def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, max_degree=3,
-                        alpha=0.01, alpha_residual=0.001, stop="both", block=1,
+                        alpha=0.001, alpha_residual=0.001, stop="both", block=1,
                         max_steps=500, min_size=10, merge_alpha=0.01, graph=None,
                         diagnostics=None, progress=None):
     """SAR-FS refinement of given raw clusters; returns a :class:`Segmentation`.
@@ -328,7 +328,7 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
 
 
 def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.05,
-                fs_alpha=0.01, alpha_residual=0.001, stop="both", degree=1, max_degree=3,
+                fs_alpha=0.001, alpha_residual=0.001, stop="both", degree=1, max_degree=3,
                 adaptive=False, grow_radius=None, threshold=None, w_radius=None,
                 min_size=30, block=1, max_steps=500, diagnostics=None, progress=None,
                 rng=0):
