@@ -61,3 +61,20 @@ def test_covariance_errors(box_las, tmp_path, capsys, argv, message):
     err = capsys.readouterr().err
     assert code == 2 and message in err and err.count("\n") == 1
     assert not (tmp_path / "out.laz").exists()
+
+
+def test_segment_method_covariance(box_las, tmp_path, capsys):
+    out = tmp_path / "seg.npz"
+    lines = tmp_path / "seg.lines.geojson"
+    code = main(["segment", str(box_las), str(out), "--method", "covariance", "--k", "30",
+                 "--min-size", "100", "--lines", str(lines)])
+    stdout = capsys.readouterr().out
+    assert code == 0 and "covariance: 2 segments" in stdout
+    res = read(out)
+    assert {"segment_id", "point_class", "reintegrated"} <= set(res.field_names)
+    table = (tmp_path / "seg.segments.csv").read_text().splitlines()
+    assert table[0].startswith("segment_id,n_points") and len(table) == 3
+    import json
+
+    feats = json.loads(lines.read_text())["features"]
+    assert len(feats) == 1 and feats[0]["properties"]["segment_a"] == 1
