@@ -1,10 +1,16 @@
-"""Per-point classes: HK surface types (seed 000), surface / edge / boundary (seed 003)."""
+"""Per-point classes: HK surface types (seed 000), surface / edge / boundary (seed 003),
+moments classification and filter scores (seed 004)."""
 
 from ._covariance import FIELDS as COVARIANCE_CLASS_FIELDS
 from ._covariance import (CovarianceClasses, CovarianceClassification, PointClass,
                           classify_covariance, covariance, estimate_plane_sigma)
+from ._cycle import CycleChoice, choose_cycle, skewness_balance_cycle
 from ._hk import SurfaceType, hk_surface_types
+from ._moments import ASPRS, MomentsClassification, MomentsStep, classify_moments
+from ._scores import GROUND_CODES, ClassScores, FilterErrors, class_scores, filter_errors
 
 __all__ = ["SurfaceType", "hk_surface_types", "COVARIANCE_CLASS_FIELDS", "CovarianceClasses",
            "CovarianceClassification", "PointClass", "classify_covariance", "covariance",
-           "estimate_plane_sigma"]
+           "estimate_plane_sigma", "ASPRS", "MomentsClassification", "MomentsStep",
+           "classify_moments", "CycleChoice", "choose_cycle", "skewness_balance_cycle",
+           "GROUND_CODES", "ClassScores", "FilterErrors", "class_scores", "filter_errors"]

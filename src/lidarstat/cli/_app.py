@@ -17,7 +17,7 @@ logger = logging.getLogger("lidarstat")
 
 #: Subcommands that live in a module of their own (``cli/<name>.py``), each with a
 #: ``register(subparsers)`` function. Add a command by adding its module here.
-COMMAND_MODULES: tuple[str, ...] = ("segment", "covariance", "ridges")
+COMMAND_MODULES: tuple[str, ...] = ("segment", "covariance", "ridges", "moments", "evaluate")
 
 
 def check_output(path: str, src: str | None = None) -> Path:

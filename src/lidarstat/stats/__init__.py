@@ -1,5 +1,7 @@
-"""Vectorised hypothesis tests (chi-square, Wald, z, F) returning statistics, p-values and decisions."""
+"""Vectorised hypothesis tests (chi-square, Wald, z, F, dip), sequential moments and densities."""
 
+from ._moments import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
+                       sequential_moments, standard_moments)
 from ._results import TestResult
 from ._sar import (LogDet, PolynomialBasis, SARFit, sar_fit, sar_mean_surface, select_degree,
                    weights_matrix)
@@ -8,4 +10,6 @@ from ._tests import (f_test_paper, variance_test_paper, variance_test_satterthwa
 
 __all__ = ["TestResult", "variance_test_paper", "variance_test_satterthwaite", "wald_test",
            "z_test", "f_test_paper", "LogDet", "PolynomialBasis", "SARFit", "sar_fit",
-           "sar_mean_surface", "select_degree", "weights_matrix"]
+           "sar_mean_surface", "select_degree", "weights_matrix", "SequentialMoments",
+           "sequential_moments", "standard_moments", "DensityEstimate", "density_estimate",
+           "dip_test"]

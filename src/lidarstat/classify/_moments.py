@@ -1,0 +1,583 @@
+"""Unsupervised classification by sequential skewness and kurtosis (Crosilla et al., seed 004).
+
+The procedure of the paper, per tile:
+
+1. density estimates and dip tests of elevation and intensity; the category with the more
+   clearly multimodal distribution (smaller dip-test p-value) is analysed first;
+2. the sequential skewness/kurtosis analysis of that category gives a separating cycle:
+   the values left form the first cluster, the removed ones stay unclassified;
+3. the cluster is analysed by the complementary category and split again when that is
+   multimodal;
+4. steps 2-3 are repeated on the unclassified values until nothing separates.
+
+Elevation is analysed as the residual from a plane fitted to the tile's ground cluster (the
+paper uses raw elevations, which on a slope mixes terrain trend with objects; removing the
+trend is what makes the method usable on the ISPRS samples, see docs/methods/moments.md).
+Tiles are the progressive method of the paper's section 4: regular tiles split into four
+while the ground cluster stays multimodal. Classes come from one ground surface built over
+all tiles, so tile borders leave no seams.
+"""
+
+from __future__ import annotations
+
+import logging
+import warnings
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._shared.validation import check_points, check_scalar
+from ..errors import InvalidParameterError, LidarstatWarning
+from ..stats._moments import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
+                              sequential_moments)
+from ._cycle import CycleChoice, choose_cycle, skewness_balance_cycle
+from ._surface import cell_keys, ground_surface
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["MomentsStep", "MomentsClassification", "classify_moments", "ASPRS"]
+
+#: ASPRS LAS classification codes written by ``moments``.
+ASPRS = {"unclassified": 1, "ground": 2, "low_vegetation": 3, "medium_vegetation": 4,
+         "high_vegetation": 5, "building": 6, "road": 11}
+
+_CURVE_SAMPLES = 600  # samples of each curve kept for the report
+
+
+@dataclass(frozen=True)
+class MomentsStep:
+    """One analysed population: what was tested, the curves and the cycle chosen.
+
+    Attributes
+    ----------
+    tile : int
+        Tile index (-1 for the reconciliation pass over all tiles).
+    step : int
+        Step number inside the tile (1 = first category).
+    population : str
+        What was analysed (``'tile'``, ``'cluster 1'``, ``'unclassified'`` ...).
+    category : str
+        ``'elevation'`` (residual from the tile trend) or ``'intensity'``.
+    n : int
+        Values analysed.
+    dip : dict
+        Dip statistic and p-value per category tested at this step.
+    choice : CycleChoice
+        The separating cycle and its evidence.
+    curves : dict
+        Thinned ``cycle``, ``skewness``, ``kurtosis``, ``threshold`` arrays.
+    density : DensityEstimate or None
+        Density of the analysed category.
+    """
+
+    tile: int
+    step: int
+    population: str
+    category: str
+    n: int
+    dip: dict
+    choice: CycleChoice
+    curves: dict
+    density: DensityEstimate | None = None
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (curves excluded)."""
+        return {"tile": self.tile, "step": self.step, "population": self.population,
+                "category": self.category, "n": self.n, "dip": self.dip,
+                "choice": self.choice.to_dict()}
+
+
+@dataclass(frozen=True)
+class MomentsClassification:
+    """Result of :func:`classify_moments`.
+
+    Attributes
+    ----------
+    classification : (N,) ndarray of uint8
+        ASPRS codes (see :data:`ASPRS`).
+    cluster_id : (N,) ndarray of int32
+        Cluster each point was assigned to by the moment procedure (unique over tiles;
+        0 = none).
+    height : (N,) ndarray of float64
+        Height above the ground surface model.
+    ground : (N,) ndarray of bool
+        Ground (classes 2 and 11).
+    steps : list of MomentsStep
+        Every analysis, in order, for the report.
+    tiles : list of dict
+        Tile boxes, sizes, split decisions and ground thresholds.
+    params : dict
+        Parameters used.
+    """
+
+    classification: np.ndarray
+    cluster_id: np.ndarray
+    height: np.ndarray
+    ground: np.ndarray
+    steps: list = field(default_factory=list)
+    tiles: list = field(default_factory=list)
+    params: dict = field(default_factory=dict)
+
+    def to_fields(self) -> dict:
+        """Per-point output fields: ``classification`` and ``cluster_id``."""
+        return {"classification": self.classification, "cluster_id": self.cluster_id}
+
+    def counts(self) -> dict:
+        """Points per ASPRS class name."""
+        names = {v: k for k, v in ASPRS.items()}
+        codes, n = np.unique(self.classification, return_counts=True)
+        return {names.get(int(c), str(int(c))): int(k) for c, k in zip(codes, n)}
+
+    def summary(self) -> str:
+        """A few lines for the terminal."""
+        tot = max(1, self.classification.size)
+        lines = [f"{self.classification.size} points, {len(self.tiles)} tiles, "
+                 f"{len(self.steps)} moment analyses"]
+        for name, k in self.counts().items():
+            lines.append(f"  {name:<18}{k:>10}  {100 * k / tot:5.1f} %")
+        return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- helpers
+def _thin(sm: SequentialMoments) -> dict:
+    step = max(1, sm.cycle.size // _CURVE_SAMPLES)
+    s = slice(None, None, step)
+    return {"cycle": sm.cycle[s], "skewness": sm.skewness[s], "kurtosis": sm.kurtosis[s],
+            "threshold": sm.threshold[s], "remaining": sm.remaining[s]}
+
+
+def _fit_plane(xy, z):
+    """Least-squares plane ``z = a + b x + c y`` (falls back to the mean)."""
+    if z.size < 3:
+        return np.array([float(np.mean(z)) if z.size else 0.0, 0.0, 0.0])
+    A = np.column_stack([np.ones(z.size), xy])
+    coef, *_ = np.linalg.lstsq(A, z, rcond=None)
+    return coef
+
+
+def _plane_at(coef, xy):
+    return coef[0] + xy @ coef[1:]
+
+
+def _lowest_per_cell(xy, z, cell):
+    key = cell_keys(xy, cell)
+    o = np.lexsort((z, key))
+    ks = key[o]
+    first = np.r_[True, ks[1:] != ks[:-1]]
+    return o[first]
+
+
+@dataclass
+class _Params:
+    alpha: float
+    min_cluster: int
+    smoothing: float
+    cycle: int | None
+    bandwidth: object
+    method: str
+    max_steps: int
+    elevation_rule: str = "symmetry"
+
+
+def _analyse(values, category, p: _Params, *, tile, step, population, dips, record=True):
+    """Sequential moments of one population + the cycle choice; returns (choice, step)."""
+    sm = sequential_moments(values, min_points=max(2, min(4, values.size)))
+    if p.method == "skewness-balancing":
+        ch = skewness_balance_cycle(sm)
+    else:
+        ch = choose_cycle(sm, category, min_cluster=p.min_cluster, smoothing=p.smoothing,
+                          cycle=p.cycle if step == 1 else None,
+                          elevation_rule=p.elevation_rule)
+    rec = None
+    if record:
+        de = density_estimate(values, bandwidth=p.bandwidth, gridsize=256)
+        rec = MomentsStep(tile=tile, step=step, population=population, category=category,
+                          n=int(values.size), dip=dips, choice=ch, curves=_thin(sm),
+                          density=de)
+    return ch, rec
+
+
+def _dips(cats: dict, alpha: float) -> dict:
+    out = {}
+    for name, v in cats.items():
+        t = dip_test(v, alpha=alpha)
+        out[name] = {"dip": float(t.statistic), "pvalue": float(t.pvalue),
+                     "multimodal": bool(t.reject)}
+    return out
+
+
+# --------------------------------------------------------------------------- one tile
+def _tile_ground(xy, z, p: _Params, tile: int, steps: list):
+    """Ground cluster of one tile by the elevation analysis of plane residuals.
+
+    Returns the boolean ground mask, the residual threshold and the final plane.
+    """
+    n = z.size
+    if n < 8:
+        return np.ones(n, bool), np.inf, _fit_plane(xy, z)
+    # initial trend: plane through the lowest point of each of ~8 x 8 sub-cells
+    ext = float(np.max(np.ptp(xy, axis=0))) or 1.0
+    low = _lowest_per_cell(xy, z, ext / 8.0 + 1e-9)
+    coef = _fit_plane(xy[low], z[low])
+    ground = np.ones(n, bool)
+    thr = np.inf
+    for it in range(3):
+        e = z - _plane_at(coef, xy)
+        ch, _ = _analyse(e, "elevation", p, tile=tile, step=1, population="tile", dips={},
+                         record=False)
+        if ch.cycle is None:
+            ground = np.ones(n, bool)
+            thr = np.inf
+        else:
+            thr = ch.threshold
+            ground = e <= thr
+        if ground.sum() < 3:
+            break
+        new = _fit_plane(xy[ground], z[ground])
+        if np.allclose(new, coef, atol=1e-6):
+            break
+        coef = new
+    return ground, thr, coef
+
+
+def _five_step(cats: dict, p: _Params, tile: int, steps: list, first_cluster: int):
+    """The paper's steps 1-4 on one tile's 1-D values; returns a cluster label per point."""
+    n = next(iter(cats.values())).size
+    labels = np.zeros(n, np.int32)
+    todo = np.arange(n)
+    next_id = first_cluster
+    step = 1
+    while todo.size >= 2 * p.min_cluster and step <= p.max_steps:
+        sub = {k: v[todo] for k, v in cats.items()}
+        dips = _dips(sub, p.alpha)
+        multi = {k: d for k, d in dips.items() if d["multimodal"]}
+        if not multi and step > 1:
+            break
+        pool = multi or dips
+        cat = min(pool, key=lambda k: (pool[k]["pvalue"], -pool[k]["dip"]))
+        ch, rec = _analyse(sub[cat], cat, p, tile=tile, step=step,
+                           population="tile" if step == 1 else "unclassified", dips=dips)
+        steps.append(rec)
+        if ch.cycle is None:
+            break
+        low = sub[cat] <= ch.threshold
+        cluster = todo[low]
+        rest = todo[~low]
+        # step 3: the cluster by the complementary category
+        comp = [k for k in cats if k != cat]
+        split = False
+        if comp and cluster.size >= 2 * p.min_cluster:
+            c2 = comp[0]
+            v2 = cats[c2][cluster]
+            d2 = _dips({c2: v2}, p.alpha)
+            if d2[c2]["multimodal"]:
+                ch2, rec2 = _analyse(v2, c2, p, tile=tile, step=step,
+                                     population=f"cluster {next_id}", dips=d2)
+                steps.append(rec2)
+                if ch2.cycle is not None:
+                    lo2 = v2 <= ch2.threshold
+                    labels[cluster[lo2]] = next_id
+                    labels[cluster[~lo2]] = next_id + 1
+                    next_id += 2
+                    split = True
+        if not split:
+            labels[cluster] = next_id
+            next_id += 1
+        todo = rest
+        step += 1
+    if todo.size:
+        labels[todo] = next_id
+        next_id += 1
+    return labels, next_id
+
+
+# --------------------------------------------------------------------------- tiles
+def _tiles(xy, size):
+    key = cell_keys(xy, size)
+    o = np.argsort(key, kind="stable")
+    ks = key[o]
+    b = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1], True])
+    return [o[a:e] for a, e in zip(b[:-1], b[1:])]
+
+
+def _progressive(xy, z, idx, size, min_size, min_points, p, tile_id, steps, tiles):
+    """Analyse one tile; split into four while its ground residuals stay multimodal."""
+    g, thr, coef = _tile_ground(xy[idx], z[idx], p, tile_id, steps)
+    info = {"tile": tile_id, "size": size, "n": int(idx.size),
+            "x0": float(xy[idx, 0].min()), "y0": float(xy[idx, 1].min()),
+            "threshold": float(thr) if np.isfinite(thr) else None}
+    if size / 2 >= min_size and idx.size >= 4 * min_points and g.sum() >= 8:
+        e = z[idx][g] - _plane_at(coef, xy[idx][g])
+        d = dip_test(e, alpha=p.alpha)
+        info["ground_dip_pvalue"] = float(d.pvalue)
+        if d.reject:
+            info["split"] = True
+            tiles.append(info)
+            out = []
+            for j, child in enumerate(_tiles(xy[idx], size / 2)):
+                if child.size < min_points:
+                    out.append((idx[child], g[child]))
+                    continue
+                out.extend(_progressive(xy, z, idx[child], size / 2, min_size, min_points, p,
+                                        f"{tile_id}.{j}", steps, tiles))
+            return out
+    info["split"] = False
+    tiles.append(info)
+    return [(idx, g)]
+
+
+# --------------------------------------------------------------------------- public
+def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
+                     method: str = "moments", tile_size: float = 64.0,
+                     min_tile_size: float = 16.0, alpha: float = 0.05, min_cluster: int = 10,
+                     smoothing: float = 0.01, cycle: int | None = None,
+                     bandwidth="silverman", surface_cell: float = 2.0,
+                     vegetation_heights=(0.5, 2.0), min_object_height: float = 0.5,
+                     elevation_rule: str = "symmetry", workers: int | None = None, source: str | None = None
+                     ) -> MomentsClassification:
+    """Classify points as ground, road, building, vegetation or unclassified without training.
+
+    Parameters
+    ----------
+    xyz : (N, 3) array_like
+        Coordinates (UTM-sized values are fine: every tile works in a local frame).
+    intensity : (N,) array_like, optional
+        Return intensity. Without it only elevation is analysed (a LidarstatWarning says
+        so) and no road class is produced.
+    number_of_returns, return_number : (N,) array_like, optional
+        Return structure; points that are not the last of several returns are vegetation
+        candidates.
+    method : {'moments', 'skewness-balancing'}
+        The sequential moments procedure, or the skewness-balancing baseline (Bartels &
+        Wei 2006: remove the highest points until the skewness is <= 0) in the same tiles.
+    tile_size, min_tile_size : float
+        Side of the regular tiles and the smallest side the progressive split may reach.
+    alpha : float
+        Level of the dip tests.
+    min_cluster : int
+        Smallest cluster a cut may leave on either side.
+    smoothing : float
+        Moving-average width of the curves as a fraction of the values analysed.
+    cycle : int, optional
+        Override the separating cycle of the first analysis of every tile.
+    bandwidth : {'silverman', 'scott'} or float
+        Kernel density bandwidth (the paper's ``h`` as a float).
+    surface_cell : float
+        Cell of the ground surface model (one TIN vertex per cell).
+    vegetation_heights : (float, float)
+        Heights above ground separating low (3), medium (4) and high (5) vegetation.
+    min_object_height : float
+        Points closer than this to the ground surface and not ground are unclassified (1).
+    workers : int, optional
+        Threads for the tiles (default: CPU count).
+    source : str, optional
+        File name used in messages.
+
+    Returns
+    -------
+    MomentsClassification
+
+    Raises
+    ------
+    InvalidPointsError
+        Empty cloud, NaN coordinates, too few points.
+    InvalidParameterError
+        Bad parameter values, or an attribute of the wrong length.
+
+    Notes
+    -----
+    See the module docstring and ``docs/methods/moments.md``: the separating cycles are
+    chosen by :func:`~lidarstat.classify.choose_cycle`; ground is the cluster left after
+    the elevation cut of every tile, re-decided once on heights above the single TIN of
+    all tiles' ground clusters so that neighbouring tiles agree; the ground is then split
+    by intensity (road = the darker cluster when intensity is multimodal on the ground)
+    and the objects are split by their return structure and height.
+
+    References
+    ----------
+    Crosilla, F., Macorig, D., Sebastianutti, I., Visintini, D. (2011). Points
+    classification by a sequential higher-order moments statistical analysis of LiDAR data.
+    ISPRS Arch. XXXVIII-5/W12.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> g = np.random.default_rng(0)
+    >>> xy = g.uniform(0, 60, (6000, 2))
+    >>> z = 100 + 0.05 * xy[:, 0] + g.normal(0, 0.05, 6000)
+    >>> roof = (np.abs(xy - 30) < 8).all(axis=1)
+    >>> z[roof] += 6
+    >>> res = classify_moments(np.c_[xy, z], tile_size=60)
+    >>> bool((res.classification[roof] == 6).mean() > 0.9)
+    True
+    >>> bool((res.classification[~roof] == 2).mean() > 0.95)
+    True
+    """
+    func = "classify_moments"
+    pts = check_points(xyz, min_points=8, source=source)
+    n = len(pts)
+    if method not in ("moments", "skewness-balancing"):
+        raise InvalidParameterError(f"The 'method' parameter of {func} must be 'moments' or "
+                                    f"'skewness-balancing'. Got {method!r} instead.")
+    tile_size = check_scalar(tile_size, "tile_size", func=func, low=0)
+    min_tile_size = check_scalar(min_tile_size, "min_tile_size", func=func, low=0)
+    alpha = check_scalar(alpha, "alpha", func=func, low=0, high=1)
+    min_cluster = check_scalar(min_cluster, "min_cluster", func=func, low=1, closed="left",
+                               integer=True)
+    smoothing = check_scalar(smoothing, "smoothing", func=func, low=0, high=0.5,
+                             closed="left")
+    surface_cell = check_scalar(surface_cell, "surface_cell", func=func, low=0)
+    if cycle is not None:
+        cycle = check_scalar(cycle, "cycle", func=func, low=0, closed="left", integer=True)
+
+    def _attr(a, name):
+        if a is None:
+            return None
+        arr = np.asarray(a)
+        if arr.shape != (n,):
+            raise InvalidParameterError(f"{source or 'points'}: `{name}` has shape {arr.shape}; "
+                                        f"expected ({n},)")
+        return arr
+
+    inten = _attr(intensity, "intensity")
+    nret = _attr(number_of_returns, "number_of_returns")
+    rnum = _attr(return_number, "return_number")
+    if inten is not None:
+        inten = inten.astype(np.float64)
+        if not np.isfinite(inten).all():
+            raise InvalidParameterError(f"{source or 'points'}: `intensity` holds NaN values")
+        if np.ptp(inten) == 0:
+            inten = None
+    if inten is None:
+        warnings.warn(f"{source or 'points'}: no usable intensity; classifying by elevation "
+                      "alone (no road class)", LidarstatWarning, stacklevel=2)
+
+    p = _Params(alpha=alpha, min_cluster=min_cluster, smoothing=smoothing, cycle=cycle,
+                bandwidth=bandwidth, method=method, max_steps=6,
+                elevation_rule=elevation_rule)
+    origin = pts.min(axis=0)
+    local = pts - origin
+    xy = np.ascontiguousarray(local[:, :2])
+    z = local[:, 2]
+
+    # ---- progressive tiles, in parallel
+    steps: list = []
+    tiles: list = []
+    roots = _tiles(xy, tile_size)
+    tile_steps = [[] for _ in roots]
+    tile_info = [[] for _ in roots]
+
+    def run(i):
+        return _progressive(xy, z, roots[i], tile_size, min_tile_size, 4 * min_cluster, p,
+                            str(i), tile_steps[i], tile_info[i])
+
+    with ThreadPoolExecutor(max_workers=workers) as ex:
+        parts = list(ex.map(run, range(len(roots))))
+    ground0 = np.zeros(n, bool)
+    for part in parts:
+        for idx, g in part:
+            ground0[idx] = g
+    for i in range(len(roots)):
+        tiles.extend(tile_info[i])
+    if ground0.sum() < 3:
+        ground0[:] = True
+
+    # ---- reconciliation: one surface over all tiles, one cut per root tile on heights
+    surf = ground_surface(xy[ground0], z[ground0], cell=surface_cell)
+    height = z - surf(xy)
+    ground = np.zeros(n, bool)
+    for i, idx in enumerate(roots):
+        h = height[idx]
+        if idx.size < 2 * min_cluster + 4:
+            ground[idx] = ground0[idx]
+            continue
+        dips = _dips({"elevation": h}, alpha)
+        ch, rec = _analyse(h, "elevation", p, tile=i, step=0, population="heights above "
+                           "the ground model", dips=dips, record=True)
+        steps.append(rec)
+        thr = ch.threshold if ch.cycle is not None else np.inf
+        ground[idx] = h <= thr
+
+    # ---- the paper's five steps per root tile (clusters, road by intensity)
+    cluster_id = np.zeros(n, np.int32)
+    next_id = 1
+    road = np.zeros(n, bool)
+    for i, idx in enumerate(roots):
+        cats = {"elevation": height[idx]}
+        if inten is not None:
+            cats["intensity"] = inten[idx]
+        if idx.size < 2 * min_cluster:
+            cluster_id[idx] = next_id
+            next_id += 1
+            continue
+        lab, next_id = _five_step(cats, p, i, steps, next_id)
+        cluster_id[idx] = lab
+        if inten is not None:
+            gi = idx[ground[idx]]
+            if gi.size >= 2 * min_cluster:
+                v = inten[gi]
+                d = _dips({"intensity": v}, alpha)
+                if d["intensity"]["multimodal"]:
+                    ch, rec = _analyse(v, "intensity", p, tile=i, step=len(steps),
+                                       population="ground cluster", dips=d)
+                    steps.append(rec)
+                    if ch.cycle is not None:
+                        dark = v <= ch.threshold
+                        # road: the darker cluster, if it is a minority-or-comparable part
+                        if 0.02 <= dark.mean() <= 0.8:
+                            road[gi[dark]] = True
+    for rec in tile_steps:
+        steps.extend(rec)
+
+    # ---- classes
+    cls = np.full(n, ASPRS["unclassified"], np.uint8)
+    cls[ground] = ASPRS["ground"]
+    cls[ground & road] = ASPRS["road"]
+    obj = ~ground & (height >= min_object_height)
+    multi = np.zeros(n, bool)
+    if nret is not None and rnum is not None:
+        multi = (nret.astype(int) > 1) & (rnum.astype(int) < nret.astype(int))
+    veg = obj & _vegetation_like(xy, height, obj, multi, surface_cell)
+    bld = obj & ~veg & (height >= vegetation_heights[1])
+    cls[bld] = ASPRS["building"]
+    h0, h1 = vegetation_heights
+    vmask = obj & ~bld
+    cls[vmask & (height < h0)] = ASPRS["low_vegetation"]
+    cls[vmask & (height >= h0) & (height < h1)] = ASPRS["medium_vegetation"]
+    cls[vmask & (height >= h1)] = ASPRS["high_vegetation"]
+    params = dict(method=method, tile_size=tile_size, min_tile_size=min_tile_size, alpha=alpha,
+                  min_cluster=min_cluster, smoothing=smoothing, cycle=cycle,
+                  bandwidth=bandwidth, surface_cell=surface_cell,
+                  vegetation_heights=list(vegetation_heights),
+                  min_object_height=min_object_height, intensity=inten is not None,
+                  returns=nret is not None and rnum is not None)
+    return MomentsClassification(classification=cls, cluster_id=cluster_id, height=height,
+                                 ground=ground, steps=steps, tiles=tiles, params=params)
+
+
+def _vegetation_like(xy, height, obj, multi, cell):
+    """Objects whose cell shows vegetation: several returns, or heights spread like a canopy.
+
+    A building cell holds a roof (heights within a few decimetres of a plane over the
+    cell); a tree cell holds points at many heights. The per-cell test compares the
+    spread of object heights in the cell with the spread of a roof: cells whose height
+    range exceeds ``2 * cell`` (a 45-degree roof over the cell) or where more than half of
+    the points are non-last returns are vegetation.
+    """
+    out = np.zeros(height.size, bool)
+    idx = np.flatnonzero(obj)
+    if idx.size == 0:
+        return out
+    key = cell_keys(xy[idx], 2 * cell)
+    _, inv = np.unique(key, return_inverse=True)
+    k = inv.max() + 1
+    hmax = np.full(k, -np.inf)
+    hmin = np.full(k, np.inf)
+    np.maximum.at(hmax, inv, height[idx])
+    np.minimum.at(hmin, inv, height[idx])
+    cnt = np.bincount(inv, minlength=k)
+    mfrac = np.bincount(inv, weights=multi[idx].astype(float), minlength=k) / np.maximum(cnt, 1)
+    veg_cell = (hmax - hmin > 4 * cell) | (mfrac > 0.5)
+    out[idx] = veg_cell[inv] | multi[idx]
+    return out

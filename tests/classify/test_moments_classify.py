@@ -1,0 +1,102 @@
+"""Moments classification: cycle choice, synthetic scene against truth, bad input, ISPRS."""
+
+import numpy as np
+import pytest
+
+from lidarstat.classify import ASPRS, choose_cycle, classify_moments, filter_errors
+from lidarstat.errors import InvalidParameterError, InvalidPointsError, LidarstatWarning
+from lidarstat.stats import sequential_moments
+
+from conftest import shared_file
+
+
+def _scene(rng, n=12000):
+    """Sloped terrain, a dark road, two flat roofs, a tree with several returns."""
+    xy = rng.uniform(0, 100, (n, 2))
+    z = 4.5e6 + 0.08 * xy[:, 0] - 0.03 * xy[:, 1] + rng.normal(0, 0.05, n)
+    truth = np.full(n, ASPRS["ground"])
+    inten = rng.normal(160, 12, n)
+    road = np.abs(xy[:, 1] - 20) < 4
+    truth[road] = ASPRS["road"]
+    inten[road] = rng.normal(60, 8, road.sum())
+    nret = np.ones(n, int)
+    rnum = np.ones(n, int)
+    for cx, cy, h in [(30, 60, 7.0), (70, 70, 10.0)]:
+        b = (np.abs(xy[:, 0] - cx) < 9) & (np.abs(xy[:, 1] - cy) < 7)
+        z[b] += h
+        truth[b] = ASPRS["building"]
+        inten[b] = rng.normal(110, 10, b.sum())
+    tree = np.hypot(xy[:, 0] - 80, xy[:, 1] - 35) < 5
+    first = tree & (rng.uniform(size=n) < 0.6)
+    z[first] += rng.uniform(3, 9, first.sum())
+    truth[first] = ASPRS["high_vegetation"]
+    nret[tree] = 2
+    rnum[first] = 1
+    rnum[tree & ~first] = 2
+    return np.c_[xy, z], inten, nret, rnum, truth
+
+
+def test_cycle_choice_finds_the_cluster_boundary(rng):
+    z = np.r_[rng.normal(0, 0.2, 3000), rng.normal(8, 0.5, 600)]
+    for rule in ("plateau", "symmetry"):
+        ch = choose_cycle(sequential_moments(z), "elevation", elevation_rule=rule)
+        assert 560 <= ch.cycle <= 720, rule
+    i = np.r_[rng.normal(50, 5, 3000), rng.normal(120, 10, 1500)]
+    ch = choose_cycle(sequential_moments(i), "intensity")
+    assert 70 < ch.threshold < 110
+    assert choose_cycle(sequential_moments(i), "intensity", cycle=5).cycle == 5
+
+
+def test_synthetic_scene_against_truth(rng):
+    xyz, inten, nret, rnum, truth = _scene(rng)
+    res = classify_moments(xyz, inten, number_of_returns=nret, return_number=rnum,
+                           tile_size=50)
+    tg = np.isin(truth, (2, 11))
+    e = filter_errors(res.ground, tg)
+    assert e.total < 0.03 and e.kappa > 0.9
+    bld = truth == ASPRS["building"]
+    assert (res.classification[bld] == ASPRS["building"]).mean() > 0.9
+    road = truth == ASPRS["road"]
+    assert (res.classification[road] == ASPRS["road"]).mean() > 0.8
+    assert (res.classification[truth == 2] == ASPRS["road"]).mean() < 0.05
+    veg = truth == ASPRS["high_vegetation"]
+    assert np.isin(res.classification[veg], (3, 4, 5)).mean() > 0.8
+    assert res.cluster_id.min() >= 1 and len(res.steps) > 0
+
+
+def test_skewness_balancing_baseline_runs(rng):
+    xyz, inten, *_ , truth = _scene(rng, 6000)
+    res = classify_moments(xyz, inten, method="skewness-balancing", tile_size=50)
+    e = filter_errors(res.ground, np.isin(truth, (2, 11)))
+    assert e.total < 0.1
+
+
+def test_no_intensity_warns_and_runs(rng):
+    xyz, *_ = _scene(rng, 3000)
+    with pytest.warns(LidarstatWarning, match="intensity"):
+        res = classify_moments(xyz, None, tile_size=50)
+    assert ASPRS["road"] not in res.classification
+
+
+@pytest.mark.parametrize("bad, err", [
+    (np.zeros((0, 3)), InvalidPointsError),
+    (np.array([[0, 0, np.nan]] * 20), InvalidPointsError),
+])
+def test_bad_points(bad, err):
+    with pytest.raises(err):
+        classify_moments(bad)
+
+
+def test_bad_parameters(rng):
+    xyz = rng.normal(size=(100, 3))
+    with pytest.raises(InvalidParameterError):
+        classify_moments(xyz, method="nope")
+    with pytest.raises(InvalidParameterError):
+        classify_moments(xyz, np.ones(5))
+
+
+def test_input_not_modified(rng):
+    xyz, inten, *_ = _scene(rng, 3000)
+    a, b = xyz.copy(), inten.copy()
+    classify_moments(xyz, inten, tile_size=50)
+    assert np.array_equal(a, xyz) and np.array_equal(b, inten)
