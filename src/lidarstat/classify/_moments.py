@@ -408,7 +408,8 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     >>> z = 100 + 0.05 * xy[:, 0] + g.normal(0, 0.05, 6000)
     >>> roof = (np.abs(xy - 30) < 8).all(axis=1)
     >>> z[roof] += 6
-    >>> res = classify_moments(np.c_[xy, z], tile_size=60)
+    >>> intensity = g.normal(120, 10, 6000)
+    >>> res = classify_moments(np.c_[xy, z], intensity, tile_size=60)
     >>> bool((res.classification[roof] == 6).mean() > 0.9)
     True
     >>> bool((res.classification[~roof] == 2).mean() > 0.95)
