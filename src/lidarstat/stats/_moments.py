@@ -334,7 +334,7 @@ def dip_test(values, *, alpha: float = 0.05, max_points: int = 20000, rng=0,
     --------
     >>> import numpy as np
     >>> g = np.random.default_rng(1)
-    >>> dip_test(np.r_[g.normal(0, 1, 500), g.normal(6, 1, 500)]).reject
+    >>> bool(dip_test(np.r_[g.normal(0, 1, 500), g.normal(6, 1, 500)]).reject)
     True
     """
     import diptest as _dt
