@@ -147,27 +147,6 @@ def _thin(sm: SequentialMoments) -> dict:
             "threshold": sm.threshold[s], "remaining": sm.remaining[s]}
 
 
-def _fit_plane(xy, z):
-    """Least-squares plane ``z = a + b x + c y`` (falls back to the mean)."""
-    if z.size < 3:
-        return np.array([float(np.mean(z)) if z.size else 0.0, 0.0, 0.0])
-    A = np.column_stack([np.ones(z.size), xy])
-    coef, *_ = np.linalg.lstsq(A, z, rcond=None)
-    return coef
-
-
-def _plane_at(coef, xy):
-    return coef[0] + xy @ coef[1:]
-
-
-def _lowest_per_cell(xy, z, cell):
-    key = cell_keys(xy, cell)
-    o = np.lexsort((z, key))
-    ks = key[o]
-    first = np.r_[True, ks[1:] != ks[:-1]]
-    return o[first]
-
-
 @dataclass
 class _Params:
     alpha: float
@@ -178,6 +157,9 @@ class _Params:
     method: str
     max_steps: int
     elevation_rule: str = "symmetry"
+    tile_size: float = 64.0
+    min_tile_size: float = 16.0
+    min_tile_points: int = 40
 
 
 def _analyse(values, category, p: _Params, *, tile, step, population, dips, record=True):
@@ -207,38 +189,97 @@ def _dips(cats: dict, alpha: float) -> dict:
     return out
 
 
-# --------------------------------------------------------------------------- one tile
-def _tile_ground(xy, z, p: _Params, tile: int, steps: list):
-    """Ground cluster of one tile by the elevation analysis of plane residuals.
+# --------------------------------------------------------------------------- ground
+def opening_surface(xy, z, *, window: float, cell: float = 1.0) -> np.ndarray:
+    """Lower envelope of the cloud: grey opening of the lowest-point grid (per point).
 
-    Returns the boolean ground mask, the residual threshold and the final plane.
+    The opening (erosion then dilation with a ``window x window`` square) removes every
+    object narrower than the window and keeps planar slopes exactly (the opening of a
+    linear function is itself), so ``z - opening`` is a height above ground that is not
+    biased by the terrain trend. Empty cells take the value of the nearest filled cell.
     """
-    n = z.size
-    if n < 8:
-        return np.ones(n, bool), np.inf, _fit_plane(xy, z)
-    # initial trend: plane through the lowest point of each of ~8 x 8 sub-cells
-    ext = float(np.max(np.ptp(xy, axis=0))) or 1.0
-    low = _lowest_per_cell(xy, z, ext / 8.0 + 1e-9)
-    coef = _fit_plane(xy[low], z[low])
-    ground = np.ones(n, bool)
-    thr = np.inf
-    for it in range(3):
-        e = z - _plane_at(coef, xy)
-        ch, _ = _analyse(e, "elevation", p, tile=tile, step=1, population="tile", dips={},
-                         record=False)
-        if ch.cycle is None:
-            ground = np.ones(n, bool)
-            thr = np.inf
-        else:
-            thr = ch.threshold
-            ground = e <= thr
-        if ground.sum() < 3:
-            break
-        new = _fit_plane(xy[ground], z[ground])
-        if np.allclose(new, coef, atol=1e-6):
-            break
-        coef = new
-    return ground, thr, coef
+    from scipy import ndimage as ndi
+
+    ij = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64)
+    shape = tuple(ij.max(axis=0) + 1)
+    g = np.full(shape, np.inf)
+    np.minimum.at(g, (ij[:, 0], ij[:, 1]), z)
+    empty = ~np.isfinite(g)
+    if empty.any():
+        ind = ndi.distance_transform_edt(empty, return_distances=False, return_indices=True)
+        g = g[tuple(ind)]
+    k = max(3, int(round(window / cell)) | 1)
+    op = ndi.grey_opening(g, size=(k, k))
+    return op[ij[:, 0], ij[:, 1]]
+
+
+def _tiles(xy, size, origin=None):
+    key = cell_keys(xy, size, origin=origin)
+    o = np.argsort(key, kind="stable")
+    ks = key[o]
+    b = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1], True])
+    return [o[a:e] for a, e in zip(b[:-1], b[1:])]
+
+
+def _progressive(xy, h, idx, size, parent_thr, p, tile_id, steps, tiles, record):
+    """Cut of one tile on heights; split into four while its ground stays multimodal.
+
+    Returns ``[(indices, threshold), ...]``. A tile whose heights do not separate keeps
+    its parent's threshold (a tile lying on one large roof is unimodal too, so "nothing
+    separates" must not mean "everything is ground").
+    """
+    v = h[idx]
+    thr = parent_thr
+    rec = None
+    if idx.size >= 2 * p.min_cluster + 4:
+        dips = _dips({"elevation": v}, p.alpha) if record else {}
+        ch, rec = _analyse(v, "elevation", p, tile=tile_id, step=1,
+                           population="heights above the ground model", dips=dips,
+                           record=record)
+        if ch.cycle is not None:
+            thr = min(ch.threshold, parent_thr)
+    info = {"tile": tile_id, "size": size, "n": int(idx.size),
+            "x0": float(xy[idx, 0].min()) if idx.size else None,
+            "y0": float(xy[idx, 1].min()) if idx.size else None,
+            "threshold": float(thr) if np.isfinite(thr) else None, "split": False}
+    kept = v <= thr
+    if (size / 2 >= p.min_tile_size and idx.size >= 4 * p.min_tile_points
+            and kept.sum() >= 8):
+        d = dip_test(v[kept], alpha=p.alpha)
+        info["ground_dip_pvalue"] = float(d.pvalue)
+        if d.reject:
+            info["split"] = True
+            tiles.append(info)
+            if rec is not None:
+                steps.append(rec)
+            out = []
+            origin = (xy[idx, 0].min(), xy[idx, 1].min())
+            for j, child in enumerate(_tiles(xy[idx], size / 2, origin)):
+                out.extend(_progressive(xy, h, idx[child], size / 2, thr, p,
+                                        f"{tile_id}.{j}", steps, tiles, record))
+            return out
+    tiles.append(info)
+    if rec is not None:
+        steps.append(rec)
+    return [(idx, thr)]
+
+
+def _ground_pass(xy, h, roots, p, workers, record):
+    """One cut of every root tile (in threads); ground mask, tile records, steps."""
+    steps = [[] for _ in roots]
+    tiles = [[] for _ in roots]
+
+    def run(i):
+        return _progressive(xy, h, roots[i], p.tile_size, np.inf, p, str(i), steps[i],
+                            tiles[i], record)
+
+    with ThreadPoolExecutor(max_workers=workers) as ex:
+        parts = list(ex.map(run, range(len(roots))))
+    ground = np.zeros(h.size, bool)
+    for part in parts:
+        for idx, thr in part:
+            ground[idx] = h[idx] <= thr
+    return ground, [t for ts in tiles for t in ts], [s for ss in steps for s in ss]
 
 
 def _five_step(cats: dict, p: _Params, tile: int, steps: list, first_cluster: int):
@@ -292,47 +333,13 @@ def _five_step(cats: dict, p: _Params, tile: int, steps: list, first_cluster: in
     return labels, next_id
 
 
-# --------------------------------------------------------------------------- tiles
-def _tiles(xy, size):
-    key = cell_keys(xy, size)
-    o = np.argsort(key, kind="stable")
-    ks = key[o]
-    b = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1], True])
-    return [o[a:e] for a, e in zip(b[:-1], b[1:])]
-
-
-def _progressive(xy, z, idx, size, min_size, min_points, p, tile_id, steps, tiles):
-    """Analyse one tile; split into four while its ground residuals stay multimodal."""
-    g, thr, coef = _tile_ground(xy[idx], z[idx], p, tile_id, steps)
-    info = {"tile": tile_id, "size": size, "n": int(idx.size),
-            "x0": float(xy[idx, 0].min()), "y0": float(xy[idx, 1].min()),
-            "threshold": float(thr) if np.isfinite(thr) else None}
-    if size / 2 >= min_size and idx.size >= 4 * min_points and g.sum() >= 8:
-        e = z[idx][g] - _plane_at(coef, xy[idx][g])
-        d = dip_test(e, alpha=p.alpha)
-        info["ground_dip_pvalue"] = float(d.pvalue)
-        if d.reject:
-            info["split"] = True
-            tiles.append(info)
-            out = []
-            for j, child in enumerate(_tiles(xy[idx], size / 2)):
-                if child.size < min_points:
-                    out.append((idx[child], g[child]))
-                    continue
-                out.extend(_progressive(xy, z, idx[child], size / 2, min_size, min_points, p,
-                                        f"{tile_id}.{j}", steps, tiles))
-            return out
-    info["split"] = False
-    tiles.append(info)
-    return [(idx, g)]
-
-
 # --------------------------------------------------------------------------- public
 def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                      method: str = "moments", tile_size: float = 64.0,
                      min_tile_size: float = 16.0, alpha: float = 0.05, min_cluster: int = 10,
                      smoothing: float = 0.01, cycle: int | None = None,
-                     bandwidth="silverman", surface_cell: float = 2.0,
+                     bandwidth="silverman", surface_cell: float = 4.0,
+                     opening_window: float = 20.0, iterations: int = 4,
                      vegetation_heights=(0.5, 2.0), min_object_height: float = 0.5,
                      elevation_rule: str = "symmetry", workers: int | None = None, source: str | None = None
                      ) -> MomentsClassification:
@@ -364,7 +371,13 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     bandwidth : {'silverman', 'scott'} or float
         Kernel density bandwidth (the paper's ``h`` as a float).
     surface_cell : float
-        Cell of the ground surface model (one TIN vertex per cell).
+        Cell of the ground surface model (one TIN vertex, the cell's median ground point,
+        per cell; a cell of several points keeps the other points' heights honest).
+    opening_window : float
+        Window of the grey opening giving the first lower envelope (wider than most
+        buildings; planar slopes pass unchanged).
+    iterations : int
+        Refits of the ground surface to the ground of the previous pass.
     vegetation_heights : (float, float)
         Heights above ground separating low (3), medium (4) and high (5) vegetation.
     min_object_height : float
@@ -456,49 +469,25 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
 
     p = _Params(alpha=alpha, min_cluster=min_cluster, smoothing=smoothing, cycle=cycle,
                 bandwidth=bandwidth, method=method, max_steps=6,
-                elevation_rule=elevation_rule)
+                elevation_rule=elevation_rule, tile_size=tile_size,
+                min_tile_size=min_tile_size, min_tile_points=4 * min_cluster)
     origin = pts.min(axis=0)
     local = pts - origin
     xy = np.ascontiguousarray(local[:, :2])
     z = local[:, 2]
 
-    # ---- progressive tiles, in parallel
-    steps: list = []
-    tiles: list = []
+    # ---- ground: lower envelope, then cuts on heights above a surface refitted to the
+    # ground of the previous pass (progressive tiles in threads)
     roots = _tiles(xy, tile_size)
-    tile_steps = [[] for _ in roots]
-    tile_info = [[] for _ in roots]
-
-    def run(i):
-        return _progressive(xy, z, roots[i], tile_size, min_tile_size, 4 * min_cluster, p,
-                            str(i), tile_steps[i], tile_info[i])
-
-    with ThreadPoolExecutor(max_workers=workers) as ex:
-        parts = list(ex.map(run, range(len(roots))))
-    ground0 = np.zeros(n, bool)
-    for part in parts:
-        for idx, g in part:
-            ground0[idx] = g
-    for i in range(len(roots)):
-        tiles.extend(tile_info[i])
-    if ground0.sum() < 3:
-        ground0[:] = True
-
-    # ---- reconciliation: one surface over all tiles, one cut per root tile on heights
-    surf = ground_surface(xy[ground0], z[ground0], cell=surface_cell)
-    height = z - surf(xy)
-    ground = np.zeros(n, bool)
-    for i, idx in enumerate(roots):
-        h = height[idx]
-        if idx.size < 2 * min_cluster + 4:
-            ground[idx] = ground0[idx]
-            continue
-        dips = _dips({"elevation": h}, alpha)
-        ch, rec = _analyse(h, "elevation", p, tile=i, step=0, population="heights above "
-                           "the ground model", dips=dips, record=True)
-        steps.append(rec)
-        thr = ch.threshold if ch.cycle is not None else np.inf
-        ground[idx] = h <= thr
+    height = z - opening_surface(xy, z, window=opening_window)
+    for it in range(iterations + 1):
+        last = it == iterations
+        ground, tiles, steps = _ground_pass(xy, height, roots, p, workers, record=last)
+        if ground.sum() < 3:
+            ground[:] = True
+        if not last:
+            surf = ground_surface(xy[ground], z[ground], cell=surface_cell)
+            height = z - surf(xy)
 
     # ---- the paper's five steps per root tile (clusters, road by intensity)
     cluster_id = np.zeros(n, np.int32)
@@ -528,8 +517,6 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                         # road: the darker cluster, if it is a minority-or-comparable part
                         if 0.02 <= dark.mean() <= 0.8:
                             road[gi[dark]] = True
-    for rec in tile_steps:
-        steps.extend(rec)
 
     # ---- classes
     cls = np.full(n, ASPRS["unclassified"], np.uint8)

@@ -29,6 +29,7 @@ def _run(args):
         alpha=args.alpha, min_cluster=args.min_cluster, cycle=args.cycle,
         bandwidth=args.bandwidth, surface_cell=args.surface_cell,
         elevation_rule=args.elevation_rule, workers=args.workers,
+        opening_window=args.opening_window, iterations=args.iterations,
         source=str(args.input))
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
@@ -76,8 +77,12 @@ def register(sub):
     s.add_argument("--elevation-rule", choices=("symmetry", "plateau"), default="symmetry")
     s.add_argument("--bandwidth", type=_bandwidth, default="silverman",
                    help="density bandwidth: silverman, scott or a number (the paper's h)")
-    s.add_argument("--surface-cell", type=float, default=2.0,
-                   help="cell of the ground surface model")
+    s.add_argument("--surface-cell", type=float, default=4.0,
+                   help="cell of the ground surface model (one median point per cell)")
+    s.add_argument("--opening-window", type=float, default=20.0,
+                   help="window of the opening giving the first lower envelope")
+    s.add_argument("--iterations", type=int, default=4,
+                   help="refits of the ground surface")
     s.add_argument("--no-intensity", action="store_true", help="analyse elevation only")
     s.add_argument("--workers", type=int, default=None, help="threads for the tiles")
     s.add_argument("--report", default=None,
