@@ -284,7 +284,13 @@ def test_input_not_modified():
 
 # ------------------------------------------------------------------------------ CGAL
 
+_BUILT = {}
+
+
 def _cgal_binary(request):
+    """The CGAL driver, compiled once per session (and kept in pytest's cache when on)."""
+    if "exe" in _BUILT:
+        return _BUILT["exe"]
     if shutil.which("g++") is None or not Path("/usr/include/CGAL/Monge_via_jet_fitting.h").exists():
         pytest.skip("g++ or the CGAL headers (apt libcgal-dev libeigen3-dev) are not available")
     tag = hashlib.sha1(CGAL_SRC.read_bytes()).hexdigest()[:12]
@@ -300,6 +306,7 @@ def _cgal_binary(request):
         if r.returncode != 0:
             pytest.skip(f"cannot build the CGAL driver: {r.stderr[-300:]}")
         os.replace(tmp, out)
+    _BUILT["exe"] = out
     return out
 
 
