@@ -744,8 +744,11 @@ def make_als_town(*, extent=(160.0, 120.0), density=8.0, sigma=0.03, rng=None,
                     if kind == "gable_dormer":
                         nd = 1 + int(lay.uniform() < 0.5)
                         xs = [0.0] if nd == 1 else [-a / 2, a / 2]
-                        spec["dormers"] = [{"x": xd, "width": 1.8, "setback": 0.3 * b,
-                                            "front": 0.9, "rise": 0.5} for xd in xs]
+                        # A dormer (front 0.9 + rise 0.5 above the roof at 0.3 b from
+                        # the eave) must stay 0.2 below the ridge: low roofs get none.
+                        if 0.7 * (ridge - eave) > 1.4 + 0.2 + 0.05:
+                            spec["dormers"] = [{"x": xd, "width": 1.8, "setback": 0.3 * b,
+                                                "front": 0.9, "rise": 0.5} for xd in xs]
                     if kind == "hip_chimney" or (roof == "gable" and lay.uniform() < 0.5):
                         spec["chimneys"] = [{"x": lay.uniform(-a / 3, a / 3),
                                              "y": 0.4 * b, "size": 0.7, "height": 0.6}]
