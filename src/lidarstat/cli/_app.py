@@ -51,6 +51,14 @@ def progress(quiet):
     return report
 
 
+def write_summary_json(path, meta: dict) -> None:
+    """Write a command's run summary as JSON, atomically (``--summary-json``)."""
+    from .._shared._atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(meta, indent=2, default=str))
+
+
 # --------------------------------------------------------------------------- commands
 def cmd_info(args):
     from ..io import describe, format_description
@@ -86,10 +94,7 @@ def cmd_curvature(args):
         meta = {"input": str(args.input), "output": str(out), "seconds": elapsed,
                 "sigma": res.sigma, "sigma_estimated": res.sigma_estimated, "alpha": res.alpha,
                 "test": res.test, "frame": res.frame, "radius": res.radius, **res.counts()}
-        from .._shared._atomic import atomic_path
-
-        with atomic_path(args.summary_json) as tmp:
-            tmp.write_text(json.dumps(meta, indent=2))
+        write_summary_json(args.summary_json, meta)
     return 0
 
 

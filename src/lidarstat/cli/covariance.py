@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import json
 import time
 
-from ._app import check_output, progress
+from ._app import check_output, progress, write_summary_json
 
 
 def add_neighbourhood_arguments(s, *, k_default=50):
@@ -41,7 +40,6 @@ def cmd_covariance(args):
         print(f"{args.input} -> {out}  ({elapsed:.2f} s)")
         print(res.summary())
     if args.summary_json:
-        from .._shared._atomic import atomic_path
 
         c = res.classes
         meta = {"input": str(args.input), "output": str(out), "seconds": elapsed,
@@ -49,8 +47,7 @@ def cmd_covariance(args):
                 "sigma": c.sigma if isinstance(c.sigma, float) else None,
                 "sigma_estimated": c.sigma_estimated, "alpha": c.alpha,
                 "boundary_alpha": c.boundary_alpha, "point_class": c.counts()}
-        with atomic_path(args.summary_json) as tmp:
-            tmp.write_text(json.dumps(meta, indent=2))
+        write_summary_json(args.summary_json, meta)
     return 0
 
 

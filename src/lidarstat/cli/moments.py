@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
-from ._app import check_output
+from ._app import check_output, write_summary_json
 
 
 def _run(args):
@@ -44,12 +43,9 @@ def _run(args):
         if report:
             print(f"report: {report}")
     if args.summary_json:
-        from .._shared._atomic import atomic_path
-
-        with atomic_path(args.summary_json) as tmp:
-            tmp.write_text(json.dumps({"input": str(args.input), "output": str(out),
-                                       "seconds": elapsed, "counts": res.counts(),
-                                       "params": res.params}, indent=2, default=str))
+        write_summary_json(args.summary_json, {"input": str(args.input), "output": str(out),
+                                               "seconds": elapsed, "counts": res.counts(),
+                                               "params": res.params})
     return 0
 
 

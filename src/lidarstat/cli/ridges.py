@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
-from ._app import check_output, progress
+from ._app import check_output, progress, write_summary_json
 
 
 def _lines_path(args, out: Path) -> Path:
@@ -39,7 +38,6 @@ def cmd_ridges(args):
         print(res.summary())
         print(f"  lines: {lines_path}")
     if args.summary_json:
-        from .._shared._atomic import atomic_path
 
         r = res.fields["ridge"]
         meta = {"input": str(args.input), "output": str(out), "lines": str(lines_path),
@@ -47,8 +45,7 @@ def cmd_ridges(args):
                 "sigma_estimated": res.jets.sigma_estimated, "crest_points": int((r == 1).sum()),
                 "ravine_points": int((r == 2).sum()), "n_lines": len(res.lines),
                 "params": res.params}
-        with atomic_path(args.summary_json) as tmp:
-            tmp.write_text(json.dumps(meta, indent=2, default=str))
+        write_summary_json(args.summary_json, meta)
     return 0
 
 

@@ -11,12 +11,11 @@ inside ``run``. The options every method shares are defined here.
 
 from __future__ import annotations
 
-import json
 import time
 from importlib import import_module
 from pathlib import Path
 
-from ._app import check_output
+from ._app import check_output, write_summary_json
 
 #: method name -> module path (``add_arguments``, ``run``). Add a method by adding it here.
 SEGMENT_METHODS: dict[str, str] = {
@@ -52,14 +51,12 @@ def cmd_segment(args):
         print(seg.summary())
         print(f"  table: {table}" + (f"\n  lines: {lines}" if seg.lines is not None else ""))
     if args.summary_json:
-        from .._shared._atomic import atomic_path
 
         meta = {"input": str(args.input), "output": str(out), "table": str(table),
                 "lines": str(lines) if seg.lines is not None else None,
                 "method": args.method, "seconds": elapsed, "n_segments": seg.n_segments,
                 "params": seg.params}
-        with atomic_path(args.summary_json) as tmp:
-            tmp.write_text(json.dumps(meta, indent=2, default=str))
+        write_summary_json(args.summary_json, meta)
     return 0
 
 
