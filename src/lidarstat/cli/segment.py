@@ -51,7 +51,6 @@ def cmd_segment(args):
         print(seg.summary())
         print(f"  table: {table}" + (f"\n  lines: {lines}" if seg.lines is not None else ""))
     if args.summary_json:
-
         meta = {"input": str(args.input), "output": str(out), "table": str(table),
                 "lines": str(lines) if seg.lines is not None else None,
                 "method": args.method, "seconds": elapsed, "n_segments": seg.n_segments,

@@ -45,7 +45,7 @@ def _step_png(path, rec):
 
 def write_moments_report(folder, result, *, input_path=None, output_path=None, seconds=None,
                          max_plots: int = 60) -> Path:
-    """Write ``report.json``, ``step_XXX.png`` and ``index.html`` into `folder`.
+    """Write ``report.json``, ``step_NNN.png`` and ``index.html`` into `folder`.
 
     Parameters
     ----------

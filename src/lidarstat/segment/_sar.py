@@ -239,7 +239,7 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
     graph : tuple, optional
         Precomputed :func:`delaunay_graph`.
     diagnostics : path, optional
-        Folder for the Forward Search monitoring plots (``fs_XXXX.png``, 40 largest units).
+        Folder for the Forward Search monitoring plots (``fs_NNNN.png``, 40 largest units).
     progress : callable, optional
         ``progress(done, total)`` after each cluster.
     """
