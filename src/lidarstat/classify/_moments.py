@@ -213,6 +213,17 @@ def opening_surface(xy, z, *, window: float, cell: float = 1.0) -> np.ndarray:
     return op[ij[:, 0], ij[:, 1]]
 
 
+def _heights(z, surface):
+    """Heights above a surface, rounded to 1e-6 of the coordinate unit.
+
+    A cut often falls inside a mass of tied heights: the TIN vertices themselves (height
+    exactly 0 in exact arithmetic) and points on flat ground. Without rounding, which of
+    them fall below the cut would depend on the last bits of the interpolation (1e-15),
+    i.e. on how the TIN is evaluated, not on the data.
+    """
+    return np.round(z - surface, 6)
+
+
 def _tiles(xy, size, origin=None):
     key = cell_keys(xy, size, origin=origin)
     o = np.argsort(key, kind="stable")
@@ -479,7 +490,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     # ---- ground: lower envelope, then cuts on heights above a surface refitted to the
     # ground of the previous pass (progressive tiles in threads)
     roots = _tiles(xy, tile_size)
-    height = z - opening_surface(xy, z, window=opening_window)
+    height = _heights(z, opening_surface(xy, z, window=opening_window))
     for it in range(iterations + 1):
         last = it == iterations
         ground, tiles, steps = _ground_pass(xy, height, roots, p, workers, record=last)
@@ -487,7 +498,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
             ground[:] = True
         if not last:
             surf = ground_surface(xy[ground], z[ground], cell=surface_cell)
-            height = z - surf(xy)
+            height = _heights(z, surf(xy))
 
     # ---- the paper's five steps per root tile (clusters, road by intensity)
     cluster_id = np.zeros(n, np.int32)

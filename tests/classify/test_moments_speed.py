@@ -1,0 +1,91 @@
+"""Moments classification: the fast kernels equal their plain references, so speed-ups
+change no label (TIN evaluation, cell medians, curve smoothing, tiling)."""
+
+import numpy as np
+import pytest
+
+from lidarstat.classify import _cycle, _moments, _surface
+from lidarstat.classify import classify_moments
+
+from classify.test_moments_classify import _scene
+
+
+def _scipy_surface(xy_ground, z_ground, *, cell, which="median"):
+    """The session-2 surface: scipy's LinearNDInterpolator, nearest vertex outside."""
+    from scipy.interpolate import LinearNDInterpolator
+    from scipy.spatial import Delaunay, cKDTree
+
+    sel = _surface._cell_pick(xy_ground, z_ground, cell, which)
+    P, V = xy_ground[sel], z_ground[sel]
+    lin, tree = LinearNDInterpolator(Delaunay(P), V), cKDTree(P)
+
+    def f(q):
+        v = lin(q)
+        bad = np.isnan(v)
+        v[bad] = V[tree.query(q[bad])[1]]
+        return v
+
+    return f
+
+
+def _convolve_smooth(y, w):
+    ok = np.isfinite(y)
+    k = np.ones(w)
+    num = np.convolve(np.where(ok, y, 0.0), k, mode="same")
+    den = np.convolve(ok.astype(float), k, mode="same")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / den, np.nan)
+
+
+def test_tin_matches_scipy_inside_outside_any_order(rng):
+    P = rng.uniform(0, 200, (3000, 2))
+    V = rng.normal(size=3000)
+    q = np.r_[rng.uniform(-20, 220, (40000, 2)), P, P[:50] + 1e-13]  # vertices, near-hull
+    ref = _scipy_surface(P, V, cell=1e-9)(q)  # cell tiny: every point is a vertex
+    got = _surface.TinSurface(P, V, cell=4.0)(q)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got[40000:43000], V, rtol=0, atol=1e-12)
+
+
+def test_tin_degenerate_vertices_fall_back_to_nearest():
+    P = np.c_[np.arange(5.0), np.arange(5.0)]  # collinear: no triangle
+    f = _surface.TinSurface(P, np.arange(5.0), cell=1.0)
+    assert f(np.array([[0.1, 0.0], [3.9, 4.2]])).tolist() == [0.0, 4.0]
+    f = _surface.TinSurface(P[:2], np.arange(2.0), cell=1.0)
+    assert f(np.array([[0.9, 0.8]])).tolist() == [1.0]
+
+
+@pytest.mark.parametrize("which", ["min", "median"])
+def test_cell_pick_equals_lexsort(rng, which):
+    xy = rng.uniform(0, 60, (20000, 2))
+    z = np.round(rng.normal(size=20000), 1)  # many ties: broken by input order
+    key = _surface.cell_keys(xy, 4.0)
+    o = np.lexsort((z, key))
+    ks = key[o]
+    b = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1], True])
+    ref = o[b[:-1]] if which == "min" else o[(b[:-1] + b[1:] - 1) // 2]
+    assert np.array_equal(_surface._cell_pick(xy, z, 4.0, which), ref)
+    far = xy * [1, 1e4]  # sparse cells over a huge box: the argsort path
+    key = _surface.cell_keys(far, 4.0)
+    assert _surface._cell_pick(far, z, 4.0, which).size == np.unique(key).size
+
+
+@pytest.mark.parametrize("n, w", [(10, 3), (11, 5), (3000, 31), (40000, 401)])
+def test_smoothing_equals_convolution(rng, n, w):
+    y = np.cumsum(rng.normal(size=n)) + 50.0
+    y[rng.uniform(size=n) < 0.05] = np.nan
+    np.testing.assert_allclose(_cycle._smooth(y, w), _convolve_smooth(y, w), rtol=1e-12,
+                               atol=1e-12, equal_nan=True)
+
+
+def test_classification_identical_to_scipy_surface(rng, monkeypatch):
+    xyz, inten, nret, rnum, _ = _scene(rng)
+    kw = dict(number_of_returns=nret, return_number=rnum, tile_size=50)
+    fast = classify_moments(xyz, inten, **kw)
+    monkeypatch.setattr(_moments, "ground_surface", _scipy_surface)
+    monkeypatch.setattr(_cycle, "_smooth", _convolve_smooth)
+    ref = classify_moments(xyz, inten, **kw)
+    assert np.array_equal(fast.classification, ref.classification)
+    assert np.array_equal(fast.cluster_id, ref.cluster_id)
+    assert np.array_equal(fast.height, ref.height)
+    assert [s.to_dict() for s in fast.steps] == [s.to_dict() for s in ref.steps]
