@@ -13,6 +13,7 @@ All files run with the command's default parameters (one parameter set).
 Usage::
 
     python benchmarks/real_moments.py --out benchmarks/results_real_moments.json
+    python benchmarks/real_moments.py --files pdal_testdata/autzen_trim.laz   # one file
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from lidarstat.classify import classify_moments, filter_errors
-from lidarstat.io import read
+from lidarstat.io import linear_units, read
 from lidarstat.segment import binary_scores
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -59,13 +60,15 @@ def score(path: Path) -> dict:
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = classify_moments(cloud.xyz, a.get("intensity"), source=str(path), **kw)
+        units = linear_units(cloud.crs, header=cloud.las_header, source=str(path))
+        res = classify_moments(cloud.xyz, a.get("intensity"), source=str(path), units=units,
+                               **kw)
     seconds = time.perf_counter() - t0
     cls = res.classification.astype(int)
     keep = ~np.isin(ref, LEFT_OUT) & (ref < 19)
     e = filter_errors(res.ground[keep], ref[keep] == 2)
     row = {"file": str(path.relative_to(DATA)), "points": int(len(ref)),
-           "scored": int(keep.sum()), "seconds": round(seconds, 2),
+           "scored": int(keep.sum()), "seconds": round(seconds, 2), "unit": units.name,
            "type_i": _pct(e.type_i), "type_ii": _pct(e.type_ii), "total": _pct(e.total),
            "kappa": round(e.kappa, 3)}
     if np.any(ref[keep] == 6):
@@ -87,9 +90,11 @@ def score(path: Path) -> dict:
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=None)
+    ap.add_argument("--files", nargs="+", default=FILES,
+                    help="files under ../shared/data to score (default: all of them)")
     args = ap.parse_args()
     rows = []
-    for rel in FILES:
+    for rel in args.files:
         path = DATA / rel
         if not path.is_file():
             print(f"skipped (not found): {path}")
@@ -109,7 +114,12 @@ def main():
         print(f"| {r['file']} | {r['points']:,} | {r['type_i']} | {r['type_ii']} | "
               f"{r['total']} | {r['kappa']} | {bld} | {veg} | {road} | {r['seconds']} |")
     if args.out:
-        Path(args.out).write_text(json.dumps(rows, indent=2))
+        out = Path(args.out)
+        if out.is_file() and set(args.files) != set(FILES):  # a subset updates its rows
+            new = {r["file"]: r for r in rows}
+            old = [new.pop(r["file"], r) for r in json.loads(out.read_text())]
+            rows = old + list(new.values())
+        out.write_text(json.dumps(rows, indent=2))
 
 
 if __name__ == "__main__":

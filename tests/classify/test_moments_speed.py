@@ -89,3 +89,36 @@ def test_classification_identical_to_scipy_surface(rng, monkeypatch):
     assert np.array_equal(fast.cluster_id, ref.cluster_id)
     assert np.array_equal(fast.height, ref.height)
     assert [s.to_dict() for s in fast.steps] == [s.to_dict() for s in ref.steps]
+
+
+def test_schedulers_give_identical_results(rng):
+    pytest.importorskip("dask", reason="the dask scheduler needs dask")
+    xyz, inten, nret, rnum, _ = _scene(rng, 6000)
+    kw = dict(number_of_returns=nret, return_number=rnum, tile_size=30, min_tile_size=10)
+    runs = [classify_moments(xyz, inten, scheduler=s, workers=2, **kw)
+            for s in ("sync", "threads", "dask")]
+    for r in runs[1:]:
+        assert np.array_equal(r.classification, runs[0].classification)
+        assert np.array_equal(r.cluster_id, runs[0].cluster_id)
+        assert [s.to_dict() for s in r.steps] == [s.to_dict() for s in runs[0].steps]
+        assert r.tiles == runs[0].tiles
+    # cluster ids are unique per tile: no id spans two root tiles
+    key = np.floor((xyz[:, :2] - xyz[:, :2].min(0)) / 30).astype(int) @ [1000, 1]
+    for c in np.unique(runs[0].cluster_id):
+        assert np.unique(key[runs[0].cluster_id == c]).size == 1
+    assert len({t["tile"] for t in runs[0].tiles}) == len(runs[0].tiles)
+
+
+def test_lengths_in_metres_whatever_the_file_unit(rng):
+    """The same scene in feet with units=0.3048 gets the labels of the metre scene."""
+    xyz, inten, nret, rnum, _ = _scene(rng, 8000)
+    kw = dict(number_of_returns=nret, return_number=rnum, tile_size=50)
+    ref = classify_moments(xyz, inten, **kw)
+    ft = classify_moments(xyz / 0.3048, inten, units=0.3048, **kw)
+    assert (ft.classification == ref.classification).mean() > 0.998
+    np.testing.assert_allclose(ft.height * 0.3048, ref.height, atol=1e-5)
+    naive = classify_moments(xyz / 0.3048, inten, **kw)  # windows 3.3 x too small
+    assert (naive.classification != ref.classification).sum() > \
+        5 * (ft.classification != ref.classification).sum()
+    with pytest.raises(Exception, match="units"):
+        classify_moments(xyz, inten, units=0, tile_size=50)

@@ -53,3 +53,22 @@ def test_moments_errors(tmp_path, scene_file, capsys):
     small = tmp_path / "s.las"
     write(small, PointCloud(np.zeros((5, 3)), {}))
     assert main(["evaluate", str(small), "--reference", str(scene_file)]) == 2
+
+
+def test_moments_units_options(scene_file, tmp_path):
+    """A feet copy of the scene with --scale 0.3048 (or --units ft) gets the metre labels."""
+    c = read(scene_file)
+    feet = tmp_path / "feet.las"
+    write(feet, PointCloud(c.xyz / 0.3048, {"intensity": c["intensity"]}))
+    ref, out_s, out_u = tmp_path / "m.las", tmp_path / "s.las", tmp_path / "u.las"
+    common = ["--tile-size", "60", "--no-report", "-q"]
+    assert main(["moments", str(scene_file), str(ref), *common]) == 0
+    js = tmp_path / "s.json"
+    assert main(["moments", str(feet), str(out_s), "--scale", "0.3048", "--summary-json",
+                 str(js), *common]) == 0
+    assert main(["moments", str(feet), str(out_u), "--units", "ft", *common]) == 0
+    a = read(ref)["classification"]
+    assert (read(out_s)["classification"] == a).mean() > 0.998
+    assert (read(out_u)["classification"] == a).mean() > 0.998
+    assert json.loads(js.read_text())["units"]["horizontal_m"] == 0.3048
+    assert main(["moments", str(feet), str(tmp_path / "x.las"), "--scale", "-1"]) == 2

@@ -22,12 +22,11 @@ from __future__ import annotations
 
 import logging
 import warnings
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .._shared.validation import check_points, check_scalar
+from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatWarning
 from ..stats._moments import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
                               sequential_moments)
@@ -275,22 +274,88 @@ def _progressive(xy, h, idx, size, parent_thr, p, tile_id, steps, tiles, record)
     return [(idx, thr)]
 
 
-def _ground_pass(xy, h, roots, p, workers, record):
-    """One cut of every root tile (in threads); ground mask, tile records, steps."""
-    steps = [[] for _ in roots]
-    tiles = [[] for _ in roots]
+class _TileOut:
+    """What one root tile gives back: per-point fields plus its report records."""
 
-    def run(i):
-        return _progressive(xy, h, roots[i], p.tile_size, np.inf, p, str(i), steps[i],
-                            tiles[i], record)
+    def __init__(self, fields, ground_steps, infos, steps=(), n_ids=0):
+        self.fields = fields
+        self.ground_steps = ground_steps
+        self.infos = infos
+        self.steps = list(steps)
+        self.n_ids = n_ids
 
-    with ThreadPoolExecutor(max_workers=workers) as ex:
-        parts = list(ex.map(run, range(len(roots))))
+    def to_fields(self):
+        return self.fields
+
+
+def _cut_tile(xyh, p, record):
+    """Progressive cuts of one root tile on heights (column 2 of `xyh`): ground mask."""
+    xy, h = xyh[:, :2], xyh[:, 2]
+    steps, infos = [], []
+    parts = _progressive(xy, h, np.arange(h.size), p.tile_size, np.inf, p, "", steps, infos,
+                         record)
     ground = np.zeros(h.size, bool)
-    for part in parts:
-        for idx, thr in part:
-            ground[idx] = h[idx] <= thr
-    return ground, [t for ts in tiles for t in ts], [s for ss in steps for s in ss]
+    for idx, thr in parts:
+        ground[idx] = h[idx] <= thr
+    return ground, steps, infos
+
+
+def _classify_tile(xyh, attrs, p, record, final):
+    """One root tile: its ground cut; on the final pass also the paper's five steps and the
+    road split of its ground by intensity. Cluster ids are local (from 1)."""
+    ground, gsteps, infos = _cut_tile(xyh, p, record)
+    if not final:
+        return _TileOut({"ground": ground}, gsteps, infos)
+    h = xyh[:, 2]
+    inten = attrs.get("intensity")
+    n = h.size
+    steps = []
+    road = np.zeros(n, bool)
+    if n < 2 * p.min_cluster:
+        return _TileOut({"ground": ground, "cluster_id": np.ones(n, np.int32), "road": road},
+                        gsteps, infos, steps, 1)
+    cats = {"elevation": h}
+    if inten is not None:
+        cats["intensity"] = inten
+    lab, next_id = _five_step(cats, p, -1, steps, 1)
+    if inten is not None:
+        gi = np.flatnonzero(ground)
+        if gi.size >= 2 * p.min_cluster:
+            v = inten[gi]
+            d = _dips({"intensity": v}, p.alpha)
+            if d["intensity"]["multimodal"]:
+                # not a tile's first analysis: never the --cycle override
+                ch, rec = _analyse(v, "intensity", p, tile=-1, step=0,
+                                   population="ground cluster", dips=d)
+                steps.append(rec)
+                if ch.cycle is not None:
+                    dark = v <= ch.threshold
+                    # road: the darker cluster, if it is a minority-or-comparable part
+                    if 0.02 <= dark.mean() <= 0.8:
+                        road[gi[dark]] = True
+    return _TileOut({"ground": ground, "cluster_id": lab, "road": road}, gsteps, infos,
+                    steps, next_id - 1)
+
+
+def _tile_pass(xyh, roots, p, inten, scheduler, workers, record, final):
+    """Every root tile through :func:`lidarstat.pipeline.map_tiles`; fields and records."""
+    from ..pipeline import map_tiles
+
+    index = {t.key: i for i, t in enumerate(roots)}
+    outs = [None] * len(roots)
+
+    def keep(tile, res):
+        outs[index[tile.key]] = res
+
+    attrs = {} if inten is None else {"intensity": inten}
+    fields = map_tiles(lambda pts, a: _classify_tile(pts, a, p, record, final), xyh,
+                       tiles=roots, attributes=attrs, scheduler=scheduler, workers=workers,
+                       collect=keep)
+    steps, infos = [], []
+    for i, o in enumerate(outs):
+        steps.extend(replace(s, tile=f"{i}{s.tile}") for s in o.ground_steps)
+        infos.extend({**t, "tile": f"{i}{t['tile']}"} for t in o.infos)
+    return fields, outs, steps, infos
 
 
 def _five_step(cats: dict, p: _Params, tile: int, steps: list, first_cluster: int):
@@ -352,8 +417,8 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                      bandwidth="silverman", surface_cell: float = 4.0,
                      opening_window: float = 20.0, iterations: int = 4,
                      vegetation_heights=(0.5, 2.0), min_object_height: float = 0.5,
-                     elevation_rule: str = "symmetry", workers: int | None = None, source: str | None = None
-                     ) -> MomentsClassification:
+                     elevation_rule: str = "symmetry", workers: int | None = None,
+                     scheduler: str = "threads", units=1.0, source: str | None = None) -> MomentsClassification:
     """Classify points as ground, road, building, vegetation or unclassified without training.
 
     Parameters
@@ -395,6 +460,15 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
         Points closer than this to the ground surface and not ground are unclassified (1).
     workers : int, optional
         Threads for the tiles (default: CPU count).
+    units : float, (float, float) or LinearUnits
+        Metres per coordinate unit (horizontal, vertical), e.g. from
+        :func:`lidarstat.io.linear_units` of the file's CRS. Every length parameter
+        (`tile_size`, `min_tile_size`, `surface_cell`, `opening_window`,
+        `vegetation_heights`, `min_object_height`) is in metres and converted with it, so
+        a file in feet gets the same physical windows as one in metres.
+    scheduler : {'threads', 'sync', 'dask'}
+        How root tiles run (:func:`lidarstat.pipeline.map_tiles`); every scheduler gives
+        the same result.
     source : str, optional
         File name used in messages.
 
@@ -453,6 +527,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     smoothing = check_scalar(smoothing, "smoothing", func=func, low=0, high=0.5,
                              closed="left")
     surface_cell = check_scalar(surface_cell, "surface_cell", func=func, low=0)
+    check_option(scheduler, "scheduler", ("threads", "sync", "dask"), func=func)
     if cycle is not None:
         cycle = check_scalar(cycle, "cycle", func=func, low=0, closed="left", integer=True)
 
@@ -478,69 +553,61 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
         warnings.warn(f"{source or 'points'}: no usable intensity; classifying by elevation "
                       "alone (no road class)", LidarstatWarning, stacklevel=2)
 
+    ux, uz = _unit_factors(units, source)
     p = _Params(alpha=alpha, min_cluster=min_cluster, smoothing=smoothing, cycle=cycle,
                 bandwidth=bandwidth, method=method, max_steps=6,
-                elevation_rule=elevation_rule, tile_size=tile_size,
-                min_tile_size=min_tile_size, min_tile_points=4 * min_cluster)
+                elevation_rule=elevation_rule, tile_size=tile_size / ux,
+                min_tile_size=min_tile_size / ux, min_tile_points=4 * min_cluster)
     origin = pts.min(axis=0)
     local = pts - origin
     xy = np.ascontiguousarray(local[:, :2])
     z = local[:, 2]
 
     # ---- ground: lower envelope, then cuts on heights above a surface refitted to the
-    # ground of the previous pass (progressive tiles in threads)
-    roots = _tiles(xy, tile_size)
-    height = _heights(z, opening_surface(xy, z, window=opening_window))
+    # ground of the previous pass (progressive tiles through lidarstat.pipeline)
+    from ..pipeline import tile_grid
+
+    xyh = np.zeros((n, 3))  # x, y and the current heights
+    xyh[:, :2] = xy
+    roots = tile_grid(xyh, p.tile_size)
+    height = _heights(z, opening_surface(xy, z, window=opening_window / ux, cell=1.0 / ux))
     for it in range(iterations + 1):
         last = it == iterations
-        ground, tiles, steps = _ground_pass(xy, height, roots, p, workers, record=last)
+        xyh[:, 2] = height
+        fields, outs, steps, tiles = _tile_pass(xyh, roots, p, inten, scheduler, workers,
+                                                record=last, final=last)
+        ground = fields["ground"]
         if ground.sum() < 3:
             ground[:] = True
         if not last:
-            surf = ground_surface(xy[ground], z[ground], cell=surface_cell)
+            surf = ground_surface(xy[ground], z[ground], cell=surface_cell / ux)
             height = _heights(z, surf(xy))
 
-    # ---- the paper's five steps per root tile (clusters, road by intensity)
-    cluster_id = np.zeros(n, np.int32)
-    next_id = 1
-    road = np.zeros(n, bool)
-    for i, idx in enumerate(roots):
-        cats = {"elevation": height[idx]}
-        if inten is not None:
-            cats["intensity"] = inten[idx]
-        if idx.size < 2 * min_cluster:
-            cluster_id[idx] = next_id
-            next_id += 1
-            continue
-        lab, next_id = _five_step(cats, p, i, steps, next_id)
-        cluster_id[idx] = lab
-        if inten is not None:
-            gi = idx[ground[idx]]
-            if gi.size >= 2 * min_cluster:
-                v = inten[gi]
-                d = _dips({"intensity": v}, alpha)
-                if d["intensity"]["multimodal"]:
-                    ch, rec = _analyse(v, "intensity", p, tile=i, step=len(steps),
-                                       population="ground cluster", dips=d)
-                    steps.append(rec)
-                    if ch.cycle is not None:
-                        dark = v <= ch.threshold
-                        # road: the darker cluster, if it is a minority-or-comparable part
-                        if 0.02 <= dark.mean() <= 0.8:
-                            road[gi[dark]] = True
+    # ---- the paper's five steps per root tile (clusters, road by intensity), run with the
+    # last cut above: cluster ids made unique in tile order, records in the session-2 order
+    road = fields["road"]
+    cluster_id = fields["cluster_id"]
+    first = 0
+    for t, o in zip(roots, outs):
+        cluster_id[t.points] += first
+        first += o.n_ids
+    for i, o in enumerate(outs):
+        for rec in o.steps:
+            steps.append(replace(rec, tile=i, step=len(steps) if rec.step == 0 else rec.step))
 
     # ---- classes
     cls = np.full(n, ASPRS["unclassified"], np.uint8)
     cls[ground] = ASPRS["ground"]
     cls[ground & road] = ASPRS["road"]
-    obj = ~ground & (height >= min_object_height)
+    obj = ~ground & (height >= min_object_height / uz)
     multi = np.zeros(n, bool)
     if nret is not None and rnum is not None:
         multi = (nret.astype(int) > 1) & (rnum.astype(int) < nret.astype(int))
-    veg = obj & _vegetation_like(xy, height, obj, multi, surface_cell)
-    bld = obj & ~veg & (height >= vegetation_heights[1])
+    h0, h1 = (v / uz for v in vegetation_heights)
+    veg = obj & _vegetation_like(xy, height, obj, multi, surface_cell / ux,
+                                 4 * surface_cell / uz)
+    bld = obj & ~veg & (height >= h1)
     cls[bld] = ASPRS["building"]
-    h0, h1 = vegetation_heights
     vmask = obj & ~bld
     cls[vmask & (height < h0)] = ASPRS["low_vegetation"]
     cls[vmask & (height >= h0) & (height < h1)] = ASPRS["medium_vegetation"]
@@ -550,19 +617,34 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                   bandwidth=bandwidth, surface_cell=surface_cell,
                   vegetation_heights=list(vegetation_heights),
                   min_object_height=min_object_height, intensity=inten is not None,
-                  returns=nret is not None and rnum is not None)
+                  returns=nret is not None and rnum is not None,
+                  units={"horizontal_m": ux, "vertical_m": uz})
     return MomentsClassification(classification=cls, cluster_id=cluster_id, height=height,
                                  ground=ground, steps=steps, tiles=tiles, params=params)
 
 
-def _vegetation_like(xy, height, obj, multi, cell):
+def _unit_factors(units, source):
+    """(horizontal, vertical) metres per coordinate unit from a number, pair or LinearUnits."""
+    if hasattr(units, "horizontal"):
+        pair = (units.horizontal, units.vertical)
+    elif np.ndim(units) == 0:
+        pair = (units, units)
+    else:
+        pair = tuple(units)
+    if len(pair) != 2 or not all(np.isfinite(float(u)) and float(u) > 0 for u in pair):
+        raise InvalidParameterError(f"{source or 'points'}: `units` must be metres per "
+                                    f"coordinate unit > 0 (or a pair); got {units!r}")
+    return float(pair[0]), float(pair[1])
+
+
+def _vegetation_like(xy, height, obj, multi, cell, spread):
     """Objects whose cell shows vegetation: several returns, or heights spread like a canopy.
 
     A building cell holds a roof (heights within a few decimetres of a plane over the
     cell); a tree cell holds points at many heights. The per-cell test compares the
-    spread of object heights in the cell with the spread of a roof: cells whose height
-    range exceeds ``2 * cell`` (a 45-degree roof over the cell) or where more than half of
-    the points are non-last returns are vegetation.
+    spread of object heights in the cell with the spread of a roof: cells (side ``2 * cell``)
+    whose height range exceeds `spread` (``4 * surface_cell``, in height units) or where more
+    than half of the points are non-last returns are vegetation.
     """
     out = np.zeros(height.size, bool)
     idx = np.flatnonzero(obj)
@@ -577,6 +659,6 @@ def _vegetation_like(xy, height, obj, multi, cell):
     np.minimum.at(hmin, inv, height[idx])
     cnt = np.bincount(inv, minlength=k)
     mfrac = np.bincount(inv, weights=multi[idx].astype(float), minlength=k) / np.maximum(cnt, 1)
-    veg_cell = (hmax - hmin > 4 * cell) | (mfrac > 0.5)
+    veg_cell = (hmax - hmin > spread) | (mfrac > 0.5)
     out[idx] = veg_cell[inv] | multi[idx]
     return out

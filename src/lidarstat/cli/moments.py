@@ -10,7 +10,7 @@ from ._app import check_output, write_summary_json
 
 def _run(args):
     from ..classify import classify_moments
-    from ..io import read, write
+    from ..io import linear_units, read, write
     from ..report._moments import write_moments_report
 
     out = check_output(args.output, args.input)
@@ -20,6 +20,8 @@ def _run(args):
 
         raise InvalidPointsError(f"{args.input}: the file holds no points")
     get = (lambda name: cloud[name] if name in cloud else None)
+    units = linear_units(cloud.crs, units=args.units, scale=args.scale,
+                         header=cloud.las_header, source=str(args.input))
     t0 = time.perf_counter()
     res = classify_moments(
         cloud.xyz, None if args.no_intensity else get("intensity"),
@@ -27,8 +29,8 @@ def _run(args):
         method=args.method, tile_size=args.tile_size, min_tile_size=args.min_tile_size,
         alpha=args.alpha, min_cluster=args.min_cluster, cycle=args.cycle,
         bandwidth=args.bandwidth, surface_cell=args.surface_cell,
-        elevation_rule=args.elevation_rule, workers=args.workers,
-        opening_window=args.opening_window, iterations=args.iterations,
+        elevation_rule=args.elevation_rule, workers=args.workers, scheduler=args.scheduler,
+        opening_window=args.opening_window, iterations=args.iterations, units=units,
         source=str(args.input))
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
@@ -38,14 +40,16 @@ def _run(args):
         report = write_moments_report(folder, res, input_path=args.input, output_path=out,
                                       seconds=elapsed)
     if not args.quiet:
-        print(f"{args.input} -> {out}  ({elapsed:.2f} s)")
+        print(f"{args.input} -> {out}  ({elapsed:.2f} s; coordinates in {units.name}, "
+              f"{units.horizontal:g} m, {units.source})")
         print(res.summary())
         if report:
             print(f"report: {report}")
     if args.summary_json:
         write_summary_json(args.summary_json, {"input": str(args.input), "output": str(out),
                                                "seconds": elapsed, "counts": res.counts(),
-                                               "params": res.params})
+                                               "params": res.params,
+                                               "units": units.to_dict()})
     return 0
 
 
@@ -63,9 +67,10 @@ def register(sub):
     s.add_argument("input")
     s.add_argument("output", help="output file; format from the suffix")
     s.add_argument("--method", choices=("moments", "skewness-balancing"), default="moments")
-    s.add_argument("--tile-size", type=float, default=64.0, help="side of the regular tiles")
+    s.add_argument("--tile-size", type=float, default=64.0,
+                   help="side of the regular tiles (metres)")
     s.add_argument("--min-tile-size", type=float, default=16.0,
-                   help="smallest side reached by the progressive split")
+                   help="smallest side reached by the progressive split (metres)")
     s.add_argument("--alpha", type=float, default=0.05, help="level of the dip tests")
     s.add_argument("--min-cluster", type=int, default=10)
     s.add_argument("--cycle", type=int, default=None,
@@ -74,13 +79,21 @@ def register(sub):
     s.add_argument("--bandwidth", type=_bandwidth, default="silverman",
                    help="density bandwidth: silverman, scott or a number (the paper's h)")
     s.add_argument("--surface-cell", type=float, default=4.0,
-                   help="cell of the ground surface model (one median point per cell)")
+                   help="cell of the ground surface model, one median point per cell (metres)")
     s.add_argument("--opening-window", type=float, default=20.0,
-                   help="window of the opening giving the first lower envelope")
+                   help="window of the opening giving the first lower envelope (metres)")
+    s.add_argument("--units", default="auto",
+                   choices=("auto", "metre", "m", "foot", "ft", "us-foot", "us-ft"),
+                   help="unit of the coordinates; auto reads it from the file's CRS (metres "
+                   "without a CRS); every length option is in metres and converted")
+    s.add_argument("--scale", type=float, default=None,
+                   help="metres per coordinate unit (overrides --units), e.g. 0.3048")
     s.add_argument("--iterations", type=int, default=4,
                    help="refits of the ground surface")
     s.add_argument("--no-intensity", action="store_true", help="analyse elevation only")
     s.add_argument("--workers", type=int, default=None, help="threads for the tiles")
+    s.add_argument("--scheduler", choices=("threads", "sync", "dask"), default="threads",
+                   help="how tiles run (lidarstat.pipeline.map_tiles); same result")
     s.add_argument("--report", default=None,
                    help="report folder (default: OUT stem + '_report')")
     s.add_argument("--no-report", action="store_true")

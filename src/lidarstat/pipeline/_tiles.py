@@ -146,7 +146,10 @@ def tile_grid(xyz, size: float, halo: float = 0.0) -> list[Tile]:
     xy = xyz[:, :2]
     grid = TileGrid.covering(xy.min(axis=0), xy.max(axis=0), size, halo)
     pid, key, is_core = grid.memberships(xy)
-    order = np.lexsort((pid, key))
+    if halo > 0:
+        order = np.lexsort((pid, key))
+    else:  # only core memberships, pid already increasing: a stable sort of the keys
+        order = np.argsort(key, kind="stable")
     pid, key, is_core = pid[order], key[order], is_core[order]
     starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
     ends = np.r_[starts[1:], key.size]
@@ -175,8 +178,10 @@ def _fields_of(result, n, key):
     return out
 
 
-def map_tiles(func: Callable, xyz, *, size: float, halo: float, scheduler: str = "sync",
-              workers: int | None = None, progress=None) -> dict[str, np.ndarray]:
+def map_tiles(func: Callable, xyz, *, size: float | None = None, halo: float = 0.0,
+              scheduler: str = "sync", workers: int | None = None, progress=None,
+              tiles: list | None = None, attributes: dict | None = None,
+              collect: Callable | None = None) -> dict[str, np.ndarray]:
     """Run ``func(xyz_of_tile)`` on every tile and assemble the core points' results.
 
     Parameters
@@ -186,9 +191,10 @@ def map_tiles(func: Callable, xyz, *, size: float, halo: float, scheduler: str =
         such as :class:`~lidarstat.features.CurvatureResult`) for the (M, 3) points of a
         tile, core and halo. Anything estimated from the whole cloud (a noise level, say)
         must be fixed in `func` beforehand, or tiles would estimate it each on their own.
+        With `attributes`, it is called as ``func(points, attributes_of_tile)``.
     xyz : (N, 3) array
     size : float
-        Core tile side.
+        Core tile side (not needed when `tiles` is given).
     halo : float
         At least the neighbourhood radius of `func` (planimetric), so that every core
         point sees its whole neighbourhood; then the result equals the untiled one.
@@ -200,20 +206,50 @@ def map_tiles(func: Callable, xyz, *, size: float, halo: float, scheduler: str =
         Threads for 'threads'.
     progress : callable, optional
         ``progress(done_points, total_points)`` after each tile.
+    tiles : list of Tile, optional
+        Tiles from :func:`tile_grid` on the same points, reused instead of cutting the
+        cloud again (a method that runs several passes over the same tiles).
+    attributes : dict of str to (N,) ndarray, optional
+        Per-point arrays handed to `func` cut to each tile's points (intensity, ...).
+    collect : callable, optional
+        ``collect(tile, result)``, called in the calling thread for every tile in tile
+        order, to gather what a result holds beyond its per-point fields (reports).
 
     Returns
     -------
     dict of str to (N,) ndarray
         Each field of `func`'s result for every point of `xyz`.
+
+    Examples
+    --------
+    >>> xyz = np.c_[np.arange(6.0), np.zeros(6), np.arange(6.0)]
+    >>> seen = []
+    >>> out = map_tiles(lambda p, a: {"z2": p[:, 2] * a["w"]}, xyz, size=2.0,
+    ...                 attributes={"w": np.full(6, 2.0)},
+    ...                 collect=lambda t, r: seen.append(t.key))
+    >>> out["z2"].tolist(), seen
+    ([0.0, 2.0, 4.0, 6.0, 8.0, 10.0], [(0, 0), (1, 0), (2, 0)])
     """
     xyz = check_points(xyz, name="xyz", min_points=1)
     check_option(scheduler, "scheduler", ("sync", "threads", "dask"), func="map_tiles")
-    tiles = tile_grid(xyz, size, halo)
+    if tiles is None:
+        if size is None:
+            raise InvalidParameterError("map_tiles needs `size` or precomputed `tiles`")
+        tiles = tile_grid(xyz, size, halo)
+    if attributes is not None:
+        attributes = {name: np.asarray(a) for name, a in attributes.items()}
+        for name, a in attributes.items():
+            if a.shape[:1] != (len(xyz),):
+                raise InvalidParameterError(
+                    f"map_tiles: attribute '{name}' has {a.shape[:1]} rows for "
+                    f"{len(xyz)} points")
     out: dict[str, np.ndarray] = {}
     done = 0
 
     def put(tile, result):
         nonlocal done
+        if collect is not None:
+            collect(tile, result)
         fields = _fields_of(result, tile.points.size, tile.key)
         rows = tile.points[tile.core]
         for name, arr in fields.items():
@@ -224,8 +260,13 @@ def map_tiles(func: Callable, xyz, *, size: float, halo: float, scheduler: str =
         if progress is not None:
             progress(done, len(xyz))
 
+    def args(tile):
+        if attributes is None:
+            return (xyz[tile.points],)
+        return xyz[tile.points], {name: a[tile.points] for name, a in attributes.items()}
+
     def one(tile):
-        return func(xyz[tile.points])
+        return func(*args(tile))
 
     if scheduler == "sync":
         for t in tiles:
@@ -240,7 +281,7 @@ def map_tiles(func: Callable, xyz, *, size: float, halo: float, scheduler: str =
         except ImportError as exc:  # pragma: no cover - depends on the environment
             raise InvalidParameterError(
                 "scheduler='dask' needs Dask: pip install 'lidarstat[dask]'") from exc
-        tasks = [dask.delayed(func)(xyz[t.points]) for t in tiles]
+        tasks = [dask.delayed(func)(*args(t)) for t in tiles]
         for t, res in zip(tiles, dask.compute(*tasks)):
             put(t, res)
     return out
