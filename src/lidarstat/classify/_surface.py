@@ -34,18 +34,61 @@ def cell_keys(xy: np.ndarray, cell: float, origin=None) -> np.ndarray:
 
 # --------------------------------------------------------------------------- cell picks
 @njit
+def _less(z, a, b):  # pragma: no cover - compiled
+    """Order by z, ties by input index (the order of ``np.lexsort((z, key))``)."""
+    return z[a] < z[b] or (z[a] == z[b] and a < b)
+
+
+@njit
+def _select(buf, k, z):  # pragma: no cover - compiled
+    """Put the k-th smallest of `buf` (by :func:`_less`) at ``buf[k]``: quickselect, O(n)."""
+    lo = 0
+    hi = buf.size - 1
+    while hi > lo:
+        mid = (lo + hi) // 2
+        # median of three as the pivot, moved to hi
+        if _less(z, buf[mid], buf[lo]):
+            buf[mid], buf[lo] = buf[lo], buf[mid]
+        if _less(z, buf[hi], buf[lo]):
+            buf[hi], buf[lo] = buf[lo], buf[hi]
+        if _less(z, buf[mid], buf[hi]):
+            buf[mid], buf[hi] = buf[hi], buf[mid]
+        pivot = buf[hi]
+        store = lo
+        for i in range(lo, hi):
+            if _less(z, buf[i], pivot):
+                buf[i], buf[store] = buf[store], buf[i]
+                store += 1
+        buf[store], buf[hi] = buf[hi], buf[store]
+        if store == k:
+            return
+        if store < k:
+            lo = store + 1
+        else:
+            hi = store - 1
+
+
+@njit
 def _pick_per_cell(order, z, starts, which_median):  # pragma: no cover - compiled
-    """Per cell (points ``order[starts[c]:starts[c+1]]`` in input order): the lowest or the
-    lower median by z, ties broken by input order (as ``np.lexsort((z, key))``)."""
+    """Per cell (points ``order[starts[c]:starts[c+1]]``): the lowest or the lower median
+    by z, ties broken by input index (as ``np.lexsort((z, key))``)."""
     m = starts.size - 1
     out = np.empty(m, np.int64)
+    buf = np.empty(order.size, np.int64)
     for c in range(m):
         a, b = starts[c], starts[c + 1]
-        idx = order[a:b]
-        zz = z[idx]
-        o = np.argsort(zz, kind="mergesort")
-        k = 0 if not which_median else (b - a - 1) // 2
-        out[c] = idx[o[k]]
+        if not which_median:
+            best = order[a]
+            for i in range(a + 1, b):
+                if _less(z, order[i], best):
+                    best = order[i]
+            out[c] = best
+            continue
+        w = buf[: b - a]
+        w[:] = order[a:b]
+        k = (b - a - 1) // 2
+        _select(w, k, z)
+        out[c] = w[k]
     return out
 
 
@@ -240,7 +283,8 @@ class TinSurface:
             if d is not None and d.nsimplex > 0:
                 lo = self.P.min(axis=0)
                 span = self.P.max(axis=0) - lo
-                g = max(float(cell), float(span.max()) / 4096.0, 1e-12)
+                # half-cell bins: about 3 candidate triangles per bin instead of 8
+                g = max(0.5 * float(cell), float(span.max()) / 4096.0, 1e-12)
                 nx, ny = (np.floor(span / g).astype(np.int64) + 1).tolist()
                 simp = np.ascontiguousarray(d.simplices, dtype=np.int64)
                 indptr, tri = _bin_triangles(self.P, simp, float(lo[0]), float(lo[1]), g,

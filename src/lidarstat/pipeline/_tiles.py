@@ -91,11 +91,13 @@ class TileGrid:
         if cell.size and (cell.min() < 0 or cell[:, 0].max() >= self.ncol
                           or cell[:, 1].max() >= self.nrow):
             raise InvalidParameterError("points lie outside the tile grid (stale bounds?)")
+        n = len(cell)
+        idx = np.arange(n, dtype=np.int64) + first_index
+        if halo == 0:  # core memberships only
+            return idx, cell[:, 0] * self.nrow + cell[:, 1], np.ones(n, bool)
         off = (rel - cell) * size  # position inside the core square
         lo = off < halo
         hi = (size - off) <= halo
-        n = len(cell)
-        idx = np.arange(n, dtype=np.int64) + first_index
         every = np.ones(n, bool)
         pid, key, is_core = [], [], []
         for dx in (-1, 0, 1):
