@@ -32,6 +32,7 @@ from ..errors import InvalidParameterError, LidarstatWarning
 from ..stats._moments import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
                               sequential_moments)
 from ._cycle import CycleChoice, choose_cycle, skewness_balance_cycle
+from ._outliers import low_outliers
 from ._surface import cell_keys, ground_surface
 
 logger = logging.getLogger(__name__)
@@ -40,7 +41,7 @@ __all__ = ["MomentsStep", "MomentsClassification", "classify_moments", "ASPRS"]
 
 #: ASPRS LAS classification codes written by ``moments``.
 ASPRS = {"unclassified": 1, "ground": 2, "low_vegetation": 3, "medium_vegetation": 4,
-         "high_vegetation": 5, "building": 6, "road": 11}
+         "high_vegetation": 5, "building": 6, "low_noise": 7, "road": 11}
 
 _CURVE_SAMPLES = 600  # samples of each curve kept for the report
 
@@ -341,7 +342,8 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                      bandwidth="silverman", surface_cell: float = 4.0,
                      opening_window: float = 20.0, iterations: int = 4,
                      vegetation_heights=(0.5, 2.0), min_object_height: float = 0.5,
-                     elevation_rule: str = "symmetry", workers: int | None = None, source: str | None = None
+                     elevation_rule: str = "symmetry", low_noise: bool = True,
+                     workers: int | None = None, source: str | None = None
                      ) -> MomentsClassification:
     """Classify points as ground, road, building, vegetation or unclassified without training.
 
@@ -382,6 +384,11 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
         Heights above ground separating low (3), medium (4) and high (5) vegetation.
     min_object_height : float
         Points closer than this to the ground surface and not ground are unclassified (1).
+    low_noise : bool
+        First flag isolated points far below their neighbourhood's lowest points
+        (:func:`~lidarstat.classify.low_outliers`) as low noise (class 7) and leave them
+        out of every analysis: one multipath echo metres under the terrain otherwise
+        pulls the lower envelope and the ground surface down around it.
     workers : int, optional
         Threads for the tiles (default: CPU count).
     source : str, optional
@@ -467,6 +474,18 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
         warnings.warn(f"{source or 'points'}: no usable intensity; classifying by elevation "
                       "alone (no road class)", LidarstatWarning, stacklevel=2)
 
+    n_all = n
+    noise = (low_outliers(pts[:, :2], pts[:, 2]) if low_noise
+             else np.zeros(n, bool))
+    if noise.any():
+        keep = ~noise
+        if keep.sum() < 8:
+            raise InvalidParameterError(f"{source or 'points'}: fewer than 8 points left "
+                                        "after removing low outliers")
+        pts_all = pts
+        pts, n = pts[keep], int(keep.sum())
+        inten, nret, rnum = (None if a is None else a[keep] for a in (inten, nret, rnum))
+
     p = _Params(alpha=alpha, min_cluster=min_cluster, smoothing=smoothing, cycle=cycle,
                 bandwidth=bandwidth, method=method, max_steps=6,
                 elevation_rule=elevation_rule, tile_size=tile_size,
@@ -480,6 +499,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     # ground of the previous pass (progressive tiles in threads)
     roots = _tiles(xy, tile_size)
     height = z - opening_surface(xy, z, window=opening_window)
+    surf = None
     for it in range(iterations + 1):
         last = it == iterations
         ground, tiles, steps = _ground_pass(xy, height, roots, p, workers, record=last)
@@ -539,25 +559,45 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                   bandwidth=bandwidth, surface_cell=surface_cell,
                   vegetation_heights=list(vegetation_heights),
                   min_object_height=min_object_height, intensity=inten is not None,
-                  returns=nret is not None and rnum is not None)
+                  returns=nret is not None and rnum is not None, low_noise=low_noise,
+                  n_low_noise=int(noise.sum()))
+    if noise.any():
+        cls, cluster_id, height, ground = _expand(keep, n_all, cls, cluster_id, height,
+                                                  ground, fill=(ASPRS["low_noise"], 0,
+                                                                np.nan, False))
+        if surf is not None:  # heights of the low noise under the final ground surface
+            q = pts_all[noise] - origin
+            height[noise] = q[:, 2] - surf(q[:, :2])
     return MomentsClassification(classification=cls, cluster_id=cluster_id, height=height,
                                  ground=ground, steps=steps, tiles=tiles, params=params)
+
+
+def _expand(keep, n, *arrays, fill):
+    """Scatter per-point arrays of the kept points back to all ``n`` points."""
+    out = []
+    for a, f in zip(arrays, fill):
+        b = np.full(n, f, dtype=a.dtype)
+        b[keep] = a
+        out.append(b)
+    return out
 
 
 def _vegetation_like(xy, height, obj, multi, cell):
     """Objects whose cell shows vegetation: several returns, or heights spread like a canopy.
 
     A building cell holds a roof (heights within a few decimetres of a plane over the
-    cell); a tree cell holds points at many heights. The per-cell test compares the
-    spread of object heights in the cell with the spread of a roof: cells whose height
-    range exceeds ``2 * cell`` (a 45-degree roof over the cell) or where more than half of
-    the points are non-last returns are vegetation.
+    cell); a tree cell holds points at many heights and pulses with several echoes. Cells
+    are ``cell / 2`` wide (2 m by default: small enough that a crown overhanging a roof
+    does not turn the roof cells beside it into vegetation, which 8 m cells did on the
+    synthetic town, building recall 0.57-0.84 against 0.97-0.98 now). A cell is
+    vegetation when more than half of its object points are non-last returns or its
+    object heights span more than ``4 * cell``; every non-last return is vegetation.
     """
     out = np.zeros(height.size, bool)
     idx = np.flatnonzero(obj)
     if idx.size == 0:
         return out
-    key = cell_keys(xy[idx], 2 * cell)
+    key = cell_keys(xy[idx], 0.5 * cell)
     _, inv = np.unique(key, return_inverse=True)
     k = inv.max() + 1
     hmax = np.full(k, -np.inf)

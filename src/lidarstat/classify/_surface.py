@@ -25,6 +25,29 @@ def _cell_pick(xy, z, cell, which):
     return o[(b[:-1] + b[1:] - 1) // 2]
 
 
+def _extrapolate(P, V, tree, q, k=8):
+    """Value at `q` of the least-squares plane through the `k` vertices nearest to it.
+
+    Falls back to the nearest vertex where those vertices are (nearly) collinear.
+    """
+    k = min(k, len(P))
+    d, nb = tree.query(q, k=k)
+    nb = nb.reshape(len(q), k)
+    if k < 3:
+        return V[nb[:, 0]]
+    dx = P[nb] - q[:, None, :]                      # (m, k, 2), q at the origin
+    A = np.concatenate([np.ones((len(q), k, 1)), dx], axis=2)
+    AtA = np.einsum("mki,mkj->mij", A, A)
+    Atb = np.einsum("mki,mk->mi", A, V[nb])
+    det = np.linalg.det(AtA)
+    scale = np.einsum("mkj,mkj->m", dx, dx) / k
+    ok = det > 1e-9 * np.maximum(scale, 1e-12) ** 2 * k ** 3
+    out = V[nb[:, 0]].astype(float)
+    if ok.any():
+        out[ok] = np.linalg.solve(AtA[ok], Atb[ok][..., None])[:, 0, 0]
+    return out
+
+
 def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median"):
     """Return ``f(xy) -> z`` interpolating ground points (one per cell) linearly on a TIN.
 
@@ -42,7 +65,10 @@ def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median"):
     Returns
     -------
     callable
-        Linear interpolation inside the hull, nearest vertex outside it.
+        Linear interpolation inside the hull; outside it, the plane fitted to the nearest
+        vertices (a terrain slope continues to the border of the cloud instead of
+        stopping at the last cell's median point, which would lift the heights of a
+        whole border strip of a sloped scene).
     """
     from scipy.interpolate import LinearNDInterpolator
     from scipy.spatial import Delaunay, QhullError, cKDTree
@@ -63,7 +89,7 @@ def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median"):
         v = lin(q)
         bad = np.isnan(v)
         if bad.any():
-            v[bad] = V[tree.query(q[bad])[1]]
+            v[bad] = _extrapolate(P, V, tree, q[bad])
         return v
 
     return f
