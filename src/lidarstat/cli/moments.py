@@ -29,7 +29,7 @@ def _run(args):
         bandwidth=args.bandwidth, surface_cell=args.surface_cell,
         elevation_rule=args.elevation_rule, workers=args.workers,
         opening_window=args.opening_window, iterations=args.iterations,
-        source=str(args.input))
+        low_noise=not args.no_low_noise, source=str(args.input))
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
     report = None
@@ -80,6 +80,8 @@ def register(sub):
     s.add_argument("--iterations", type=int, default=4,
                    help="refits of the ground surface")
     s.add_argument("--no-intensity", action="store_true", help="analyse elevation only")
+    s.add_argument("--no-low-noise", action="store_true",
+                   help="do not flag isolated points under the terrain as low noise (7)")
     s.add_argument("--workers", type=int, default=None, help="threads for the tiles")
     s.add_argument("--report", default=None,
                    help="report folder (default: OUT stem + '_report')")
