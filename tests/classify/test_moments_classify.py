@@ -144,7 +144,7 @@ def test_als_town_against_truth():
     """The synthetic town (sloped terrain, asphalt roads with their own reflectance,
     gable/hip/flat roofs, trees with several returns, cars, noise) scored against its
     exact ASPRS classes. Measured on this scene (100 x 80 m, 4 pulses/m2, rng 0):
-    ground/object total 0.57 %, kappa 0.965; road precision 0.931 / recall 0.997;
+    ground/object total 0.57 %, kappa 0.965; road precision 0.934 / recall 0.963;
     building 0.969 / 0.982; low noise 164 of 164 flagged."""
     from lidarstat.segment import binary_scores
     from lidarstat.synth import make_als_town
@@ -159,7 +159,7 @@ def test_als_town_against_truth():
     e = filter_errors(res.ground[scored], np.isin(truth[scored], (2, 11)))
     assert e.total < 0.01 and e.kappa > 0.95
     road = binary_scores(cls == 11, truth == 11)
-    assert road["precision"] > 0.9 and road["recall"] > 0.95
+    assert road["precision"] > 0.9 and road["recall"] > 0.93
     bld = binary_scores(cls == 6, truth == 6)
     assert bld["precision"] > 0.93 and bld["recall"] > 0.95
     veg = np.isin(truth, (3, 4, 5))
@@ -167,3 +167,25 @@ def test_als_town_against_truth():
     low = (truth == 7) & (c.fields["height_above_ground"] < 0)
     assert (cls[low] == ASPRS["low_noise"]).all()
     assert (cls[~low] != ASPRS["low_noise"]).mean() > 0.999
+
+
+def test_road_cut_between_the_modes_and_none_when_unimodal(rng):
+    """Darker cluster 30 % of the ground: the cut lies between the modes and splits the
+    clusters with under 2 % error; a unimodal ground gives no road; the paper's
+    kurtosis-peak rule is available as an option."""
+    from lidarstat.classify._roads import road_cut
+
+    road = rng.normal(30, 3, 3000)
+    land = rng.normal(60, 6, 7000)
+    v = np.r_[road, land]
+    ch, sm, de, dip = road_cut(v)
+    assert ch.rule == "antimode" and dip["multimodal"]
+    err = ((road > ch.threshold).sum() + (land <= ch.threshold).sum()) / v.size
+    assert err < 0.02
+    assert ch.cycle == (v > ch.threshold).sum()
+    ch2, *_ = road_cut(v, rule="kurtosis-peak")
+    assert ch2.rule in ("kurtosis-peak", "none")
+    ch3, *_ = road_cut(rng.normal(60, 6, 10000))
+    assert ch3.cycle is None
+    ch4, *_ = road_cut(np.r_[rng.normal(30, 3, 100), rng.normal(60, 6, 9900)])
+    assert ch4.cycle is None  # 1 % darker: below min_fraction, no road cluster

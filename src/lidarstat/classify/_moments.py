@@ -27,12 +27,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._shared.validation import check_points, check_scalar
+from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatWarning
 from ..stats._moments import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
                               sequential_moments)
 from ._cycle import CycleChoice, choose_cycle, skewness_balance_cycle
 from ._outliers import low_outliers
+from ._roads import cell_median, road_cut
 from ._surface import cell_keys, ground_surface
 
 logger = logging.getLogger(__name__)
@@ -343,6 +344,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                      opening_window: float = 20.0, iterations: int = 4,
                      vegetation_heights=(0.5, 2.0), min_object_height: float = 0.5,
                      elevation_rule: str = "symmetry", low_noise: bool = True,
+                     road_rule: str = "antimode", road_cell_points: float = 8.0,
                      workers: int | None = None, source: str | None = None
                      ) -> MomentsClassification:
     """Classify points as ground, road, building, vegetation or unclassified without training.
@@ -384,6 +386,14 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
         Heights above ground separating low (3), medium (4) and high (5) vegetation.
     min_object_height : float
         Points closer than this to the ground surface and not ground are unclassified (1).
+    road_rule : {'antimode', 'kurtosis-peak'}
+        Cut of the ground's intensity into road and the rest (:func:`road_cut`): the
+        antimode of the density between its two main modes (default) or the paper's
+        kurtosis peak; either only when the dip test finds the ground's intensity
+        multimodal.
+    road_cell_points : float
+        The ground intensity is first replaced by its median over cells of about this
+        many ground points (one echo's intensity is too noisy to split; roads are areas).
     low_noise : bool
         First flag isolated points far below their neighbourhood's lowest points
         (:func:`~lidarstat.classify.low_outliers`) as low noise (class 7) and leave them
@@ -449,6 +459,9 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     smoothing = check_scalar(smoothing, "smoothing", func=func, low=0, high=0.5,
                              closed="left")
     surface_cell = check_scalar(surface_cell, "surface_cell", func=func, low=0)
+    check_option(road_rule, "road_rule", ("antimode", "kurtosis-peak"), func=func)
+    road_cell_points = check_scalar(road_cell_points, "road_cell_points", func=func, low=1,
+                                    closed="left")
     if cycle is not None:
         cycle = check_scalar(cycle, "cycle", func=func, low=0, closed="left", integer=True)
 
@@ -512,7 +525,6 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     # ---- the paper's five steps per root tile (clusters, road by intensity)
     cluster_id = np.zeros(n, np.int32)
     next_id = 1
-    road = np.zeros(n, bool)
     for i, idx in enumerate(roots):
         cats = {"elevation": height[idx]}
         if inten is not None:
@@ -523,20 +535,21 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
             continue
         lab, next_id = _five_step(cats, p, i, steps, next_id)
         cluster_id[idx] = lab
-        if inten is not None:
-            gi = idx[ground[idx]]
-            if gi.size >= 2 * min_cluster:
-                v = inten[gi]
-                d = _dips({"intensity": v}, alpha)
-                if d["intensity"]["multimodal"]:
-                    ch, rec = _analyse(v, "intensity", p, tile=i, step=len(steps),
-                                       population="ground cluster", dips=d)
-                    steps.append(rec)
-                    if ch.cycle is not None:
-                        dark = v <= ch.threshold
-                        # road: the darker cluster, if it is a minority-or-comparable part
-                        if 0.02 <= dark.mean() <= 0.8:
-                            road[gi[dark]] = True
+
+    # ---- roads: the intensity sub-cluster of the whole ground cluster (_roads.py)
+    road = np.zeros(n, bool)
+    gi = np.flatnonzero(ground)
+    if inten is not None and gi.size >= 2 * min_cluster:
+        smoothed = cell_median(xy[gi], inten[gi], points_per_cell=road_cell_points)
+        ch, sm, de, dips = road_cut(smoothed, alpha=alpha, rule=road_rule,
+                                    min_cluster=min_cluster, smoothing=smoothing,
+                                    bandwidth=bandwidth)
+        steps.append(MomentsStep(tile=-1, step=len(steps) + 1, population="ground cluster",
+                                 category="intensity", n=int(gi.size),
+                                 dip={"intensity": dips}, choice=ch, curves=_thin(sm),
+                                 density=de))
+        if ch.cycle is not None:
+            road[gi[smoothed <= ch.threshold]] = True
 
     # ---- classes
     cls = np.full(n, ASPRS["unclassified"], np.uint8)
@@ -560,6 +573,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                   vegetation_heights=list(vegetation_heights),
                   min_object_height=min_object_height, intensity=inten is not None,
                   returns=nret is not None and rnum is not None, low_noise=low_noise,
+                  road_rule=road_rule, road_cell_points=road_cell_points,
                   n_low_noise=int(noise.sum()))
     if noise.any():
         cls, cluster_id, height, ground = _expand(keep, n_all, cls, cluster_id, height,
