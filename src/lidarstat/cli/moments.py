@@ -29,7 +29,8 @@ def _run(args):
         bandwidth=args.bandwidth, surface_cell=args.surface_cell,
         elevation_rule=args.elevation_rule, workers=args.workers,
         opening_window=args.opening_window, iterations=args.iterations,
-        low_noise=not args.no_low_noise, source=str(args.input))
+        low_noise=not args.no_low_noise, road_rule=args.road_rule,
+        source=str(args.input))
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
     report = None
@@ -79,6 +80,8 @@ def register(sub):
                    help="window of the opening giving the first lower envelope")
     s.add_argument("--iterations", type=int, default=4,
                    help="refits of the ground surface")
+    s.add_argument("--road-rule", choices=("antimode", "kurtosis-peak"), default="antimode",
+                   help="cut of the ground's intensity into road and the rest")
     s.add_argument("--no-intensity", action="store_true", help="analyse elevation only")
     s.add_argument("--no-low-noise", action="store_true",
                    help="do not flag isolated points under the terrain as low noise (7)")
