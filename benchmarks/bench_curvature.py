@@ -252,7 +252,8 @@ def child_jakteristics(args):
 
 
 def child_cgal(args):
-    t, rc, out, mb = run_external([args.cgal_exe, args.xyzbin, args.knn, args.outbin])
+    # cgal_monge.cpp at jet degree 2, Monge degree 2: the quadric's CGAL counterpart
+    t, rc, out, mb = run_external([args.cgal_exe, args.xyzbin, args.knn, args.outbin, "2", "2"])
     if rc:
         raise RuntimeError(out)
     inner = json.loads([ln for ln in out.splitlines() if ln.startswith("{")][-1])
@@ -394,9 +395,9 @@ def build_cgal(tmp):
         return None, "g++ not installed"
     if not Path("/usr/include/CGAL/Monge_via_jet_fitting.h").exists():
         return None, "CGAL headers missing (apt-get install -y libcgal-dev libeigen3-dev)"
-    exe = Path(tmp) / "cgal_jet"
+    exe = Path(tmp) / "cgal_monge"
     cmd = [cxx, "-O3", "-DNDEBUG", "-fopenmp", "-std=c++17", "-I/usr/include/eigen3",
-           str(HERE / "cgal_jet.cpp"), "-o", str(exe)]
+           str(HERE / "cgal_monge.cpp"), "-o", str(exe)]
     p = subprocess.run(cmd, capture_output=True, text=True)
     if p.returncode:
         return None, "compile failed: " + p.stderr[-800:]

@@ -150,6 +150,7 @@ def main():
         n = args.points
         cg = np.fromfile(tmp / "cgal.bin").reshape(n, 21)[:20000]
         ours = np.load(tmp / "ours.npy")
+        sys.path.insert(0, str(HERE.parent / "src"))  # this checkout's lidarstat first
         sys.path.insert(0, str(HERE.parent / "tests" / "features"))
         from test_jets import align_cgal
 

@@ -1,5 +1,6 @@
 // CGAL Monge_via_jet_fitting of any degree at every point, neighbours given: the peer of
-// lidarstat's jets (benchmarks/bench_jets.py) and the reference of
+// lidarstat's jets (benchmarks/bench_jets.py, d = d' = 4), of its quadric curvature
+// (benchmarks/bench_curvature.py, d = d' = 2) and the reference of
 // tests/features/test_jets.py::test_equals_cgal.
 //
 // Build:  g++ -O3 -DNDEBUG -fopenmp -std=c++17 -I/usr/include/eigen3 cgal_monge.cpp -o cgal_monge

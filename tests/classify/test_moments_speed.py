@@ -11,7 +11,7 @@ from classify.test_moments_classify import _scene
 
 
 def _scipy_surface(xy_ground, z_ground, *, cell, which="median"):
-    """The session-2 surface: scipy's LinearNDInterpolator, nearest vertex outside."""
+    """The scipy surface: LinearNDInterpolator, the nearest vertices' plane outside."""
     from scipy.interpolate import LinearNDInterpolator
     from scipy.spatial import Delaunay, cKDTree
 
@@ -22,7 +22,7 @@ def _scipy_surface(xy_ground, z_ground, *, cell, which="median"):
     def f(q):
         v = lin(q)
         bad = np.isnan(v)
-        v[bad] = V[tree.query(q[bad])[1]]
+        v[bad] = _surface._extrapolate(P, V, tree, q[bad])
         return v
 
     return f

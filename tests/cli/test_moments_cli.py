@@ -40,7 +40,9 @@ def test_moments_then_evaluate(scene_file, tmp_path, capsys):
     assert main(["evaluate", str(out), "--reference", str(scene_file), "--classes",
                  "--json", str(js)]) == 0
     e = json.loads(js.read_text())
-    assert e["ground_object"]["total"] < 0.04 and e["ground_object"]["kappa"] > 0.75
+    # measured: total 0, kappa 1.0 (was 0.81 before the ground surface extrapolated the
+    # terrain slope beyond the hull of its vertices)
+    assert e["ground_object"]["total"] < 0.01 and e["ground_object"]["kappa"] > 0.95
     assert "Type I" in capsys.readouterr().out
 
 

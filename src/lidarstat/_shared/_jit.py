@@ -24,3 +24,41 @@ def njit(*args, **kwargs):
 def njit_parallel(func):
     """``numba.njit(parallel=True)`` with lidarstat's defaults."""
     return numba.njit(parallel=True, **_DEFAULTS)(func)
+
+
+
+def closure_cache(driver, functions):
+    """Make the disk cache of a jitted closure over kernel `functions` work across processes.
+
+    Numba keys the cache of a closure by the pickled contents of its cells; a jitted
+    function in a cell pickles with a random per-process UUID and its Python function by
+    value (with its globals), so the key changes in every process and the closure is
+    compiled again each time (numba issue 6264). This gives `driver` (a dispatcher made
+    with ``cache=True``) a cache keyed instead by the module, qualified name and source file
+    hash of each of `functions`: stable across processes, distinct per set of kernels, and
+    changed when a kernel's file is edited (as a plain cached function is recompiled when
+    its own file changes). Returns `driver`.
+    """
+    import hashlib
+    import inspect
+
+    from numba.core.caching import FunctionCache
+
+    parts = []
+    for f in functions:
+        py = getattr(f, "py_func", f)
+        try:
+            with open(inspect.getsourcefile(py), "rb") as fh:
+                digest = hashlib.sha256(fh.read()).hexdigest()
+        except (OSError, TypeError):  # no source file: never reuse a cached entry
+            digest = repr(id(py))
+        parts.append(f"{py.__module__}.{py.__qualname__}:{digest}")
+    token = hashlib.sha256("|".join(parts).encode()).hexdigest()
+
+    class _KeyedCache(FunctionCache):
+        def _index_key(self, sig, codegen):
+            code = hashlib.sha256(self._py_func.__code__.co_code).hexdigest()
+            return (sig, codegen.magic_tuple(), (code, token))
+
+    driver._cache = _KeyedCache(driver.py_func)
+    return driver

@@ -6,11 +6,12 @@ from ._covariance import (CovarianceClasses, CovarianceClassification, PointClas
                           classify_covariance, covariance, estimate_plane_sigma)
 from ._cycle import CycleChoice, choose_cycle, skewness_balance_cycle
 from ._hk import SurfaceType, hk_surface_types
+from ._outliers import low_outliers
 from ._moments import ASPRS, MomentsClassification, MomentsStep, classify_moments
 from ._scores import GROUND_CODES, ClassScores, FilterErrors, class_scores, filter_errors
 
 __all__ = ["SurfaceType", "hk_surface_types", "COVARIANCE_CLASS_FIELDS", "CovarianceClasses",
            "CovarianceClassification", "PointClass", "classify_covariance", "covariance",
            "estimate_plane_sigma", "ASPRS", "MomentsClassification", "MomentsStep",
-           "classify_moments", "CycleChoice", "choose_cycle", "skewness_balance_cycle",
+           "classify_moments", "low_outliers", "CycleChoice", "choose_cycle", "skewness_balance_cycle",
            "GROUND_CODES", "ClassScores", "FilterErrors", "class_scores", "filter_errors"]

@@ -31,6 +31,8 @@ from ..errors import InvalidParameterError, LidarstatWarning
 from ..stats._moments import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
                               sequential_moments)
 from ._cycle import CycleChoice, choose_cycle, skewness_balance_cycle
+from ._outliers import low_outliers
+from ._roads import cell_median, road_cut
 from ._surface import cell_keys, ground_surface
 
 logger = logging.getLogger(__name__)
@@ -39,7 +41,7 @@ __all__ = ["MomentsStep", "MomentsClassification", "classify_moments", "ASPRS"]
 
 #: ASPRS LAS classification codes written by ``moments``.
 ASPRS = {"unclassified": 1, "ground": 2, "low_vegetation": 3, "medium_vegetation": 4,
-         "high_vegetation": 5, "building": 6, "road": 11}
+         "high_vegetation": 5, "building": 6, "low_noise": 7, "road": 11}
 
 _CURVE_SAMPLES = 600  # samples of each curve kept for the report
 
@@ -301,8 +303,8 @@ def _cut_tile(xyh, p, record):
 
 
 def _classify_tile(xyh, attrs, p, record, final):
-    """One root tile: its ground cut; on the final pass also the paper's five steps and the
-    road split of its ground by intensity. Cluster ids are local (from 1)."""
+    """One root tile: its ground cut, and on the final pass also the paper's five steps
+    (cluster ids local, from 1)."""
     ground, gsteps, infos = _cut_tile(xyh, p, record)
     if not final:
         return _TileOut({"ground": ground}, gsteps, infos)
@@ -310,31 +312,14 @@ def _classify_tile(xyh, attrs, p, record, final):
     inten = attrs.get("intensity")
     n = h.size
     steps = []
-    road = np.zeros(n, bool)
     if n < 2 * p.min_cluster:
-        return _TileOut({"ground": ground, "cluster_id": np.ones(n, np.int32), "road": road},
-                        gsteps, infos, steps, 1)
+        return _TileOut({"ground": ground, "cluster_id": np.ones(n, np.int32)}, gsteps,
+                        infos, steps, 1)
     cats = {"elevation": h}
     if inten is not None:
         cats["intensity"] = inten
     lab, next_id = _five_step(cats, p, -1, steps, 1)
-    if inten is not None:
-        gi = np.flatnonzero(ground)
-        if gi.size >= 2 * p.min_cluster:
-            v = inten[gi]
-            d = _dips({"intensity": v}, p.alpha)
-            if d["intensity"]["multimodal"]:
-                # not a tile's first analysis: never the --cycle override
-                ch, rec = _analyse(v, "intensity", p, tile=-1, step=0,
-                                   population="ground cluster", dips=d)
-                steps.append(rec)
-                if ch.cycle is not None:
-                    dark = v <= ch.threshold
-                    # road: the darker cluster, if it is a minority-or-comparable part
-                    if 0.02 <= dark.mean() <= 0.8:
-                        road[gi[dark]] = True
-    return _TileOut({"ground": ground, "cluster_id": lab, "road": road}, gsteps, infos,
-                    steps, next_id - 1)
+    return _TileOut({"ground": ground, "cluster_id": lab}, gsteps, infos, steps, next_id - 1)
 
 
 def _tile_pass(xyh, roots, p, inten, scheduler, workers, record, final):
@@ -417,8 +402,10 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                      bandwidth="silverman", surface_cell: float = 4.0,
                      opening_window: float = 20.0, iterations: int = 4,
                      vegetation_heights=(0.5, 2.0), min_object_height: float = 0.5,
-                     elevation_rule: str = "symmetry", workers: int | None = None,
-                     scheduler: str = "threads", units=1.0, source: str | None = None) -> MomentsClassification:
+                     elevation_rule: str = "symmetry", low_noise: bool = True,
+                     road_rule: str = "antimode", road_cell_points: float = 8.0,
+                     workers: int | None = None, scheduler: str = "threads", units=1.0,
+                     source: str | None = None) -> MomentsClassification:
     """Classify points as ground, road, building, vegetation or unclassified without training.
 
     Parameters
@@ -458,6 +445,19 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
         Heights above ground separating low (3), medium (4) and high (5) vegetation.
     min_object_height : float
         Points closer than this to the ground surface and not ground are unclassified (1).
+    road_rule : {'antimode', 'kurtosis-peak'}
+        Cut of the ground's intensity into road and the rest (:func:`road_cut`): the
+        antimode of the density between its two main modes (default) or the paper's
+        kurtosis peak; either only when the dip test finds the ground's intensity
+        multimodal.
+    road_cell_points : float
+        The ground intensity is first replaced by its median over cells of about this
+        many ground points (one echo's intensity is too noisy to split; roads are areas).
+    low_noise : bool
+        First flag isolated points far below their neighbourhood's lowest points
+        (:func:`~lidarstat.classify.low_outliers`) as low noise (class 7) and leave them
+        out of every analysis: one multipath echo metres under the terrain otherwise
+        pulls the lower envelope and the ground surface down around it.
     workers : int, optional
         Threads for the tiles (default: CPU count).
     units : float, (float, float) or LinearUnits
@@ -528,6 +528,9 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                              closed="left")
     surface_cell = check_scalar(surface_cell, "surface_cell", func=func, low=0)
     check_option(scheduler, "scheduler", ("threads", "sync", "dask"), func=func)
+    check_option(road_rule, "road_rule", ("antimode", "kurtosis-peak"), func=func)
+    road_cell_points = check_scalar(road_cell_points, "road_cell_points", func=func, low=1,
+                                    closed="left")
     if cycle is not None:
         cycle = check_scalar(cycle, "cycle", func=func, low=0, closed="left", integer=True)
 
@@ -554,6 +557,18 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                       "alone (no road class)", LidarstatWarning, stacklevel=2)
 
     ux, uz = _unit_factors(units, source)
+    n_all = n
+    noise = (low_outliers(pts[:, :2], pts[:, 2], min_depth=0.5 / uz) if low_noise
+             else np.zeros(n, bool))
+    if noise.any():
+        keep = ~noise
+        if keep.sum() < 8:
+            raise InvalidParameterError(f"{source or 'points'}: fewer than 8 points left "
+                                        "after removing low outliers")
+        pts_all = pts
+        pts, n = pts[keep], int(keep.sum())
+        inten, nret, rnum = (None if a is None else a[keep] for a in (inten, nret, rnum))
+
     p = _Params(alpha=alpha, min_cluster=min_cluster, smoothing=smoothing, cycle=cycle,
                 bandwidth=bandwidth, method=method, max_steps=6,
                 elevation_rule=elevation_rule, tile_size=tile_size / ux,
@@ -571,6 +586,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     xyh[:, :2] = xy
     roots = tile_grid(xyh, p.tile_size)
     height = _heights(z, opening_surface(xy, z, window=opening_window / ux, cell=1.0 / ux))
+    surf = None
     for it in range(iterations + 1):
         last = it == iterations
         xyh[:, 2] = height
@@ -583,17 +599,30 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
             surf = ground_surface(xy[ground], z[ground], cell=surface_cell / ux)
             height = _heights(z, surf(xy))
 
-    # ---- the paper's five steps per root tile (clusters, road by intensity), run with the
-    # last cut above: cluster ids made unique in tile order, records in the session-2 order
-    road = fields["road"]
+    # ---- the paper's five steps per root tile (clusters), run with the last cut above:
+    # cluster ids made unique in tile order, records in tile order
     cluster_id = fields["cluster_id"]
     first = 0
     for t, o in zip(roots, outs):
         cluster_id[t.points] += first
         first += o.n_ids
     for i, o in enumerate(outs):
-        for rec in o.steps:
-            steps.append(replace(rec, tile=i, step=len(steps) if rec.step == 0 else rec.step))
+        steps.extend(replace(rec, tile=i) for rec in o.steps)
+
+    # ---- roads: the intensity sub-cluster of the whole ground cluster (_roads.py)
+    road = np.zeros(n, bool)
+    gi = np.flatnonzero(ground)
+    if inten is not None and gi.size >= 2 * min_cluster:
+        smoothed = cell_median(xy[gi], inten[gi], points_per_cell=road_cell_points)
+        ch, sm, de, dips = road_cut(smoothed, alpha=alpha, rule=road_rule,
+                                    min_cluster=min_cluster, smoothing=smoothing,
+                                    bandwidth=bandwidth)
+        steps.append(MomentsStep(tile=-1, step=len(steps) + 1, population="ground cluster",
+                                 category="intensity", n=int(gi.size),
+                                 dip={"intensity": dips}, choice=ch, curves=_thin(sm),
+                                 density=de))
+        if ch.cycle is not None:
+            road[gi[smoothed <= ch.threshold]] = True
 
     # ---- classes
     cls = np.full(n, ASPRS["unclassified"], np.uint8)
@@ -617,8 +646,16 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                   bandwidth=bandwidth, surface_cell=surface_cell,
                   vegetation_heights=list(vegetation_heights),
                   min_object_height=min_object_height, intensity=inten is not None,
-                  returns=nret is not None and rnum is not None,
-                  units={"horizontal_m": ux, "vertical_m": uz})
+                  returns=nret is not None and rnum is not None, low_noise=low_noise,
+                  road_rule=road_rule, road_cell_points=road_cell_points,
+                  n_low_noise=int(noise.sum()), units={"horizontal_m": ux, "vertical_m": uz})
+    if noise.any():
+        cls, cluster_id, height, ground = _expand(keep, n_all, cls, cluster_id, height,
+                                                  ground, fill=(ASPRS["low_noise"], 0,
+                                                                np.nan, False))
+        if surf is not None:  # heights of the low noise under the final ground surface
+            q = pts_all[noise] - origin
+            height[noise] = _heights(q[:, 2], surf(q[:, :2]))
     return MomentsClassification(classification=cls, cluster_id=cluster_id, height=height,
                                  ground=ground, steps=steps, tiles=tiles, params=params)
 
@@ -637,20 +674,33 @@ def _unit_factors(units, source):
     return float(pair[0]), float(pair[1])
 
 
+def _expand(keep, n, *arrays, fill):
+    """Scatter per-point arrays of the kept points back to all ``n`` points."""
+    out = []
+    for a, f in zip(arrays, fill):
+        b = np.full(n, f, dtype=a.dtype)
+        b[keep] = a
+        out.append(b)
+    return out
+
+
 def _vegetation_like(xy, height, obj, multi, cell, spread):
     """Objects whose cell shows vegetation: several returns, or heights spread like a canopy.
 
     A building cell holds a roof (heights within a few decimetres of a plane over the
-    cell); a tree cell holds points at many heights. The per-cell test compares the
-    spread of object heights in the cell with the spread of a roof: cells (side ``2 * cell``)
-    whose height range exceeds `spread` (``4 * surface_cell``, in height units) or where more
-    than half of the points are non-last returns are vegetation.
+    cell); a tree cell holds points at many heights and pulses with several echoes. Cells
+    are ``cell / 2`` wide (2 m by default: small enough that a crown overhanging a roof
+    does not turn the roof cells beside it into vegetation, which 8 m cells did on the
+    synthetic town, building recall 0.57-0.84 against 0.97-0.98 now). A cell is
+    vegetation when more than half of its object points are non-last returns or its
+    object heights span more than `spread` (``4 * surface_cell`` in height units); every
+    non-last return is vegetation.
     """
     out = np.zeros(height.size, bool)
     idx = np.flatnonzero(obj)
     if idx.size == 0:
         return out
-    key = cell_keys(xy[idx], 2 * cell)
+    key = cell_keys(xy[idx], 0.5 * cell)
     _, inv = np.unique(key, return_inverse=True)
     k = inv.max() + 1
     hmax = np.full(k, -np.inf)

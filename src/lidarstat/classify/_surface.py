@@ -249,7 +249,8 @@ def _transforms(P, simplices):
 
 
 class TinSurface:
-    """Linear interpolation on a Delaunay TIN, nearest vertex outside its hull.
+    """Linear interpolation on a Delaunay TIN; outside its hull the plane of the nearest
+    vertices (:func:`_extrapolate`), the nearest vertex when there is no triangle.
 
     Parameters
     ----------
@@ -265,7 +266,7 @@ class TinSurface:
     >>> P = np.array([[0.0, 0.0], [1, 0], [0, 1], [1, 1]])
     >>> f = TinSurface(P, np.array([0.0, 1, 2, 3]), cell=0.5)
     >>> f(np.array([[0.5, 0.5], [0.25, 0.0], [3.0, 3.0]])).round(6).tolist()
-    [1.5, 0.25, 3.0]
+    [1.5, 0.25, 9.0]
     """
 
     def __init__(self, P, V, cell: float):
@@ -300,8 +301,31 @@ class TinSurface:
         _tin_eval(q, *self._tri, self.V, _EPS, _EPS_BROAD, out)
         bad = np.isnan(out)
         if bad.any():
-            out[bad] = self.V[self._tree.query(q[bad])[1]]
+            out[bad] = _extrapolate(self.P, self.V, self._tree, q[bad])
         return out
+
+
+def _extrapolate(P, V, tree, q, k=8):
+    """Value at `q` of the least-squares plane through the `k` vertices nearest to it.
+
+    Falls back to the nearest vertex where those vertices are (nearly) collinear.
+    """
+    k = min(k, len(P))
+    d, nb = tree.query(q, k=k)
+    nb = nb.reshape(len(q), k)
+    if k < 3:
+        return V[nb[:, 0]]
+    dx = P[nb] - q[:, None, :]                      # (m, k, 2), q at the origin
+    A = np.concatenate([np.ones((len(q), k, 1)), dx], axis=2)
+    AtA = np.einsum("mki,mkj->mij", A, A)
+    Atb = np.einsum("mki,mk->mi", A, V[nb])
+    det = np.linalg.det(AtA)
+    scale = np.einsum("mkj,mkj->m", dx, dx) / k
+    ok = det > 1e-9 * np.maximum(scale, 1e-12) ** 2 * k ** 3
+    out = V[nb[:, 0]].astype(float)
+    if ok.any():
+        out[ok] = np.linalg.solve(AtA[ok], Atb[ok][..., None])[:, 0, 0]
+    return out
 
 
 def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median"):
@@ -321,8 +345,11 @@ def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median"):
     Returns
     -------
     TinSurface
-        Linear interpolation inside the hull, nearest vertex outside it; evaluating N
-        points costs O(N) in any order.
+        Linear interpolation inside the hull; outside it, the plane fitted to the nearest
+        vertices (a terrain slope continues to the border of the cloud instead of
+        stopping at the last cell's median point, which would lift the heights of a
+        whole border strip of a sloped scene). Evaluating N points costs O(N) in any
+        order.
     """
     sel = _cell_pick(xy_ground, z_ground, cell, which)
     return TinSurface(xy_ground[sel], z_ground[sel], cell)

@@ -31,6 +31,7 @@ def _run(args):
         bandwidth=args.bandwidth, surface_cell=args.surface_cell,
         elevation_rule=args.elevation_rule, workers=args.workers, scheduler=args.scheduler,
         opening_window=args.opening_window, iterations=args.iterations, units=units,
+        low_noise=not args.no_low_noise, road_rule=args.road_rule,
         source=str(args.input))
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
@@ -90,7 +91,11 @@ def register(sub):
                    help="metres per coordinate unit (overrides --units), e.g. 0.3048")
     s.add_argument("--iterations", type=int, default=4,
                    help="refits of the ground surface")
+    s.add_argument("--road-rule", choices=("antimode", "kurtosis-peak"), default="antimode",
+                   help="cut of the ground's intensity into road and the rest")
     s.add_argument("--no-intensity", action="store_true", help="analyse elevation only")
+    s.add_argument("--no-low-noise", action="store_true",
+                   help="do not flag isolated points under the terrain as low noise (7)")
     s.add_argument("--workers", type=int, default=None, help="threads for the tiles")
     s.add_argument("--scheduler", choices=("threads", "sync", "dask"), default="threads",
                    help="how tiles run (lidarstat.pipeline.map_tiles); same result")

@@ -32,7 +32,7 @@ import numpy as np
 from numba import prange
 
 from .._shared._jit import njit, njit_parallel
-from ..neighbors._kernels import _cell_ranges, _scan
+from ..neighbors._drivers import make_drivers
 from ._quadric_kernels import _eigh3, cholesky_inverse_n
 
 OK = 0
@@ -44,8 +44,6 @@ SKIPPED = 255
 NMONGE = 11
 #: stats columns: Q, sum w, tr(B), tr(B^2), sqrt cond_1(equilibrated N), bandwidth, A0
 NSTAT = 7
-_CHUNK = 64
-_CELL_CHUNK = 64
 _MAXD = 4
 _MAXM = 15  # coefficients of a degree-4 jet
 _MAXMOM = 45  # monomials of degree <= 8
@@ -586,69 +584,34 @@ def _fail(r, st, p, status, npts, jet, monge, frames, stats, mcof):
         stats[r, a] = np.nan
 
 
-@njit_parallel
-def fit_jets_block(pts, query, indptr, idx, dist, bandwidth, d, dm, weighted, sensor, has_sensor,
-                   min_nb, want_se, status, npts, jet, monge, frames, stats, mcof):
-    """Fit the jet at every query point (positions into `pts`) of CSR rows."""
-    mq = query.size
-    nchunks = (mq + _CHUNK - 1) // _CHUNK
-    longest = 0
-    for r in range(mq):
-        longest = max(longest, indptr[r + 1] - indptr[r])
-    m = n_coef(d)
-    for ch in prange(nchunks):
-        ws = _workspace(m)
-        buf = np.empty((max(longest, 1), 4))
-        for r in range(ch * _CHUNK, min(mq, (ch + 1) * _CHUNK)):
-            st, p = _jet_one(query[r], pts, idx, dist, indptr[r], indptr[r + 1], bandwidth, d,
-                             dm, weighted, sensor, has_sensor, min_nb, want_se, ws, buf, jet[r],
-                             monge[r], frames[r], stats[r], mcof[r])
-            if st != OK:
-                _fail(r, st, p, status, npts, jet, monge, frames, stats, mcof)
-            else:
-                status[r] = st
-                npts[r] = p
+@njit
+def _jet_workspace(params):
+    return _workspace(n_coef(params[1]))
 
 
-@njit_parallel
-def fit_jets_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, bandwidth, d, dm, weighted,
-                   sensor, has_sensor, min_nb, want_se, status, npts, jet, monge, frames, stats,
-                   mcof):
-    """Fused neighbour search (3-D sphere of `radius`) and jet fit, cells ``c0..c1-1``.
+@njit
+def _jet_point(i, pts, idx, dist, s, e, r, params, ws, buf, outs):
+    """Fit the jet of point i from ``idx[s:e]`` into output row r (generic-driver protocol,
+    ``neighbors/_drivers.py``). params: bandwidth (<= 0: farthest neighbour), degree,
+    Monge degree, weighted, sensor, has_sensor, min_neighbors, want_se."""
+    bw, d, dm, weighted, sensor, has_sensor, min_nb, want_se = params
+    status, npts, jet, monge, frames, stats, mcof = outs
+    st, p = _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, min_nb,
+                     want_se, ws, buf, jet[r], monge[r], frames[r], stats[r], mcof[r])
+    if st != OK:
+        _fail(r, st, p, status, npts, jet, monge, frames, stats, mcof)
+    else:
+        status[r] = st
+        npts[r] = p
 
-    Output row r is sorted position ``cell_start[c0] + r`` (as ``fit_quadrics_cells``).
-    """
-    base = cell_start[c0]
-    r2 = radius * radius
-    ncell = c1 - c0
-    nchunks = (ncell + _CELL_CHUNK - 1) // _CELL_CHUNK
-    m = n_coef(d)
-    for ch in prange(nchunks):
-        ws = _workspace(m)
-        ranges = np.empty((9, 2), dtype=np.int64)
-        cap = 256
-        idx_buf = np.empty(cap, dtype=np.int64)
-        dist_buf = np.empty(cap)
-        buf = np.empty((cap, 4))
-        for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
-            nr = _cell_ranges(c, cell_keys, cell_start, dims, 3, ranges)
-            need = 0
-            for t in range(nr):
-                need += ranges[t, 1] - ranges[t, 0]
-            if need > cap:
-                cap = max(need, 2 * cap)
-                idx_buf = np.empty(cap, dtype=np.int64)
-                dist_buf = np.empty(cap)
-                buf = np.empty((cap, 4))
-            for i in range(cell_start[c], cell_start[c + 1]):
-                r = i - base
-                n = _scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, 3, idx_buf,
-                          dist_buf, 0, False)
-                st, p = _jet_one(i, pts, idx_buf, dist_buf, 0, n, bandwidth, d, dm, weighted,
-                                 sensor, has_sensor, min_nb, want_se, ws, buf, jet[r], monge[r],
-                                 frames[r], stats[r], mcof[r])
-                if st != OK:
-                    _fail(r, st, p, status, npts, jet, monge, frames, stats, mcof)
-                else:
-                    status[r] = st
-                    npts[r] = p
+
+@njit
+def _jet_skip(r, outs):
+    status, npts, jet, monge, frames, stats, mcof = outs
+    _fail(r, SKIPPED, 0, status, npts, jet, monge, frames, stats, mcof)
+
+
+#: ``fit_jets_block(pts, query, indptr, idx, dist, params, outs)`` (CSR rows) and
+#: ``fit_jets_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, active, params, outs)``
+#: (fused radius search), with ``params`` and ``outs`` as :func:`_jet_point`'s.
+fit_jets_block, fit_jets_cells = make_drivers(_jet_point, _jet_workspace, _jet_skip)

@@ -227,12 +227,18 @@ def fit_jets(points, neighborhoods: Neighborhoods, *, degree=4, monge_degree=Non
     sensor_arr, has_sensor = _sensor(sensor, origin)
     query = neighborhoods.query_indices()
     out = _allocate(query.size)
+    params = (-1.0 if bandwidth is None else float(bandwidth), degree, monge_degree,
+              weight == "tricube", sensor_arr, has_sensor, int(min_neighbors),
+              bool(standard_errors))
     _jk.fit_jets_block(local, query, neighborhoods.indptr, neighborhoods.indices,
-                       neighborhoods.distances, -1.0 if bandwidth is None else float(bandwidth),
-                       degree, monge_degree, weight == "tricube", sensor_arr, has_sensor,
-                       int(min_neighbors), bool(standard_errors), out["status"], out["npts"],
-                       out["jet"], out["monge"], out["frames"], out["stats"], out["mcof"])
+                       neighborhoods.distances, params, _outs(out))
     return _to_fit(out, degree, monge_degree, weight)
+
+
+def _outs(out):
+    """The output tuple of the jet kernels (``_jet_kernels._jet_point``)."""
+    return (out["status"], out["npts"], out["jet"], out["monge"], out["frames"], out["stats"],
+            out["mcof"])
 
 
 def _fit_cells(index, *, degree, monge_degree, weight, sensor, min_neighbors, standard_errors,
@@ -241,16 +247,15 @@ def _fit_cells(index, *, degree, monge_degree, weight, sensor, min_neighbors, st
     n = index.n_points
     out = _allocate(n)
     sensor_arr, has_sensor = _sensor(sensor, index.origin)
+    params = (float(index.radius), degree, monge_degree, weight == "tricube", sensor_arr,
+              has_sensor, int(min_neighbors), bool(standard_errors))
+    active = np.ones(n, np.uint8)
     done = 0
     for c0, c1 in index.cell_blocks(block_size):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
         part = {k: v[s0:s1] for k, v in out.items()}
         _jk.fit_jets_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
-                           index.dims, float(index.radius), float(index.radius), degree,
-                           monge_degree, weight == "tricube", sensor_arr, has_sensor,
-                           int(min_neighbors), bool(standard_errors), part["status"],
-                           part["npts"], part["jet"], part["monge"], part["frames"],
-                           part["stats"], part["mcof"])
+                           index.dims, float(index.radius), active, params, _outs(part))
         done += s1 - s0
         if progress is not None:
             progress(done, n)

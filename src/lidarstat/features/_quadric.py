@@ -84,6 +84,11 @@ def _allocate(m):
     )
 
 
+def _outs(out):
+    """The output tuple of the quadric kernels (``_quadric_kernels._quadric_point``)."""
+    return (out["status"], out["npts"], out["beta"], out["cof"], out["frames"], out["stats"])
+
+
 def _run_kernel(pts, query, indptr, idx, dist, *, bandwidth, frame, sensor, min_neighbors,
                 covariance):
     """Fit one block; `pts` local coordinates, `query` positions into `pts`."""
@@ -93,9 +98,8 @@ def _run_kernel(pts, query, indptr, idx, dist, *, bandwidth, frame, sensor, min_
     sensor_arr = np.zeros(3) if sensor is None else np.asarray(sensor, dtype=np.float64)
     _k.fit_quadrics_block(
         pts, np.ascontiguousarray(query, dtype=np.int64), indptr, idx, dist,
-        -1.0 if bandwidth is None else float(bandwidth), FRAMES[frame], sensor_arr, has_sensor,
-        int(min_neighbors), COVARIANCES[covariance], out["status"], out["npts"], out["beta"],
-        out["cof"], out["frames"], out["stats"],
+        (-1.0 if bandwidth is None else float(bandwidth), FRAMES[frame], sensor_arr, has_sensor,
+         int(min_neighbors), COVARIANCES[covariance]), _outs(out),
     )
     return _mark_unfitted(out)
 
@@ -121,9 +125,9 @@ def _run_cells(index, c0, c1, *, bandwidth, frame, sensor, min_neighbors, covari
     sensor_arr = np.zeros(3) if sensor is None else np.asarray(sensor, dtype=np.float64)
     _k.fit_quadrics_cells(
         c0, c1, index.sorted_points, index.cell_keys, index.cell_start, index.dims,
-        float(index.radius), float(bandwidth), FRAMES[frame], sensor_arr, has_sensor,
-        int(min_neighbors), COVARIANCES[covariance], active, out["status"], out["npts"],
-        out["beta"], out["cof"], out["frames"], out["stats"],
+        float(index.radius), active,
+        (float(bandwidth), FRAMES[frame], sensor_arr, has_sensor, int(min_neighbors),
+         COVARIANCES[covariance]), _outs(out),
     )
     return _mark_unfitted(out)
 

@@ -19,10 +19,9 @@ Everything is finally rescaled to physical units (a1, a2 by 1/b, a3..a5 by 1/b^2
 from __future__ import annotations
 
 import numpy as np
-from numba import prange
 
-from .._shared._jit import njit, njit_parallel
-from ..neighbors._kernels import _cell_ranges, _scan
+from .._shared._jit import njit
+from ..neighbors._drivers import make_drivers
 
 # status codes (mirrored by FitStatus in _results.py)
 OK = 0
@@ -36,9 +35,6 @@ FRAME_PCA = 2
 
 COV_PAPER = 0
 COV_SANDWICH = 1
-
-_CHUNK = 64
-_CELL_CHUNK = 64
 
 # x = [1, U, V, U^2/2, UV, V^2/2]: x_a x_c = _COEF * monomial number _MONO (row-major a, c)
 # monomials: 1 U V U2 UV V2 U3 U2V UV2 V3 U4 U3V U2V2 UV3 V4
@@ -543,88 +539,46 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
     return OK, p
 
 
-@njit_parallel
-def fit_quadrics_block(pts, query, indptr, idx, dist, bandwidth, frame, sensor, has_sensor,
-                       min_nb, cov_mode, status, npts, beta, cof, frames, stats):
-    """Fit the quadric at every query point (positions into `pts`) of one block.
-
-    Row r of the CSR arrays is the neighbourhood of ``pts[query[r]]``; outputs are indexed
-    by r. Parallel over chunks of rows, one workspace per chunk (no per-point allocation).
-    """
-    m = query.size
-    nchunks = (m + _CHUNK - 1) // _CHUNK
-    longest = 0
-    for r in range(m):
-        longest = max(longest, indptr[r + 1] - indptr[r])
-    for ch in prange(nchunks):
-        ws = _workspace()
-        buf = np.empty((longest, 4))
-        for r in range(ch * _CHUNK, min(m, (ch + 1) * _CHUNK)):
-            st, p = _fit_one(query[r], pts, idx, dist, indptr[r], indptr[r + 1], bandwidth,
-                             frame, sensor, has_sensor, min_nb, cov_mode, ws, buf, beta[r],
-                             cof[r], frames[r], stats[r])
-            status[r] = st
-            npts[r] = p
-            if st != OK:
-                for a in range(6):
-                    beta[r, a] = np.nan
-                for a in range(4):
-                    stats[r, a] = np.nan
+@njit
+def _quadric_workspace(params):
+    return _workspace()
 
 
-@njit_parallel
-def fit_quadrics_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, bandwidth, frame,
-                       sensor, has_sensor, min_nb, cov_mode, active, status, npts, beta, cof,
-                       frames, stats):
-    """Fused neighbour search and fit for the points of occupied cells ``c0..c1-1``.
+@njit
+def _quadric_point(i, pts, idx, dist, s, e, r, params, ws, buf, outs):
+    """Fit the quadric of point i from ``idx[s:e]`` into output row r (generic-driver
+    protocol, ``neighbors/_drivers.py``). params: bandwidth (<= 0: farthest neighbour),
+    frame, sensor, has_sensor, min_neighbors, covariance mode; outs: status, npts, beta,
+    cof, frames, stats."""
+    bw, frame, sensor, has_sensor, min_nb, cov_mode = params
+    status, npts, beta, cof, frames, stats = outs
+    st, p = _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov_mode,
+                     ws, buf, beta[r], cof[r], frames[r], stats[r])
+    status[r] = st
+    npts[r] = p
+    if st != OK:
+        for a in range(6):
+            beta[r, a] = np.nan
+        for a in range(4):
+            stats[r, a] = np.nan
 
-    The neighbours of each point (3-D sphere of `radius`) are gathered from the 27 cells
-    around its own into a per-cell buffer and fitted at once by the same ``_fit_one`` as
-    :func:`fit_quadrics_block`, so no global CSR arrays are written and read back. Output
-    row r is sorted position ``cell_start[c0] + r``. Points with ``active[i] == 0`` (sorted
-    positions) are not fitted: status SKIPPED, NaN outputs.
-    """
-    base = cell_start[c0]
-    r2 = radius * radius
-    ncell = c1 - c0
-    nchunks = (ncell + _CELL_CHUNK - 1) // _CELL_CHUNK
-    for ch in prange(nchunks):
-        # scratch space once per chunk of cells; neighbour buffers grow on demand
-        ws = _workspace()
-        ranges = np.empty((9, 2), dtype=np.int64)
-        cap = 256
-        idx_buf = np.empty(cap, dtype=np.int64)
-        dist_buf = np.empty(cap)
-        buf = np.empty((cap, 4))
-        for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
-            nr = _cell_ranges(c, cell_keys, cell_start, dims, 3, ranges)
-            need = 0
-            for t in range(nr):
-                need += ranges[t, 1] - ranges[t, 0]
-            if need > cap:
-                cap = max(need, 2 * cap)
-                idx_buf = np.empty(cap, dtype=np.int64)
-                dist_buf = np.empty(cap)
-                buf = np.empty((cap, 4))
-            for i in range(cell_start[c], cell_start[c + 1]):
-                r = i - base
-                if active[i] == 0:
-                    status[r] = SKIPPED
-                    npts[r] = 0
-                    for a in range(6):
-                        beta[r, a] = np.nan
-                    for a in range(4):
-                        stats[r, a] = np.nan
-                    continue
-                n = _scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, 3, idx_buf,
-                          dist_buf, 0, False)
-                st, p = _fit_one(i, pts, idx_buf, dist_buf, 0, n, bandwidth, frame, sensor,
-                                 has_sensor, min_nb, cov_mode, ws, buf, beta[r], cof[r],
-                                 frames[r], stats[r])
-                status[r] = st
-                npts[r] = p
-                if st != OK:
-                    for a in range(6):
-                        beta[r, a] = np.nan
-                    for a in range(4):
-                        stats[r, a] = np.nan
+
+@njit
+def _quadric_skip(r, outs):
+    status, npts, beta, cof, frames, stats = outs
+    status[r] = SKIPPED
+    npts[r] = 0
+    for a in range(6):
+        beta[r, a] = np.nan
+    for a in range(4):
+        stats[r, a] = np.nan
+
+
+#: ``fit_quadrics_block(pts, query, indptr, idx, dist, params, outs)``: every query point
+#: (positions into `pts`) of CSR rows; ``fit_quadrics_cells(c0, c1, pts, cell_keys,
+#: cell_start, dims, radius, active, params, outs)``: fused neighbour search (3-D sphere of
+#: `radius`) and fit of the points of cells ``c0..c1-1`` (output row r = sorted position
+#: ``cell_start[c0] + r``; ``active[i] == 0``: SKIPPED, NaN outputs). ``params`` and ``outs``
+#: as :func:`_quadric_point`'s.
+fit_quadrics_block, fit_quadrics_cells = make_drivers(_quadric_point, _quadric_workspace,
+                                                      _quadric_skip)

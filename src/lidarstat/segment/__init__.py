@@ -6,7 +6,7 @@ criteria and call the shared graph kernels here; every method returns a
 """
 
 from ._grow import adjacency, components, grow_regions, relabel
-from ._metrics import HooverScore, binary_scores, hoover
+from ._metrics import CreaseCoverage, HooverScore, binary_scores, crease_coverage, hoover
 from ._result import Polylines, Segmentation, segment_table
 from ._forward_search import ForwardSearchResult, forward_search
 from ._search_area import SearchAreas, delaunay_graph, search_areas
@@ -21,6 +21,7 @@ from ._ridges import RIDGE_FIELDS, RidgeResult, ridge_segments, ridges
 
 __all__ = ["Segmentation", "Polylines", "segment_table", "components", "grow_regions",
            "relabel", "adjacency", "hoover", "HooverScore", "binary_scores",
+           "crease_coverage", "CreaseCoverage",
            "ForwardSearchResult", "forward_search", "SearchAreas", "delaunay_graph",
            "search_areas", "RawClusters", "plane_edges", "raw_clusters", "SurfaceUnit",
            "refine_cluster", "intersection_lines", "refine_raw_clusters", "segment_sar",

@@ -177,3 +177,118 @@ def binary_scores(pred, truth) -> dict[str, float]:
     rec = tp / (tp + fn) if tp + fn else float("nan")
     f1 = 2 * tp / (2 * tp + fp + fn) if tp + fp + fn else float("nan")
     return {"precision": prec, "recall": rec, "f1": f1, "tp": tp, "fp": fp, "fn": fn}
+
+
+@dataclass
+class CreaseCoverage:
+    """How much of the true crease length a set of detected points covers.
+
+    Attributes
+    ----------
+    length : float
+        Visible length of the true creases (both adjacent faces sampled near it).
+    covered : float
+        Part of that length with a detected point within the tolerance.
+    ratio : float
+        ``covered / length`` (NaN when nothing is visible).
+    per_crease : list of dict
+        ``faces``, ``convex``, ``length``, ``covered`` of each crease with a visible part.
+    tolerance : float
+    """
+
+    length: float
+    covered: float
+    ratio: float
+    per_crease: list
+    tolerance: float
+
+
+def crease_coverage(creases, detected, tolerance, *, points=None, faces=None,
+                    visible_distance=None, step=None) -> CreaseCoverage:
+    """Share of the true crease length that has a detected point within `tolerance`.
+
+    The creases (``lidarstat.synth.crease_lines`` dicts: segments or arcs) are sampled every
+    `step` (default ``tolerance / 4``); a sample is *visible* when each of the two faces
+    meeting there has a point of the cloud (`points` with face ids `faces`) within
+    `visible_distance` (default twice the tolerance), so that occluded or unscanned parts
+    of a crease do not count; without `points` every sample counts. A visible sample is
+    covered when a point of `detected` lies within `tolerance` (3-D).
+
+    Parameters
+    ----------
+    creases : list of dict
+    detected : (M, 3) array_like
+        Positions of the detected edge (ridge, barrier) points.
+    tolerance : float
+    points : (N, 3) array_like, optional
+        The cloud (true positions preferably), for the visibility test.
+    faces : (N,) array_like of int, optional
+        Face id (as in ``creases[i]["faces"]``) of every point of `points`.
+    visible_distance, step : float, optional
+
+    Returns
+    -------
+    CreaseCoverage
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> line = [{"kind": "segment", "faces": (0, 1), "convex": True,
+    ...          "vertices": np.array([[0.0, 0, 0], [1.0, 0, 0]])}]
+    >>> det = np.c_[np.linspace(0, 0.5, 51), np.zeros(51), np.full(51, 0.01)]
+    >>> print(f"{crease_coverage(line, det, 0.02).ratio:.3f}")  # half the line, plus the tolerance
+    0.515
+    """
+    from scipy.spatial import cKDTree
+
+    tolerance = float(tolerance)
+    if not tolerance > 0:
+        raise InvalidParameterError(f"crease_coverage: tolerance must be > 0, got {tolerance}")
+    step = tolerance / 4.0 if step is None else float(step)
+    visible_distance = 2.0 * tolerance if visible_distance is None else float(visible_distance)
+    det = np.asarray(detected, dtype=np.float64).reshape(-1, 3)
+    tree = cKDTree(det) if det.shape[0] else None
+    face_trees = {}
+    if points is not None:
+        if faces is None:
+            raise InvalidParameterError("crease_coverage: `points` needs `faces`")
+        pts = np.asarray(points, dtype=np.float64)
+        faces = np.asarray(faces)
+        for f in np.unique(faces):
+            face_trees[int(f)] = cKDTree(pts[faces == f])
+    total = covered = 0.0
+    rows = []
+    for cr in creases:
+        v = np.asarray(cr["vertices"], dtype=np.float64)
+        seg = np.linalg.norm(np.diff(v, axis=0), axis=1)
+        cum = np.r_[0.0, np.cumsum(seg)]
+        if cum[-1] <= 0:
+            continue
+        s = np.arange(0.5 * step, cum[-1], step)
+        samples = np.column_stack([np.interp(s, cum, v[:, c]) for c in range(3)])
+        w = np.full(s.size, step)
+        w[-1] = cum[-1] - s[-1] + 0.5 * step
+        vis = np.ones(s.size, bool)
+        if points is not None:
+            for f in cr["faces"]:
+                t = face_trees.get(int(f))
+                if t is None:
+                    vis[:] = False
+                    break
+                d, _ = t.query(samples, k=1, distance_upper_bound=visible_distance)
+                vis &= np.isfinite(d)
+        if not vis.any():
+            continue
+        hit = np.zeros(s.size, bool)
+        if tree is not None:
+            d, _ = tree.query(samples[vis], k=1, distance_upper_bound=tolerance)
+            hit[vis] = np.isfinite(d)
+        length = float(w[vis].sum())
+        cov = float(w[hit].sum())
+        rows.append({"faces": tuple(int(f) for f in cr["faces"]), "convex": bool(cr["convex"]),
+                     "length": length, "covered": cov})
+        total += length
+        covered += cov
+    return CreaseCoverage(length=total, covered=covered,
+                          ratio=covered / total if total > 0 else float("nan"),
+                          per_crease=rows, tolerance=tolerance)

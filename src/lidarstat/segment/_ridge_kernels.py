@@ -253,3 +253,114 @@ def band_edges(indptr, idx, band, ok):
     for i in prange(n):
         for s in range(indptr[i], indptr[i + 1]):
             ok[s] = not band[i] and not band[idx[s]]
+
+
+@njit
+def monge_height(monge, X, Y):
+    """Height Z(X, Y) of the degree-4 Monge form ``monge`` (k1, k2, b0..b3, c0..c4).
+
+    ``Z = (k1 X^2 + k2 Y^2)/2 + (b0 X^3 + 3 b1 X^2 Y + 3 b2 X Y^2 + b3 Y^3)/6
+    + (c0 X^4 + 4 c1 X^3 Y + 6 c2 X^2 Y^2 + 4 c3 X Y^3 + c4 Y^4)/24``; NaN coefficients
+    (a lower Monge degree) count as zero.
+    """
+    z = 0.5 * (monge[0] * X * X + monge[1] * Y * Y)
+    if not math.isnan(monge[2]):
+        z += (monge[2] * X * X * X + 3.0 * monge[3] * X * X * Y + 3.0 * monge[4] * X * Y * Y
+              + monge[5] * Y * Y * Y) / 6.0
+    if not math.isnan(monge[6]):
+        x2 = X * X
+        y2 = Y * Y
+        z += (monge[6] * x2 * x2 + 4.0 * monge[7] * x2 * X * Y + 6.0 * monge[8] * x2 * y2
+              + 4.0 * monge[9] * X * y2 * Y + monge[10] * y2 * y2) / 24.0
+    return z
+
+
+@njit_parallel
+def assign_by_jets(pts, query, cand, labels, monge, frames, offset, per_unit, out):
+    """Label each query point with the unit whose jets explain it best.
+
+    For query point p = pts[query[r]] and each candidate i = cand[r, t] (labelled points
+    sorted by distance, -1 = none), the residual is the height of p above the Monge surface
+    of i, in i's Monge frame (rows d1, d2, n of ``frames[i]``, origin the fitted point
+    ``pts[i] + offset[i] n``): ``Z - Z_i(X, Y)``. Each unit among the candidates scores the
+    median |residual| of its `per_unit` nearest candidates (one jet that happens to pass
+    near p does not decide); out[r] = the unit of the smallest score (0 without a
+    candidate).
+    """
+    K = cand.shape[1]
+    for r in prange(query.size):
+        p = query[r]
+        res = np.empty(K)
+        lab = np.empty(K, dtype=np.int64)
+        m = 0
+        for t in range(K):
+            i = cand[r, t]
+            if i < 0:
+                continue
+            w0 = pts[p, 0] - pts[i, 0]
+            w1 = pts[p, 1] - pts[i, 1]
+            w2 = pts[p, 2] - pts[i, 2]
+            o = offset[i]
+            w0 -= o * frames[i, 2, 0]
+            w1 -= o * frames[i, 2, 1]
+            w2 -= o * frames[i, 2, 2]
+            X = w0 * frames[i, 0, 0] + w1 * frames[i, 0, 1] + w2 * frames[i, 0, 2]
+            Y = w0 * frames[i, 1, 0] + w1 * frames[i, 1, 1] + w2 * frames[i, 1, 2]
+            Z = w0 * frames[i, 2, 0] + w1 * frames[i, 2, 1] + w2 * frames[i, 2, 2]
+            e = abs(Z - monge_height(monge[i], X, Y))
+            if math.isnan(e):
+                continue
+            res[m] = e
+            lab[m] = labels[i]
+            m += 1
+        best = np.inf
+        unit = 0
+        tmp = np.empty(per_unit)
+        for a in range(m):
+            u = lab[a]
+            first = True  # score each unit once, at its nearest candidate
+            for b in range(a):
+                if lab[b] == u:
+                    first = False
+                    break
+            if not first:
+                continue
+            c = 0
+            for b in range(a, m):
+                if lab[b] == u and c < per_unit:
+                    tmp[c] = res[b]
+                    c += 1
+            score = np.median(tmp[:c])
+            if score < best:
+                best = score
+                unit = u
+        out[r] = unit
+
+
+@njit_parallel
+def unit_boundaries(pts, indptr, idx, dist, labels, normals, max_dist, out):
+    """Points with a neighbour of another unit within `max_dist`: 1 convex, 2 concave.
+
+    The crease between the units of i and j is convex when the normals open away from
+    each other across it, ``(n_i - n_j) . (x_i - x_j) > 0`` (normals up or to the
+    sensor); the sign is summed over i's neighbours of other units.
+    """
+    n = indptr.size - 1
+    for i in prange(n):
+        out[i] = 0
+        if labels[i] <= 0:
+            continue
+        s = 0.0
+        hit = False
+        for t in range(indptr[i], indptr[i + 1]):
+            j = idx[t]
+            if labels[j] <= 0 or labels[j] == labels[i] or dist[t] > max_dist:
+                continue
+            hit = True
+            acc = 0.0
+            for c in range(3):
+                acc += (normals[i, c] - normals[j, c]) * (pts[i, c] - pts[j, c])
+            if not math.isnan(acc):
+                s += acc
+        if hit:
+            out[i] = CREST if s > 0.0 else RAVINE

@@ -13,7 +13,7 @@ from ..features import FitStatus, jets
 from ..features._jets import MONGE_NAMES, JET_FIELDS
 from ..neighbors import knn_neighbors, radius_neighbors
 from . import _ridge_kernels as _rk
-from ._grow import grow_regions
+from ._grow import components
 from ._result import Polylines, Segmentation, segment_table
 
 #: Per-point fields added by :func:`ridges` to those of :func:`lidarstat.features.jets`.
@@ -312,14 +312,38 @@ def _build_lines(nl, out_pts, out_start, line_of, vert, ridge, cval, min_vertice
     return Polylines(verts, attributes), new_id
 
 
-def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_size=50):
-    """Direct segmentation: surface units are the regions that ridge lines separate.
+#: Per-point fields of :func:`ridge_segments` beside ``segment_id``.
+SEGMENT_FIELDS = {
+    "ridge": ("uint8", "0 none, 1 crest, 2 ravine (ridge points of ridges())"),
+    "crease": ("uint8", "0 none, 1 convex, 2 concave: on the boundary between two units"),
+    "barrier": ("uint8", "1 ridge band or jet rejected by the chi-square test"),
+}
 
-    Points within `width` of a ridge line (sampled every width/4) form a barrier band;
-    regions grow over the k-nearest-neighbour graph through the other points
-    (:func:`lidarstat.segment.grow_regions`), band points join the first region that
-    reaches them but never expand it, so regions cannot leak across a ridge as long as
-    the band is wider than a neighbour step.
+
+def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_size=50,
+                   chi2_barrier=True, assign=True):
+    """Direct segmentation: surface units are the regions that creases and ridges separate.
+
+    1. **Barrier.** Ridge points, the points within `width` of a ridge line (sampled every
+       width/4), and, with `chi2_barrier`, every point whose degree-4 jet the chi-square
+       test of the variance factor rejects (or that could not be fitted): a crease (a C0
+       discontinuity) inside a neighbourhood is exactly what a smooth jet cannot fit, so
+       the rejections form a band about one jet radius wide on each side of every crease,
+       and they close the gaps where the ridge lines stop (weak k'', thinly sampled faces,
+       line ends at silhouettes).
+    2. **Units.** Connected components of the other points over the k-nearest-neighbour
+       graph (:func:`lidarstat.segment.components`), smaller than `min_size` dropped.
+    3. **Assignment** (`assign`): each barrier point joins the unit whose jet explains it
+       best: among the (up to 24) nearest unit points within the jet radius, each unit
+       scores the median, over its five nearest, of the height of the point above their
+       fitted degree-4 Monge surfaces, and the smallest score wins (the point lies on the
+       surface that continues smoothly through it, not on the one across a crease).
+       Points of the ridge band (within `width` of a ridge line, where the surface may be
+       smooth and both sides' jets fit) join the unit of their nearest unit point
+       instead. Without `assign`, barrier points keep 0.
+    4. **Creases.** Points with one of their `k` neighbours in another unit within 1.5
+       `width` lie on the boundary between two units: ``crease`` 1 where the crease is convex, 2 concave (the
+       unit normals open away from, or toward, each other across it).
 
     Parameters
     ----------
@@ -329,15 +353,21 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_si
     k : int
         Neighbours of the growing graph.
     width : float, optional
-        Half-width of the barrier band; default the median distance to the k-th
-        neighbour (so that no edge jumps over the band).
+        Half-width of the band around ridge lines and largest crease-pair distance; default
+        the median distance to the k-th neighbour (so that no edge jumps over the band).
     min_size : int
-        Smaller regions get 0.
+        Smaller units get 0 (their points are then assigned like barrier points).
+    chi2_barrier : bool
+        Jets rejected by the chi-square test are barriers (default; False reproduces the
+        ridge-only barrier).
+    assign : bool
+        Assign barrier points to units by their jets (default); False leaves them 0.
 
     Returns
     -------
     lidarstat.segment.Segmentation
-        ``segment_id`` plus the per-point ``ridge`` field; lines = the ridge lines.
+        ``segment_id`` plus the per-point ``ridge``, ``crease`` and ``barrier`` fields
+        (:data:`SEGMENT_FIELDS`); lines = the ridge lines.
     """
     from scipy.spatial import cKDTree
 
@@ -345,20 +375,74 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_si
     pts = check_points(points)
     k = check_scalar(k, "k", func=func, low=2, closed="left", integer=True)
     min_size = check_scalar(min_size, "min_size", func=func, low=1, closed="left", integer=True)
+    n = pts.shape[0]
+    if len(ridge_result.fields["ridge"]) != n:
+        raise InvalidParameterError(f"{func}: `ridge_result` has "
+                                    f"{len(ridge_result.fields['ridge'])} points, `points` {n}")
     origin = pts.mean(axis=0)
     local = pts - origin
-    nb = knn_neighbors(local, min(k, pts.shape[0]))
+    nb = knn_neighbors(local, min(k, n))
     if width is None:
         width = float(np.median(nb.distances[nb.indptr[1:] - 1]))
     width = check_scalar(width, "width", func=func, low=0.0)
     lines = ridge_result.lines
-    band = ridge_result.fields["ridge"] > 0
+    ridge = ridge_result.fields["ridge"]
+    ridge_band = ridge > 0
     if len(lines):
         sampled, _ = lines.sample(width / 4.0)
         dist, _ = cKDTree(sampled - origin).query(local, k=1)
-        band |= dist < width
-    labels = grow_regions(nb, can_grow=~band, min_size=min_size)
+        ridge_band |= dist < width
+    band = ridge_band.copy()
+    if chi2_barrier:
+        band |= ridge_result.fields["chi2_pass"] != 1
+    labels = components(nb, mask=~band, min_size=min_size)
+    fit = ridge_result.jets.fit
+    if assign:
+        labels = _assign_by_jets(local, labels, ~ridge_band, fit, ridge_result)
+        # the ridge band (a line, smooth or not) is split by the nearest unit point
+        todo = np.flatnonzero(labels == 0)
+        done = np.flatnonzero(labels > 0)
+        if todo.size and done.size:
+            d, j = cKDTree(local[done]).query(local[todo], k=1, distance_upper_bound=4 * width)
+            hit = np.isfinite(d)
+            labels[todo[hit]] = labels[done[j[hit]]]
+    crease = np.zeros(n, np.uint8)
+    normals = np.ascontiguousarray(fit.frame[:, 2, :])
+    _rk.unit_boundaries(local, nb.indptr, nb.indices, nb.distances, labels, normals,
+                        1.5 * float(width), crease)
     return Segmentation(labels=labels, table=segment_table(labels, pts), lines=lines,
-                        fields={"ridge": ridge_result.fields["ridge"]}, method="ridges",
+                        fields={"ridge": ridge, "crease": crease,
+                                "barrier": band.astype(np.uint8)},
+                        method="ridges",
                         params={**ridge_result.params, "grow_k": k, "width": width,
-                                "min_size": min_size})
+                                "min_size": min_size, "chi2_barrier": bool(chi2_barrier),
+                                "assign": bool(assign)})
+
+
+def _assign_by_jets(local, labels, allowed, fit, ridge_result, n_candidates=24, per_unit=5):
+    """Unlabelled `allowed` points join the unit whose nearby jets fit them best."""
+    from scipy.spatial import cKDTree
+
+    done = np.flatnonzero(labels > 0)
+    todo = np.flatnonzero((labels == 0) & allowed)
+    if done.size == 0 or todo.size == 0:
+        return labels
+    ok = np.isin(ridge_result.jets["status"], (FitStatus.OK, FitStatus.MODEL_REJECTED))
+    radius = ridge_result.params.get("radius")
+    if radius is None:
+        radius = float(np.nanmax(fit.bandwidth[ok])) if ok.any() else 0.0
+    src = done[ok[done]]  # unit points with a jet
+    if src.size == 0:
+        return labels
+    kk = min(n_candidates, src.size)
+    dist, j = cKDTree(local[src]).query(local[todo], k=kk, distance_upper_bound=radius)
+    dist = dist.reshape(todo.size, kk)
+    j = j.reshape(todo.size, kk)
+    cand = np.where(np.isfinite(dist), src[np.minimum(j, src.size - 1)], -1).astype(np.int64)
+    out = np.zeros(todo.size, np.int32)
+    _rk.assign_by_jets(local, todo.astype(np.int64), cand, labels,
+                       np.ascontiguousarray(fit.monge), np.ascontiguousarray(fit.frame),
+                       np.nan_to_num(fit.offset), per_unit, out)
+    labels = labels.copy()
+    labels[todo] = out
+    return labels

@@ -17,6 +17,7 @@ from .._shared.validation import check_scalar
 from ..errors import InvalidParameterError
 from ._als import make_als_town, make_hip_roof_scene
 from ._csg import Box, Cylinder, FaceRegistry, difference, scan_orthographic, union
+from ._edges import crease_lines
 from ._surfaces import SURFACE_KINDS, make_surface
 from ._tls import make_tls_building, make_tls_plant
 from ._truth import SyntheticCloud, _build
@@ -79,6 +80,7 @@ def _finish_scan(name, solid, faces, spacing, sigma, rng, meta, jump_factor=3.0)
         "grid_origin": scan["grid_origin"],
         "grid_shape": scan["grid_shape"],
         "jump_factor": jump_factor,
+        "creases": crease_lines(solid),
         "edge_distance": (
             "3-D distance to the nearest boundary sample: samples next to a miss "
             "(silhouette) or across a depth jump > jump_factor * XY separation between "
