@@ -26,6 +26,7 @@ def run(args, cloud):
         cloud.xyz, k=args.k or 50, radius=args.radius, sensor=args.sensor, sigma=args.sigma,
         alpha=args.alpha, boundary_alpha=args.boundary_alpha,
         curvature_threshold=args.curvature_threshold,
-        variance_threshold=args.variance_threshold, min_size=args.min_size or 50,
+        variance_threshold=args.variance_threshold, curved=args.curved,
+        edge_alpha=args.edge_alpha, min_size=args.min_size or 50,
         grow_k=args.grow_k, seeds=args.seeds, min_angle=args.min_angle,
         reintegration=not args.no_reintegration)

@@ -20,6 +20,12 @@ def add_neighbourhood_arguments(s, *, k_default=50):
     s.add_argument("--variance-threshold", type=float, default=None,
                    help="CurvatureVariance above this is an edge (replaces the automatic "
                    "test; the paper used 0.0001)")
+    s.add_argument("--curved", choices=("cylinder", "variation"), default="cylinder",
+                   help="consistent-curvature test where the plane is rejected: a cylinder "
+                   "fit (default) or the paper's variance of curvature")
+    s.add_argument("--edge-alpha", type=float, default=None,
+                   help="level of the consistent-curvature test (rejected -> edge) "
+                   "[0.001 cylinder, --alpha variation]")
 
 
 def cmd_covariance(args):
@@ -32,7 +38,8 @@ def cmd_covariance(args):
     res = covariance(cloud.xyz, k=args.k, radius=args.radius, sensor=args.sensor,
                      sigma=args.sigma, alpha=args.alpha, boundary_alpha=args.boundary_alpha,
                      curvature_threshold=args.curvature_threshold,
-                     variance_threshold=args.variance_threshold, eigen_mode=args.eigen_mode,
+                     variance_threshold=args.variance_threshold, curved=args.curved,
+                     edge_alpha=args.edge_alpha, eigen_mode=args.eigen_mode,
                      progress=progress(args.quiet))
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
@@ -46,7 +53,8 @@ def cmd_covariance(args):
                 "k": res.features.k, "radius": res.features.radius,
                 "sigma": c.sigma if isinstance(c.sigma, float) else None,
                 "sigma_estimated": c.sigma_estimated, "alpha": c.alpha,
-                "boundary_alpha": c.boundary_alpha, "point_class": c.counts()}
+                "boundary_alpha": c.boundary_alpha, "curved": c.meta.get("curved"),
+                "edge_alpha": c.meta.get("edge_alpha"), "point_class": c.counts()}
         write_summary_json(args.summary_json, meta)
     return 0
 

@@ -291,7 +291,7 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
 
 def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, alpha=0.05,
                        boundary_alpha=0.001, curvature_threshold=None, variance_threshold=None,
-                       min_size=50, grow_k=20, seeds="curvature", min_angle=20.0,
+                       curved="cylinder", edge_alpha=None, min_size=50, grow_k=20, seeds="curvature", min_angle=20.0,
                        reintegration=True, lines=True, result=None) -> Segmentation:
     """Covariance classification, region growing (Fig. 4), intersection lines (eq. 9-17).
 
@@ -300,6 +300,9 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
     points : (N, 3) array_like
     k, radius, sensor, sigma, alpha, boundary_alpha, curvature_threshold, variance_threshold
         As for :func:`lidarstat.classify.covariance`.
+    curved, edge_alpha
+        The consistent-curvature test and its level (as for
+        :func:`lidarstat.classify.classify_covariance`).
     min_size : int
         Smallest segment kept (points).
     grow_k : int
@@ -340,7 +343,8 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         result = covariance(pts, k=k, radius=radius, sensor=sensor, sigma=sigma, alpha=alpha,
                             boundary_alpha=boundary_alpha,
                             curvature_threshold=curvature_threshold,
-                            variance_threshold=variance_threshold, keep_neighbors=True)
+                            variance_threshold=variance_threshold, curved=curved,
+                            edge_alpha=edge_alpha, keep_neighbors=True)
     feats, classes = result.features, result.classes
     nbh = feats.neighborhoods
     if nbh is None:
