@@ -106,7 +106,7 @@ class CovarianceClasses:
                  + f", alpha {self.alpha}, boundary alpha {self.boundary_alpha}"]
         if "curved" in self.meta:
             lines.append(f"consistent curvature: {self.meta['curved']} test at "
-                         f"{self.meta['edge_alpha']}")
+                         f"{self.meta['curved_alpha']}")
         if self.curvature_threshold is not None:
             lines.append(f"SurfaceVariation threshold {self.curvature_threshold} (user)")
         if self.variance_threshold is not None:
@@ -234,7 +234,7 @@ CURVED = ("cylinder", "variation")
 #: nested with the plane test (a plane is a cylinder of infinite radius): the planes the
 #: plane test rejects by chance (alpha of them) are rejected by the cylinder test too, so
 #: at alpha = 0.05 it would call about 4 % of every plane edges.
-EDGE_ALPHA = 0.001
+CURVED_ALPHA = 0.001
 
 
 def _neighbour_rows(points, features, query):
@@ -294,7 +294,7 @@ def curved_surface_test(points, features, query, sigma, *, sensor=None):
 def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
                         boundary_alpha=BOUNDARY_ALPHA, curvature_threshold=None,
                         variance_threshold=None, points=None, curved=None,
-                        edge_alpha=None) -> CovarianceClasses:
+                        curved_alpha=None) -> CovarianceClasses:
     """Label every point surface, edge or boundary from its covariance features.
 
     Parameters
@@ -328,8 +328,8 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         its weighted residuals, ``chi2(n - 3)`` (:mod:`lidarstat.classify._cylinder`);
         ``'variation'`` is the paper's variance of curvature as a ratio test against
         the scan's own planes.
-    edge_alpha : float, optional
-        Level of test 2 (rejected -> edge). Default: 0.001 (``EDGE_ALPHA``) for the
+    curved_alpha : float, optional
+        Level of test 2 (rejected -> edge). Default: 0.001 (``CURVED_ALPHA``) for the
         cylinder test, `alpha` for the variation test.
 
     Returns
@@ -398,10 +398,10 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
             f"The 'curved' parameter of {func} must be one of 'cylinder', 'variation'. "
             f"Got {curved!r} instead.")
     meta["curved"] = curved
-    if edge_alpha is None:
-        edge_alpha = EDGE_ALPHA if curved == "cylinder" else alpha
-    edge_alpha = check_scalar(edge_alpha, "edge_alpha", func=func, low=0.0, high=1.0)
-    meta["edge_alpha"] = edge_alpha
+    if curved_alpha is None:
+        curved_alpha = CURVED_ALPHA if curved == "cylinder" else alpha
+    curved_alpha = check_scalar(curved_alpha, "curved_alpha", func=func, low=0.0, high=1.0)
+    meta["curved_alpha"] = curved_alpha
     if curved == "cylinder":
         if points is None:
             raise InvalidParameterError(f"{func}: curved='cylinder' needs the `points`")
@@ -424,7 +424,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         mu, sd = fit_variation_null(ratio, valid & low)
         variation_p = variation_test(ratio, mu, sd)
     if variance_threshold is None:
-        consistent = variation_p >= edge_alpha
+        consistent = variation_p >= curved_alpha
     else:
         consistent = f["CurvatureVariance"] <= variance_threshold
     surface = valid & (low | consistent)
@@ -477,7 +477,7 @@ class CovarianceClassification:
 
 def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None, alpha=0.05,
                boundary_alpha=BOUNDARY_ALPHA, curvature_threshold=None, variance_threshold=None,
-               curved="cylinder", edge_alpha=None, eigen_mode="raw", keep_neighbors=False,
+               curved="cylinder", curved_alpha=None, eigen_mode="raw", keep_neighbors=False,
                progress=None):
     """Covariance features and surface / edge / boundary classes of every point (seed 003).
 
@@ -509,5 +509,5 @@ def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None
                                   boundary_alpha=boundary_alpha,
                                   curvature_threshold=curvature_threshold,
                                   variance_threshold=variance_threshold, points=points,
-                                  curved=curved, edge_alpha=edge_alpha)
+                                  curved=curved, curved_alpha=curved_alpha)
     return CovarianceClassification(features=feats, classes=classes)

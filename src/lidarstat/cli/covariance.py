@@ -23,7 +23,7 @@ def add_neighbourhood_arguments(s, *, k_default=50):
     s.add_argument("--curved", choices=("cylinder", "variation"), default="cylinder",
                    help="consistent-curvature test where the plane is rejected: a cylinder "
                    "fit (default) or the paper's variance of curvature")
-    s.add_argument("--edge-alpha", type=float, default=None,
+    s.add_argument("--curved-alpha", type=float, default=None,
                    help="level of the consistent-curvature test (rejected -> edge) "
                    "[0.001 cylinder, --alpha variation]")
 
@@ -39,7 +39,7 @@ def cmd_covariance(args):
                      sigma=args.sigma, alpha=args.alpha, boundary_alpha=args.boundary_alpha,
                      curvature_threshold=args.curvature_threshold,
                      variance_threshold=args.variance_threshold, curved=args.curved,
-                     edge_alpha=args.edge_alpha, eigen_mode=args.eigen_mode,
+                     curved_alpha=args.curved_alpha, eigen_mode=args.eigen_mode,
                      progress=progress(args.quiet))
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
@@ -54,7 +54,7 @@ def cmd_covariance(args):
                 "sigma": c.sigma if isinstance(c.sigma, float) else None,
                 "sigma_estimated": c.sigma_estimated, "alpha": c.alpha,
                 "boundary_alpha": c.boundary_alpha, "curved": c.meta.get("curved"),
-                "edge_alpha": c.meta.get("edge_alpha"), "point_class": c.counts()}
+                "curved_alpha": c.meta.get("curved_alpha"), "point_class": c.counts()}
         write_summary_json(args.summary_json, meta)
     return 0
 

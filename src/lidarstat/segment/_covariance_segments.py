@@ -216,6 +216,8 @@ def reintegrate(points, labels, candidates, normals, centroids, nbh, sigma, *, n
     dist = np.abs(np.einsum("ij,ij->i", points[s] - centroids[t], normals[t])) / sig
     fit = dist <= nsigma
     s, t, dist = s[fit], t[fit], dist[fit]
+    if not s.size:
+        return out
     order = np.lexsort((dist, s))
     s, t = s[order], t[order]
     first = np.r_[True, s[1:] != s[:-1]]
@@ -291,8 +293,9 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
 
 def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, alpha=0.05,
                        boundary_alpha=0.001, curvature_threshold=None, variance_threshold=None,
-                       curved="cylinder", edge_alpha=None, min_size=50, grow_k=20, seeds="curvature", min_angle=20.0,
-                       reintegration=True, lines=True, result=None) -> Segmentation:
+                       curved="cylinder", curved_alpha=None, adaptive_scale=True, min_size=50,
+                       grow_k=20, seeds="curvature", min_angle=20.0, reintegration=True,
+                       lines=True, result=None) -> Segmentation:
     """Covariance classification, region growing (Fig. 4), intersection lines (eq. 9-17).
 
     Parameters
@@ -300,9 +303,14 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
     points : (N, 3) array_like
     k, radius, sensor, sigma, alpha, boundary_alpha, curvature_threshold, variance_threshold
         As for :func:`lidarstat.classify.covariance`.
-    curved, edge_alpha
+    curved, curved_alpha
         The consistent-curvature test and its level (as for
         :func:`lidarstat.classify.classify_covariance`).
+    adaptive_scale : bool
+        Also grow through each point's largest planar neighbourhood prefix
+        (:func:`lidarstat.segment._scales.planar_scales`: 8 to k nearest, plane test at
+        `alpha`), so faces narrower than the k-neighbourhood are found; writes
+        ``scale_k`` and ``scale_plane_p``.
     min_size : int
         Smallest segment kept (points).
     grow_k : int
@@ -344,7 +352,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
                             boundary_alpha=boundary_alpha,
                             curvature_threshold=curvature_threshold,
                             variance_threshold=variance_threshold, curved=curved,
-                            edge_alpha=edge_alpha, keep_neighbors=True)
+                            curved_alpha=curved_alpha, keep_neighbors=True)
     feats, classes = result.features, result.classes
     nbh = feats.neighborhoods
     if nbh is None:
@@ -353,14 +361,37 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
     surface = pc == PointClass.SURFACE
     boundary = pc == PointClass.BOUNDARY
     grow_nbh = truncate_rows(nbh, grow_k)
-    # boundary points end a surface, they do not separate two: they may be joined (and do
-    # not grow), only edge and undetermined points cut the rows (Fig. 4)
-    edge_ok = surface_prefix_edges(grow_nbh, surface | boundary)
     sv = feats["SurfaceVariation"]
     order = np.argsort(np.where(np.isfinite(sv), sv, np.inf), kind="stable") \
         if seeds == "curvature" else None
-    labels = grow_regions(grow_nbh, edge_ok, order=order, can_grow=surface,
-                          mask=surface | boundary, merge=True, min_size=min_size)
+    extra = {}
+    if adaptive_scale and nbh.kind == "knn":
+        from ._scales import planar_scales, prefix_edges
+
+        kstar, kp, pn = planar_scales(pts, nbh, classes.sigma, alpha=classes.alpha,
+                                      sensor=feats.sensor if classes.meta.get("noise") ==
+                                      "range" else None)
+        extra = {"scale_k": kstar.astype(np.uint8), "scale_plane_p": kp}
+        src, dst = nbh.edges()
+        # Fig. 4 on the first grow_k neighbours of surface points, plus every point's
+        # largest planar prefix; members of either may be joined, only tested points grow.
+        # Two growing points of a prefix must also agree in their prefix normals: on a
+        # scan whose rows run along a crease, two rows (one per face) are two parallel
+        # lines, always coplanar, so a small prefix can pass the test across the crease.
+        first = prefix_edges(nbh, np.full(len(nbh), grow_k))
+        cos = np.abs(np.einsum("ij,ij->i", pn[src], pn[dst]))
+        smooth = (kstar[dst] == 0) | (cos >= np.cos(np.radians(min_angle / 2)))
+        edge_ok = (surface_prefix_edges(nbh, surface | boundary) & first & surface[src]) | \
+            (prefix_edges(nbh, kstar) & smooth)
+        labels = grow_regions(nbh, edge_ok, order=order, can_grow=surface | (kstar > 0),
+                              mask=pc != PointClass.UNDETERMINED, merge=True,
+                              min_size=min_size)
+    else:
+        # boundary points end a surface, they do not separate two: they may be joined (and
+        # do not grow), only edge and undetermined points cut the rows (Fig. 4)
+        edge_ok = surface_prefix_edges(grow_nbh, surface | boundary)
+        labels = grow_regions(grow_nbh, edge_ok, order=order, can_grow=surface,
+                              mask=surface | boundary, merge=True, min_size=min_size)
     normals = feats.normals
     centroids = feats.centroid
     across = classes.sigma
@@ -378,17 +409,23 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
     if lines:
         rk = nbh.distances.reshape(len(nbh), -1)[:, -1] if nbh.kind == "knn" else \
             np.full(len(nbh), nbh.radius)
-        ref = clean_plane_points(labels, surface | boundary, nbh)
-        x0, seg = local_intersections(pts, labels, normals[ref], centroids[ref], nbh,
+        # local planes from neighbourhoods the plane test accepted (a surface accepted by
+        # the cylinder test is curved: its covariance plane is not the tangent plane)
+        planar = (classes["plane_p"] >= classes.alpha) & (surface | boundary)
+        ref = clean_plane_points(labels, planar, nbh)
+        # a point with no such plane in its row (its own straddles the crease) takes no part
+        x0, seg = local_intersections(pts, labels * planar[ref], normals[ref], centroids[ref],
+                                      nbh,
                                       min_angle=min_angle,
                                       max_distance=2.0 * float(np.median(rk)))
         lines_out = fit_lines(x0, seg)
     table = segment_planes(pts, labels)
     fields = {"point_class": pc.astype(np.uint8), "reintegrated": reint,
               "NormalX": feats["NormalX"], "NormalY": feats["NormalY"],
-              "NormalZ": feats["NormalZ"], "SurfaceVariation": sv}
+              "NormalZ": feats["NormalZ"], "SurfaceVariation": sv, **extra}
     params = {"k": feats.k, "radius": feats.radius, "grow_k": grow_k, "min_size": min_size,
               "seeds": seeds, "min_angle": min_angle, "alpha": classes.alpha,
+              "adaptive_scale": bool(extra),
               "boundary_alpha": classes.boundary_alpha, "noise": classes.meta.get("noise"),
               "sigma_estimated": classes.sigma_estimated}
     return Segmentation(labels=labels, table=table, lines=lines_out, fields=fields,
