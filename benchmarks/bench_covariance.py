@@ -78,7 +78,8 @@ def child_pieces(args, pts):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
         ck.knn_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
                      index.dims, float(index.cell), k, tau0, False, table[s0:s1],
-                     np.empty((0, k)), np.zeros(3), False, raw[s0:s1])
+                     index.order, np.empty(0, np.int64), np.empty(0), np.zeros(3), False,
+                     raw[s0:s1])
     out["knn_covariance_eigen"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     sv = C._surface_variation(raw)

@@ -65,11 +65,14 @@ def test_fused_knn_equals_kdtree_neighbourhoods_bit_for_bit(rng, k):
     from lidarstat.features import _covariance_kernels as ck
 
     pts = _no_ties(rng)
-    index, table, dist, raw = cov._knn_table(pts, k, block_size=700, sort=True)
+    index, table, nbh, raw = cov._knn_table(pts, k, block_size=700, sort=True)
     local = index.sorted_points
     d, j = cKDTree(local).query(local, k=k)
     assert np.array_equal(table, j)
-    np.testing.assert_allclose(dist, d, rtol=1e-15, atol=0)
+    # the input-order neighbourhoods written beside the table are the same rows
+    assert np.array_equal(nbh.indices.reshape(-1, k)[index.order], index.order[j])
+    np.testing.assert_allclose(nbh.distances.reshape(-1, k)[index.order], d, rtol=1e-15,
+                               atol=0)
     ref = np.empty_like(raw)
     n = len(pts)
     ck.covariance_rows(local, np.arange(n), np.arange(n + 1) * k, j.ravel(), np.zeros(3),

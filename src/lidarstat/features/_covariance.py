@@ -201,32 +201,36 @@ def _knn_cell_size(points, k, rng=0, sample=4000, min_k=24, min_tree=400_000):
 
 
 def _knn_table(points, k, *, block_size, sort=True, sensor=None, progress=None, rng=0):
-    """Exact kNN of every point with the grid kernel: (index, table, dist) in sorted order.
+    """Exact kNN of every point with the grid kernel, in the grid's sorted order.
 
-    ``table[r]`` lists the sorted positions of the k nearest neighbours of sorted position r
-    (in ascending distance if `sort`, and then ``dist`` holds the distances, else None);
-    int32 when the cloud allows (4 k bytes per point). ``raw`` holds the covariance
-    kernel's output per sorted position (computed in the same pass); `sensor` in file
-    coordinates.
+    Returns ``(index, table, nbh, raw)``: ``table[r]`` lists the sorted positions of the k
+    nearest neighbours of sorted position r (in ascending distance if `sort`), int32 when
+    the cloud allows (4 k bytes per point); with `sort`, ``nbh`` holds the same
+    neighbourhoods as :class:`Neighborhoods` in input order (original indices, distances),
+    written by the kernel directly, else None. ``raw`` holds the covariance kernel's
+    output per sorted position (computed in the same pass); `sensor` in file coordinates.
     """
     cell, tau0 = _knn_cell_size(points, k, rng=rng)
     index = CellIndex(points, cell)
     n = index.n_points
     dtype = np.int32 if n < 2**31 - 1 else np.int64
     table = np.empty((n, k), dtype=dtype)
-    dist = np.empty((n, k)) if sort else None  # kept (float64) only for the neighbourhoods
+    nbr_idx = np.empty(n * k if sort else 0, dtype=np.int64)
+    nbr_dist = np.empty(n * k if sort else 0)
     raw = np.empty((n, _ck.NCOL))
     sens = np.zeros(3) if sensor is None else np.asarray(sensor, float) - index.origin
-    nodist = np.empty((0, k))
     for c0, c1 in index.cell_blocks(block_size):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
-        dblock = dist[s0:s1] if sort else nodist
         _ck.knn_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
                       index.dims, float(index.cell), int(k), tau0, sort, table[s0:s1],
-                      dblock, sens, sensor is not None, raw[s0:s1])
+                      index.order, nbr_idx, nbr_dist, sens, sensor is not None, raw[s0:s1])
         if progress is not None:
             progress(int(s1), 2 * n)
-    return index, table, dist, raw
+    nbh = None
+    if sort:
+        nbh = Neighborhoods(np.arange(n + 1, dtype=np.int64) * k, nbr_idx, nbr_dist, n,
+                            kind="knn", k=k)
+    return index, table, nbh, raw
 
 
 def _check_sensor(sensor, func):
@@ -361,7 +365,7 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
             keep = radius_neighbors(pts, radius)
         k = None
     else:
-        index, table, dist, raw = _knn_table(pts, k, block_size=block_size,
+        index, table, keep, raw = _knn_table(pts, k, block_size=block_size,
                                              sort=keep_neighbors, sensor=sensor,
                                              progress=progress)
         origin = index.origin
@@ -375,9 +379,7 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         if progress is not None:
             progress(2 * n, 2 * n)
         order = index.order
-        if keep_neighbors:
-            keep = _table_to_csr(table, dist, order, k)
-        del table, dist
+        del table
 
     res = _assemble(raw, mean_sv, var_sv, spread, origin, order, k=k, radius=radius,
                     eigen_mode=eigen_mode, neighborhoods=keep)
@@ -390,18 +392,6 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         object.__setattr__(res, "ray_range", rng_)
         object.__setattr__(res, "ray_cos", cos)
     return res
-
-
-def _table_to_csr(table, dist, order, k):
-    """Dense sorted-order kNN table -> Neighborhoods in input order (original indices)."""
-    n = table.shape[0]
-    inverse = np.empty_like(order)
-    inverse[order] = np.arange(n)
-    rows = table[inverse]
-    idx = order[rows.ravel()]
-    d = dist[inverse].ravel()
-    indptr = np.arange(n + 1, dtype=np.int64) * k
-    return Neighborhoods(indptr, idx, d, n, kind="knn", k=k)
 
 
 def _rows(local, query, indptr, idx, sens):

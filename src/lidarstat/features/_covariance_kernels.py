@@ -253,13 +253,16 @@ def _count(ranges, nr):
 
 @njit_parallel
 def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out_idx,
-              out_dist, sensor, has_sensor, out_feat):
+              order, nbr_idx, nbr_dist, sensor, has_sensor, out_feat):
     """Exact `k` nearest neighbours (self included) of the points of cells ``c0..c1-1``.
 
     `pts` are the grid's sorted local coordinates; output row r is sorted position
     ``cell_start[c0] + r``; ``out_idx`` (sorted positions, any integer dtype) gets the k
-    neighbours, in ascending distance if `sort` (and then ``out_dist`` their distances;
-    it is not touched otherwise and may be empty). Requires ``k <= len(pts)``. `tau0` is
+    neighbours, in ascending distance if `sort`. With `sort` the neighbourhoods are also
+    written in input order as CSR entries of k per row: ``nbr_idx[order[p] k + t]`` (input
+    indices, ``order`` maps sorted positions to input indices) and ``nbr_dist`` (the
+    distances); they are not touched otherwise and may be empty. Requires
+    ``k <= len(pts)``. `tau0` is
     a typical k-th neighbour distance: candidates farther than 1.15 times the previous
     point's k-th distance (tau0 for a cell's first point) are dropped before the
     selection, unless fewer than k remain (then all are kept), so the pre-filter changes
@@ -326,8 +329,10 @@ def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out
                 for t in range(k):
                     out_idx[r, t] = ti[t]
                 if sort:
+                    row = order[i] * k
                     for t in range(k):
-                        out_dist[r, t] = np.sqrt(td[t])
+                        nbr_idx[row + t] = order[ti[t]]
+                        nbr_dist[row + t] = np.sqrt(td[t])
                 _covariance_one(i, pts, ti, 0, k, sensor, has_sensor, cov, evals, evecs,
                                 out_feat[r])
 
