@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from ._app import check_output, progress, write_summary_json
+from ._app import SENSOR_HELP, check_output, progress, resolve_sensor, write_summary_json
 
 
 def add_neighbourhood_arguments(s, *, k_default=50):
@@ -35,7 +35,8 @@ def cmd_covariance(args):
     out = check_output(args.output, args.input)
     cloud = read(args.input)
     t0 = time.perf_counter()
-    res = covariance(cloud.xyz, k=args.k, radius=args.radius, sensor=args.sensor,
+    sensor = resolve_sensor(args.sensor, args.input, args.quiet)
+    res = covariance(cloud.xyz, k=args.k, radius=args.radius, sensor=sensor,
                      sigma=args.sigma, alpha=args.alpha, boundary_alpha=args.boundary_alpha,
                      curvature_threshold=args.curvature_threshold,
                      variance_threshold=args.variance_threshold, curved=args.curved,
@@ -71,7 +72,7 @@ def register(sub):
     g.add_argument("--k", type=int, default=50, help="neighbours per point, itself included [50]")
     g.add_argument("--radius", type=float, default=None, help="sphere radius instead of kNN")
     s.add_argument("--sensor", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
-                   help="scanner position (normals point to it; default up)")
+                   help=SENSOR_HELP)
     s.add_argument("--sigma", type=float, default=None,
                    help="noise std across surfaces (default: estimated from the data)")
     s.add_argument("--alpha", type=float, default=0.05,
