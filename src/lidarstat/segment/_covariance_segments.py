@@ -25,6 +25,7 @@ import numpy as np
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import Neighborhoods
+from . import _edge_kernels as _ek
 from ._grow import grow_regions
 from ._result import Polylines, Segmentation
 
@@ -34,13 +35,10 @@ def surface_prefix_edges(nbh: Neighborhoods, surface):
 
     The row's own point (distance 0) is skipped when looking for the first non-surface one.
     """
-    surface = np.asarray(surface, dtype=bool)
-    src, dst = nbh.edges()
-    bad = (~surface[dst]) & (dst != src)
-    cs = np.cumsum(bad)
-    start = nbh.indptr[:-1]
-    before = np.where(start > 0, cs[np.maximum(start - 1, 0)], 0)
-    return (cs - np.repeat(before, nbh.counts)) == 0
+    surface = np.ascontiguousarray(surface, dtype=bool)
+    out = np.empty(nbh.nnz, dtype=bool)
+    _ek.prefix_ok(nbh.indptr, nbh.indices, nbh.query_indices(), surface, out)
+    return out
 
 
 def truncate_rows(nbh: Neighborhoods, m: int) -> Neighborhoods:
@@ -107,11 +105,8 @@ def clean_plane_points(labels, clean, nbh):
     ref = np.arange(n)
     if nbh.kind != "knn" or nbh.k is None:
         return ref
-    idx = nbh.indices.reshape(n, nbh.k)
-    ok = clean[idx] & (labels[idx] == labels[:, None])
-    first = np.argmax(ok, axis=1)
-    has = ok[np.arange(n), first]
-    ref[has] = idx[has, first[has]]
+    _ek.first_in_row(nbh.indptr, nbh.indices, nbh.query_indices(),
+                     np.ascontiguousarray(clean, dtype=bool), np.ascontiguousarray(labels), ref)
     return ref
 
 
@@ -126,10 +121,7 @@ def local_intersections(points, labels, normals, centroids, nbh, *, min_angle=20
     seg : (P, 2) ndarray of int
         The two segments (smaller id first).
     """
-    src, dst = nbh.edges()
-    la, lb = labels[src], labels[dst]
-    keep = (la > 0) & (lb > 0) & (la < lb)
-    i, j = src[keep], dst[keep]
+    i, j = _ek.label_pairs(nbh, labels)  # 0 < labels[i] < labels[j]
     n1, n2 = normals[i], normals[j]
     cosang = np.abs(np.einsum("ij,ij->i", n1, n2))
     ok = cosang < np.cos(np.radians(min_angle))  # eq. 9: not parallel
@@ -209,9 +201,13 @@ def reintegrate(points, labels, candidates, normals, centroids, nbh, sigma, *, n
         Labels with the reintegrated points set; unchanged elsewhere.
     """
     out = labels.copy()
-    src, dst = nbh.edges()
-    use = candidates[src] & (labels[dst] > 0) & (labels[src] == 0)
-    s, t = src[use], dst[use]
+    # edges from an unlabelled candidate to a labelled point
+    rows = nbh.query_indices()
+    cand = np.ascontiguousarray(candidates, dtype=bool)
+    lab = np.ascontiguousarray(labels)
+    m = _ek.count_reintegration(nbh.indptr, nbh.indices, rows, cand, lab)
+    s, t = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
+    _ek.fill_reintegration(nbh.indptr, nbh.indices, rows, cand, lab, s, t)
     sig = np.broadcast_to(np.asarray(sigma, dtype=np.float64), labels.shape)[t]
     dist = np.abs(np.einsum("ij,ij->i", points[s] - centroids[t], normals[t])) / sig
     fit = dist <= nsigma
@@ -252,11 +248,8 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
     db = np.abs(np.einsum("ij,ij->i", c[a] - c[b], n[b]))
     ok = (cos >= np.cos(np.radians(max_angle))) & (da <= tol) & (db <= tol)
     if normals is not None:
-        src, dst = nbh.edges()
-        la, lb = labels[src], labels[dst]
-        touch = (la > 0) & (lb > 0) & (la < lb)
-        key = la[touch].astype(np.int64) * (int(labels.max()) + 1) + lb[touch]
-        si, di = src[touch], dst[touch]
+        si, di = _ek.label_pairs(nbh, labels)  # 0 < labels[si] < labels[di]
+        key = labels[si].astype(np.int64) * (int(labels.max()) + 1) + labels[di]
         c_local = np.abs(np.einsum("ij,ij->i", normals[si], normals[di]))
         off = np.abs(np.einsum("ij,ij->i", points[di] - centroids[si], normals[si]))
         order = np.argsort(key, kind="stable")
