@@ -6,7 +6,13 @@ included, k = 50 (radius peers: the radius whose median neighbour count is 50), 
 synthetic airborne-like cloud of ``bench_curvature.py``. Each measurement runs in a fresh
 subprocess (``--child``); Numba kernels load from a benchmark-private cache warmed by one
 untimed run. Peers, in the same run: jakteristics ``compute_features`` (radius), pgeof
-(``knn_search`` + ``compute_features``), Open3D ``estimate_normals`` (kNN 50).
+(``knn_search`` + ``compute_features``), Open3D ``estimate_normals`` (kNN 50), and
+CloudCompare (command line, headless through ``xvfb-run``): ``-FEATURE SURFACE_VARIATION``
+and ``-OCTREE_NORMALS`` (least-squares plane) at the radius whose median neighbour count is
+50. CloudCompare runs as a whole external process from a binary PLY file; its ``seconds``
+are that process minus the median process that only loads the file (both kept in the
+JSON), i.e. the octree plus the feature step, as the other rows time neighbour search plus
+features from coordinates in memory.
 
 Usage::
 
@@ -22,6 +28,7 @@ import argparse
 import datetime
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -32,7 +39,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from bench_curvature import _cpu_name, _git_rev, _vmhwm_mb, calibrate_radius, make_cloud  # noqa: E402
+from bench_curvature import (_cpu_name, _git_rev, _vmhwm_mb, calibrate_radius,  # noqa: E402
+                             make_cloud, run_external, write_ply)
 
 K = 50
 
@@ -44,6 +52,46 @@ def child_lidarstat(args, pts):
     res = covariance_features(pts, k=args.k)
     return dict(seconds=time.perf_counter() - t0,
                 median_neighbors=float(np.median(res["neighbors"])))
+
+
+def child_pieces(args, pts):
+    """covariance_features(k) piece by piece (wall seconds): the cell size (thinned
+    KD-tree), the grid index (counting sort), the fused kNN + covariance + eigen kernel, the
+    second pass over the kNN table (eq. 5 variance, normal spread), the output arrays in
+    input order."""
+    from lidarstat.features import _covariance as C
+    from lidarstat.features import _covariance_kernels as ck
+    from lidarstat.neighbors import CellIndex
+
+    k, n = args.k, pts.shape[0]
+    out = {}
+    t0 = time.perf_counter()
+    cell, tau0 = C._knn_cell_size(pts, k)
+    out["cell_size"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    index = CellIndex(pts, cell)
+    out["grid_index"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    table = np.empty((n, k), dtype=np.int32)
+    raw = np.empty((n, ck.NCOL))
+    for c0, c1 in index.cell_blocks(262144):
+        s0, s1 = index.cell_start[c0], index.cell_start[c1]
+        ck.knn_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
+                     index.dims, float(index.cell), k, tau0, False, table[s0:s1],
+                     index.order, np.empty(0, np.int64), np.empty(0), np.zeros(3), False,
+                     raw[s0:s1])
+    out["knn_covariance_eigen"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    sv = C._surface_variation(raw)
+    mean_sv, var_sv, spread = np.empty(n), np.empty(n), np.empty((n, 4))
+    ck.table_variance(sv, table, mean_sv, var_sv)
+    ck.normal_spread_table(np.ascontiguousarray(raw[:, ck.C_NX:ck.C_NZ + 1]), table, spread)
+    out["second_pass"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    C._assemble(raw, mean_sv, var_sv, spread, index.origin, index.order, k=k, radius=None,
+                eigen_mode="raw", neighborhoods=None)
+    out["output_arrays"] = time.perf_counter() - t0
+    return dict(seconds=sum(out.values()), pieces=out)
 
 
 def child_classify(args, pts):
@@ -96,7 +144,7 @@ def child_open3d(args, pts):
     return dict(seconds=time.perf_counter() - t0, note="estimate_normals, KNN 50")
 
 
-CHILDREN = dict(lidarstat=child_lidarstat, classify=child_classify, segment=child_segment,
+CHILDREN = dict(lidarstat=child_lidarstat, pieces=child_pieces, classify=child_classify, segment=child_segment,
                 jakteristics=child_jakteristics, pgeof=child_pgeof, open3d=child_open3d)
 
 
@@ -123,10 +171,49 @@ def run_repeats(mode, repeats, data, env, **kw):
     return best
 
 
+def cloudcompare(tmp, xyz, radius, repeats):
+    """CloudCompare's covariance features and normals (whole process minus loading)."""
+    exe = shutil.which("CloudCompare") or shutil.which("cloudcompare")
+    xvfb = shutil.which("xvfb-run")
+    if exe is None or xvfb is None:
+        print("cloudcompare: skipped (apt-get install -y cloudcompare xvfb)", flush=True)
+        return {}
+    ply = Path(tmp) / "cloud.ply"
+    write_ply(ply, xyz - np.floor(xyz.min(0)))
+    base = [xvfb, "-a", exe, "-SILENT", "-AUTO_SAVE", "OFF", "-NO_TIMESTAMP", "-O",
+            "-GLOBAL_SHIFT", "AUTO", str(ply)]
+    steps = {"cloudcompare_load_only": [],
+             "cloudcompare_feature": ["-FEATURE", "SURFACE_VARIATION", f"{radius:.6f}"],
+             "cloudcompare_normals": ["-OCTREE_NORMALS", f"{radius:.6f}", "-MODEL", "LS"]}
+    out = {}
+    for name, extra in steps.items():
+        runs = []
+        for _ in range(repeats):
+            t, rc, log, mb = run_external(base + extra)
+            if rc != 0:
+                print(f"{name}: skipped (rc {rc}: {log.strip()[-300:]})", flush=True)
+                return out
+            runs.append((t, mb))
+        wall = float(np.median([t for t, _ in runs]))
+        out[name] = dict(process_wall=wall, all_process_wall=[t for t, _ in runs],
+                         peak_rss_mb=max(mb for _, mb in runs), note=" ".join(extra) or "load")
+    load = out["cloudcompare_load_only"]["process_wall"]
+    for name in ("cloudcompare_feature", "cloudcompare_normals"):
+        if name in out:
+            out[name]["seconds"] = out[name]["process_wall"] - load
+            print(f"{name}: {out[name]['seconds']:.2f} s (process {out[name]['process_wall']:.2f}"
+                  f" s, load {load:.2f} s)", flush=True)
+    out["cloudcompare_load_only"]["seconds"] = load
+    return out
+
+
+PEERS = ("jakteristics", "pgeof", "open3d", "cloudcompare_feature", "cloudcompare_normals")
+
+
 def print_table(results):
     rows = results["measurements"]
-    ref = min(v["seconds"] for k, v in rows.items() if k in ("jakteristics", "pgeof", "open3d")) \
-        if any(k in rows for k in ("jakteristics", "pgeof", "open3d")) else None
+    peers = [v["seconds"] for k, v in rows.items() if k in PEERS]
+    ref = min(peers) if peers else None
     print(f"\n{results['points']} points, k = {K}, {results['cpu']} ({results['cores']} cores)\n")
     print("| run | seconds | peak RSS MB | vs fastest peer |")
     print("|---|---:|---:|---:|")
@@ -173,6 +260,10 @@ def main(argv=None):
         run_child(mode, data, env)  # warm the Numba cache (compiles once)
         m[mode] = run_repeats(mode, args.repeats, data, env)
         print(f"{mode}: {m[mode]['seconds']:.2f} s", flush=True)
+    pieces = run_child("pieces", data, env)
+    results["lidarstat_pieces"] = pieces["pieces"]
+    print("lidarstat pieces: " + ", ".join(f"{k} {v:.2f} s" for k, v in pieces["pieces"].items()),
+          flush=True)
     if not args.skip_peers:
         for mode in ("jakteristics", "pgeof", "open3d"):
             try:
@@ -180,6 +271,7 @@ def main(argv=None):
                 print(f"{mode}: {m[mode]['seconds']:.2f} s", flush=True)
             except (subprocess.CalledProcessError, ImportError) as exc:
                 print(f"{mode}: skipped ({exc})", flush=True)
+        m.update(cloudcompare(tmp, xyz, radius, args.repeats))
     print_table(results)
     if not args.quick:
         Path(args.out).write_text(json.dumps(results, indent=1))

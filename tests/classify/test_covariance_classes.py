@@ -5,8 +5,10 @@ import pytest
 from scipy.spatial import cKDTree
 
 from lidarstat.classify import PointClass, classify_covariance, covariance
+from lidarstat.classify._covariance import curved_surface_test
 from lidarstat.errors import InvalidParameterError
 from lidarstat.features import covariance_features
+from lidarstat.synth import make_tls_building, make_tls_plant
 
 
 def _plane(rng, n=40000, size=20.0, sigma=0.01):
@@ -103,6 +105,69 @@ def test_pipe_is_a_consistently_curved_surface_not_an_edge(rng):
     inner = (h > 1) & (h < 5)
     assert (res["plane_p"][inner] < 0.05).mean() > 0.9  # not planes
     assert (res.point_class[inner] == PointClass.SURFACE).mean() > 0.9
+
+
+@pytest.mark.parametrize("k", [20, 50])
+def test_cylinder_test_size_under_true_nulls(rng, k):
+    """The consistent-curvature (cylinder) test on a noisy pipe and a noisy plane, axes
+    estimated from the normals: on the pipe the rejection rate is within the 99.9 %
+    interval of alpha; on the plane (where the test only runs after the plane test
+    rejected) the axis is chosen by the noise itself, the direction along which the
+    neighbourhood is straightest, and the test is conservative (measured 2.4-4.2 %:
+    docs/methods/covariance.md), never above alpha."""
+    alpha, sigma, n = 0.05, 0.002, 40000
+    rej = {"pipe": [], "plane": []}
+    for _ in range(3):
+        t = rng.uniform(0, 2 * np.pi, n)
+        h = rng.uniform(0, 8, n)
+        r = 0.3 + rng.normal(0, sigma, n)
+        pipe = np.c_[r * np.cos(t), r * np.sin(t), h]
+        plane = _plane(rng, n=n, sigma=sigma)
+        for name, pts, flat in (("pipe", pipe, np.c_[0.3 * t, h]), ("plane", plane, plane)):
+            feats = covariance_features(pts, k=k)
+            rk = np.sqrt(k / (np.pi * n / np.ptp(flat[:, 0]) / np.ptp(flat[:, 1])))
+            sel = _separated(np.c_[flat[:, :2], np.zeros(n)], 2.2 * rk, 0.3, rng)
+            p, radius = curved_surface_test(pts, feats, sel, sigma)
+            rej[name].append(p < alpha)
+            if name == "pipe":
+                assert abs(np.median(radius) - 0.3) < 0.01
+    ok, rate, m = _binomial_ok(np.concatenate(rej["pipe"]), alpha)
+    assert ok and m > 200, f"cylinder test rejects {rate:.3f} of {m} points of a pipe"
+    ok, rate, m = _binomial_ok(np.concatenate(rej["plane"]), alpha)
+    assert m > 200 and alpha / 3 < rate <= alpha + 3.3 * np.sqrt(alpha * (1 - alpha) / m), \
+        f"cylinder test rejects {rate:.3f} of {m} points of a plane"
+
+
+def _support_f1(make, step):
+    from lidarstat.synth import neighborhood_class_truth
+
+    sc = make(step=step, rng=0)
+    res = covariance(sc.xyz, sensor=sc.scanner, k=50, keep_neighbors=True)
+    truth = neighborhood_class_truth(sc, res.features.neighborhoods)
+    return sc, res, truth
+
+
+def test_tls_plant_pipes_and_tanks_are_surfaces_not_edges():
+    """Consistently curved surfaces come out as surface (the cylinder test): on the
+    sides of the pipes and tanks whose neighbourhoods hold no other face, < 3 % edges
+    (the variation-of-curvature test gives 22 %); edges found with F1 >= 0.6 against the
+    neighbourhood truth (0.43 with the variation test; docs/methods/covariance.md)."""
+    sc, res, truth = _support_f1(make_tls_plant, 0.004)
+    pc = res.point_class
+    names = np.array(sc.meta["face_names"])[sc.face]
+    curved = np.char.endswith(names.astype(str), "_side") & (truth == 1)
+    assert curved.sum() > 3000
+    assert (pc[curved] == PointClass.EDGE).mean() < 0.03
+    assert _f1(pc == PointClass.EDGE, truth == 2) >= 0.6
+    assert res.classes.meta["curved"] == "cylinder"
+
+
+def test_tls_building_edges_f1_against_neighbourhood_truth():
+    """Edge points of the synthetic building with F1 >= 0.9 (the issue's target) against
+    the truth judged on the neighbourhoods used (see docs/methods/covariance.md for the
+    fixed-band truth, on which the figure is lower)."""
+    _, res, truth = _support_f1(make_tls_building, 0.004)
+    assert _f1(res.point_class == PointClass.EDGE, truth == 2) >= 0.9
 
 
 def test_user_thresholds_override_the_tests(rng):

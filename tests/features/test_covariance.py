@@ -46,6 +46,69 @@ def test_knn_is_exact_and_sorted(rng):
         np.all(got[:, 0] == 0)
 
 
+def _no_ties(rng, n=4000):
+    """Planes and a noisy ball without duplicates (distance ties have probability 0)."""
+    a = np.c_[rng.uniform(0, 10, (n, 2)), rng.normal(0, 0.01, n)]
+    b = np.c_[rng.uniform(0, 2, (n // 4, 1)), rng.normal(5.0, 0.01, (n // 4, 1)),
+              rng.uniform(0, 3, (n // 4, 1))]
+    c = rng.normal([8, 8, 2], 0.05, (300, 3))
+    return np.vstack([a, b, c]) + [512_000.0, 5_430_000.0, 120.0]
+
+
+@pytest.mark.parametrize("k", [20, 50])
+def test_fused_knn_equals_kdtree_neighbourhoods_bit_for_bit(rng, k):
+    """The grid kNN finds cKDTree's neighbours in cKDTree's order, and the covariance fused
+    into the search equals the generic per-row kernel on those neighbourhoods exactly."""
+    from scipy.spatial import cKDTree
+
+    from lidarstat.features import _covariance as cov
+    from lidarstat.features import _covariance_kernels as ck
+
+    pts = _no_ties(rng)
+    index, table, nbh, raw = cov._knn_table(pts, k, block_size=700, sort=True)
+    local = index.sorted_points
+    d, j = cKDTree(local).query(local, k=k)
+    assert np.array_equal(table, j)
+    # the input-order neighbourhoods written beside the table are the same rows
+    assert np.array_equal(nbh.indices.reshape(-1, k)[index.order], index.order[j])
+    np.testing.assert_allclose(nbh.distances.reshape(-1, k)[index.order], d, rtol=1e-15,
+                               atol=0)
+    ref = np.empty_like(raw)
+    n = len(pts)
+    ck.covariance_rows(local, np.arange(n), np.arange(n + 1) * k, j.ravel(), np.zeros(3),
+                       False, ref)
+    assert np.array_equal(raw, ref)
+    # without sorting only the summation order changes
+    _, table_u, _, raw_u = cov._knn_table(pts, k, block_size=700, sort=False)
+    assert np.array_equal(np.sort(table_u, axis=1), np.sort(j, axis=1))
+    np.testing.assert_allclose(raw_u, raw, rtol=1e-9, atol=1e-13)
+
+
+def test_knn_with_many_exact_duplicates(rng):
+    """40 copies of every point: distance ties everywhere (the selection's sorting fallback)."""
+    from scipy.spatial import cKDTree
+
+    base = np.c_[rng.uniform(0, 5, (150, 2)), rng.normal(0, 0.02, 150)]
+    pts = np.repeat(base, 40, axis=0)
+    k = 50
+    res = covariance_features(pts, k=k, keep_neighbors=True)
+    got = res.neighborhoods.distances.reshape(-1, k)
+    d, _ = cKDTree(pts).query(pts, k=k)
+    np.testing.assert_allclose(got, d, rtol=0, atol=1e-12)
+    unsorted = covariance_features(pts, k=k)
+    np.testing.assert_allclose(unsorted["Eigenvalue2"], res["Eigenvalue2"], rtol=1e-9)
+
+
+@pytest.mark.parametrize("mode", ["raw", "sqrt", "normalized"])
+def test_fields_equal_eigen_features_exactly(rng, mode):
+    """The fused output kernel computes eigen_features' formulas with the same rounding."""
+    pts = _cloud(rng, 1500)
+    res = covariance_features(pts, k=20, eigen_mode=mode)
+    ref = eigen_features(res.eigenvalues, res.normals, res.major, mode=mode)
+    for name, v in ref.items():
+        assert np.array_equal(res[name], v, equal_nan=True), name
+
+
 def test_features_match_brute_force(rng):
     pts = _cloud(rng)
     k = 25

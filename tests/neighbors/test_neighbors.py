@@ -68,3 +68,33 @@ def test_bad_points():
         radius_neighbors(np.zeros((0, 3)), 1.0)
     with pytest.raises(InvalidPointsError, match="NaN or infinite"):
         radius_neighbors(np.array([[0, 0, np.nan]]), 1.0)
+
+
+def _argsort_index(points, cell, dim):
+    """CellIndex as first written: NumPy keys and a stable argsort (the reference)."""
+    origin = points.min(axis=0)
+    local = points - origin
+    extent = local.max(axis=0)
+    dims = np.floor(extent / cell).astype(np.int64) + 1
+    if dim == 2:
+        dims[2] = 1
+    ijk = np.minimum(np.floor(local / cell).astype(np.int64), dims - 1)
+    if dim == 2:
+        ijk[:, 2] = 0
+    keys = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
+    order = np.argsort(keys, kind="stable")
+    skeys = keys[order]
+    starts = np.r_[0, np.flatnonzero(np.diff(skeys)) + 1, skeys.size]
+    return order, local[order], skeys[starts[:-1]], starts
+
+
+@pytest.mark.parametrize("dim", [3, 2])
+@pytest.mark.parametrize("n, cell", [(70_000, 0.05), (70_000, 0.004), (3000, 0.05)])
+def test_cell_index_counting_sort_equals_stable_argsort(rng, dim, n, cell):
+    """Dense grids use an O(N) counting sort, sparse ones argsort: same index either way."""
+    pts = np.c_[rng.uniform(0, 1, (n, 2)), rng.normal(0, 0.05, n)] + [6e5, 5.2e6, 300.0]
+    pts[:50] = pts[50:100]  # duplicates keep their input order within a cell
+    idx = CellIndex(pts, cell, dim=dim)
+    for got, ref in zip((idx.order, idx.sorted_points, idx.cell_keys, idx.cell_start),
+                        _argsort_index(pts, cell, dim)):
+        assert np.array_equal(got, ref)

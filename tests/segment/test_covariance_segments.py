@@ -67,14 +67,25 @@ def test_segment_planes_exact():
 
 @pytest.mark.slow
 def test_tls_building_hoover_and_lines():
-    """Synthetic terrestrial scan: measured scores (see docs/methods/covariance.md)."""
+    """Synthetic terrestrial scan: measured scores (see docs/methods/covariance.md).
+
+    With the scale-adaptive growing, the west wall (cut by two windows) and the west gable
+    (seen at grazing incidence) are found: 11 of 14 faces > 200 points (10 without it).
+    The lines with support lie on the true creases within 2 sigma along their length.
+    """
     sc = make_tls_building(rng=0)
     seg = segment_covariance(sc.xyz, sensor=sc.scanner)
     h = hoover(seg.labels, sc.face + 1, 0.8, min_size=200)
-    assert h.correct >= 10  # of 14 faces > 200 points; narrow strips (fascia, soffit) missed
-    # every line lies near a true crease: mean distance of its end points
+    assert h.correct >= 11  # of 14; the soffit (1-2 scan lines) and the fascia are missed
+    assert seg.fields["scale_k"].max() == 50 and (seg.fields["scale_k"] < 50).any()
     from lidarstat.synth._edges import distance_to_creases
 
-    ends = np.concatenate(seg.lines.vertices)
-    d = distance_to_creases(ends, sc.meta["edges"])
-    assert np.median(d) < 0.05
+    two_sigma = 2 * (0.002 + 5e-5 * 30)  # range noise at 30 m
+    t = np.array([0.2, 0.5, 0.8])[:, None]
+    long_lines = 0
+    for v, n in zip(seg.lines.vertices, seg.lines.attributes["n_points"]):
+        if n >= 50 and np.linalg.norm(v[-1] - v[0]) > 1.0:
+            d = distance_to_creases(v[0] + t * (v[-1] - v[0]), sc.meta["edges"])
+            assert d.max() < two_sigma
+            long_lines += 1
+    assert long_lines >= 3

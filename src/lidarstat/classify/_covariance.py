@@ -104,6 +104,9 @@ class CovarianceClasses:
             sig = f"along the rays {a:.3g} + {b:.3g} r"
         lines = [f"{n} points, sigma {sig}" + (" (estimated)" if self.sigma_estimated else "")
                  + f", alpha {self.alpha}, boundary alpha {self.boundary_alpha}"]
+        if "curved" in self.meta:
+            lines.append(f"consistent curvature: {self.meta['curved']} test at "
+                         f"{self.meta['curved_alpha']}")
         if self.curvature_threshold is not None:
             lines.append(f"SurfaceVariation threshold {self.curvature_threshold} (user)")
         if self.variance_threshold is not None:
@@ -225,11 +228,73 @@ BOUNDARY_ALPHA = 0.001
 
 
 NOISE = ("normal", "range")
+CURVED = ("cylinder", "variation")
+
+#: Default level of the cylinder (smooth-surface) test, which declares edges. It is
+#: nested with the plane test (a plane is a cylinder of infinite radius): the planes the
+#: plane test rejects by chance (alpha of them) are rejected by the cylinder test too, so
+#: at alpha = 0.05 it would call about 4 % of every plane edges.
+CURVED_ALPHA = 0.001
+
+
+def _neighbour_rows(points, features, query):
+    """CSR rows (indptr, indices) of the points `query`: kept neighbourhoods, else a search."""
+    nbh = features.neighborhoods
+    if nbh is not None and nbh.query is None and len(nbh) == len(points):
+        counts = nbh.counts[query]
+        indptr = np.zeros(query.size + 1, dtype=np.int64)
+        np.cumsum(counts, out=indptr[1:])
+        starts = nbh.indptr[query]
+        pos = np.repeat(starts - indptr[:-1], counts) + np.arange(indptr[-1])
+        return indptr, nbh.indices[pos]
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(points)
+    if features.k is not None:
+        k = min(int(features.k), len(points))
+        _, idx = tree.query(points[query], k=k, workers=-1)
+        idx = np.asarray(idx).reshape(query.size, k)
+        return np.arange(query.size + 1, dtype=np.int64) * k, idx.ravel()
+    rows = tree.query_ball_point(points[query], features.radius, workers=-1)
+    counts = np.fromiter((len(r) for r in rows), dtype=np.int64, count=query.size)
+    indptr = np.zeros(query.size + 1, dtype=np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    idx = np.fromiter((j for r in rows for j in r), dtype=np.int64, count=int(indptr[-1]))
+    return indptr, idx
+
+
+def curved_surface_test(points, features, query, sigma, *, sensor=None):
+    """p-values of the cylinder test (:mod:`._cylinder`) at the points `query`.
+
+    `sigma` (scalar or per point) is along the rays with a `sensor`, else across the
+    surface.
+
+    Returns
+    -------
+    p, radius : (M,) ndarray
+        Upper-tail chi-square p-value of the weighted circle-fit residuals and the fitted
+        radius of curvature (inf: planar across the axis).
+    """
+    from ._cylinder import cylinder_test
+
+    f = features.fields
+    normal = features.normals
+    pdir = np.stack([f["PrincipalDirX"], f["PrincipalDirY"], f["PrincipalDirZ"]], axis=1)
+    axis = np.cross(normal, pdir)
+    nrm = np.linalg.norm(axis, axis=1, keepdims=True)
+    bad = ~(nrm[:, 0] > 1e-12)
+    axis = np.where(bad[:, None], features.major, axis / np.where(bad[:, None], 1.0, nrm))
+    indptr, idx = _neighbour_rows(points, features, query)
+    stat, dof, radius = cylinder_test(points, query, indptr, idx, axis, sigma, sensor=sensor)
+    with np.errstate(invalid="ignore"):
+        p = _sp.chdtrc(np.where(dof > 0, dof, np.nan), stat)
+    return p, radius
 
 
 def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
                         boundary_alpha=BOUNDARY_ALPHA, curvature_threshold=None,
-                        variance_threshold=None) -> CovarianceClasses:
+                        variance_threshold=None, points=None, curved=None,
+                        curved_alpha=None) -> CovarianceClasses:
     """Label every point surface, edge or boundary from its covariance features.
 
     Parameters
@@ -255,6 +320,17 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     variance_threshold : float, optional
         Paper mode: CurvatureVariance above this is an edge (replaces test 2; the
         paper used 0.0001).
+    points : (N, 3) array_like, optional
+        The coordinates the features were computed on; needed by ``curved='cylinder'``.
+    curved : {'cylinder', 'variation'}, optional
+        Test 2, where the plane is rejected: ``'cylinder'`` (default when `points` are
+        given) fits a circular cylinder along the minimum-curvature direction and tests
+        its weighted residuals, ``chi2(n - 3)`` (:mod:`lidarstat.classify._cylinder`);
+        ``'variation'`` is the paper's variance of curvature as a ratio test against
+        the scan's own planes.
+    curved_alpha : float, optional
+        Level of test 2 (rejected -> edge). Default: 0.001 (``CURVED_ALPHA``) for the
+        cylinder test, `alpha` for the variation test.
 
     Returns
     -------
@@ -315,11 +391,40 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         low = plane_p >= alpha
     else:
         low = f["SurfaceVariation"] <= curvature_threshold
-    ratio = variation_ratio(features.mean_variation, f["CurvatureVariance"])
-    mu, sd = fit_variation_null(ratio, valid & low)
-    variation_p = variation_test(ratio, mu, sd)
+    if curved is None:
+        curved = "cylinder" if points is not None else "variation"
+    if curved not in CURVED:
+        raise InvalidParameterError(
+            f"The 'curved' parameter of {func} must be one of 'cylinder', 'variation'. "
+            f"Got {curved!r} instead.")
+    meta["curved"] = curved
+    if curved_alpha is None:
+        curved_alpha = CURVED_ALPHA if curved == "cylinder" else alpha
+    curved_alpha = check_scalar(curved_alpha, "curved_alpha", func=func, low=0.0, high=1.0)
+    meta["curved_alpha"] = curved_alpha
+    if curved == "cylinder":
+        if points is None:
+            raise InvalidParameterError(f"{func}: curved='cylinder' needs the `points`")
+        points = np.asarray(points, dtype=np.float64)
+        if points.shape != (n, 3):
+            raise InvalidParameterError(
+                f"{func}: `points` must be the {n} points of the features, got shape "
+                f"{points.shape}")
+        variation_p = np.full(n, np.nan)
+        curv_radius = np.full(n, np.nan)
+        query = np.flatnonzero(valid & ~low)
+        if query.size:
+            variation_p[query], curv_radius[query] = curved_surface_test(
+                points, features, query, sigma,
+                sensor=features.sensor if noise == "range" else None)
+        meta["curvature_radius"] = curv_radius
+        variation_p[valid & low] = 1.0  # not tested: the plane is accepted
+    else:
+        ratio = variation_ratio(features.mean_variation, f["CurvatureVariance"])
+        mu, sd = fit_variation_null(ratio, valid & low)
+        variation_p = variation_test(ratio, mu, sd)
     if variance_threshold is None:
-        consistent = variation_p >= alpha
+        consistent = variation_p >= curved_alpha
     else:
         consistent = f["CurvatureVariance"] <= variance_threshold
     surface = valid & (low | consistent)
@@ -372,7 +477,8 @@ class CovarianceClassification:
 
 def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None, alpha=0.05,
                boundary_alpha=BOUNDARY_ALPHA, curvature_threshold=None, variance_threshold=None,
-               eigen_mode="raw", keep_neighbors=False, progress=None):
+               curved="cylinder", curved_alpha=None, eigen_mode="raw", keep_neighbors=False,
+               progress=None):
     """Covariance features and surface / edge / boundary classes of every point (seed 003).
 
     One call of :func:`lidarstat.features.covariance_features` and
@@ -402,5 +508,6 @@ def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None
     classes = classify_covariance(feats, sigma=sigma, noise=noise, alpha=alpha,
                                   boundary_alpha=boundary_alpha,
                                   curvature_threshold=curvature_threshold,
-                                  variance_threshold=variance_threshold)
+                                  variance_threshold=variance_threshold, points=points,
+                                  curved=curved, curved_alpha=curved_alpha)
     return CovarianceClassification(features=feats, classes=classes)

@@ -30,11 +30,37 @@ def check_output(path: str, src: str | None = None) -> Path:
             f"{p}: unknown point-cloud format '{p.suffix}'; supported: "
             + ", ".join(SUPPORTED_SUFFIXES)
         )
+    if p.suffix.lower() == ".e57":
+        raise UnknownFormatError(f"{p}: E57 is read only; write .las, .laz, .ply, .csv, .txt "
+                                 "or .npz")
     if not p.parent.is_dir() and str(p.parent):
         raise LidarstatError(f"{p}: output directory {p.parent} does not exist")
     if src is not None and p.resolve() == Path(src).resolve():
         raise LidarstatError(f"{p}: refusing to overwrite the input file")
     return p
+
+
+def resolve_sensor(sensor, path, quiet=False):
+    """``--sensor`` when given, else the scanner position the input file carries.
+
+    The file's position is an E57 scan pose or a ``<file>.sensor.json`` sidecar
+    (:func:`lidarstat.io.read_sensor`); the choice is reported on stderr unless `quiet`.
+    """
+    if sensor is not None:
+        return sensor
+    from ..io import read_sensor
+
+    found, source = read_sensor(path)
+    if found is not None and not quiet:
+        print(f"  sensor {found[0]:.4f} {found[1]:.4f} {found[2]:.4f} from {source}",
+              file=sys.stderr)
+    return found
+
+
+#: ``--sensor`` help shared by the commands that orient toward a scanner.
+SENSOR_HELP = ("scanner position; normals point to it and the range noise grows with the "
+               "distance from it (default: the position the input carries, as an E57 scan "
+               "pose or a FILE.sensor.json sidecar, else normals point up)")
 
 
 def progress(quiet):

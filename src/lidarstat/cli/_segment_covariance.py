@@ -16,6 +16,9 @@ def add_arguments(group):
                        help="smallest angle (degrees) between normals for an intersection")
     group.add_argument("--no-reintegration", action="store_true",
                        help="leave edge points out of the segments")
+    group.add_argument("--no-adaptive-scale", action="store_true",
+                       help="grow only through k-neighbourhood surface points (no planar "
+                       "prefixes of 8..k neighbours: narrow faces are then missed)")
 
 
 def run(args, cloud):
@@ -26,6 +29,8 @@ def run(args, cloud):
         cloud.xyz, k=args.k or 50, radius=args.radius, sensor=args.sensor, sigma=args.sigma,
         alpha=args.alpha, boundary_alpha=args.boundary_alpha,
         curvature_threshold=args.curvature_threshold,
-        variance_threshold=args.variance_threshold, min_size=args.min_size or 50,
+        variance_threshold=args.variance_threshold, curved=args.curved,
+        curved_alpha=args.curved_alpha, min_size=args.min_size or 50,
         grow_k=args.grow_k, seeds=args.seeds, min_angle=args.min_angle,
-        reintegration=not args.no_reintegration)
+        reintegration=not args.no_reintegration,
+        adaptive_scale=not args.no_adaptive_scale)

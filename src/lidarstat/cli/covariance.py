@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from ._app import check_output, progress, write_summary_json
+from ._app import SENSOR_HELP, check_output, progress, resolve_sensor, write_summary_json
 
 
 def add_neighbourhood_arguments(s, *, k_default=50):
@@ -20,6 +20,12 @@ def add_neighbourhood_arguments(s, *, k_default=50):
     s.add_argument("--variance-threshold", type=float, default=None,
                    help="CurvatureVariance above this is an edge (replaces the automatic "
                    "test; the paper used 0.0001)")
+    s.add_argument("--curved", choices=("cylinder", "variation"), default="cylinder",
+                   help="consistent-curvature test where the plane is rejected: a cylinder "
+                   "fit (default) or the paper's variance of curvature")
+    s.add_argument("--curved-alpha", type=float, default=None,
+                   help="level of the consistent-curvature test (rejected -> edge) "
+                   "[0.001 cylinder, --alpha variation]")
 
 
 def cmd_covariance(args):
@@ -29,10 +35,12 @@ def cmd_covariance(args):
     out = check_output(args.output, args.input)
     cloud = read(args.input)
     t0 = time.perf_counter()
-    res = covariance(cloud.xyz, k=args.k, radius=args.radius, sensor=args.sensor,
+    sensor = resolve_sensor(args.sensor, args.input, args.quiet)
+    res = covariance(cloud.xyz, k=args.k, radius=args.radius, sensor=sensor,
                      sigma=args.sigma, alpha=args.alpha, boundary_alpha=args.boundary_alpha,
                      curvature_threshold=args.curvature_threshold,
-                     variance_threshold=args.variance_threshold, eigen_mode=args.eigen_mode,
+                     variance_threshold=args.variance_threshold, curved=args.curved,
+                     curved_alpha=args.curved_alpha, eigen_mode=args.eigen_mode,
                      progress=progress(args.quiet))
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
@@ -46,7 +54,8 @@ def cmd_covariance(args):
                 "k": res.features.k, "radius": res.features.radius,
                 "sigma": c.sigma if isinstance(c.sigma, float) else None,
                 "sigma_estimated": c.sigma_estimated, "alpha": c.alpha,
-                "boundary_alpha": c.boundary_alpha, "point_class": c.counts()}
+                "boundary_alpha": c.boundary_alpha, "curved": c.meta.get("curved"),
+                "curved_alpha": c.meta.get("curved_alpha"), "point_class": c.counts()}
         write_summary_json(args.summary_json, meta)
     return 0
 
@@ -63,7 +72,7 @@ def register(sub):
     g.add_argument("--k", type=int, default=50, help="neighbours per point, itself included [50]")
     g.add_argument("--radius", type=float, default=None, help="sphere radius instead of kNN")
     s.add_argument("--sensor", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
-                   help="scanner position (normals point to it; default up)")
+                   help=SENSOR_HELP)
     s.add_argument("--sigma", type=float, default=None,
                    help="noise std across surfaces (default: estimated from the data)")
     s.add_argument("--alpha", type=float, default=0.05,

@@ -15,7 +15,7 @@ import time
 from importlib import import_module
 from pathlib import Path
 
-from ._app import check_output, write_summary_json
+from ._app import SENSOR_HELP, check_output, resolve_sensor, write_summary_json
 
 #: method name -> module path (``add_arguments``, ``run``). Add a method by adding it here.
 SEGMENT_METHODS: dict[str, str] = {
@@ -38,6 +38,7 @@ def cmd_segment(args):
     table = Path(args.table) if args.table else _default_path(out, ".segments.csv")
     lines = Path(args.lines) if args.lines else _default_path(out, ".lines.geojson")
     cloud = read(args.input)
+    args.sensor = resolve_sensor(args.sensor, args.input, args.quiet)
     method = import_module(SEGMENT_METHODS[args.method])
     t0 = time.perf_counter()
     seg = method.run(args, cloud)
@@ -74,7 +75,7 @@ def register(sub):
     s.add_argument("--min-size", type=int, default=None,
                    help="smallest segment kept (points); method default if omitted")
     s.add_argument("--sensor", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
-                   help="scanner position (orients normals)")
+                   help=SENSOR_HELP)
     s.add_argument("--sigma", type=float, default=None,
                    help="measurement noise std (default: estimated from the data)")
     s.add_argument("--alpha", type=float, default=0.05, help="significance level of tests")

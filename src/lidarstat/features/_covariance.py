@@ -168,53 +168,69 @@ def _xlogx(x):
         return np.where(x > 0, x * np.log(np.where(x > 0, x, 1.0)), 0.0)
 
 
-def _knn_cell_size(local, k, rng=0, sample=4000):
+def _knn_cell_size(points, k, rng=0, sample=4000, min_k=24, min_tree=400_000):
     """Grid cell for the kNN kernel: the 0.9 quantile of k-th neighbour distances of a sample.
 
     With the cell at least the k-th neighbour distance, the 27 cells around a point hold its
-    k neighbours for most points (the rest are searched in a wider block).
+    k neighbours for most points (the rest are searched in a wider block). On large clouds
+    the distances come from a random thinning to a fraction f of the points (at least
+    `min_tree` points, and f (k - 1) >= `min_k` - 1): its ``1 + f (k - 1)``-th neighbour
+    distance estimates the k-th of the whole cloud. The cell only sets the speed of the
+    exact search, never its result. Returns the cell and 1.15 times the median distance.
     """
     from scipy.spatial import cKDTree
 
-    n = local.shape[0]
+    n = points.shape[0]
     rng = np.random.default_rng(rng)
-    pos = rng.choice(n, size=min(sample, n), replace=False)
+    f = min(1.0, max((min_k - 1) / max(k - 1, 1), min_tree / n))
+    if f < 1.0:
+        sub = points[rng.random(n) < f]
+        kk = min(sub.shape[0], max(1, int(round(1 + f * (k - 1)))))
+    else:
+        sub, kk = points, k
+    origin = sub.min(axis=0)
+    local = sub - origin
+    pos = rng.choice(local.shape[0], size=min(sample, local.shape[0]), replace=False)
     tree = cKDTree(local, balanced_tree=False, compact_nodes=False)
-    d, _ = tree.query(local[pos], k=k, workers=-1)
-    d = np.asarray(d).reshape(pos.size, k)[:, -1]
+    d, _ = tree.query(local[pos], k=kk, workers=-1)
+    d = np.asarray(d).reshape(pos.size, kk)[:, -1]
     cell = float(np.quantile(d, 0.9))
     if not cell > 0:  # duplicates: any positive size works
-        cell = float(np.ptp(local, axis=0).max()) or 1.0
+        cell = float(np.ptp(points, axis=0).max()) or 1.0
     return cell, float(np.median(d)) * 1.15
 
 
 def _knn_table(points, k, *, block_size, sort=True, sensor=None, progress=None, rng=0):
-    """Exact kNN of every point with the grid kernel: (index, table, dist) in sorted order.
+    """Exact kNN of every point with the grid kernel, in the grid's sorted order.
 
-    ``table[r]`` lists the sorted positions of the k nearest neighbours of sorted position r
-    (in ascending distance if `sort`, and then ``dist`` holds the distances, else None);
-    int32 when the cloud allows (4 k bytes per point). ``raw`` holds the covariance
-    kernel's output per sorted position (computed in the same pass); `sensor` in file
-    coordinates.
+    Returns ``(index, table, nbh, raw)``: ``table[r]`` lists the sorted positions of the k
+    nearest neighbours of sorted position r (in ascending distance if `sort`), int32 when
+    the cloud allows (4 k bytes per point); with `sort`, ``nbh`` holds the same
+    neighbourhoods as :class:`Neighborhoods` in input order (original indices, distances),
+    written by the kernel directly, else None. ``raw`` holds the covariance kernel's
+    output per sorted position (computed in the same pass); `sensor` in file coordinates.
     """
-    origin = points.min(axis=0)
-    cell, tau0 = _knn_cell_size(points - origin, k, rng=rng)
+    cell, tau0 = _knn_cell_size(points, k, rng=rng)
     index = CellIndex(points, cell)
     n = index.n_points
     dtype = np.int32 if n < 2**31 - 1 else np.int64
     table = np.empty((n, k), dtype=dtype)
-    dist = np.empty((n, k)) if sort else None  # kept (float64) only for the neighbourhoods
+    nbr_idx = np.empty(n * k if sort else 0, dtype=np.int64)
+    nbr_dist = np.empty(n * k if sort else 0)
     raw = np.empty((n, _ck.NCOL))
     sens = np.zeros(3) if sensor is None else np.asarray(sensor, float) - index.origin
     for c0, c1 in index.cell_blocks(block_size):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
-        dblock = dist[s0:s1] if sort else np.empty((s1 - s0, k))
         _ck.knn_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
                       index.dims, float(index.cell), int(k), tau0, sort, table[s0:s1],
-                      dblock, sens, sensor is not None, raw[s0:s1])
+                      index.order, nbr_idx, nbr_dist, sens, sensor is not None, raw[s0:s1])
         if progress is not None:
             progress(int(s1), 2 * n)
-    return index, table, dist, raw
+    nbh = None
+    if sort:
+        nbh = Neighborhoods(np.arange(n + 1, dtype=np.int64) * k, nbr_idx, nbr_dist, n,
+                            kind="knn", k=k)
+    return index, table, nbh, raw
 
 
 def _check_sensor(sensor, func):
@@ -349,7 +365,7 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
             keep = radius_neighbors(pts, radius)
         k = None
     else:
-        index, table, dist, raw = _knn_table(pts, k, block_size=block_size,
+        index, table, keep, raw = _knn_table(pts, k, block_size=block_size,
                                              sort=keep_neighbors, sensor=sensor,
                                              progress=progress)
         origin = index.origin
@@ -363,18 +379,9 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         if progress is not None:
             progress(2 * n, 2 * n)
         order = index.order
-        if keep_neighbors:
-            keep = _table_to_csr(table, dist, order, k)
-        del table, dist
+        del table
 
-    if order is not None:  # back to input order
-        inverse = np.empty_like(order)
-        inverse[order] = np.arange(n)
-        raw = raw[inverse]
-        mean_sv = mean_sv[inverse]
-        var_sv = var_sv[inverse]
-        spread = spread[inverse]
-    res = _assemble(raw, mean_sv, var_sv, spread, origin, k=k, radius=radius,
+    res = _assemble(raw, mean_sv, var_sv, spread, origin, order, k=k, radius=radius,
                     eigen_mode=eigen_mode, neighborhoods=keep)
     if sensor is not None:
         ray = pts - sensor
@@ -385,18 +392,6 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         object.__setattr__(res, "ray_range", rng_)
         object.__setattr__(res, "ray_cos", cos)
     return res
-
-
-def _table_to_csr(table, dist, order, k):
-    """Dense sorted-order kNN table -> Neighborhoods in input order (original indices)."""
-    n = table.shape[0]
-    inverse = np.empty_like(order)
-    inverse[order] = np.arange(n)
-    rows = table[inverse]
-    idx = order[rows.ravel()]
-    d = dist[inverse].ravel()
-    indptr = np.arange(n + 1, dtype=np.int64) * k
-    return Neighborhoods(indptr, idx, d, n, kind="knn", k=k)
 
 
 def _rows(local, query, indptr, idx, sens):
@@ -424,27 +419,30 @@ def _spread_block(nrm, s0, s1, indptr, idx, spread):
     _ck.normal_spread_rows_offset(nrm, s0, indptr, idx, spread[s0:s1])
 
 
-def _assemble(raw, mean_sv, var_sv, spread, origin, *, k, radius, eigen_mode, neighborhoods):
-    evals = raw[:, _ck.C_L0:_ck.C_L2 + 1]
-    normal = raw[:, _ck.C_NX:_ck.C_NZ + 1]
-    major = np.ascontiguousarray(raw[:, _ck.C_AX:_ck.C_AZ + 1])
-    feats = eigen_features(evals, normal, major, mode=eigen_mode)
-    fields = {
-        "NormalX": raw[:, _ck.C_NX].copy(), "NormalY": raw[:, _ck.C_NY].copy(),
-        "NormalZ": raw[:, _ck.C_NZ].copy(),
-        "Eigenvalue0": raw[:, _ck.C_L0].copy(), "Eigenvalue1": raw[:, _ck.C_L1].copy(),
-        "Eigenvalue2": raw[:, _ck.C_L2].copy(),
-        "SurfaceVariation": feats.pop("SurfaceVariation"),
-        "CurvatureVariance": var_sv,
-    }
-    fields.update(feats)
-    fields["PrincipalDirX"] = spread[:, 0].copy()
-    fields["PrincipalDirY"] = spread[:, 1].copy()
-    fields["PrincipalDirZ"] = spread[:, 2].copy()
-    fields["NormalVariation"] = spread[:, 3].copy()
-    fields["neighbors"] = raw[:, _ck.C_N].astype(np.int32)
+def _assemble(raw, mean_sv, var_sv, spread, origin, order, *, k, radius, eigen_mode,
+              neighborhoods):
+    """The result in input order (`order`: sorted position -> input index, or None)."""
+    n = raw.shape[0]
+    if order is None:
+        source = np.arange(n)
+    else:
+        source = np.empty_like(order)
+        source[order] = np.arange(n)
+    block = np.empty((len(_ck.FIELD_ROWS), n))
+    centroid = np.empty((n, 3))
+    major = np.empty((n, 3))
+    offset_uv = np.empty((n, 2))
+    mean_out = np.empty(n)
+    counts = np.empty(n, dtype=np.int32)
+    mode = {"raw": _ck.MODE_RAW, "sqrt": _ck.MODE_SQRT, "normalized": _ck.MODE_NORMALIZED}
+    with np.errstate(invalid="ignore", divide="ignore"):
+        _ck.assemble(raw, mean_sv, var_sv, np.ascontiguousarray(spread), source,
+                     np.asarray(origin, dtype=np.float64), mode[eigen_mode], block, centroid,
+                     major, offset_uv, mean_out, counts)
+    fields = dict(zip(_ck.FIELD_ROWS, block))
+    fields["neighbors"] = counts
     return CovarianceResult(
-        fields=fields, centroid=raw[:, _ck.C_CX:_ck.C_CZ + 1] + origin, major=major,
-        offset_uv=np.ascontiguousarray(raw[:, _ck.C_U:_ck.C_V + 1]), mean_variation=mean_sv,
-        k=k, radius=radius, eigen_mode=eigen_mode, neighborhoods=neighborhoods,
+        fields=fields, centroid=centroid, major=major, offset_uv=offset_uv,
+        mean_variation=mean_out, k=k, radius=radius, eigen_mode=eigen_mode,
+        neighborhoods=neighborhoods,
     )

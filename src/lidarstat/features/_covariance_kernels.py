@@ -51,59 +51,118 @@ _ROW_CHUNK = 256
 
 
 # ------------------------------------------------------------------ k nearest neighbours
-@njit
-def _select(bd, bi, n, k, sort):
-    """Partial sort: move the k smallest of ``bd[:n]`` (with their ``bi``) to the front.
+_NBIN = 64  # distance bins of the k-nearest selection
+_SMALL = 32  # a bin with more candidates (duplicates, ties) is sorted by mergesort
 
-    Quickselect with median-of-three pivots (expected O(n)), then (if `sort`) insertion
-    sort of the first k so rows come out in ascending distance.
-    """
-    lo = 0
-    hi = n - 1
-    kk = k - 1
-    while hi > lo:
-        mid = (lo + hi) // 2
-        a = bd[lo]
-        b = bd[mid]
-        c = bd[hi]
-        if a < b:
-            pivot = b if b < c else (c if a < c else a)
-        else:
-            pivot = a if a < c else (c if b < c else b)
-        i = lo
-        j = hi
-        while i <= j:
-            while bd[i] < pivot:
-                i += 1
-            while bd[j] > pivot:
-                j -= 1
-            if i <= j:
-                td = bd[i]
-                bd[i] = bd[j]
-                bd[j] = td
-                ti = bi[i]
-                bi[i] = bi[j]
-                bi[j] = ti
-                i += 1
-                j -= 1
-        if kk <= j:
-            hi = j
-        elif kk >= i:
-            lo = i
-        else:
-            break
-    if not sort:
+
+@njit
+def _scratch(cap):
+    """Work arrays of :func:`_nearest` for up to `cap` candidates."""
+    return (np.empty(cap + 1), np.empty(cap + 1, dtype=np.int64),
+            np.empty(cap + 1, dtype=np.int32), np.empty(cap + 1),
+            np.empty(cap + 1, dtype=np.int64), np.empty(_NBIN + 1, dtype=np.int64))
+
+
+@njit
+def _insertion(d, i, n):
+    """Insertion sort of ``d[:n]`` with ``i`` (stable; linear on nearly sorted input)."""
+    for a in range(1, n):
+        x = d[a]
+        y = i[a]
+        b = a - 1
+        while b >= 0 and d[b] > x:
+            d[b + 1] = d[b]
+            i[b + 1] = i[b]
+            b -= 1
+        d[b + 1] = x
+        i[b + 1] = y
+
+
+@njit
+def _sort_pairs(d, i, n):
+    """Sort ``d[:n]`` ascending with ``i``; equal keys keep their order (stable)."""
+    if n <= _SMALL:
+        _insertion(d, i, n)
         return
-    for i in range(1, k):
-        d = bd[i]
-        t = bi[i]
-        j = i - 1
-        while j >= 0 and bd[j] > d:
-            bd[j + 1] = bd[j]
-            bi[j + 1] = bi[j]
-            j -= 1
-        bd[j + 1] = d
-        bi[j + 1] = t
+    o = np.argsort(d[:n], kind="mergesort")
+    dd = d[:n][o]
+    ii = i[:n][o]
+    d[:n] = dd
+    i[:n] = ii
+
+
+@njit
+def _nearest(bd, bi, m, k, sort, td, ti, tb, sd, si, cnt):
+    """The k smallest of the squared distances ``bd[:m]`` (``m >= k``), with their ``bi``.
+
+    Written to ``td[:k]``, ``ti[:k]``; returns the k-th smallest. A counting pass over
+    `_NBIN` equal bins of ``[0, max]`` finds the bin that holds the k-th value: every
+    candidate of a lower bin is selected, the bin itself is sorted and cut (bins are
+    monotone in the distance, so this is exact). With `sort` the selected candidates are
+    placed bin by bin (counting sort) and finished by insertion sort (ascending
+    distance, equal distances in candidate order); without, the lower bins keep the
+    candidate order and the cut bin follows in ascending distance.
+    """
+    dmax = 0.0
+    for t in range(m):
+        dmax = max(dmax, bd[t])
+    scale = _NBIN / dmax if dmax > 0.0 else 0.0
+    for b in range(_NBIN + 1):
+        cnt[b] = 0
+    for t in range(m):
+        b = min(int(bd[t] * scale), _NBIN - 1)
+        tb[t] = b
+        cnt[b] += 1
+    big = 0
+    before = 0
+    cut = 0
+    for b in range(_NBIN):
+        big = max(big, cnt[b])
+        if before + cnt[b] >= k:
+            cut = b
+            break
+        before += cnt[b]
+    need = k - before
+    if sort:
+        # counting sort of the candidates of bins <= cut: cnt becomes bin starts
+        acc = 0
+        for b in range(cut + 1):
+            c = cnt[b]
+            cnt[b] = acc
+            acc += c
+        for t in range(m):
+            b = tb[t]
+            if b <= cut:
+                p = cnt[b]
+                td[p] = bd[t]
+                ti[p] = bi[t]
+                cnt[b] = p + 1
+        # the bins are in order: sort within them (one insertion sort when all are small)
+        if big <= _SMALL:
+            _insertion(td, ti, acc)
+        else:
+            start = 0
+            for b in range(cut + 1):
+                _sort_pairs(td[start:], ti[start:], cnt[b] - start)
+                start = cnt[b]
+        return td[k - 1]
+    p = 0
+    q = 0
+    for t in range(m):
+        b = tb[t]
+        d = bd[t]
+        j = bi[t]
+        td[p] = d
+        ti[p] = j
+        p += b < cut
+        sd[q] = d
+        si[q] = j
+        q += b == cut
+    _sort_pairs(sd, si, q)
+    for t in range(need):
+        td[before + t] = sd[t]
+        ti[before + t] = si[t]
+    return td[k - 1]
 
 
 @njit
@@ -194,17 +253,21 @@ def _count(ranges, nr):
 
 @njit_parallel
 def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out_idx,
-              out_dist, sensor, has_sensor, out_feat):
+              order, nbr_idx, nbr_dist, sensor, has_sensor, out_feat):
     """Exact `k` nearest neighbours (self included) of the points of cells ``c0..c1-1``.
 
     `pts` are the grid's sorted local coordinates; output row r is sorted position
-    ``cell_start[c0] + r``; ``out_idx`` (sorted positions, any integer dtype) and
-    ``out_dist`` get the k neighbours, in ascending distance if `sort`. Requires
-    ``k <= len(pts)``. `tau0` is a typical k-th neighbour distance: candidates farther
-    than 1.15 times the previous point's k-th distance (tau0 for a cell's first point)
-    are dropped before the selection, unless fewer than k remain (then all are kept), so
-    the pre-filter changes the speed, never the result. The covariance features of each
-    point (:func:`_covariance_one`) are computed at once into ``out_feat`` (rows as
+    ``cell_start[c0] + r``; ``out_idx`` (sorted positions, any integer dtype) gets the k
+    neighbours, in ascending distance if `sort`. With `sort` the neighbourhoods are also
+    written in input order as CSR entries of k per row: ``nbr_idx[order[p] k + t]`` (input
+    indices, ``order`` maps sorted positions to input indices) and ``nbr_dist`` (the
+    distances); they are not touched otherwise and may be empty. Requires
+    ``k <= len(pts)``. `tau0` is
+    a typical k-th neighbour distance: candidates farther than 1.15 times the previous
+    point's k-th distance (tau0 for a cell's first point) are dropped before the
+    selection, unless fewer than k remain (then all are kept), so the pre-filter changes
+    the speed, never the result. The covariance features of each point
+    (:func:`_covariance_one`) are computed at once into ``out_feat`` (rows as
     ``out_idx``) while its neighbours are in cache.
     """
     base = cell_start[c0]
@@ -215,6 +278,7 @@ def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out
         cap = 1024
         bd = np.empty(cap + 1)
         bi = np.empty(cap + 1, dtype=np.int64)
+        td, ti, tb, sd, si, cnt = _scratch(cap)
         ranges = np.empty((9, 2), dtype=np.int64)
         cov = np.empty((3, 3))
         evals = np.empty(3)
@@ -231,6 +295,7 @@ def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out
                 cap = max(need, 2 * cap)
                 bd = np.empty(cap + 1)
                 bi = np.empty(cap + 1, dtype=np.int64)
+                td, ti, tb, sd, si, cnt = _scratch(cap)
             tau2 = tau0 * tau0
             for i in range(cell_start[c], cell_start[c + 1]):
                 px = pts[i, 0]
@@ -240,10 +305,11 @@ def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out
                 if m < k:
                     m = _gather(px, py, pz, pts, ranges, nr, bd, bi)
                 rad = 1
+                kth = np.inf
                 if m >= k:
-                    _select(bd, bi, m, k, sort)
-                while m < k or _kth(bd, k, sort) > _guaranteed(px, py, pz, ix0, iy0, iz0, rad,
-                                                               cell, dims) ** 2:
+                    kth = _nearest(bd, bi, m, k, sort, td, ti, tb, sd, si, cnt)
+                while m < k or kth > _guaranteed(px, py, pz, ix0, iy0, iz0, rad, cell,
+                                                 dims) ** 2:
                     if rad > maxrad:
                         break
                     rad += 1
@@ -254,29 +320,21 @@ def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out
                         cap = max(need, 2 * cap)
                         bd = np.empty(cap + 1)
                         bi = np.empty(cap + 1, dtype=np.int64)
+                        td, ti, tb, sd, si, cnt = _scratch(cap)
                     m = _gather(px, py, pz, pts, big, nb, bd, bi)
                     if m >= k:
-                        _select(bd, bi, m, k, sort)
-                kth = _kth(bd, k, sort)
+                        kth = _nearest(bd, bi, m, k, sort, td, ti, tb, sd, si, cnt)
                 tau2 = kth * 1.3225  # (1.15 r_k)^2 for the next point of the cell
                 r = i - base
                 for t in range(k):
-                    out_idx[r, t] = bi[t]
-                    out_dist[r, t] = np.sqrt(bd[t])
-                _covariance_one(i, pts, bi, 0, k, sensor, has_sensor, cov, evals, evecs,
+                    out_idx[r, t] = ti[t]
+                if sort:
+                    row = order[i] * k
+                    for t in range(k):
+                        nbr_idx[row + t] = order[ti[t]]
+                        nbr_dist[row + t] = np.sqrt(td[t])
+                _covariance_one(i, pts, ti, 0, k, sensor, has_sensor, cov, evals, evecs,
                                 out_feat[r])
-
-
-@njit
-def _kth(bd, k, sorted_):
-    """Largest of the k selected squared distances."""
-    if sorted_:
-        return bd[k - 1]
-    mx = bd[0]
-    for t in range(1, k):
-        if bd[t] > mx:
-            mx = bd[t]
-    return mx
 
 
 # ------------------------------------------------------------------ covariance per row
@@ -523,3 +581,93 @@ def normal_spread_table(normals, nbr, out):
     k = nbr.shape[1]
     for r in prange(m):
         _normal_spread_one(r, normals, nbr[r], 0, k, out[r])
+
+
+# ------------------------------------------------------------------ output assembly
+#: rows of the per-point field block written by :func:`assemble`, in ``FIELDS`` order
+FIELD_ROWS = ("NormalX", "NormalY", "NormalZ", "Eigenvalue0", "Eigenvalue1", "Eigenvalue2",
+              "SurfaceVariation", "CurvatureVariance", "Linearity", "Planarity", "Scattering",
+              "Verticality", "Omnivariance", "Anisotropy", "Eigenentropy", "EigenvalueSum",
+              "DemantkeVerticality", "PrincipalDirX", "PrincipalDirY", "PrincipalDirZ",
+              "NormalVariation")
+MODE_RAW = 0
+MODE_SQRT = 1
+MODE_NORMALIZED = 2
+
+
+@njit
+def _xlogx(x):
+    return x * np.log(x) if x > 0 else 0.0
+
+
+@njit_parallel
+def assemble(raw, mean_sv, var_sv, spread, source, origin, mode, fields, centroid, major,
+             offset_uv, mean_out, counts):
+    """Every output array of a point in input order, from the per-row kernel outputs.
+
+    Output point i takes row ``source[i]`` of `raw`, `mean_sv`, `var_sv` and `spread`
+    (the grid's sorted order back to input order). The eigen features follow
+    :func:`lidarstat.features.eigen_features` operation for operation (same rounding):
+    ratios of the eigenvalues (`mode` raw), their square roots (sqrt) or the eigenvalues
+    over their sum (normalized); ``SurfaceVariation`` and ``EigenvalueSum`` always raw.
+    `fields` is (len(FIELD_ROWS), N).
+    """
+    n = source.size
+    for i in prange(n):
+        s = source[i]
+        r0 = raw[s, C_L0]
+        r1 = raw[s, C_L1]
+        r2 = raw[s, C_L2]
+        total = r0 + r1 + r2
+        if mode == MODE_SQRT:
+            l0 = np.sqrt(r0)
+            l1 = np.sqrt(r1)
+            l2 = np.sqrt(r2)
+        elif mode == MODE_NORMALIZED:
+            l0 = r0 / total
+            l1 = r1 / total
+            l2 = r2 / total
+        else:
+            l0 = r0
+            l1 = r1
+            l2 = r2
+        n0 = raw[s, C_NX]
+        n1 = raw[s, C_NY]
+        n2 = raw[s, C_NZ]
+        a0 = raw[s, C_AX]
+        a1 = raw[s, C_AY]
+        a2 = raw[s, C_AZ]
+        m0 = n1 * a2 - n2 * a1  # middle eigenvector = normal x major
+        m1 = n2 * a0 - n0 * a2
+        m2 = n0 * a1 - n1 * a0
+        u0 = l2 * abs(a0) + l1 * abs(m0) + l0 * abs(n0)
+        u1 = l2 * abs(a1) + l1 * abs(m1) + l0 * abs(n1)
+        u2 = l2 * abs(a2) + l1 * abs(m2) + l0 * abs(n2)
+        fields[0, i] = n0
+        fields[1, i] = n1
+        fields[2, i] = n2
+        fields[3, i] = r0
+        fields[4, i] = r1
+        fields[5, i] = r2
+        fields[6, i] = r0 / total
+        fields[7, i] = var_sv[s]
+        fields[8, i] = (l2 - l1) / l2
+        fields[9, i] = (l1 - l0) / l2
+        fields[10, i] = l0 / l2
+        fields[11, i] = u2 / np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+        fields[12, i] = np.cbrt(l0 * l1 * l2)
+        fields[13, i] = (l2 - l0) / l2
+        fields[14, i] = -(_xlogx(l0) + _xlogx(l1) + _xlogx(l2))
+        fields[15, i] = total
+        fields[16, i] = 1.0 - abs(n2)
+        for a in range(4):
+            fields[17 + a, i] = spread[s, a]
+        for a in range(3):
+            centroid[i, a] = raw[s, C_CX + a] + origin[a]
+        major[i, 0] = a0
+        major[i, 1] = a1
+        major[i, 2] = a2
+        offset_uv[i, 0] = raw[s, C_U]
+        offset_uv[i, 1] = raw[s, C_V]
+        mean_out[i] = mean_sv[s]
+        counts[i] = np.int32(raw[s, C_N])

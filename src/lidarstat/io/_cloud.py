@@ -27,8 +27,9 @@ from ..errors import (
 
 __all__ = ["PointCloud", "read", "write", "iter_chunks", "SUPPORTED_SUFFIXES"]
 
-#: File suffixes understood by :func:`read` and :func:`write` (compared case-insensitively).
-SUPPORTED_SUFFIXES = (".las", ".laz", ".ply", ".csv", ".txt", ".npz")
+#: File suffixes understood by :func:`read` and :func:`write` (compared case-insensitively);
+#: ``.e57`` is read only (through pye57).
+SUPPORTED_SUFFIXES = (".las", ".laz", ".ply", ".csv", ".txt", ".npz", ".e57")
 
 _XYZ = ("x", "y", "z")
 
@@ -49,8 +50,8 @@ class PointCloud:
     source_path : Path, optional
         File the cloud was read from.
     source_format : str
-        One of ``"las"``, ``"laz"``, ``"ply"``, ``"csv"``, ``"txt"``, ``"npz"`` or
-        ``"memory"`` for clouds built in code.
+        One of ``"las"``, ``"laz"``, ``"ply"``, ``"csv"``, ``"txt"``, ``"npz"``, ``"e57"``
+        or ``"memory"`` for clouds built in code.
     las_header : laspy.LasHeader, optional
         Header of the LAS/LAZ file the cloud came from, kept so that :func:`write` can
         reproduce version, point format, scales, offsets, VLRs and EVLRs.
@@ -187,6 +188,8 @@ def _module(fmt: str):
         from . import _ply as mod
     elif fmt in ("csv", "txt"):
         from . import _text as mod
+    elif fmt == "e57":
+        from . import _e57 as mod
     else:
         from . import _npz as mod
     return mod
@@ -219,7 +222,8 @@ def read(path: str | os.PathLike, *, fields=None) -> PointCloud:
     Parameters
     ----------
     path : path-like
-        A ``.las``, ``.laz``, ``.ply``, ``.csv``, ``.txt`` or ``.npz`` file.
+        A ``.las``, ``.laz``, ``.ply``, ``.csv``, ``.txt``, ``.npz`` or ``.e57`` file (E57:
+        every scan with its pose applied, through pye57).
     fields : sequence of str, optional
         Attributes to keep (coordinates are always read); default: all.
 

@@ -173,3 +173,36 @@ def permute_rows(indptr, indices, distances, row_of, order):
             new_dist[o] = distances[t]
             o += 1
     return new_ptr, new_idx, new_dist
+
+
+# ------------------------------------------------------------------ building the index
+@njit
+def grid_keys(points, origin, cell, dims, flat, keys):
+    """Row-major cell key of every point: ``floor((p - origin) / cell)`` clipped to `dims`.
+
+    `flat` (2-D index) puts every point in z layer 0. Same arithmetic as NumPy's
+    ``np.floor(local / cell).astype(np.int64)`` so the keys are identical.
+    """
+    for i in range(points.shape[0]):
+        ix = min(np.int64(np.floor((points[i, 0] - origin[0]) / cell)), dims[0] - 1)
+        iy = min(np.int64(np.floor((points[i, 1] - origin[1]) / cell)), dims[1] - 1)
+        iz = 0
+        if not flat:
+            iz = min(np.int64(np.floor((points[i, 2] - origin[2]) / cell)), dims[2] - 1)
+        keys[i] = (ix * dims[1] + iy) * dims[2] + iz
+
+
+@njit
+def counting_scatter(points, origin, keys, start, order, sorted_points):
+    """Stable counting sort by key: ``order`` and ``sorted_points = points[order] - origin``.
+
+    ``start[key]`` is the first sorted position of each key (exclusive prefix sum of the
+    key counts); it is advanced in place.
+    """
+    for i in range(points.shape[0]):
+        p = start[keys[i]]
+        start[keys[i]] = p + 1
+        order[p] = i
+        sorted_points[p, 0] = points[i, 0] - origin[0]
+        sorted_points[p, 1] = points[i, 1] - origin[1]
+        sorted_points[p, 2] = points[i, 2] - origin[2]

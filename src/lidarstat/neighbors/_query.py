@@ -50,26 +50,40 @@ class CellIndex:
         self.radius = radius
         self.n_points = points.shape[0]
         self.origin = points.min(axis=0)
-        local = points - self.origin
-        extent = local.max(axis=0)
+        extent = points.max(axis=0) - self.origin  # == (points - origin).max(axis=0)
         cell = max(radius, float(extent[:dim].max()) / _MAX_CELLS_PER_AXIS)
         self.cell = cell
         dims = np.floor(extent / cell).astype(np.int64) + 1
         if dim == 2:
             dims[2] = 1
         self.dims = dims
-        ijk = np.floor(local / cell).astype(np.int64)
-        ijk = np.minimum(ijk, dims - 1)
-        if dim == 2:
-            ijk[:, 2] = 0
-        keys = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
-        self.order = np.argsort(keys, kind="stable").astype(np.int64)
-        skeys = keys[self.order]
-        self.sorted_points = np.ascontiguousarray(local[self.order])
-        boundaries = np.flatnonzero(np.diff(skeys)) + 1
-        starts = np.concatenate(([0], boundaries, [skeys.size])).astype(np.int64)
-        self.cell_keys = np.ascontiguousarray(skeys[starts[:-1]])
-        self.cell_start = starts
+        n = self.n_points
+        keys = np.empty(n, dtype=np.int64)
+        _kernels.grid_keys(points, self.origin, cell, dims, dim == 2, keys)
+        total = int(np.prod([int(d) for d in dims]))
+        if n >= 65536 and total <= 4 * n:
+            # stable counting sort over the key range: same order as the stable argsort
+            # below, in O(N) (dense clouds; sparse grids and small clouds sort the keys)
+            counts = np.bincount(keys, minlength=total)
+            start = np.cumsum(counts) - counts
+            occupied = np.flatnonzero(counts)
+            self.order = np.empty(n, dtype=np.int64)
+            self.sorted_points = np.empty((n, 3))
+            _kernels.counting_scatter(points, self.origin, keys, start, self.order,
+                                      self.sorted_points)
+            self.cell_keys = occupied.astype(np.int64)
+            cell_start = np.empty(occupied.size + 1, dtype=np.int64)
+            cell_start[0] = 0
+            np.cumsum(counts[occupied], out=cell_start[1:])
+            self.cell_start = cell_start
+        else:
+            self.order = np.argsort(keys, kind="stable").astype(np.int64)
+            skeys = keys[self.order]
+            self.sorted_points = np.ascontiguousarray(points[self.order] - self.origin)
+            boundaries = np.flatnonzero(np.diff(skeys)) + 1
+            starts = np.concatenate(([0], boundaries, [skeys.size])).astype(np.int64)
+            self.cell_keys = np.ascontiguousarray(skeys[starts[:-1]])
+            self.cell_start = starts
 
     @property
     def n_cells(self) -> int:

@@ -25,6 +25,7 @@ import numpy as np
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import Neighborhoods
+from . import _edge_kernels as _ek
 from ._grow import grow_regions
 from ._result import Polylines, Segmentation
 
@@ -34,13 +35,10 @@ def surface_prefix_edges(nbh: Neighborhoods, surface):
 
     The row's own point (distance 0) is skipped when looking for the first non-surface one.
     """
-    surface = np.asarray(surface, dtype=bool)
-    src, dst = nbh.edges()
-    bad = (~surface[dst]) & (dst != src)
-    cs = np.cumsum(bad)
-    start = nbh.indptr[:-1]
-    before = np.where(start > 0, cs[np.maximum(start - 1, 0)], 0)
-    return (cs - np.repeat(before, nbh.counts)) == 0
+    surface = np.ascontiguousarray(surface, dtype=bool)
+    out = np.empty(nbh.nnz, dtype=bool)
+    _ek.prefix_ok(nbh.indptr, nbh.indices, nbh.query_indices(), surface, out)
+    return out
 
 
 def truncate_rows(nbh: Neighborhoods, m: int) -> Neighborhoods:
@@ -107,11 +105,8 @@ def clean_plane_points(labels, clean, nbh):
     ref = np.arange(n)
     if nbh.kind != "knn" or nbh.k is None:
         return ref
-    idx = nbh.indices.reshape(n, nbh.k)
-    ok = clean[idx] & (labels[idx] == labels[:, None])
-    first = np.argmax(ok, axis=1)
-    has = ok[np.arange(n), first]
-    ref[has] = idx[has, first[has]]
+    _ek.first_in_row(nbh.indptr, nbh.indices, nbh.query_indices(),
+                     np.ascontiguousarray(clean, dtype=bool), np.ascontiguousarray(labels), ref)
     return ref
 
 
@@ -126,10 +121,7 @@ def local_intersections(points, labels, normals, centroids, nbh, *, min_angle=20
     seg : (P, 2) ndarray of int
         The two segments (smaller id first).
     """
-    src, dst = nbh.edges()
-    la, lb = labels[src], labels[dst]
-    keep = (la > 0) & (lb > 0) & (la < lb)
-    i, j = src[keep], dst[keep]
+    i, j = _ek.label_pairs(nbh, labels)  # 0 < labels[i] < labels[j]
     n1, n2 = normals[i], normals[j]
     cosang = np.abs(np.einsum("ij,ij->i", n1, n2))
     ok = cosang < np.cos(np.radians(min_angle))  # eq. 9: not parallel
@@ -209,13 +201,19 @@ def reintegrate(points, labels, candidates, normals, centroids, nbh, sigma, *, n
         Labels with the reintegrated points set; unchanged elsewhere.
     """
     out = labels.copy()
-    src, dst = nbh.edges()
-    use = candidates[src] & (labels[dst] > 0) & (labels[src] == 0)
-    s, t = src[use], dst[use]
+    # edges from an unlabelled candidate to a labelled point
+    rows = nbh.query_indices()
+    cand = np.ascontiguousarray(candidates, dtype=bool)
+    lab = np.ascontiguousarray(labels)
+    m = _ek.count_reintegration(nbh.indptr, nbh.indices, rows, cand, lab)
+    s, t = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
+    _ek.fill_reintegration(nbh.indptr, nbh.indices, rows, cand, lab, s, t)
     sig = np.broadcast_to(np.asarray(sigma, dtype=np.float64), labels.shape)[t]
     dist = np.abs(np.einsum("ij,ij->i", points[s] - centroids[t], normals[t])) / sig
     fit = dist <= nsigma
     s, t, dist = s[fit], t[fit], dist[fit]
+    if not s.size:
+        return out
     order = np.lexsort((dist, s))
     s, t = s[order], t[order]
     first = np.r_[True, s[1:] != s[:-1]]
@@ -250,11 +248,8 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
     db = np.abs(np.einsum("ij,ij->i", c[a] - c[b], n[b]))
     ok = (cos >= np.cos(np.radians(max_angle))) & (da <= tol) & (db <= tol)
     if normals is not None:
-        src, dst = nbh.edges()
-        la, lb = labels[src], labels[dst]
-        touch = (la > 0) & (lb > 0) & (la < lb)
-        key = la[touch].astype(np.int64) * (int(labels.max()) + 1) + lb[touch]
-        si, di = src[touch], dst[touch]
+        si, di = _ek.label_pairs(nbh, labels)  # 0 < labels[si] < labels[di]
+        key = labels[si].astype(np.int64) * (int(labels.max()) + 1) + labels[di]
         c_local = np.abs(np.einsum("ij,ij->i", normals[si], normals[di]))
         off = np.abs(np.einsum("ij,ij->i", points[di] - centroids[si], normals[si]))
         order = np.argsort(key, kind="stable")
@@ -291,8 +286,9 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
 
 def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, alpha=0.05,
                        boundary_alpha=0.001, curvature_threshold=None, variance_threshold=None,
-                       min_size=50, grow_k=20, seeds="curvature", min_angle=20.0,
-                       reintegration=True, lines=True, result=None) -> Segmentation:
+                       curved="cylinder", curved_alpha=None, adaptive_scale=True, min_size=50,
+                       grow_k=20, seeds="curvature", min_angle=20.0, reintegration=True,
+                       lines=True, result=None) -> Segmentation:
     """Covariance classification, region growing (Fig. 4), intersection lines (eq. 9-17).
 
     Parameters
@@ -300,6 +296,14 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
     points : (N, 3) array_like
     k, radius, sensor, sigma, alpha, boundary_alpha, curvature_threshold, variance_threshold
         As for :func:`lidarstat.classify.covariance`.
+    curved, curved_alpha
+        The consistent-curvature test and its level (as for
+        :func:`lidarstat.classify.classify_covariance`).
+    adaptive_scale : bool
+        Also grow through each point's largest planar neighbourhood prefix
+        (:func:`lidarstat.segment._scales.planar_scales`: 8 to k nearest, plane test at
+        `alpha`), so faces narrower than the k-neighbourhood are found; writes
+        ``scale_k`` and ``scale_plane_p``.
     min_size : int
         Smallest segment kept (points).
     grow_k : int
@@ -340,7 +344,8 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         result = covariance(pts, k=k, radius=radius, sensor=sensor, sigma=sigma, alpha=alpha,
                             boundary_alpha=boundary_alpha,
                             curvature_threshold=curvature_threshold,
-                            variance_threshold=variance_threshold, keep_neighbors=True)
+                            variance_threshold=variance_threshold, curved=curved,
+                            curved_alpha=curved_alpha, keep_neighbors=True)
     feats, classes = result.features, result.classes
     nbh = feats.neighborhoods
     if nbh is None:
@@ -349,14 +354,37 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
     surface = pc == PointClass.SURFACE
     boundary = pc == PointClass.BOUNDARY
     grow_nbh = truncate_rows(nbh, grow_k)
-    # boundary points end a surface, they do not separate two: they may be joined (and do
-    # not grow), only edge and undetermined points cut the rows (Fig. 4)
-    edge_ok = surface_prefix_edges(grow_nbh, surface | boundary)
     sv = feats["SurfaceVariation"]
     order = np.argsort(np.where(np.isfinite(sv), sv, np.inf), kind="stable") \
         if seeds == "curvature" else None
-    labels = grow_regions(grow_nbh, edge_ok, order=order, can_grow=surface,
-                          mask=surface | boundary, merge=True, min_size=min_size)
+    extra = {}
+    if adaptive_scale and nbh.kind == "knn":
+        from ._scales import planar_scales, prefix_edges
+
+        kstar, kp, pn = planar_scales(pts, nbh, classes.sigma, alpha=classes.alpha,
+                                      sensor=feats.sensor if classes.meta.get("noise") ==
+                                      "range" else None)
+        extra = {"scale_k": kstar.astype(np.uint8), "scale_plane_p": kp}
+        src, dst = nbh.edges()
+        # Fig. 4 on the first grow_k neighbours of surface points, plus every point's
+        # largest planar prefix; members of either may be joined, only tested points grow.
+        # Two growing points of a prefix must also agree in their prefix normals: on a
+        # scan whose rows run along a crease, two rows (one per face) are two parallel
+        # lines, always coplanar, so a small prefix can pass the test across the crease.
+        first = prefix_edges(nbh, np.full(len(nbh), grow_k))
+        cos = np.abs(np.einsum("ij,ij->i", pn[src], pn[dst]))
+        smooth = (kstar[dst] == 0) | (cos >= np.cos(np.radians(min_angle / 2)))
+        edge_ok = (surface_prefix_edges(nbh, surface | boundary) & first & surface[src]) | \
+            (prefix_edges(nbh, kstar) & smooth)
+        labels = grow_regions(nbh, edge_ok, order=order, can_grow=surface | (kstar > 0),
+                              mask=pc != PointClass.UNDETERMINED, merge=True,
+                              min_size=min_size)
+    else:
+        # boundary points end a surface, they do not separate two: they may be joined (and
+        # do not grow), only edge and undetermined points cut the rows (Fig. 4)
+        edge_ok = surface_prefix_edges(grow_nbh, surface | boundary)
+        labels = grow_regions(grow_nbh, edge_ok, order=order, can_grow=surface,
+                              mask=surface | boundary, merge=True, min_size=min_size)
     normals = feats.normals
     centroids = feats.centroid
     across = classes.sigma
@@ -374,17 +402,23 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
     if lines:
         rk = nbh.distances.reshape(len(nbh), -1)[:, -1] if nbh.kind == "knn" else \
             np.full(len(nbh), nbh.radius)
-        ref = clean_plane_points(labels, surface | boundary, nbh)
-        x0, seg = local_intersections(pts, labels, normals[ref], centroids[ref], nbh,
+        # local planes from neighbourhoods the plane test accepted (a surface accepted by
+        # the cylinder test is curved: its covariance plane is not the tangent plane)
+        planar = (classes["plane_p"] >= classes.alpha) & (surface | boundary)
+        ref = clean_plane_points(labels, planar, nbh)
+        # a point with no such plane in its row (its own straddles the crease) takes no part
+        x0, seg = local_intersections(pts, labels * planar[ref], normals[ref], centroids[ref],
+                                      nbh,
                                       min_angle=min_angle,
                                       max_distance=2.0 * float(np.median(rk)))
         lines_out = fit_lines(x0, seg)
     table = segment_planes(pts, labels)
     fields = {"point_class": pc.astype(np.uint8), "reintegrated": reint,
               "NormalX": feats["NormalX"], "NormalY": feats["NormalY"],
-              "NormalZ": feats["NormalZ"], "SurfaceVariation": sv}
+              "NormalZ": feats["NormalZ"], "SurfaceVariation": sv, **extra}
     params = {"k": feats.k, "radius": feats.radius, "grow_k": grow_k, "min_size": min_size,
               "seeds": seeds, "min_angle": min_angle, "alpha": classes.alpha,
+              "adaptive_scale": bool(extra),
               "boundary_alpha": classes.boundary_alpha, "noise": classes.meta.get("noise"),
               "sigma_estimated": classes.sigma_estimated}
     return Segmentation(labels=labels, table=table, lines=lines_out, fields=fields,

@@ -204,12 +204,13 @@ def adjacency(nbh: Neighborhoods, labels, *, min_edges: int = 1):
     if labels.shape != (nbh.n_points,):
         raise InvalidParameterError(
             f"labels must have one entry per point ({nbh.n_points}), got {labels.shape}")
-    src, dst = nbh.edges()
+    from ._edge_kernels import label_pairs
+
+    src, dst = label_pairs(nbh, labels, different_only=True)  # labelled, different segments
     a = labels[src].astype(np.int64)
     b = labels[dst].astype(np.int64)
-    keep = (a > 0) & (b > 0) & (a != b)
-    lo = np.minimum(a[keep], b[keep])
-    hi = np.maximum(a[keep], b[keep])
+    lo = np.minimum(a, b)
+    hi = np.maximum(a, b)
     base = int(labels.max()) + 1 if labels.size else 1
     keys, counts = np.unique(lo * base + hi, return_counts=True)
     sel = counts >= int(min_edges)

@@ -39,6 +39,7 @@ from ._tls import make_tls_building, make_tls_plant, scan_spherical
 from ._truth import (
     SURFACE_TYPE_NAMES,
     SyntheticCloud,
+    neighborhood_class_truth,
     point_class_truth,
     principal_curvatures,
     surface_type_from_curvature,
@@ -47,6 +48,7 @@ from ._truth import (
 __all__ = [
     "SyntheticCloud",
     "point_class_truth",
+    "neighborhood_class_truth",
     "SURFACE_TYPE_NAMES",
     "SURFACE_KINDS",
     "SCENES",

@@ -17,6 +17,7 @@ from ..errors import InvalidParameterError
 __all__ = [
     "SyntheticCloud",
     "point_class_truth",
+    "neighborhood_class_truth",
     "SURFACE_TYPE_NAMES",
     "surface_type_from_curvature",
     "principal_curvatures",
@@ -298,4 +299,60 @@ def point_class_truth(cloud: SyntheticCloud, radius: float) -> np.ndarray:
         bd = cloud.fields.get("boundary_distance")
         if bd is not None:
             out[bd < radius] = 3
+    return out
+
+
+def neighborhood_class_truth(cloud: SyntheticCloud, neighborhoods, *,
+                             boundary_band: float = 0.5) -> np.ndarray:
+    """True class of every point judged on the neighbourhood a method actually used.
+
+    *Edge* (2) where the neighbourhood holds a point of another face (it straddles a
+    crease, whichever face is seen), *boundary* (3) where ``boundary_distance`` is below
+    `boundary_band` times the point's own neighbourhood radius (its farthest neighbour),
+    boundary winning as in :func:`point_class_truth`; else *surface* (1). Unlike
+    :func:`point_class_truth` with one radius, the zones follow the density of the scan
+    (a terrestrial scan's neighbourhoods grow with the range), and a crease whose other
+    face is not seen (a hidden window jamb) makes no edge: no neighbour lies across it.
+
+    Parameters
+    ----------
+    cloud : SyntheticCloud
+    neighborhoods : Neighborhoods
+        One row per point of `cloud` (e.g. ``covariance_features(...,
+        keep_neighbors=True).neighborhoods``).
+    boundary_band : float
+        Boundary zone as a share of the neighbourhood radius.
+
+    Returns
+    -------
+    numpy.ndarray of uint8, shape (N,)
+
+    Examples
+    --------
+    >>> from lidarstat.synth import make_plane
+    >>> from lidarstat.neighbors import knn_neighbors
+    >>> c = make_plane(extent=1.0, spacing=0.1)
+    >>> np.bincount(neighborhood_class_truth(c, knn_neighbors(c.xyz, 5))).tolist()
+    [0, 121]
+    """
+    n = len(cloud)
+    if len(neighborhoods) != n:
+        raise InvalidParameterError(
+            f"neighborhood_class_truth: {len(neighborhoods)} neighbourhoods for {n} points")
+    if not (np.isfinite(boundary_band) and boundary_band > 0):
+        raise InvalidParameterError(
+            f"The 'boundary_band' parameter of neighborhood_class_truth must be a float in "
+            f"the range (0, inf). Got {boundary_band!r} instead.")
+    counts = np.diff(neighborhoods.indptr)
+    rows = np.repeat(np.arange(n), counts)
+    other = np.bincount(rows, weights=cloud.face[neighborhoods.indices] != cloud.face[rows],
+                        minlength=n)
+    reach = np.zeros(n)
+    np.maximum.at(reach, rows, neighborhoods.distances)
+    out = np.ones(n, dtype=np.uint8)
+    out[other > 0] = 2
+    bd = cloud.fields.get("boundary_distance")
+    if bd is not None:
+        with np.errstate(invalid="ignore"):
+            out[bd < boundary_band * reach] = 3
     return out

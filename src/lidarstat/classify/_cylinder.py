@@ -1,0 +1,260 @@
+"""Consistent-curvature test by a cylinder fit: is a curved neighbourhood a smooth surface?
+
+Where the plane test rejects, the neighbourhood is either a consistently curved surface
+(a pipe, a tank wall) or it straddles an edge. Model: a circular cylinder whose axis is
+the minimum-curvature direction of the point (``Normal x PrincipalDir`` of the covariance
+features, section 5). The neighbours are projected on the plane perpendicular to the
+axis and a circle is fitted there (algebraic fit, then Gauss-Newton on the geometric
+residuals weighted by the per-neighbour noise). Under "a cylinder with independent
+noise", the weighted residual sum of squares is ``chi2(n - 3)`` (3 circle parameters;
+the axis comes from the neighbours' normals, not from this fit, so it absorbs no degree
+of freedom: measured mean of the statistic n - 3.0 on noisy cylinders and planes with
+the true axis, k = 20 and 50). A plane is the limit of large radius (a straight line in
+the projection); a crease projects to a V, which no circle fits.
+
+Per-neighbour noise: with a sensor, the range noise ``sigma_r(r) = a + b r`` runs along the
+ray ``d``; its radial (residual) component is ``sigma_r |d . rho|`` with ``rho`` the
+radial direction at that neighbour, floored at 0.1 ``sigma_r`` (at the silhouette of a
+pipe the ray is tangent and the first-order radial noise vanishes; the second-order term
+``eps^2 / 2R`` remains). Without a sensor the given (or estimated) sigma across the
+surface.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from .._shared._jit import njit, njit_parallel
+
+_FLOOR = 0.1  # smallest |cos| of the ray against the radial direction (see module doc)
+_ITERS = 8
+
+
+@njit
+def _basis(a):
+    ax, ay, az = a[0], a[1], a[2]
+    if abs(ax) < 0.9:
+        t0, t1, t2 = 1.0, 0.0, 0.0
+    else:
+        t0, t1, t2 = 0.0, 1.0, 0.0
+    # e1 = normalise(t - (t.a) a), e2 = a x e1
+    d = t0 * ax + t1 * ay + t2 * az
+    e10, e11, e12 = t0 - d * ax, t1 - d * ay, t2 - d * az
+    nn = np.sqrt(e10 * e10 + e11 * e11 + e12 * e12)
+    e10, e11, e12 = e10 / nn, e11 / nn, e12 / nn
+    e20 = ay * e12 - az * e11
+    e21 = az * e10 - ax * e12
+    e22 = ax * e11 - ay * e10
+    return e10, e11, e12, e20, e21, e22
+
+
+@njit
+def _solve3(A, b):
+    """Solve a 3x3 system by Cramer's rule; returns (x, ok)."""
+    det = (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
+           - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
+           + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
+    x = np.zeros(3)
+    scale = abs(A[0, 0] * A[1, 1] * A[2, 2]) + 1e-300
+    if abs(det) <= 1e-14 * scale:
+        return x, False
+    for c in range(3):
+        M = A.copy()
+        for r in range(3):
+            M[r, c] = b[r]
+        x[c] = (M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
+                - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
+                + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0])) / det
+    return x, True
+
+
+@njit_parallel
+def cylinder_rows(pts, query, indptr, idx, axes, sensor, has_sensor, sig_pt, stat, dof,
+                  radius):
+    """Weighted circle fit perpendicular to `axes[q]` over each query row (see module doc).
+
+    `pts` local coordinates; row r lists the neighbours of point ``query[r]``. Noise of
+    neighbour j: ``sig_pt[j] * max(|d . rho|, 0.1)`` with a sensor (`sig_pt` along the
+    rays), else ``sig_pt[j]`` (across the surface). Writes the weighted RSS, its degrees of freedom (n - 3) and the
+    fitted radius (inf for a straight line); NaN where fewer than 7 neighbours.
+    """
+    m = query.size
+    for r in numba.prange(m):
+        i = query[r]
+        s, e = indptr[r], indptr[r + 1]
+        n = e - s
+        stat[r] = np.nan
+        dof[r] = n - 3
+        radius[r] = np.nan
+        if n < 7:
+            continue
+        a = axes[i]
+        e10, e11, e12, e20, e21, e22 = _basis(a)
+        x = np.empty(n)
+        y = np.empty(n)
+        sr = np.empty(n)
+        dx = np.zeros(n)
+        dy = np.zeros(n)
+        mx = 0.0
+        my = 0.0
+        for t in range(n):
+            j = idx[s + t]
+            px, py, pz = pts[j, 0] - pts[i, 0], pts[j, 1] - pts[i, 1], pts[j, 2] - pts[i, 2]
+            x[t] = px * e10 + py * e11 + pz * e12
+            y[t] = px * e20 + py * e21 + pz * e22
+            mx += x[t]
+            my += y[t]
+            sr[t] = sig_pt[j]
+            if has_sensor:
+                rx, ry, rz = pts[j, 0] - sensor[0], pts[j, 1] - sensor[1], pts[j, 2] - sensor[2]
+                rn = np.sqrt(rx * rx + ry * ry + rz * rz)
+                if rn > 0:
+                    rx, ry, rz = rx / rn, ry / rn, rz / rn
+                dx[t] = rx * e10 + ry * e11 + rz * e12
+                dy[t] = rx * e20 + ry * e21 + rz * e22
+        mx /= n
+        my /= n
+        scale = 0.0
+        for t in range(n):
+            x[t] -= mx
+            y[t] -= my
+            scale = max(scale, abs(x[t]), abs(y[t]))
+        if not scale > 0:
+            continue
+        for t in range(n):
+            x[t] /= scale
+            y[t] /= scale
+        # algebraic (Kasa) circle: x^2 + y^2 + D x + E y + F = 0
+        A = np.zeros((3, 3))
+        b = np.zeros(3)
+        for t in range(n):
+            z = x[t] * x[t] + y[t] * y[t]
+            v0, v1 = x[t], y[t]
+            A[0, 0] += v0 * v0
+            A[0, 1] += v0 * v1
+            A[0, 2] += v0
+            A[1, 1] += v1 * v1
+            A[1, 2] += v1
+            A[2, 2] += 1.0
+            b[0] -= z * v0
+            b[1] -= z * v1
+            b[2] -= z
+        A[1, 0], A[2, 0], A[2, 1] = A[0, 1], A[0, 2], A[1, 2]
+        sol, ok = _solve3(A, b)
+        cx, cy = -0.5 * sol[0], -0.5 * sol[1]
+        R2 = cx * cx + cy * cy - sol[2]
+        line = (not ok) or (not R2 > 0) or np.sqrt(max(R2, 0.0)) > 1e4
+        w = np.empty(n)
+        res = np.empty(n)
+        if not line:
+            R = np.sqrt(R2)
+            for _ in range(_ITERS):  # Gauss-Newton on (cx, cy, R), weighted
+                J = np.zeros((3, 3))
+                g = np.zeros(3)
+                for t in range(n):
+                    ux, uy = x[t] - cx, y[t] - cy
+                    dist = np.sqrt(ux * ux + uy * uy)
+                    if dist > 0:
+                        ux, uy = ux / dist, uy / dist
+                    c = abs(dx[t] * ux + dy[t] * uy) if has_sensor else 1.0
+                    sg = sr[t] * max(c, _FLOOR) / scale
+                    w[t] = 1.0 / (sg * sg)
+                    res[t] = dist - R
+                    j0, j1, j2 = -ux, -uy, -1.0
+                    J[0, 0] += w[t] * j0 * j0
+                    J[0, 1] += w[t] * j0 * j1
+                    J[0, 2] += w[t] * j0 * j2
+                    J[1, 1] += w[t] * j1 * j1
+                    J[1, 2] += w[t] * j1 * j2
+                    J[2, 2] += w[t] * j2 * j2
+                    g[0] -= w[t] * j0 * res[t]
+                    g[1] -= w[t] * j1 * res[t]
+                    g[2] -= w[t] * j2 * res[t]
+                J[1, 0], J[2, 0], J[2, 1] = J[0, 1], J[0, 2], J[1, 2]
+                step, ok2 = _solve3(J, g)
+                if not ok2:
+                    break
+                cx += step[0]
+                cy += step[1]
+                R += step[2]
+                if not (R > 0 and R < 1e4):
+                    line = True
+                    break
+            if not line:
+                q = 0.0
+                for t in range(n):
+                    ux, uy = x[t] - cx, y[t] - cy
+                    dist = np.sqrt(ux * ux + uy * uy)
+                    if dist > 0:
+                        ux, uy = ux / dist, uy / dist
+                    c = abs(dx[t] * ux + dy[t] * uy) if has_sensor else 1.0
+                    sg = sr[t] * max(c, _FLOOR) / scale
+                    rr = dist - R
+                    q += rr * rr / (sg * sg)
+                stat[r] = q
+                radius[r] = R * scale
+        if line:  # straight line in the projection: total least squares, 2 parameters
+            sxx = 0.0
+            sxy = 0.0
+            syy = 0.0
+            for t in range(n):
+                sxx += x[t] * x[t]
+                sxy += x[t] * y[t]
+                syy += y[t] * y[t]
+            tr = sxx + syy
+            det = sxx * syy - sxy * sxy
+            lmin = 0.5 * tr - np.sqrt(max(0.25 * tr * tr - det, 0.0))
+            # normal of the line: eigenvector of lmin
+            nx, ny = sxy, lmin - sxx
+            nn = np.sqrt(nx * nx + ny * ny)
+            if nn == 0:
+                nx, ny = (1.0, 0.0) if sxx <= syy else (0.0, 1.0)
+            else:
+                nx, ny = nx / nn, ny / nn
+            q = 0.0
+            for t in range(n):
+                rr = x[t] * nx + y[t] * ny
+                c = abs(dx[t] * nx + dy[t] * ny) if has_sensor else 1.0
+                sg = sr[t] * max(c, _FLOOR) / scale
+                q += rr * rr / (sg * sg)
+            stat[r] = q
+            radius[r] = np.inf
+
+
+def cylinder_test(points, query, indptr, idx, axes, sigma, *, sensor=None):
+    """Cylinder test of the rows of `query` (see the module doc).
+
+    Parameters
+    ----------
+    points : (N, 3) ndarray
+    query : (M,) ndarray of int
+        The points tested; row r of the CSR (`indptr`, `idx`) lists the neighbours of
+        ``query[r]`` (indices into `points`, the point itself included).
+    axes : (N, 3) ndarray
+        Unit axis direction per point (minimum-curvature direction).
+    sigma : float or (N,) array_like
+        Noise std per point: along the rays with a `sensor`, else across the surface.
+    sensor : (3,) array_like, optional
+        Scanner position.
+
+    Returns
+    -------
+    stat, dof, radius : (M,) ndarray
+        Weighted residual sum of squares (``~ chi2(dof)`` on a cylinder), ``n - 3`` and
+        the fitted radius (inf: straight in the projection, i.e. planar).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    origin = pts.mean(axis=0)
+    local = np.ascontiguousarray(pts - origin)
+    m = len(query)
+    stat, dof, radius = np.empty(m), np.empty(m), np.empty(m)
+    has_sensor = sensor is not None
+    sens = (np.asarray(sensor, dtype=np.float64) - origin) if has_sensor else np.zeros(3)
+    sig = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma, dtype=np.float64),
+                                               (pts.shape[0],)))
+    cylinder_rows(local, np.ascontiguousarray(query, dtype=np.int64),
+                  np.ascontiguousarray(indptr, dtype=np.int64), np.ascontiguousarray(idx),
+                  np.ascontiguousarray(axes, dtype=np.float64), sens, has_sensor, sig, stat,
+                  dof, radius)
+    return stat, dof, radius

@@ -1,0 +1,127 @@
+"""Numba kernels that select CSR edges by the labels or classes of their two ends.
+
+The vectorised form of these selections (``src, dst = nbh.edges()`` and boolean masks over
+them) allocates several arrays of one entry per neighbour pair: at 2 million points and
+k = 50 that is 100 million pairs and gigabytes per step. These kernels walk the CSR rows
+once to count and once to fill, so only the selected pairs are stored. Each returns
+exactly what the mask expression it replaces returns (same pairs, in CSR order).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._shared._jit import njit
+
+
+@njit
+def prefix_ok(indptr, indices, rows, good, out):
+    """``out[e]``: no neighbour before or at entry e of its row is a non-`good` point.
+
+    The row's own point never counts as a non-`good` one (``dst == src``). This is
+    ``cumsum(~good[dst] & (dst != src))`` restarted per row, equal to 0.
+    """
+    for r in range(indptr.size - 1):
+        p = rows[r]
+        bad = False
+        for e in range(indptr[r], indptr[r + 1]):
+            q = indices[e]
+            if q != p and not good[q]:
+                bad = True
+            out[e] = not bad
+
+
+@njit
+def _label_pair(la, lb, mode):
+    if la <= 0 or lb <= 0:
+        return False
+    if mode == 0:  # 0 < la < lb
+        return la < lb
+    return la != lb  # both labelled, different
+
+
+@njit
+def count_label_pairs(indptr, indices, rows, labels, mode):
+    """Number of edges whose ends have labels ``0 < la < lb`` (mode 0) or ``la != lb > 0``."""
+    c = 0
+    for r in range(indptr.size - 1):
+        la = labels[rows[r]]
+        if la <= 0:
+            continue
+        for e in range(indptr[r], indptr[r + 1]):
+            c += _label_pair(la, labels[indices[e]], mode)
+    return c
+
+
+@njit
+def fill_label_pairs(indptr, indices, rows, labels, mode, src, dst):
+    """The edges counted by :func:`count_label_pairs`, in CSR order."""
+    c = 0
+    for r in range(indptr.size - 1):
+        p = rows[r]
+        la = labels[p]
+        if la <= 0:
+            continue
+        for e in range(indptr[r], indptr[r + 1]):
+            q = indices[e]
+            if _label_pair(la, labels[q], mode):
+                src[c] = p
+                dst[c] = q
+                c += 1
+
+
+@njit
+def count_reintegration(indptr, indices, rows, candidates, labels):
+    """Edges from an unlabelled candidate point to a labelled one."""
+    c = 0
+    for r in range(indptr.size - 1):
+        p = rows[r]
+        if not candidates[p] or labels[p] != 0:
+            continue
+        for e in range(indptr[r], indptr[r + 1]):
+            c += labels[indices[e]] > 0
+    return c
+
+
+@njit
+def fill_reintegration(indptr, indices, rows, candidates, labels, src, dst):
+    """The edges counted by :func:`count_reintegration`, in CSR order."""
+    c = 0
+    for r in range(indptr.size - 1):
+        p = rows[r]
+        if not candidates[p] or labels[p] != 0:
+            continue
+        for e in range(indptr[r], indptr[r + 1]):
+            q = indices[e]
+            if labels[q] > 0:
+                src[c] = p
+                dst[c] = q
+                c += 1
+
+
+@njit
+def first_in_row(indptr, indices, rows, clean, labels, ref):
+    """``ref[p]``: the first neighbour q of p's row with ``clean[q]`` and the same label."""
+    for r in range(indptr.size - 1):
+        p = rows[r]
+        for e in range(indptr[r], indptr[r + 1]):
+            q = indices[e]
+            if clean[q] and labels[q] == labels[p]:
+                ref[p] = q
+                break
+
+
+def label_pairs(nbh, labels, *, different_only=False):
+    """``(src, dst)`` of the edges between two labelled points of different segments.
+
+    Default: ``0 < labels[src] < labels[dst]`` (each touching pair of points once per CSR
+    direction it appears in); `different_only`: ``labels[src] != labels[dst]``, both > 0.
+    """
+    labels = np.ascontiguousarray(labels)
+    rows = nbh.query_indices()
+    mode = 1 if different_only else 0
+    m = count_label_pairs(nbh.indptr, nbh.indices, rows, labels, mode)
+    src = np.empty(m, dtype=np.int64)
+    dst = np.empty(m, dtype=np.int64)
+    fill_label_pairs(nbh.indptr, nbh.indices, rows, labels, mode, src, dst)
+    return src, dst
