@@ -122,3 +122,29 @@ def test_lengths_in_metres_whatever_the_file_unit(rng):
         5 * (ft.classification != ref.classification).sum()
     with pytest.raises(Exception, match="units"):
         classify_moments(xyz, inten, units=0, tile_size=50)
+
+
+def test_low_outlier_and_road_cell_kernels_equal_lexsort(rng):
+    from lidarstat.classify import _outliers, _roads
+
+    ij = rng.integers(0, 30, (20000, 2))
+    z = np.round(rng.normal(size=20000), 1)  # ties: the first in input order wins
+    key = ij[:, 0] * 30 + ij[:, 1]
+    o = np.lexsort((z, key))
+    ks = key[o]
+    first = o[np.r_[True, ks[1:] != ks[:-1]]]
+    z1, arg = _outliers._cell_lowest(ij, z, (30, 30))
+    assert np.array_equal(arg.ravel()[key[first]], first)
+    assert np.array_equal(z1.ravel()[key[first]], z[first])
+    assert (arg.ravel() >= 0).sum() == first.size
+    xy = rng.uniform(0, 50, (20000, 2))
+    v = np.round(rng.normal(100, 20, 20000))
+    span = np.ptp(xy, axis=0)
+    key = _surface.cell_keys(xy, np.sqrt(8 * span[0] * span[1] / 20000))
+    o = np.lexsort((v, key))
+    ks, vs = key[o], v[o]
+    b = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1], True])
+    ref = np.empty(v.size)
+    ref[o] = np.repeat(0.5 * (vs[(b[:-1] + b[1:] - 1) // 2] + vs[(b[:-1] + b[1:]) // 2]),
+                       np.diff(b))
+    assert np.array_equal(_roads.cell_median(xy, v, points_per_cell=8), ref)

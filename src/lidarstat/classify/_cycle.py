@@ -51,6 +51,17 @@ class CycleChoice:
 
 
 @njit
+def _add(s, comp, x):  # pragma: no cover - compiled
+    """Neumaier-compensated ``s + x``: the new sum and the new running compensation."""
+    t = s + x
+    if abs(s) >= abs(x):
+        comp += (s - t) + x
+    else:
+        comp += (x - t) + s
+    return t, comp
+
+
+@njit
 def _window_sums(v, ok, h, num, den):  # pragma: no cover - compiled
     """Sums of `v` and counts of `ok` over ``[i - h, i + h]`` (clipped), for every i.
 
@@ -66,22 +77,10 @@ def _window_sums(v, ok, h, num, den):  # pragma: no cover - compiled
     for i in range(n):
         while hi < min(n - 1, i + h):
             hi += 1
-            x = v[hi]
-            t = s + x
-            if abs(s) >= abs(x):
-                comp += (s - t) + x
-            else:
-                comp += (x - t) + s
-            s = t
+            s, comp = _add(s, comp, v[hi])
             cnt += ok[hi]
         while lo < i - h:
-            x = -v[lo]
-            t = s + x
-            if abs(s) >= abs(x):
-                comp += (s - t) + x
-            else:
-                comp += (x - t) + s
-            s = t
+            s, comp = _add(s, comp, -v[lo])
             cnt -= ok[lo]
             lo += 1
         num[i] = s + comp

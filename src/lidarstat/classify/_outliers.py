@@ -23,19 +23,27 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._shared._jit import njit
+
 __all__ = ["low_outliers"]
 
 
+@njit
+def _lowest(key, z, m):  # pragma: no cover - compiled
+    z1 = np.full(m, np.inf)
+    arg = np.full(m, -1, np.int64)
+    for i in range(key.size):
+        k = key[i]
+        if z[i] < z1[k]:  # strict: the first of equal lows is kept, as np.lexsort((z, key))
+            z1[k] = z[i]
+            arg[k] = i
+    return z1, arg
+
+
 def _cell_lowest(ij, z, shape):
-    """Per cell: the lowest z and the index of that point (inf / -1 where empty)."""
-    key = ij[:, 0] * shape[1] + ij[:, 1]
-    o = np.lexsort((z, key))
-    ks = key[o]
-    first = o[np.r_[True, ks[1:] != ks[:-1]]]
-    z1 = np.full(shape[0] * shape[1], np.inf)
-    arg = np.full(shape[0] * shape[1], -1, np.int64)
-    z1[key[first]] = z[first]
-    arg[key[first]] = first
+    """Per cell: the lowest z and the index of that point (inf / -1 where empty); O(N)."""
+    key = np.ascontiguousarray(ij[:, 0] * shape[1] + ij[:, 1])
+    z1, arg = _lowest(key, np.ascontiguousarray(z, dtype=np.float64), shape[0] * shape[1])
     return z1.reshape(shape), arg.reshape(shape)
 
 

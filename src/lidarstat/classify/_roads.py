@@ -30,7 +30,7 @@ import numpy as np
 
 from ..stats._moments import density_estimate, dip_test, sequential_moments
 from ._cycle import CycleChoice, choose_cycle
-from ._surface import cell_keys
+from ._surface import cell_keys, cell_median_values
 
 __all__ = ["cell_median", "road_cut"]
 
@@ -65,15 +65,7 @@ def cell_median(xy, values, *, points_per_cell: float = 8.0) -> np.ndarray:
     n = v.size
     span = np.maximum(np.ptp(xy, axis=0), 1e-9) if n else np.ones(2)
     cell = float(np.sqrt(points_per_cell * span[0] * span[1] / max(n, 1)))
-    key = cell_keys(xy, cell)
-    o = np.lexsort((v, key))
-    ks, vs = key[o], v[o]
-    b = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1], True])
-    lo, hi = b[:-1], b[1:]
-    med = 0.5 * (vs[(lo + hi - 1) // 2] + vs[(lo + hi) // 2])
-    out = np.empty(n)
-    out[o] = np.repeat(med, hi - lo)
-    return out
+    return cell_median_values(cell_keys(xy, cell), v)
 
 
 def _antimode(de):

@@ -120,18 +120,55 @@ def _counting_order(key, nkeys):  # pragma: no cover - compiled
     return order, starts
 
 
-def _cell_pick(xy, z, cell, which):
-    """Index of the lowest (``'min'``) or lower-median (``'median'``) point of every cell."""
-    key = cell_keys(xy, cell)
+def cell_order(key):
+    """Points grouped by cell, in input order inside a cell: ``(order, starts)`` with the
+    points of the c-th non-empty cell (keys ascending) at ``order[starts[c]:starts[c+1]]``.
+
+    A counting sort (O(N)) unless the keys span a huge, mostly empty range.
+    """
+    key = np.ascontiguousarray(key, dtype=np.int64)
     nkeys = int(key.max()) + 1 if key.size else 0
     if nkeys <= 4 * key.size + 1_000_000:
-        order, starts = _counting_order(key, nkeys)
-    else:  # sparse cells over a huge box: sort the keys instead
-        order = np.argsort(key, kind="stable")
-        ks = key[order]
-        starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1], True])
-    return _pick_per_cell(order, np.ascontiguousarray(z, dtype=np.float64),
-                          starts.astype(np.int64), which == "median")
+        return _counting_order(key, nkeys)
+    order = np.argsort(key, kind="stable")  # sparse cells over a huge box
+    ks = key[order]
+    return order, np.flatnonzero(np.r_[True, ks[1:] != ks[:-1], True]).astype(np.int64)
+
+
+@njit
+def _median_per_cell(order, v, starts, out):  # pragma: no cover - compiled
+    """``out[i]`` = median of `v` over the cell of point i (mean of the two middle values)."""
+    buf = np.empty(order.size, np.int64)
+    for c in range(starts.size - 1):
+        a, b = starts[c], starts[c + 1]
+        w = buf[: b - a]
+        w[:] = order[a:b]
+        k = (b - a - 1) // 2
+        _select(w, k, v)
+        lo = v[w[k]]
+        hi = lo
+        if (b - a) % 2 == 0:  # the upper middle: the smallest value above position k
+            hi = v[w[k + 1]]
+            for j in range(k + 2, b - a):
+                hi = min(hi, v[w[j]])
+        m = 0.5 * (lo + hi)
+        for j in range(a, b):
+            out[order[j]] = m
+
+
+def cell_median_values(key, values):
+    """Each point's median of `values` over the points sharing its cell `key` (O(N))."""
+    order, starts = cell_order(key)
+    out = np.empty(len(values))
+    _median_per_cell(order, np.ascontiguousarray(values, dtype=np.float64), starts, out)
+    return out
+
+
+def _cell_pick(xy, z, cell, which):
+    """Index of the lowest (``'min'``) or lower-median (``'median'``) point of every cell."""
+    order, starts = cell_order(cell_keys(xy, cell))
+    return _pick_per_cell(order, np.ascontiguousarray(z, dtype=np.float64), starts,
+                          which == "median")
 
 
 # --------------------------------------------------------------------------- TIN kernels
