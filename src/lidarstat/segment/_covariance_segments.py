@@ -359,23 +359,22 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         if seeds == "curvature" else None
     extra = {}
     if adaptive_scale and nbh.kind == "knn":
-        from ._scales import planar_scales, prefix_edges
+        from ._scales import planar_scales
 
         kstar, kp, pn = planar_scales(pts, nbh, classes.sigma, alpha=classes.alpha,
                                       sensor=feats.sensor if classes.meta.get("noise") ==
                                       "range" else None)
         extra = {"scale_k": kstar.astype(np.uint8), "scale_plane_p": kp}
-        src, dst = nbh.edges()
         # Fig. 4 on the first grow_k neighbours of surface points, plus every point's
         # largest planar prefix; members of either may be joined, only tested points grow.
         # Two growing points of a prefix must also agree in their prefix normals: on a
         # scan whose rows run along a crease, two rows (one per face) are two parallel
         # lines, always coplanar, so a small prefix can pass the test across the crease.
-        first = prefix_edges(nbh, np.full(len(nbh), grow_k))
-        cos = np.abs(np.einsum("ij,ij->i", pn[src], pn[dst]))
-        smooth = (kstar[dst] == 0) | (cos >= np.cos(np.radians(min_angle / 2)))
-        edge_ok = (surface_prefix_edges(nbh, surface | boundary) & first & surface[src]) | \
-            (prefix_edges(nbh, kstar) & smooth)
+        # (one Numba pass over the rows: no per-edge arrays besides the mask)
+        edge_ok = np.empty(nbh.nnz, dtype=bool)
+        _ek.adaptive_edges(nbh.indptr, nbh.indices, nbh.query_indices(), surface | boundary,
+                           surface, np.ascontiguousarray(kstar), np.ascontiguousarray(pn),
+                           int(grow_k), float(np.cos(np.radians(min_angle / 2))), edge_ok)
         labels = grow_regions(nbh, edge_ok, order=order, can_grow=surface | (kstar > 0),
                               mask=pc != PointClass.UNDETERMINED, merge=True,
                               min_size=min_size)

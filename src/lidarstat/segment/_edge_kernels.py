@@ -125,3 +125,46 @@ def label_pairs(nbh, labels, *, different_only=False):
     dst = np.empty(m, dtype=np.int64)
     fill_label_pairs(nbh.indptr, nbh.indices, rows, labels, mode, src, dst)
     return src, dst
+
+
+@njit
+def prefix_lengths(indptr, lengths, out):
+    """``out[e]``: entry e lies within the first ``lengths[r]`` entries of its row r."""
+    for r in range(indptr.size - 1):
+        s = indptr[r]
+        for e in range(s, indptr[r + 1]):
+            out[e] = e - s < lengths[r]
+
+
+@njit
+def adaptive_edges(indptr, indices, rows, joinable, surface, kstar, pn, grow_k, cos_min, out):
+    """Edges of the scale-adaptive region growing, one pass over the CSR rows.
+
+    ``out[e]`` for the entry e (position t in row r of point p, neighbour q) is
+
+    * Fig. 4 on the first `grow_k` neighbours of surface points: ``t < grow_k``, p is
+      `surface` and no non-`joinable` neighbour other than p itself comes before or at
+      e; or
+    * the largest planar prefix of the row: ``t < kstar[r]`` and q has no planar prefix
+      (``kstar[q] == 0``) or the two prefix normals agree: ``|pn[p] . pn[q]| >= cos_min``
+      (summed as NumPy's einsum does, so equal to it bit for bit here).
+    """
+    for r in range(indptr.size - 1):
+        p = rows[r]
+        s = indptr[r]
+        bad = False
+        grow = surface[p]
+        kp = kstar[r]
+        for e in range(s, indptr[r + 1]):
+            q = indices[e]
+            t = e - s
+            if q != p and not joinable[q]:
+                bad = True
+            ok = grow and not bad and t < grow_k
+            if not ok and t < kp:
+                if kstar[q] == 0:
+                    ok = True
+                else:
+                    c = abs((pn[p, 0] * pn[q, 0] + pn[p, 2] * pn[q, 2]) + pn[p, 1] * pn[q, 1])
+                    ok = c >= cos_min
+            out[e] = ok

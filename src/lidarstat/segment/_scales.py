@@ -29,6 +29,8 @@ from scipy import special as _sp
 from .._shared._jit import njit_parallel
 from ..features._quadric_kernels import _eigh3
 
+_CHUNK = 256  # points per parallel task (scratch arrays allocated once per task)
+
 #: Candidate neighbourhood sizes (the smallest has 5 degrees of freedom).
 SCALES = (8, 12, 16, 20, 30, 40, 50)
 
@@ -38,74 +40,97 @@ def _prefix_planes(pts, indptr, idx, sizes, crit, sig, sensor, has_sensor, kstar
                    normal):
     n = indptr.size - 1
     ns = sizes.size
-    for i in numba.prange(n):
-        s = indptr[i]
-        cnt = indptr[i + 1] - s
-        kstar[i] = 0
-        stat[i] = np.nan
-        normal[i, 0] = np.nan
-        normal[i, 1] = np.nan
-        normal[i, 2] = np.nan
-        sx = 0.0
-        sy = 0.0
-        sz = 0.0
-        sxx = 0.0
-        sxy = 0.0
-        sxz = 0.0
-        syy = 0.0
-        syz = 0.0
-        szz = 0.0
-        ox, oy, oz = pts[i, 0], pts[i, 1], pts[i, 2]
-        c = 0
+    nch = (n + _CHUNK - 1) // _CHUNK
+    for ch in numba.prange(nch):
         a = np.empty((3, 3))
         ev = np.empty(3)
         evec = np.empty((3, 3))
-        rx, ry, rz = 0.0, 0.0, 1.0
-        if has_sensor:
-            rx, ry, rz = ox - sensor[0], oy - sensor[1], oz - sensor[2]
-            rn = np.sqrt(rx * rx + ry * ry + rz * rz)
-            if rn > 0:
-                rx, ry, rz = rx / rn, ry / rn, rz / rn
-        for q in range(ns):
-            m = sizes[q]
-            if m > cnt:
-                break
-            while c < m:
-                j = idx[s + c]
-                x, y, z = pts[j, 0] - ox, pts[j, 1] - oy, pts[j, 2] - oz
-                sx += x
-                sy += y
-                sz += z
-                sxx += x * x
-                sxy += x * y
-                sxz += x * z
-                syy += y * y
-                syz += y * z
-                szz += z * z
-                c += 1
-            mx, my, mz = sx / m, sy / m, sz / m
-            a[0, 0] = (sxx - m * mx * mx) / (m - 1)
-            a[0, 1] = (sxy - m * mx * my) / (m - 1)
-            a[0, 2] = (sxz - m * mx * mz) / (m - 1)
-            a[1, 1] = (syy - m * my * my) / (m - 1)
-            a[1, 2] = (syz - m * my * mz) / (m - 1)
-            a[2, 2] = (szz - m * mz * mz) / (m - 1)
-            a[1, 0] = a[0, 1]
-            a[2, 0] = a[0, 2]
-            a[2, 1] = a[1, 2]
-            _eigh3(a, ev, evec)
-            across = sig[i]
+        mom = np.empty((ns, 9))
+        for i in range(ch * _CHUNK, min(n, (ch + 1) * _CHUNK)):
+            s = indptr[i]
+            cnt = indptr[i + 1] - s
+            kstar[i] = 0
+            stat[i] = np.nan
+            normal[i, 0] = np.nan
+            normal[i, 1] = np.nan
+            normal[i, 2] = np.nan
+            sx = 0.0
+            sy = 0.0
+            sz = 0.0
+            sxx = 0.0
+            sxy = 0.0
+            sxz = 0.0
+            syy = 0.0
+            syz = 0.0
+            szz = 0.0
+            ox, oy, oz = pts[i, 0], pts[i, 1], pts[i, 2]
+            c = 0
+            rx, ry, rz = 0.0, 0.0, 1.0
             if has_sensor:
-                across *= abs(rx * evec[0, 0] + ry * evec[1, 0] + rz * evec[2, 0])
-            if not across > 0:
-                continue
-            t = (m - 1) * max(ev[0], 0.0) / (across * across)
-            if t <= crit[q]:
-                kstar[i] = m
-                stat[i] = t
-                normal[i, 0] = evec[0, 0]
-                normal[i, 1] = evec[1, 0]
-                normal[i, 2] = evec[2, 0]
+                rx, ry, rz = ox - sensor[0], oy - sensor[1], oz - sensor[2]
+                rn = np.sqrt(rx * rx + ry * ry + rz * rz)
+                if rn > 0:
+                    rx, ry, rz = rx / rn, ry / rn, rz / rn
+            # moment sums of every prefix size first (same order of additions as one pass),
+            # then the tests from the largest size down: the first that passes is the answer
+            # (most points are planes at the largest size: one eigen-decomposition, not seven)
+            top = 0
+            for q in range(ns):
+                m = sizes[q]
+                if m > cnt:
+                    break
+                while c < m:
+                    j = idx[s + c]
+                    x, y, z = pts[j, 0] - ox, pts[j, 1] - oy, pts[j, 2] - oz
+                    sx += x
+                    sy += y
+                    sz += z
+                    sxx += x * x
+                    sxy += x * y
+                    sxz += x * z
+                    syy += y * y
+                    syz += y * z
+                    szz += z * z
+                    c += 1
+                mom[q, 0] = sx
+                mom[q, 1] = sy
+                mom[q, 2] = sz
+                mom[q, 3] = sxx
+                mom[q, 4] = sxy
+                mom[q, 5] = sxz
+                mom[q, 6] = syy
+                mom[q, 7] = syz
+                mom[q, 8] = szz
+                top = q + 1
+            for q in range(top - 1, -1, -1):
+                m = sizes[q]
+                sx, sy, sz = mom[q, 0], mom[q, 1], mom[q, 2]
+                sxx, sxy, sxz = mom[q, 3], mom[q, 4], mom[q, 5]
+                syy, syz, szz = mom[q, 6], mom[q, 7], mom[q, 8]
+                mx, my, mz = sx / m, sy / m, sz / m
+                a[0, 0] = (sxx - m * mx * mx) / (m - 1)
+                a[0, 1] = (sxy - m * mx * my) / (m - 1)
+                a[0, 2] = (sxz - m * mx * mz) / (m - 1)
+                a[1, 1] = (syy - m * my * my) / (m - 1)
+                a[1, 2] = (syz - m * my * mz) / (m - 1)
+                a[2, 2] = (szz - m * mz * mz) / (m - 1)
+                a[1, 0] = a[0, 1]
+                a[2, 0] = a[0, 2]
+                a[2, 1] = a[1, 2]
+                _eigh3(a, ev, evec)
+                across = sig[i]
+                if has_sensor:
+                    across *= abs(rx * evec[0, 0] + ry * evec[1, 0] + rz * evec[2, 0])
+                if not across > 0:
+                    continue
+                t = (m - 1) * max(ev[0], 0.0) / (across * across)
+                if t <= crit[q]:
+                    kstar[i] = m
+                    stat[i] = t
+                    normal[i, 0] = evec[0, 0]
+                    normal[i, 1] = evec[1, 0]
+                    normal[i, 2] = evec[2, 0]
+                    break
 
 
 def planar_scales(points, nbh, sigma, *, sensor=None, alpha=0.05, scales=SCALES):
@@ -155,6 +180,8 @@ def planar_scales(points, nbh, sigma, *, sensor=None, alpha=0.05, scales=SCALES)
 
 def prefix_edges(nbh, kstar):
     """CSR entries within the first ``kstar[i]`` neighbours of each row i."""
-    counts = np.diff(nbh.indptr)
-    pos = np.arange(nbh.indices.size) - np.repeat(nbh.indptr[:-1], counts)
-    return pos < np.repeat(np.asarray(kstar, dtype=np.int64), counts)
+    from ._edge_kernels import prefix_lengths
+
+    out = np.empty(nbh.nnz, dtype=bool)
+    prefix_lengths(nbh.indptr, np.ascontiguousarray(kstar, dtype=np.int64), out)
+    return out
