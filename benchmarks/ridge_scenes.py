@@ -93,7 +93,7 @@ def run_scene(name):
     t0 = time.perf_counter()
     seg = ridge_segments(sc.xyz, res)
     out["seconds_segments"] = round(time.perf_counter() - t0, 2)
-    old = ridge_segments(sc.xyz, res, chi2_barrier=False, assign=False)
+    old = ridge_segments(sc.xyz, res, chi2_barrier=False, consistent=False, assign=False)
     face = sc.face.astype(np.int64)
     if name == "hip_roof":
         truth = {"roof_planes": sc.fields["roof_plane"].astype(int)}
