@@ -373,8 +373,8 @@ def jet_consistent_edges(pts, indptr, idx, monge, frames, offset, tol, ok):
     """Edges (i, j) along which each end lies on the other's fitted jet: |residual| <= tol.
 
     A neighbour across a crease that the chi-square test missed (a one-sided neighbourhood
-    at a face corner, a weak fold) lies off the point's jet and the edge is cut; NaN
-    jets (unfitted points) cut their edges.
+    at a face corner, a weak fold) lies off the point's jet and the edge is cut. Points
+    without a jet (NaN) are judged by the other end's jet only.
     """
     n = indptr.size - 1
     for i in prange(n):
@@ -385,4 +385,10 @@ def jet_consistent_edges(pts, indptr, idx, monge, frames, offset, tol, ok):
                 continue
             a = abs(_jet_residual(pts, j, i, monge, frames, offset))
             b = abs(_jet_residual(pts, i, j, monge, frames, offset))
+            # a point without a jet (too few neighbours) gives no evidence: the other
+            # end's jet decides, and an edge between two such points is kept
+            if math.isnan(a):
+                a = 0.0 if math.isnan(b) else b
+            if math.isnan(b):
+                b = a
             ok[t] = a <= tol and b <= tol

@@ -328,8 +328,9 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_si
        width/4) or of its straight extensions beyond both ends (along the end tangent, up
        to `extend`, as long as the cloud has a point within `width`: the detector fails
        within about a jet radius of a border or of another crease, where lines stop short
-       of face corners), and, with `chi2_barrier`, every point whose degree-4 jet the chi-square
-       test of the variance factor rejects (or that could not be fitted): a crease (a C0
+       of face corners), and, with `chi2_barrier`, every point whose degree-4 jet the
+       chi-square test of the variance factor rejects (points with too few neighbours for
+       a jet are no evidence either way and are not barriers): a crease (a C0
        discontinuity) inside a neighbourhood is exactly what a smooth jet cannot fit, so
        the rejections form a band about one jet radius wide on each side of every crease,
        and they close the gaps where the ridge lines stop (weak k'', thinly sampled faces,
@@ -413,8 +414,8 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_si
         dist, _ = cKDTree(sampled).query(local, k=1)
         ridge_band |= dist < width
     band = ridge_band.copy()
-    if chi2_barrier:
-        band |= ridge_result.fields["chi2_pass"] != 1
+    if chi2_barrier:  # rejected jets; unfitted points (too few neighbours) are no evidence
+        band |= ridge_result.fields["status"] == FitStatus.MODEL_REJECTED
     fit = ridge_result.jets.fit
     monge = np.ascontiguousarray(fit.monge)
     frames = np.ascontiguousarray(fit.frame)
