@@ -201,13 +201,7 @@ def reintegrate(points, labels, candidates, normals, centroids, nbh, sigma, *, n
         Labels with the reintegrated points set; unchanged elsewhere.
     """
     out = labels.copy()
-    # edges from an unlabelled candidate to a labelled point
-    rows = nbh.query_indices()
-    cand = np.ascontiguousarray(candidates, dtype=bool)
-    lab = np.ascontiguousarray(labels)
-    m = _ek.count_reintegration(nbh.indptr, nbh.indices, rows, cand, lab)
-    s, t = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
-    _ek.fill_reintegration(nbh.indptr, nbh.indices, rows, cand, lab, s, t)
+    s, t = _ek.reintegration_pairs(nbh, candidates, labels)  # unlabelled -> labelled
     sig = np.broadcast_to(np.asarray(sigma, dtype=np.float64), labels.shape)[t]
     dist = np.abs(np.einsum("ij,ij->i", points[s] - centroids[t], normals[t])) / sig
     fit = dist <= nsigma
