@@ -319,7 +319,10 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
     Returns
     -------
     Segmentation
-        ``labels``; ``table`` from :func:`segment_planes`; ``lines`` (Polylines);
+        ``labels``; ``table`` from :func:`segment_planes` plus the cylinder model of
+        :func:`lidarstat.segment._cylinders.segment_cylinders` (``model`` 1 plane, 2
+        cylinder, ``radius``, ``axis_x/y/z``, ``axis_point_x/y/z``, ``cylinder_p``);
+        ``lines`` (Polylines);
         ``fields``: ``point_class``, ``reintegrated``, ``NormalX/Y/Z``,
         ``SurfaceVariation``.
     """
@@ -391,6 +394,17 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         labels = new
     labels = merge_coplanar(pts, labels, grow_nbh, max_angle=min_angle / 4,
                             normals=feats.normals, centroids=feats.centroid)
+    from ._cylinders import merge_cylinders
+
+    pdir = np.stack([feats["PrincipalDirX"], feats["PrincipalDirY"], feats["PrincipalDirZ"]],
+                    axis=1)
+    # per-point axes (minimum-curvature directions) of the curved surface points only
+    curved_pts = surface & ~(classes["plane_p"] >= classes.alpha)
+    pt_axes = np.where(curved_pts[:, None], np.cross(feats.normals, pdir), np.nan)
+    labels, cylinders = merge_cylinders(
+        pts, labels, feats.normals, classes.sigma, max_angle=min_angle / 4,
+        sensor=feats.sensor if classes.meta.get("noise") == "range" else None,
+        point_axes=pt_axes)
     lines_out = None
     if lines:
         rk = nbh.distances.reshape(len(nbh), -1)[:, -1] if nbh.kind == "knn" else \
@@ -406,6 +420,9 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
                                       max_distance=2.0 * float(np.median(rk)))
         lines_out = fit_lines(x0, seg)
     table = segment_planes(pts, labels)
+    for key in ("model", "radius", "axis_x", "axis_y", "axis_z", "axis_point_x",
+                "axis_point_y", "axis_point_z", "cylinder_p"):
+        table[key] = cylinders[key]
     fields = {"point_class": pc.astype(np.uint8), "reintegrated": reint,
               "NormalX": feats["NormalX"], "NormalY": feats["NormalY"],
               "NormalZ": feats["NormalZ"], "SurfaceVariation": sv, **extra}
