@@ -215,8 +215,33 @@ def reintegrate(points, labels, candidates, normals, centroids, nbh, sigma, *, n
     return out
 
 
+def _union_plane_rms(points, labels, a, b):
+    """Orthogonal RMS of the plane fitted to the union of segments a and b (1-based ids)."""
+    s = int(labels.max())
+    origin = points.mean(axis=0)
+    x = points - origin
+    ins = labels > 0
+    lab = labels[ins] - 1
+    cnt = np.bincount(lab, minlength=s).astype(np.float64)
+    cen = np.stack([np.bincount(lab, weights=x[ins, j], minlength=s) for j in range(3)], 1)
+    cen /= np.maximum(cnt, 1)[:, None]
+    d = x[ins] - cen[lab]
+    S = np.zeros((s, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            v = np.bincount(lab, weights=d[:, i] * d[:, j], minlength=s)
+            S[:, i, j] = v
+            S[:, j, i] = v
+    a0, b0 = a - 1, b - 1
+    na, nb = cnt[a0], cnt[b0]
+    dc = cen[a0] - cen[b0]
+    U = S[a0] + S[b0] + (na * nb / (na + nb))[:, None, None] * np.einsum("ij,ik->ijk", dc, dc)
+    w = np.linalg.eigvalsh(U)[:, 0]
+    return np.sqrt(np.maximum(w, 0.0) / (na + nb))
+
+
 def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=None,
-                   centroids=None):
+                   centroids=None, tolerance=1.5):
     """Merge touching segments that are one surface (split by a window, a pipe in front, ...).
 
     Two segments that share neighbour pairs merge when their plane normals differ by less
@@ -224,8 +249,11 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
     (plus the first's) of the other's plane, or - with per-point `normals` - when the
     median angle between the local normals of their touching points is below `max_angle`
     and the touching points lie on each other's local planes (median distance within the
-    plane tolerance): a smooth continuation, as a pipe or tank cut by spurious edge
-    points. Ids are renumbered by size.
+    plane tolerance): a smooth continuation. Either way the plane fitted to the union
+    must have an orthogonal RMS at most `tolerance` times the larger RMS of the two
+    (two parallel planes a recess apart are not one surface; pieces of one cylinder are
+    merged by :func:`lidarstat.segment._cylinders.merge_cylinders`). Ids are renumbered
+    by size.
     """
     from ._grow import adjacency, relabel
 
@@ -260,6 +288,15 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
         smooth[found] = (med[pos[found]] >= np.cos(np.radians(max_angle))) & \
             (moff[pos[found]] <= tol[found])
         ok |= smooth
+    if ok.any():
+        # one plane must fit the union about as well as each part: two parallel planes
+        # a recess apart (a window's back and its wall) are not one surface
+        pooled = np.sqrt((t["rms"][a] ** 2 * t["n_points"][a] + t["rms"][b] ** 2 *
+                          t["n_points"][b]) / (t["n_points"][a] + t["n_points"][b]))
+        cand = np.flatnonzero(ok)
+        union = _union_plane_rms(points, labels, pairs[cand, 0], pairs[cand, 1])
+        ok[cand] = union <= tolerance * np.maximum(pooled[cand], np.maximum(
+            t["rms"][a[cand]], t["rms"][b[cand]]))
     if not ok.any():
         return labels
     parent = np.arange(len(t["segment_id"]) + 1)

@@ -8,7 +8,9 @@ consistent-curvature test (:mod:`lidarstat.classify._cylinder`: algebraic start,
 Gauss-Newton on the geometric residuals weighted by the per-point noise). A segment is a
 *cylinder* when the circle explains significantly more than a straight line does (the
 plane), ``F = ((RSS_line - RSS_circle) / 1) / (RSS_circle / (n - 3))`` against
-``F(1, n - 3)`` at 0.001, and its radius is below the segment's extent times 10.
+``F(1, n - 3)`` at 0.001, the circle's weighted RSS is at most half the
+line's (a plane with a small misfit of the noise model passes the F test alone when it has
+thousands of points), and its radius is below the segment's extent times 10.
 
 Pieces of one cylinder (a tank cut by the shadow of a pipe in front of it, a pipe split
 at a support) merge when one cylinder fitted to their union explains them about as well
@@ -171,7 +173,9 @@ def segment_cylinders(points, labels, normals, sigma, *, sensor=None, alpha=0.00
         p = _sp.fdtrc(1.0, np.maximum(n - 3, 1), np.maximum(f, 0.0))
     ext = np.array([np.ptp(points[sub_idx[a:b]], axis=0).max() for a, b in
                     zip(sub_ptr[:-1], sub_ptr[1:])])
-    cyl = np.isfinite(radius) & (p < alpha) & (radius < 10 * ext)
+    # significant and large: with thousands of points the F test alone calls a plane with
+    # a small misfit of the noise model a cylinder of radius 40 m (a door recess)
+    cyl = np.isfinite(radius) & (p < alpha) & (lstat >= 2.0 * stat) & (radius < 10 * ext)
     out["cylinder_p"][sel] = p
     out["stat"][sel] = stat
     out["model"][sel[cyl]] = 2
