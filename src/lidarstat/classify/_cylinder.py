@@ -50,6 +50,17 @@ def _basis(a):
 
 
 @njit
+def _radial(ux, uy, dx, dy, has_sensor, sr, scale):
+    """Distance from the circle centre, radial unit vector and the point's radial noise
+    (scaled coordinates) for the offset (ux, uy) and the projected ray (dx, dy)."""
+    dist = np.sqrt(ux * ux + uy * uy)
+    if dist > 0:
+        ux, uy = ux / dist, uy / dist
+    c = abs(dx * ux + dy * uy) if has_sensor else 1.0
+    return dist, ux, uy, sr * max(c, _FLOOR) / scale
+
+
+@njit
 def _solve3(A, b):
     """Solve a 3x3 system by Cramer's rule; returns (x, ok)."""
     det = (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
@@ -157,12 +168,8 @@ def cylinder_rows(pts, query, indptr, idx, axes, sensor, has_sensor, sig_pt, sta
                 J = np.zeros((3, 3))
                 g = np.zeros(3)
                 for t in range(n):
-                    ux, uy = x[t] - cx, y[t] - cy
-                    dist = np.sqrt(ux * ux + uy * uy)
-                    if dist > 0:
-                        ux, uy = ux / dist, uy / dist
-                    c = abs(dx[t] * ux + dy[t] * uy) if has_sensor else 1.0
-                    sg = sr[t] * max(c, _FLOOR) / scale
+                    dist, ux, uy, sg = _radial(x[t] - cx, y[t] - cy, dx[t], dy[t],
+                                               has_sensor, sr[t], scale)
                     w[t] = 1.0 / (sg * sg)
                     res[t] = dist - R
                     j0, j1, j2 = -ux, -uy, -1.0
@@ -188,12 +195,8 @@ def cylinder_rows(pts, query, indptr, idx, axes, sensor, has_sensor, sig_pt, sta
             if not line:
                 q = 0.0
                 for t in range(n):
-                    ux, uy = x[t] - cx, y[t] - cy
-                    dist = np.sqrt(ux * ux + uy * uy)
-                    if dist > 0:
-                        ux, uy = ux / dist, uy / dist
-                    c = abs(dx[t] * ux + dy[t] * uy) if has_sensor else 1.0
-                    sg = sr[t] * max(c, _FLOOR) / scale
+                    dist, ux, uy, sg = _radial(x[t] - cx, y[t] - cy, dx[t], dy[t],
+                                               has_sensor, sr[t], scale)
                     rr = dist - R
                     q += rr * rr / (sg * sg)
                 stat[r] = q

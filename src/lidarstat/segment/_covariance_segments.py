@@ -217,6 +217,8 @@ def reintegrate(points, labels, candidates, normals, centroids, nbh, sigma, *, n
 
 def _union_plane_rms(points, labels, a, b):
     """Orthogonal RMS of the plane fitted to the union of segments a and b (1-based ids)."""
+    from ._cylinders import group_outer
+
     s = int(labels.max())
     origin = points.mean(axis=0)
     x = points - origin
@@ -225,13 +227,7 @@ def _union_plane_rms(points, labels, a, b):
     cnt = np.bincount(lab, minlength=s).astype(np.float64)
     cen = np.stack([np.bincount(lab, weights=x[ins, j], minlength=s) for j in range(3)], 1)
     cen /= np.maximum(cnt, 1)[:, None]
-    d = x[ins] - cen[lab]
-    S = np.zeros((s, 3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            v = np.bincount(lab, weights=d[:, i] * d[:, j], minlength=s)
-            S[:, i, j] = v
-            S[:, j, i] = v
+    S = group_outer(x[ins] - cen[lab], lab, s)
     a0, b0 = a - 1, b - 1
     na, nb = cnt[a0], cnt[b0]
     dc = cen[a0] - cen[b0]

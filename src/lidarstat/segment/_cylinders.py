@@ -33,34 +33,31 @@ from scipy import special as _sp
 from ..classify._cylinder import cylinder_test
 
 
-def _axes_of(normals, rows_idx, indptr):
-    """Per row: eigenvector of the smallest eigenvalue of the normals' second moments."""
-    m = indptr.size - 1
-    nn = normals[rows_idx]
-    seg = np.repeat(np.arange(m), np.diff(indptr))
+def group_outer(vectors, groups, m):
+    """Per group g < m: the sum of ``v v'`` over the rows v of `vectors` in group g (NaN
+    rows count as zero). Returns (m, 3, 3)."""
+    v = np.nan_to_num(np.asarray(vectors, dtype=np.float64))
     M = np.zeros((m, 3, 3))
     for a in range(3):
         for b in range(a, 3):
-            v = np.bincount(seg, weights=nn[:, a] * nn[:, b], minlength=m)
-            M[:, a, b] = v
-            M[:, b, a] = v
-    _, vec = np.linalg.eigh(M)
-    return vec[:, :, 0]
+            w = np.bincount(groups, weights=v[:, a] * v[:, b], minlength=m)
+            M[:, a, b] = w
+            M[:, b, a] = w
+    return M
+
+
+def _axes_of(normals, rows_idx, indptr):
+    """Per row: eigenvector of the smallest eigenvalue of the normals' second moments."""
+    m = indptr.size - 1
+    seg = np.repeat(np.arange(m), np.diff(indptr))
+    return np.linalg.eigh(group_outer(normals[rows_idx], seg, m))[1][:, :, 0]
 
 
 def _dominant(axes, rows_idx, indptr):
     """Per row: the dominant direction of the members' axes (largest eigenvector)."""
     m = indptr.size - 1
-    aa = axes[rows_idx]
     seg = np.repeat(np.arange(m), np.diff(indptr))
-    M = np.zeros((m, 3, 3))
-    for a in range(3):
-        for b in range(a, 3):
-            v = np.bincount(seg, weights=np.nan_to_num(aa[:, a] * aa[:, b]), minlength=m)
-            M[:, a, b] = v
-            M[:, b, a] = v
-    _, vec = np.linalg.eigh(M)
-    return vec[:, :, 2]
+    return np.linalg.eigh(group_outer(axes[rows_idx], seg, m))[1][:, :, 2]
 
 
 def _fit_rows(points, normals, rows_idx, indptr, sigma, sensor, point_axes=None):
@@ -100,12 +97,7 @@ def _line_stat(points, rows_idx, indptr, axes_row, sigma, sensor):
     cen /= cnt[:, None]
     d = p - cen[seg]
     d = d - np.einsum("ij,ij->i", d, a)[:, None] * a
-    C = np.zeros((m, 3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            v = np.bincount(seg, weights=d[:, i] * d[:, j], minlength=m)
-            C[:, i, j] = v
-            C[:, j, i] = v
+    C = group_outer(d, seg, m)
     # the axis direction has zero variance after projection: take the smallest eigenvector
     # orthogonal to it (the middle one when the axis is the smallest)
     w, vec = np.linalg.eigh(C)
