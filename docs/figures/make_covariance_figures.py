@@ -39,8 +39,9 @@ def _axes(title, view):
 
 
 def _equal(ax, xyz):
-    c = (xyz.min(axis=0) + xyz.max(axis=0)) / 2
-    h = np.ptp(xyz, axis=0).max() / 2
+    lo, hi = np.percentile(xyz, [0.5, 99.5], axis=0)  # stray far points do not shrink it
+    c = (lo + hi) / 2
+    h = (hi - lo).max() / 2
     ax.set_xlim(c[0] - h, c[0] + h)
     ax.set_ylim(c[1] - h, c[1] + h)
     ax.set_zlim(c[2] - h, c[2] + h)
@@ -69,7 +70,8 @@ def segments_png(path, xyz, labels, lines, title, view):
     size = max(0.05, min(1.5, 3e4 / len(xyz)))
     rng = np.random.default_rng(3)
     cmap = plt.get_cmap("tab20")
-    colors = cmap(rng.permutation(max(labels.max(), 1) + 1) % 20)
+    palette = cmap(np.r_[0:14, 16:20])  # the greys (14, 15) are for "no segment"
+    colors = palette[rng.permutation(max(labels.max(), 1) + 1) % len(palette)]
     none = labels == 0
     ax.scatter(*xyz[none].T, s=size * 0.5, c="#dddddd", linewidths=0)
     ax.scatter(*xyz[~none].T, s=size, c=colors[labels[~none]], linewidths=0)
