@@ -9,8 +9,11 @@
    held at its raw-cluster value: each step is a rank-one least-squares update, the paper's
    F test of ``theta(m) - theta(n_s)`` and the deletion-residual envelope are monitored.
 5. theta and sigma^2 re-estimated on the m accepted points (eq. 3.1-3.2, rho from step
-   3); the surface reported is the polynomial closest to the SAR mean
-   ``(I - rho W)^-1 A theta``.
+   3); the surface reported is the least-squares trend of the accepted points, the
+   direct estimate of the polynomial closest to the SAR mean ``(I - rho W)^-1 A theta``,
+   with its covariance under the SAR model (:func:`lidarstat.stats.sar_trend`).
+   :func:`lidarstat.segment.refine_raw_clusters` refits every final segment (rho by ML
+   included) on its final points.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scipy.spatial import cKDTree
-from ..stats._sar import (PolynomialBasis, SARFit, sar_fit, sar_mean_surface, select_degree,
+from ..stats._sar import (PolynomialBasis, SARFit, sar_fit, sar_trend, select_degree,
                           weights_matrix)
 from ._forward_search import ForwardSearchResult, forward_search
 
@@ -52,9 +55,11 @@ class SurfaceUnit:
         Final fit on the accepted points: rho (and its standard error) from the ML fit
         on the raw cluster, theta and sigma^2 by eq. 3.1-3.2 on the m accepted points.
     surface : (r,) ndarray
-        Orthogonal-basis coefficients of the surface (projection of the SAR mean).
+        Orthogonal-basis coefficients of the surface: the least-squares trend of the
+        accepted points (:func:`lidarstat.stats.sar_trend`), which estimates the
+        polynomial closest to the SAR mean ``(I - rho W)^-1 A theta``.
     surface_cov : (r, r) ndarray
-        Approximate covariance of `surface`: ``cov(theta) / (1 - rho)^2``.
+        Covariance of `surface` under the fitted SAR model (sandwich).
     sigma : float
         Residual standard deviation of the accepted points about `surface`.
     fs : ForwardSearchResult
@@ -197,9 +202,8 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
     acc = fs.accepted
     W_acc = _weights(xy_area[acc], w_radius)
     fit = _conditional_fit(z_area[acc], A_area[acc], W_acc, fit0)
-    surface = sar_mean_surface(fit, A_area[acc], W_acc)
+    surface, cov = sar_trend(z_area[acc], A_area[acc], W_acc, fit.rho, fit.sigma2)
     r = basis.n_terms
-    cov = fit.cov[:r, :r] / (1.0 - fit.rho) ** 2
     res = z_area[acc] - A_area[acc] @ surface
     sigma = float(np.sqrt(res @ res / max(acc.sum() - r, 1)))
     # report in file coordinates: shift the basis centre by the local origin
