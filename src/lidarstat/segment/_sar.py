@@ -35,6 +35,11 @@ from ._search_area import delaunay_graph, search_areas
 
 logger = logging.getLogger(__name__)
 
+#: When the noise is estimated, a second pass uses the median residual standard deviation
+#: of the first pass's units if it exceeds the local (lower-quartile) estimate by this
+#: factor (see :func:`segment_sar`, `sigma`).
+SIGMA_RATIO = 1.25
+
 #: Forward Search stop reasons written to the table (``fs_stop``).
 STOP_CODES = {"exhausted": 0, "f": 1, "residual": 2, "not searched": 3}
 
@@ -232,9 +237,9 @@ def _merge_groups(points, unit_labels, units, graph, alpha, threshold):
 def _refit_unit(points, idx, group, w_radius):
     """A unit refitted on its final points `idx` (rho by ML, theta, sigma^2, the surface),
     keeping the Table 6 sizes (summed over a merged group) and the Forward Search record."""
-    unit = refine_cluster(points, idx, np.empty(0, np.int64), w_radius=w_radius,
-                          degree=group[0].degree)
     big = max(group, key=lambda u: u.m)
+    unit = refine_cluster(points, idx, np.empty(0, np.int64), w_radius=w_radius,
+                          degree=group[0].degree, rho_hint=big.fit.rho)
     return dataclasses.replace(unit, n_s=sum(u.n_s for u in group),
                                n_sa=sum(u.n_sa for u in group), m=sum(u.m for u in group),
                                fs=big.fs, raw=np.concatenate([u.raw for u in group]))
@@ -389,7 +394,13 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
     bandwidth : float, optional
         Plane-regression bandwidth b; default chosen by :func:`select_plane_bandwidth`.
     sigma : float, optional
-        Height noise; default estimated from the local planes.
+        Height noise. Default: estimated in up to two passes. The first uses the lower
+        quartile of the local-plane variances (the noise of the smoothest surfaces); when
+        the median residual standard deviation of the resulting units about their
+        fitted surfaces exceeds it by more than :data:`SIGMA_RATIO` (real surveys: strip
+        offsets, roof texture), the segmentation is redone with that median, the noise
+        about actual roof planes. ``params`` records ``sigma_local``, ``sigma_units`` and
+        ``sigma_passes``.
     alpha : float
         Level of the local planarity test.
     edge_alpha : float
@@ -453,19 +464,33 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
     grow_radius = grow_radius or min(b, 2.0 * spacing)
     threshold = threshold or 3.0 * b
     w_radius = w_radius or 1.5 * spacing
-    fit = local_planes(points, b, sigma=sigma, alpha=alpha, adaptive=adaptive)
+    graph = delaunay_graph(points)
     nbh = radius_neighbors(points, grow_radius, dim=2)
-    core = (fit.bandwidth >= b) if fit.params.get("adaptive") == "multiscale" else None
-    raw = raw_clusters(points, fit, nbh, alpha=edge_alpha, min_size=min_size, core=core)
-    seg = refine_raw_clusters(points, raw.labels, threshold=threshold, w_radius=w_radius,
-                              degrees=degree, max_degree=max_degree, alpha=fs_alpha,
-                              alpha_residual=alpha_residual, stop=stop, block=block,
-                              max_steps=max_steps, min_size=min_size, diagnostics=diagnostics,
-                              progress=progress)
+
+    def one_pass(noise):
+        fit = local_planes(points, b, sigma=noise, alpha=alpha, adaptive=adaptive)
+        core = (fit.bandwidth >= b) if fit.params.get("adaptive") == "multiscale" else None
+        raw = raw_clusters(points, fit, nbh, alpha=edge_alpha, min_size=min_size, core=core)
+        seg = refine_raw_clusters(points, raw.labels, threshold=threshold, w_radius=w_radius,
+                                  degrees=degree, max_degree=max_degree, alpha=fs_alpha,
+                                  alpha_residual=alpha_residual, stop=stop, block=block,
+                                  max_steps=max_steps, min_size=min_size, graph=graph,
+                                  diagnostics=diagnostics, progress=progress)
+        return fit, seg
+
+    fit, seg = one_pass(sigma)
+    sigma_local = float(np.sqrt(fit.sigma2))
+    sigma_units = float(np.median([u.sigma for u in seg.units])) if seg.units else np.nan
+    passes = 1
+    if sigma is None and sigma_units > SIGMA_RATIO * sigma_local:
+        fit, seg = one_pass(sigma_units)
+        passes = 2
     f = fit.to_fields()
     seg.fields.update({"z0": f["z0"], "slope_e": f["slope_e"], "slope_n": f["slope_n"],
                        "plane_pass": f["plane_pass"]})
     seg.params.update({"bandwidth": b, "sigma": float(np.sqrt(fit.sigma2)),
+                       "sigma_local": sigma_local, "sigma_units": sigma_units,
+                       "sigma_passes": passes,
                        "grow_radius": grow_radius, "spacing": spacing, "adaptive": adaptive,
                        "degree": degree})
     return seg

@@ -117,14 +117,35 @@ def _weights(xy, radius):
     return weights_matrix(np.cumsum(indptr), j[o], n)
 
 
-def _ml_fit(z, A, xy, w_radius):
-    """ML SAR fit; above SAR_MAX points rho comes from a contiguous patch."""
+#: Half-width of the rho interval searched when a previous estimate is known (the refit
+#: of a final segment starts from its raw cluster's rho).
+RHO_WINDOW = 0.2
+
+
+def _ml_fit(z, A, xy, w_radius, rho_hint=None):
+    """ML SAR fit; above SAR_MAX points rho comes from a contiguous patch.
+
+    With `rho_hint` the profile likelihood is searched on a 5-point grid over
+    ``rho_hint +- RHO_WINDOW`` (then refined), not over the whole admissible interval;
+    if the maximum falls on the window's edge the whole interval is searched."""
     n = z.size
+    if n > SAR_MAX:
+        med = np.median(xy, axis=0)
+        patch = np.argsort(np.sum((xy - med) ** 2, axis=1))[:SAR_MAX]
+        z_s, A_s, xy_s = z[patch], A[patch], xy[patch]
+    else:
+        z_s, A_s, xy_s = z, A, xy
+    W = _weights(xy_s, w_radius)
+    sub = None
+    if rho_hint is not None and np.isfinite(rho_hint):
+        lo, hi = max(rho_hint - RHO_WINDOW, -0.999), min(rho_hint + RHO_WINDOW, 0.999)
+        sub = sar_fit(z_s, A_s, W, bounds=(lo, hi), grid=5, xatol=1e-6)
+        if min(sub.rho - lo, hi - sub.rho) < 1e-3 * (hi - lo):
+            sub = None  # on the edge of the window: search everywhere
+    if sub is None:
+        sub = sar_fit(z_s, A_s, W)
     if n <= SAR_MAX:
-        return sar_fit(z, A, _weights(xy, w_radius)), n
-    med = np.median(xy, axis=0)
-    patch = np.argsort(np.sum((xy - med) ** 2, axis=1))[:SAR_MAX]
-    sub = sar_fit(z[patch], A[patch], _weights(xy[patch], w_radius))
+        return sub, n
     return _conditional_fit(z, A, _weights(xy, w_radius), sub), SAR_MAX
 
 
@@ -144,7 +165,7 @@ def _conditional_fit(z, A, W, ref):
 
 def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alpha=0.01,
                    alpha_residual=0.001, stop="both", block=1, max_steps=500,
-                   max_search=MAX_SEARCH):
+                   max_search=MAX_SEARCH, rho_hint=None):
     """Refine one raw cluster by SAR-FS within its search area.
 
     Parameters
@@ -165,6 +186,8 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
         Raw clusters larger than this (terrain, large flat roofs) are not searched: the
         unit is the raw cluster (``m = n_s``, ``fs_stop`` 3), which bounds the cost of the
         O(n_sa) steps.
+    rho_hint : float, optional
+        A previous estimate of rho: the ML search starts in a window around it.
 
     Returns
     -------
@@ -186,7 +209,7 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
     else:
         basis = PolynomialBasis.fit(xy_raw, int(degree))
     A_area = basis(xy_area)
-    fit0, rho_points = _ml_fit(z_raw, A_area[in_raw], xy_raw, w_radius)
+    fit0, rho_points = _ml_fit(z_raw, A_area[in_raw], xy_raw, w_radius, rho_hint)
     W_area = _weights(xy_area, w_radius)
     ystar = z_area - fit0.rho * (W_area @ z_area)
     if raw.size > max_search:
