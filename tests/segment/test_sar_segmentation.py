@@ -232,3 +232,26 @@ def test_noise_is_reestimated_on_the_units_when_strips_disagree(rng):
     assert p["sigma_passes"] == 2 and p["sigma_units"] > 1.25 * p["sigma_local"]
     one = segment_sar(pts, bandwidth=1.0, sigma=p["sigma_local"])
     assert np.mean(seg.labels[roof] > 0) > np.mean(one.labels[roof] > 0) + 0.05
+
+
+def test_refinement_models_a_wall_in_its_own_plane(rng):
+    """Seed-000 variant with a wall: z(E, N) degenerates on it, so the unit is modelled
+    as a height field over its own plane (table column frame = 1)."""
+    ground = np.c_[rng.uniform(0, 8, (2500, 2)), np.zeros(2500)]
+    wall = np.c_[np.full(1500, 4.0), rng.uniform(0, 8, 1500), rng.uniform(0.05, 3, 1500)]
+    pts = np.r_[ground, wall] + rng.normal(0, 0.01, (4000, 3))
+    is_wall = np.r_[np.zeros(2500, bool), np.ones(1500, bool)]
+    seg = segment_curvature(pts, radius=0.6, sigma=0.01, refine=True, frame="pca",
+                            noise="normal")
+    frame = np.asarray(seg.table["frame"])
+    assert frame.sum() == 1
+    k = int(np.flatnonzero(frame == 1)[0])
+    nrm = np.array([seg.table[f"normal_{c}"][k] for c in "xyz"])
+    assert np.degrees(np.arccos(min(1.0, abs(nrm[0])))) < 0.5
+    assert np.mean(seg.labels[is_wall] == k + 1) > 0.9
+    assert np.mean(is_wall[seg.labels == k + 1]) > 0.97
+    assert np.isnan(seg.table["c_10"][k])  # coefficients of z(E, N) do not exist
+    for a, b in zip(seg.lines.attributes["segment_a"], seg.lines.attributes["segment_b"]):
+        assert k + 1 not in (a, b)
+    # the ground units remain height fields with vertical normals
+    assert np.all(np.abs(np.asarray(seg.table["normal_z"])[frame == 0]) > 0.9999)

@@ -118,7 +118,8 @@ def _table(points, labels, units, keep_units):
     powers = [(i - j, j) for i in range(max_deg + 1) for j in range(i + 1)]
     cols = {k: np.full(s, np.nan) for k in
             ["degree", "n_s", "n_sa", "m", "rho", "se_rho", "sigma_sar", "sigma", "E0", "N0",
-             "normal_x", "normal_y", "normal_z", "slope_deg", "fs_stop", "rho_points"]}
+             "normal_x", "normal_y", "normal_z", "slope_deg", "fs_stop", "rho_points",
+             "frame"]}
     for pe, pn in powers:
         cols[f"c_{pe}{pn}"] = np.full(s, np.nan)
         cols[f"se_c_{pe}{pn}"] = np.full(s, np.nan)
@@ -131,18 +132,22 @@ def _table(points, labels, units, keep_units):
         cols["sigma_sar"][k] = np.sqrt(unit.fit.sigma2)
         cols["sigma"][k] = unit.sigma
         cols["E0"][k], cols["N0"][k] = unit.basis.center
-        pw, coef, se = unit.monomials()
-        for (pe, pn), c, e in zip(pw, coef, se):
-            cols[f"c_{pe}{pn}"][k] = c
-            cols[f"se_c_{pe}{pn}"][k] = e
-        cen = np.array([[table["centroid_x"][k], table["centroid_y"][k]]])
-        g = unit.basis.gradient(unit.surface, cen)[0]
-        nrm = np.array([-g[0], -g[1], 1.0]) / np.sqrt(1.0 + g @ g)
+        cols["frame"][k] = 0 if unit.frame is None else 1
+        if unit.frame is None:  # coefficients of z(E, N); a wall's are in its own frame
+            pw, coef, se = unit.monomials()
+            for (pe, pn), c, e in zip(pw, coef, se):
+                cols[f"c_{pe}{pn}"][k] = c
+                cols[f"se_c_{pe}{pn}"][k] = e
+        else:
+            cols["E0"][k] = cols["N0"][k] = np.nan
+        cen = np.array([[table["centroid_x"][k], table["centroid_y"][k],
+                         table["centroid_z"][k]]])
+        nrm = unit.normal(cen)[0]
         cols["normal_x"][k], cols["normal_y"][k], cols["normal_z"][k] = nrm
         cols["slope_deg"][k] = np.degrees(np.arccos(nrm[2]))
         cols["fs_stop"][k] = STOP_CODES[unit.fs.stop_reason]
         cols["rho_points"][k] = unit.rho_points
-    for k in ("degree", "n_s", "n_sa", "m", "fs_stop", "rho_points"):
+    for k in ("degree", "n_s", "n_sa", "m", "fs_stop", "rho_points", "frame"):
         cols[k] = cols[k].astype(np.int64)
     table.update(cols)
     return table
@@ -225,7 +230,8 @@ def _merge_groups(points, unit_labels, units, graph, alpha, threshold):
 
     for key in keys[counts >= 4]:
         ua, ub = int(key // base), int(key % base)
-        if units[ua - 1].degree != units[ub - 1].degree:
+        if units[ua - 1].degree != units[ub - 1].degree or units[ua - 1].frame is not None \
+                or units[ub - 1].frame is not None:
             continue
         if _chow_pvalue(mom(ua), mom(ub)) >= alpha:
             ra, rb = find(ua), find(ub)

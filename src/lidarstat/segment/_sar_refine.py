@@ -31,6 +31,9 @@ from ._forward_search import ForwardSearchResult, forward_search
 #: Largest subset on which rho is estimated by full ML; larger clusters estimate rho on
 #: their `SAR_MAX` points nearest to the medoid (a contiguous patch) and theta on all.
 SAR_MAX = 3000
+#: Units whose raw cluster's normal is more than this many degrees from vertical (walls)
+#: are modelled in their own frame (:func:`refine_cluster`, ``frame='auto'``).
+FRAME_SLOPE = 70.0
 #: Largest raw cluster the Forward Search grows (see :func:`refine_cluster`).
 MAX_SEARCH = 20000
 
@@ -69,6 +72,12 @@ class SurfaceUnit:
         :data:`SAR_MAX` of its points).
     raw : (n_s,) ndarray of int64
         Indices of the raw cluster.
+    frame : (4, 3) ndarray or None
+        None: the surface is a height field z(E, N) (the paper's model). Otherwise the
+        unit is steeper than :data:`FRAME_SLOPE` and is modelled in its own frame: row 0
+        the origin, rows 1-3 the unit vectors u, v, n (n the raw cluster's normal);
+        local coordinates are ``(x - origin) @ rows[1:].T``, the "height" is along n
+        and `basis`, `surface`, `residuals` are in that frame.
     """
 
     accepted: np.ndarray
@@ -85,10 +94,27 @@ class SurfaceUnit:
     fs: ForwardSearchResult
     rho_points: int
     raw: np.ndarray
+    frame: np.ndarray | None = None
 
     def height(self, xy):
-        """Surface height at planimetric positions `xy` (file coordinates)."""
+        """Surface height at planimetric positions `xy` (file coordinates; only for units
+        modelled as z(E, N), ``frame is None``)."""
         return self.basis.evaluate(self.surface, xy)
+
+    def normal(self, xyz):
+        """Unit normals (3,) of the surface at points `xyz` (k, 3), in file coordinates,
+        upward (or, for a vertical unit, as its frame's third axis)."""
+        xyz = np.atleast_2d(np.asarray(xyz, dtype=np.float64))
+        if self.frame is None:
+            g = self.basis.gradient(self.surface, xyz[:, :2])
+            n = np.c_[-g, np.ones(len(g))]
+            return n / np.linalg.norm(n, axis=1, keepdims=True)
+        origin, rot = self.frame[0], self.frame[1:]
+        local = (xyz - origin) @ rot.T
+        g = self.basis.gradient(self.surface, local[:, :2])
+        n = np.c_[-g, np.ones(len(g))] @ rot
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        return np.where(n[:, 2:3] < 0, -n, n)
 
     def monomials(self):
         """Coefficients in metres of ``(E - E0)^p (N - N0)^q`` and their standard errors.
@@ -165,7 +191,7 @@ def _conditional_fit(z, A, W, ref):
 
 def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alpha=0.01,
                    alpha_residual=0.001, stop="both", block=1, max_steps=500,
-                   max_search=MAX_SEARCH, rho_hint=None):
+                   max_search=MAX_SEARCH, rho_hint=None, frame="auto"):
     """Refine one raw cluster by SAR-FS within its search area.
 
     Parameters
@@ -188,6 +214,12 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
         O(n_sa) steps.
     rho_hint : float, optional
         A previous estimate of rho: the ML search starts in a window around it.
+    frame : {'auto', 'z'}
+        'z': the paper's height field z(E, N). 'auto': the same, unless the raw cluster's
+        principal-axis normal is more than :data:`FRAME_SLOPE` degrees from vertical
+        (walls, facades), where z(E, N) degenerates (the points are nearly collinear in
+        plan); such a unit is modelled as a height field over its own plane (heights
+        along the normal, W and the search in the plane's coordinates).
 
     Returns
     -------
@@ -196,9 +228,13 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
     raw = np.asarray(raw, dtype=np.int64)
     extra = np.asarray(extra, dtype=np.int64)
     area = np.concatenate([raw, extra])
-    origin = points[area].min(axis=0)
-    xy_area = points[area, :2] - origin[:2]
-    z_area = points[area, 2] - origin[2]
+    coords = points[area]
+    rows = _steep_frame(points[raw]) if frame == "auto" else None
+    if rows is not None:
+        coords = (coords - rows[0]) @ rows[1:].T
+    origin = coords.min(axis=0)
+    xy_area = coords[:, :2] - origin[:2]
+    z_area = coords[:, 2] - origin[2]
     in_raw = np.zeros(area.size, dtype=bool)
     in_raw[:raw.size] = True
     xy_raw, z_raw = xy_area[in_raw], z_area[in_raw]
@@ -236,5 +272,22 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
     surface_shift = origin[2]
     # the constant term: orthogonal column 0 is constant (= 1 / R00); add the origin height
     surface[0] += surface_shift * basis.R[0, 0]
-    return SurfaceUnit(area[acc], res, int(raw.size), int(raw.size + extra.size), int(acc.sum()), int(degree),
-                       basis, fit, surface, cov, sigma, fs, int(rho_points), raw)
+    return SurfaceUnit(area[acc], res, int(raw.size), int(raw.size + extra.size),
+                       int(acc.sum()), int(degree), basis, fit, surface, cov, sigma, fs,
+                       int(rho_points), raw, rows)
+
+
+def _steep_frame(xyz):
+    """(4, 3) frame [origin; u; v; n] of a point set whose principal-axis normal is more
+    than FRAME_SLOPE degrees from vertical, else None."""
+    if xyz.shape[0] < 3:
+        return None
+    c = xyz.mean(axis=0)
+    _, vec = np.linalg.eigh(np.cov((xyz - c).T))
+    n = vec[:, 0]
+    if np.degrees(np.arccos(min(abs(n[2]), 1.0))) <= FRAME_SLOPE:
+        return None
+    u = np.cross([0.0, 0.0, 1.0], n)
+    u /= np.linalg.norm(u)  # horizontal axis in the plane
+    v = np.cross(n, u)  # up the plane
+    return np.vstack([c, u, v, n])
