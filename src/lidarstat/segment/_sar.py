@@ -268,6 +268,20 @@ def _final_units(points, labels, units, w_radius):
     return out
 
 
+#: Units whose residual standard deviation exceeds this multiple of the local noise
+#: estimate are not planes at that noise (terrain, trees, curved or merged faces) and do
+#: not enter the units' noise estimate.
+SIGMA_UNIT_MAX = 3.0
+
+
+def _units_noise(units, sigma_local):
+    """Median residual standard deviation of the units that can be planes at the noise
+    level: those within :data:`SIGMA_UNIT_MAX` times the local estimate (NaN if none)."""
+    sd = np.array([u.sigma for u in units])
+    sd = sd[np.isfinite(sd) & (sd <= SIGMA_UNIT_MAX * sigma_local)]
+    return float(np.median(sd)) if sd.size else np.nan
+
+
 def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, max_degree=3,
                         alpha=0.001, alpha_residual=0.001, stop="both", block=1,
                         max_steps=500, min_size=10, merge_alpha=0.01, graph=None,
@@ -318,7 +332,7 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
             unit = refine_cluster(points, raw, extra, w_radius=w_radius,
                                   degree=deg, max_degree=max_degree, alpha=alpha,
                                   alpha_residual=alpha_residual, stop=stop, block=block,
-                                  max_steps=max_steps)
+                                  max_steps=max_steps, covariance=False)
             units.append(unit)
         except (np.linalg.LinAlgError, InvalidParameterError, ValueError) as exc:
             skipped.append((c, int(raw.size), str(exc)))
@@ -403,9 +417,10 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
         Height noise. Default: estimated in up to two passes. The first uses the lower
         quartile of the local-plane variances (the noise of the smoothest surfaces); when
         the median residual standard deviation of the resulting units about their
-        fitted surfaces exceeds it by more than :data:`SIGMA_RATIO` (real surveys: strip
-        offsets, roof texture), the segmentation is redone with that median, the noise
-        about actual roof planes. ``params`` records ``sigma_local``, ``sigma_units`` and
+        fitted surfaces (units within :data:`SIGMA_UNIT_MAX` times that estimate: the
+        others are not planes at this noise) exceeds it by more than
+        :data:`SIGMA_RATIO` (real surveys: strip offsets, roof texture), the
+        segmentation is redone with that median, the noise about actual roof planes. ``params`` records ``sigma_local``, ``sigma_units`` and
         ``sigma_passes``.
     alpha : float
         Level of the local planarity test.
@@ -486,7 +501,7 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
 
     fit, seg = one_pass(sigma)
     sigma_local = float(np.sqrt(fit.sigma2))
-    sigma_units = float(np.median([u.sigma for u in seg.units])) if seg.units else np.nan
+    sigma_units = _units_noise(seg.units, sigma_local)
     passes = 1
     if sigma is None and sigma_units > SIGMA_RATIO * sigma_local:
         fit, seg = one_pass(sigma_units)

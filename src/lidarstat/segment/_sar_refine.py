@@ -148,7 +148,7 @@ def _weights(xy, radius):
 RHO_WINDOW = 0.2
 
 
-def _ml_fit(z, A, xy, w_radius, rho_hint=None):
+def _ml_fit(z, A, xy, w_radius, rho_hint=None, covariance=True):
     """ML SAR fit; above SAR_MAX points rho comes from a contiguous patch.
 
     With `rho_hint` the profile likelihood is searched on a 5-point grid over
@@ -165,11 +165,12 @@ def _ml_fit(z, A, xy, w_radius, rho_hint=None):
     sub = None
     if rho_hint is not None and np.isfinite(rho_hint):
         lo, hi = max(rho_hint - RHO_WINDOW, -0.999), min(rho_hint + RHO_WINDOW, 0.999)
-        sub = sar_fit(z_s, A_s, W, bounds=(lo, hi), grid=5, xatol=1e-6)
+        sub = sar_fit(z_s, A_s, W, bounds=(lo, hi), grid=5, xatol=1e-6,
+                      covariance=covariance)
         if min(sub.rho - lo, hi - sub.rho) < 1e-3 * (hi - lo):
             sub = None  # on the edge of the window: search everywhere
     if sub is None:
-        sub = sar_fit(z_s, A_s, W)
+        sub = sar_fit(z_s, A_s, W, covariance=covariance)
     if n <= SAR_MAX:
         return sub, n
     return _conditional_fit(z, A, _weights(xy, w_radius), sub), SAR_MAX
@@ -191,7 +192,7 @@ def _conditional_fit(z, A, W, ref):
 
 def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alpha=0.01,
                    alpha_residual=0.001, stop="both", block=1, max_steps=500,
-                   max_search=MAX_SEARCH, rho_hint=None, frame="auto"):
+                   max_search=MAX_SEARCH, rho_hint=None, frame="auto", covariance=True):
     """Refine one raw cluster by SAR-FS within its search area.
 
     Parameters
@@ -220,6 +221,10 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
         (walls, facades), where z(E, N) degenerates (the points are nearly collinear in
         plan); such a unit is modelled as a height field over its own plane (heights
         along the normal, W and the search in the plane's coordinates).
+    covariance : bool
+        Compute the standard errors (information matrix of the ML fit, sandwich of the
+        surface). False leaves them NaN: :func:`refine_raw_clusters` refits every final
+        segment, so the search stage skips them.
 
     Returns
     -------
@@ -245,7 +250,7 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
     else:
         basis = PolynomialBasis.fit(xy_raw, int(degree))
     A_area = basis(xy_area)
-    fit0, rho_points = _ml_fit(z_raw, A_area[in_raw], xy_raw, w_radius, rho_hint)
+    fit0, rho_points = _ml_fit(z_raw, A_area[in_raw], xy_raw, w_radius, rho_hint, covariance)
     W_area = _weights(xy_area, w_radius)
     ystar = z_area - fit0.rho * (W_area @ z_area)
     if raw.size > max_search:
@@ -261,7 +266,8 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
     acc = fs.accepted
     W_acc = _weights(xy_area[acc], w_radius)
     fit = _conditional_fit(z_area[acc], A_area[acc], W_acc, fit0)
-    surface, cov = sar_trend(z_area[acc], A_area[acc], W_acc, fit.rho, fit.sigma2)
+    surface, cov = sar_trend(z_area[acc], A_area[acc], W_acc, fit.rho, fit.sigma2,
+                             covariance=covariance)
     r = basis.n_terms
     res = z_area[acc] - A_area[acc] @ surface
     sigma = float(np.sqrt(res @ res / max(acc.sum() - r, 1)))

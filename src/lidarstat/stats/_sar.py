@@ -380,7 +380,7 @@ def sar_mean_surface(fit, A, W):
     return np.linalg.lstsq(A, mean, rcond=None)[0]
 
 
-def sar_trend(z, A, W, rho, sigma2):
+def sar_trend(z, A, W, rho, sigma2, *, covariance=True):
     """Least-squares trend of the heights with its covariance under the SAR model.
 
     The surface of a unit is the polynomial closest to the expected heights. In the lag
@@ -408,6 +408,8 @@ def sar_trend(z, A, W, rho, sigma2):
         Spatial weights of the SAR model.
     rho, sigma2 : float
         SAR interaction and innovation variance.
+    covariance : bool
+        False: `cov` is NaN (not computed).
 
     Returns
     -------
@@ -428,6 +430,8 @@ def sar_trend(z, A, W, rho, sigma2):
     A = np.asarray(A, dtype=np.float64)
     q, rr = np.linalg.qr(A)
     coef = sla.solve_triangular(rr, q.T @ z)
+    if not covariance:
+        return coef, np.full((coef.size, coef.size), np.nan)
     ainv = sla.solve_triangular(rr, np.eye(rr.shape[0]))  # R^-1
     if rho == 0.0:
         bread = ainv @ ainv.T
