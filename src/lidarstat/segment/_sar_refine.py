@@ -22,10 +22,10 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-
+import scipy.sparse as sp
 from scipy.spatial import cKDTree
-from ..stats._sar import (PolynomialBasis, SARFit, sar_fit, sar_trend, select_degree,
-                          weights_matrix)
+
+from ..stats._sar import PolynomialBasis, SARFit, sar_fit, sar_trend, select_degree
 from ._forward_search import ForwardSearchResult, forward_search
 
 #: Largest subset on which rho is estimated by full ML; larger clusters estimate rho on
@@ -131,16 +131,23 @@ class SurfaceUnit:
         return b.powers, coef, se
 
 
-def _weights(xy, radius):
-    """Row-standardised binary adjacency of points within `radius` in plan."""
+def _adjacency(xy, radius):
+    """Binary adjacency (CSR, no self-pairs) of points within `radius` in plan."""
     n = xy.shape[0]
     pairs = cKDTree(xy).query_pairs(radius, output_type="ndarray")
     i = np.r_[pairs[:, 0], pairs[:, 1]]
     j = np.r_[pairs[:, 1], pairs[:, 0]]
-    o = np.argsort(i, kind="stable")
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.add.at(indptr, i + 1, 1)
-    return weights_matrix(np.cumsum(indptr), j[o], n)
+    return sp.csr_matrix((np.ones(i.size), (i, j)), shape=(n, n))
+
+
+def _standardised(B, idx=None):
+    """Row-standardised weights of the binary adjacency `B` restricted to `idx`."""
+    if idx is not None:
+        B = B[idx][:, idx]
+    rs = np.asarray(B.sum(axis=1)).ravel()
+    with np.errstate(divide="ignore"):
+        inv = np.where(rs > 0, 1.0 / rs, 0.0)
+    return sp.csr_matrix(sp.diags(inv) @ B)
 
 
 #: Half-width of the rho interval searched when a previous estimate is known (the refit
@@ -148,8 +155,9 @@ def _weights(xy, radius):
 RHO_WINDOW = 0.2
 
 
-def _ml_fit(z, A, xy, w_radius, rho_hint=None, covariance=True):
-    """ML SAR fit; above SAR_MAX points rho comes from a contiguous patch.
+def _ml_fit(z, A, xy, B, rho_hint=None, covariance=True):
+    """ML SAR fit (binary adjacency `B` of the points); above SAR_MAX points rho comes
+    from a contiguous patch.
 
     With `rho_hint` the profile likelihood is searched on a 5-point grid over
     ``rho_hint +- RHO_WINDOW`` (then refined), not over the whole admissible interval;
@@ -158,10 +166,9 @@ def _ml_fit(z, A, xy, w_radius, rho_hint=None, covariance=True):
     if n > SAR_MAX:
         med = np.median(xy, axis=0)
         patch = np.argsort(np.sum((xy - med) ** 2, axis=1))[:SAR_MAX]
-        z_s, A_s, xy_s = z[patch], A[patch], xy[patch]
+        z_s, A_s, W = z[patch], A[patch], _standardised(B, patch)
     else:
-        z_s, A_s, xy_s = z, A, xy
-    W = _weights(xy_s, w_radius)
+        z_s, A_s, W = z, A, _standardised(B)
     sub = None
     if rho_hint is not None and np.isfinite(rho_hint):
         lo, hi = max(rho_hint - RHO_WINDOW, -0.999), min(rho_hint + RHO_WINDOW, 0.999)
@@ -173,7 +180,7 @@ def _ml_fit(z, A, xy, w_radius, rho_hint=None, covariance=True):
         sub = sar_fit(z_s, A_s, W, covariance=covariance)
     if n <= SAR_MAX:
         return sub, n
-    return _conditional_fit(z, A, _weights(xy, w_radius), sub), SAR_MAX
+    return _conditional_fit(z, A, _standardised(B), sub), SAR_MAX
 
 
 def _conditional_fit(z, A, W, ref):
@@ -243,15 +250,18 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
     in_raw = np.zeros(area.size, dtype=bool)
     in_raw[:raw.size] = True
     xy_raw, z_raw = xy_area[in_raw], z_area[in_raw]
+    B_area = _adjacency(xy_area, w_radius)
+    raw_idx = np.flatnonzero(in_raw)
+    B_raw = B_area[raw_idx][:, raw_idx] if extra.size else B_area
     if degree is None:
-        degree, _, basis = select_degree(z_raw, xy_raw, _weights(xy_raw, w_radius),
+        degree, _, basis = select_degree(z_raw, xy_raw, _standardised(B_raw),
                                          max_degree=max_degree, alpha=alpha)
         basis = PolynomialBasis.fit(xy_raw, degree)
     else:
         basis = PolynomialBasis.fit(xy_raw, int(degree))
     A_area = basis(xy_area)
-    fit0, rho_points = _ml_fit(z_raw, A_area[in_raw], xy_raw, w_radius, rho_hint, covariance)
-    W_area = _weights(xy_area, w_radius)
+    fit0, rho_points = _ml_fit(z_raw, A_area[in_raw], xy_raw, B_raw, rho_hint, covariance)
+    W_area = _standardised(B_area)
     ystar = z_area - fit0.rho * (W_area @ z_area)
     if raw.size > max_search:
         in_raw = in_raw[:raw.size]
@@ -264,7 +274,8 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
     if raw.size > max_search:
         fs = dataclasses.replace(fs, stop_reason="not searched")
     acc = fs.accepted
-    W_acc = _weights(xy_area[acc], w_radius)
+    full = acc.size == W_area.shape[0] and acc.all()
+    W_acc = W_area if full else _standardised(B_area, np.flatnonzero(acc))
     fit = _conditional_fit(z_area[acc], A_area[acc], W_acc, fit0)
     surface, cov = sar_trend(z_area[acc], A_area[acc], W_acc, fit.rho, fit.sigma2,
                              covariance=covariance)
