@@ -3,7 +3,7 @@
 
 `lidarstat curvature` runs on synthetic airborne-like LAZ files of two sizes, once whole
 (the cloud in memory) and once with ``--tile`` (streamed chunks, tile buckets on disk,
-memmapped results). Each run is a fresh subprocess; its peak RSS comes from ``os.wait4``.
+results bucketed by output chunk). Each run is a fresh subprocess; its peak RSS comes from ``os.wait4``.
 If streaming works, the tiled peak stays flat while the whole-cloud peak grows with the
 file.
 

@@ -5,8 +5,9 @@ Full mode (run by the lead on a quiet machine; a few minutes):
     python benchmarks/bench_sar.py
 
 * the whole ``segment_sar`` on a synthetic airborne town scaled to ~1 million points
-  (``make_als_town`` over 400 x 300 m at 8 pulses/m^2), with the time of each stage and
-  the Hoover scores of the roof planes;
+  (``make_als_town`` over 400 x 300 m at 8 pulses/m^2) with its defaults (automatic
+  bandwidth, multi-scale windows, estimated noise), with the Hoover scores of the roof
+  planes and the normal errors of the correct ones;
 * on the same run, PySAL ``spreg.ML_Lag`` (its default method 'full') and
   ``lidarstat.stats.sar_fit`` on the same 5,000-point cluster with the same W: time ratio
   and the agreement of rho and theta.
@@ -35,7 +36,30 @@ def _town(extent, density, rng=1):
     return cloud, time.perf_counter() - t
 
 
-def bench_segment(cloud, bandwidth):
+def _normal_errors(cloud, seg, min_size=30):
+    """Angle (degrees) between each correctly found roof plane's normal and the truth."""
+    rp = cloud.fields["roof_plane"].astype(int)
+    planes = cloud.meta["roof_planes"]
+    normals = np.c_[seg.table["normal_x"], seg.table["normal_y"], seg.table["normal_z"]]
+    errors = []
+    for pid, n_true in zip(planes["id"], planes["normal"]):
+        mine = rp == pid
+        if mine.sum() < min_size:
+            continue
+        lab = seg.labels[mine]
+        lab = lab[lab > 0]
+        if lab.size == 0:
+            continue
+        s = int(np.bincount(lab).argmax())
+        overlap = np.count_nonzero(seg.labels[mine] == s)
+        if overlap < 0.8 * mine.sum() or overlap < 0.8 * np.count_nonzero(seg.labels == s):
+            continue  # not a correct detection at tolerance 0.8
+        c = min(1.0, abs(float(normals[s - 1] @ np.asarray(n_true))))
+        errors.append(float(np.degrees(np.arccos(c))))
+    return np.array(errors)
+
+
+def bench_segment(cloud, bandwidth=None):
     from lidarstat.segment import hoover, segment_sar
 
     t = time.perf_counter()
@@ -44,12 +68,17 @@ def bench_segment(cloud, bandwidth):
     rp = cloud.fields["roof_plane"].astype(int)
     h_all = hoover(seg.labels, rp, 0.8)
     h30 = hoover(seg.labels, rp, 0.8, min_size=30)
+    err = _normal_errors(cloud, seg)
     return {"points": int(cloud.xyz.shape[0]), "seconds": round(dt, 2),
-            "bandwidth": seg.params["bandwidth"], "segments": seg.n_segments,
+            "bandwidth": seg.params["bandwidth"], "adaptive": seg.params["adaptive"],
+            "sigma": seg.params["sigma"], "sigma_passes": seg.params["sigma_passes"],
+            "segments": seg.n_segments,
             "roof_planes": int(np.unique(rp[rp > 0]).size),
             "hoover_correct": h_all.correct, "hoover_missed": h_all.missed,
             "hoover_correct_rate_min30": round(h30.correct_rate, 3),
-            "hoover_correct_min30": h30.correct}
+            "hoover_correct_min30": h30.correct,
+            "normal_error_median_deg": round(float(np.median(err)), 3) if err.size else None,
+            "normals_within_0.5_deg": round(float(np.mean(err < 0.5)), 3) if err.size else None}
 
 
 def _cluster(n, rng):
@@ -127,7 +156,7 @@ def main(argv=None):
     else:
         extent, density, n_fit, methods = (400.0, 300.0), 8.0, 5000, ["full"]
     cloud, t_gen = _town(extent, density)
-    seg = bench_segment(cloud, 0.7)
+    seg = bench_segment(cloud)  # automatic bandwidth, multi-scale windows
     fit = bench_sar_fit(n_fit, methods)
     fs = bench_forward_search()
     result = {"machine": platform.platform(), "python": platform.python_version(),
@@ -135,8 +164,12 @@ def main(argv=None):
               "sar_fit": fit, "forward_search_2000": fs}
     print("| measure | value |\n|---|---|")
     print(f"| segment_sar on {seg['points']:,} points | {seg['seconds']} s |")
+    print(f"| automatic bandwidth b, noise sigma | {seg['bandwidth']:.3f} m, "
+          f"{seg['sigma']:.4f} m |")
     print(f"| roof planes correct (Hoover 0.8, planes >= 30 points) | "
           f"{seg['hoover_correct_min30']} ({seg['hoover_correct_rate_min30']:.1%}) |")
+    print(f"| normals of correct planes within 0.5 deg | {seg['normals_within_0.5_deg']} "
+          f"(median {seg['normal_error_median_deg']} deg) |")
     print(f"| sar_fit, {fit['n']} points ({fit['lidarstat_logdet']}) | "
           f"{fit['lidarstat_seconds']} s |")
     for m in methods:

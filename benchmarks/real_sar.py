@@ -6,7 +6,9 @@ For each file: ``segment_sar`` with the automatic bandwidth, a top view coloured
 segment (PNG in ``--out``), the number of segments, the share of producer building points
 (class 6) that lie in a planar unit, and for AHN3 Amsterdam (BAG footprints) the share of
 footprint area covered by roof segments (1 m cells whose centre is inside a footprint and
-that hold a point of a segment lying mostly inside footprints).
+that hold a point of a segment lying mostly inside footprints; footprints drawn in black).
+
+Writes ``benchmarks/results_real_sar.json``.
 """
 
 from __future__ import annotations
@@ -64,7 +66,7 @@ def footprint_coverage(xyz, labels, polys, cell=1.0):
     return float(cov), float(inside_cell.sum() * cell * cell)
 
 
-def figure(xyz, labels, path, title):
+def figure(xyz, labels, path, title, polys=None):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -77,6 +79,14 @@ def figure(xyz, labels, path, title):
     fig, ax = plt.subplots(figsize=(7, max(3.0, 7 * span[1] / max(span[0], 1e-9))), dpi=110)
     o = np.argsort(xyz[:, 2])
     ax.scatter(xyz[o, 0], xyz[o, 1], c=colours[labels[o]], s=0.6, linewidths=0)
+    lo, hi = xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
+    for p in polys or []:
+        if p[:, 0].max() < lo[0] or p[:, 0].min() > hi[0] or p[:, 1].max() < lo[1] \
+                or p[:, 1].min() > hi[1]:
+            continue
+        ax.plot(p[:, 0], p[:, 1], color="k", linewidth=0.6)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal")
     ax.set_title(title, fontsize=9)
     fig.savefig(path, bbox_inches="tight")
@@ -110,6 +120,9 @@ def main(argv=None):
         r = {"points": int(len(xyz)), "seconds": round(dt, 1), "segments": seg.n_segments,
              "bandwidth": round(seg.params["bandwidth"], 3),
              "sigma": round(seg.params["sigma"], 4),
+             "sigma_local": round(seg.params["sigma_local"], 4),
+             "sigma_units": round(seg.params["sigma_units"], 4),
+             "sigma_passes": seg.params["sigma_passes"],
              "in_segments": round(float(np.mean(seg.labels > 0)), 3)}
         if cls is not None:
             b = cls[keep] == 6
@@ -117,10 +130,14 @@ def main(argv=None):
         if name.startswith("ahn3_amsterdam"):
             r["footprint_coverage"], r["footprint_area_m2"] = footprint_coverage(
                 xyz, seg.labels, polys)
+        amsterdam = name.startswith("ahn3_amsterdam")
         figure(xyz, seg.labels, out / f"sar_{name}.png",
-               f"{name}: {seg.n_segments} SAR-FS units (b = {r['bandwidth']} m)")
+               f"{name}: {seg.n_segments} SAR-FS units (b = {r['bandwidth']} m, "
+               f"sigma = {r['sigma']} m)" + (", BAG footprints" if amsterdam else ""),
+               polys if amsterdam else None)
         results[name] = r
         print(name, json.dumps(r), flush=True)
+    Path(__file__).with_name("results_real_sar.json").write_text(json.dumps(results, indent=2))
     return results
 
 

@@ -50,7 +50,8 @@ from lidarstat.synth import (make_agpart, make_column, make_hip_roof_scene,  # n
 SCENES = {
     "agpart": (dict(sigma=0.0015, rng=0), dict(radius=0.2, sigma=0.0015, alpha=0.01), 0.02),
     "column": (dict(sigma=0.0015, rng=0), dict(radius=0.2, sigma=0.0015, alpha=0.01), 0.02),
-    "tls_building": (dict(rng=0), dict(radius=0.3, alpha=0.01), 0.05),
+    # range noise 0.002 + 5e-5 r m: sigma given at about 30 m (the house's range)
+    "tls_building": (dict(rng=0), dict(radius=0.3, sigma=0.0035, alpha=0.01), 0.05),
     "hip_roof": (dict(rng=1), dict(radius=1.5, sigma=0.03, alpha=0.01), 0.26),
 }
 FACTORY = dict(agpart=make_agpart, column=make_column, tls_building=make_tls_building,
@@ -93,7 +94,7 @@ def run_scene(name):
     t0 = time.perf_counter()
     seg = ridge_segments(sc.xyz, res)
     out["seconds_segments"] = round(time.perf_counter() - t0, 2)
-    old = ridge_segments(sc.xyz, res, chi2_barrier=False, assign=False)
+    old = ridge_segments(sc.xyz, res, chi2_barrier=False, consistent=False, assign=False)
     face = sc.face.astype(np.int64)
     if name == "hip_roof":
         truth = {"roof_planes": sc.fields["roof_plane"].astype(int)}

@@ -35,6 +35,11 @@ def test_sar_method_writes_ids_table_lines_and_plots(rng, tmp_path, capsys):
     assert (tmp_path / "seg.lines.geojson").is_file()
     assert len(list(diag.glob("fs_*.png"))) == 2
     assert "2 segments" in capsys.readouterr().out
+    # one bandwidth for the whole cloud, and the bare flag (Geary) still parse
+    for extra in (["--adaptive", "none"], ["--adaptive"]):
+        assert main(["segment", str(src), str(tmp_path / "b.las"), "--method", "sar",
+                     "--radius", "1.0", *extra]) == 0
+        assert "2 segments" in capsys.readouterr().out
 
 
 def test_curvature_method_needs_a_radius(rng, tmp_path, capsys):

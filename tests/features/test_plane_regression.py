@@ -152,3 +152,40 @@ def test_bad_input():
     fit = local_planes(pts, 5.0, sigma=0.1)
     assert (fit.status[3:7] == 2).all() and np.isin(fit.status, [1, 2]).all()
     assert np.isnan(fit.beta).all() and not fit.ok.any()
+
+
+def test_multiscale_bandwidth_shrinks_only_near_the_ridge(rng):
+    xy = rng.uniform(0, 20, (6000, 2))
+    z = np.where(xy[:, 0] < 10, 0.6 * xy[:, 0], 12 - 0.6 * xy[:, 0]) + rng.normal(0, 0.03, 6000)
+    pts = np.c_[xy, z]
+    one = local_planes(pts, 1.2)
+    ms = local_planes(pts, 1.2, adaptive="multiscale")
+    np.testing.assert_allclose(np.unique(ms.bandwidth), [0.6, 0.9, 1.2])
+    dist = np.abs(xy[:, 0] - 10)
+    # windows shrink where the full window crosses the ridge; elsewhere only after a false
+    # rejection of the planarity test (level 0.05)
+    shrunk = ms.bandwidth < 1.2
+    passed = ms.to_fields()["plane_pass"] == 1
+    band = (dist > 0.3) & (dist < 0.9)
+    assert shrunk[band].mean() > 0.6 and passed[band].mean() > 0.85
+    assert shrunk[dist > 1.5].mean() < 0.08
+    # at the ridge no window holds one plane: the test still rejects there
+    assert passed[dist < 0.15].mean() < 0.2
+    # the same noise estimate; points planar at b keep their fit exactly
+    assert ms.sigma2 == one.sigma2
+    keep = ms.bandwidth == 1.2
+    np.testing.assert_array_equal(ms.beta[keep], one.beta[keep])
+    # more points with an accepted plane, and the shrunk windows' slopes are the faces'
+    assert ms.to_fields()["plane_pass"].mean() > one.to_fields()["plane_pass"].mean() + 0.03
+    small = (ms.bandwidth < 1.2) & (ms.to_fields()["plane_pass"] == 1) & (dist > 0.3)
+    true_slope = np.where(xy[small, 0] < 10, 0.6, -0.6)
+    z_score = (ms.beta[small, 1] - true_slope) / ms.se[small, 1]
+    assert small.sum() > 100 and abs(np.median(z_score)) < 0.5
+    with pytest.raises(InvalidParameterError, match="scales"):
+        local_planes(pts, 1.2, adaptive="multiscale", scales=(0.8, 0.5))
+    with pytest.raises(InvalidParameterError, match="adaptive"):
+        local_planes(pts, 1.2, adaptive="lepski")
+    nb = radius_neighbors(pts, 1.2, dim=2)
+    given = local_planes(pts, 1.2, adaptive="multiscale", neighborhoods=nb)
+    np.testing.assert_allclose(given.bandwidth, ms.bandwidth)
+    np.testing.assert_allclose(given.beta, ms.beta, equal_nan=True)

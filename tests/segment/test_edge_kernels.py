@@ -38,9 +38,7 @@ def test_prefix_and_label_selections(graph, rng):
     assert np.array_equal(i, src[keep]) and np.array_equal(j, dst[keep])
     cand = rng.random(len(pts)) < 0.3
     use = cand[src] & (labels[dst] > 0) & (labels[src] == 0)
-    m = ek.count_reintegration(nbh.indptr, nbh.indices, nbh.query_indices(), cand, labels)
-    s, t = np.empty(m, np.int64), np.empty(m, np.int64)
-    ek.fill_reintegration(nbh.indptr, nbh.indices, nbh.query_indices(), cand, labels, s, t)
+    s, t = ek.reintegration_pairs(nbh, cand, labels)
     assert np.array_equal(s, src[use]) and np.array_equal(t, dst[use])
     kstar = rng.integers(0, 25, len(pts))
     pos = np.arange(nbh.nnz) - np.repeat(nbh.indptr[:-1], nbh.counts)

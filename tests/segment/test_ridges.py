@@ -148,6 +148,13 @@ def test_cli_ridges_and_segment(tmp_path, crest_result):
                  "--sigma", str(SIGMA), "--alpha", "0.05", "--min-size", "100", "-q"]) == 0
     seg = read(seg_out)
     assert seg.attributes["segment_id"].max() >= 2
+    for name in ("ridge", "crease", "barrier"):
+        assert name in seg.attributes, name
+    # the crest is smooth: the chi-square accepts it, the ridge band alone cuts it
+    assert main(["segment", str(src), str(seg_out), "--method", "ridges", "--radius", "0.25",
+                 "--sigma", str(SIGMA), "--alpha", "0.05", "--min-size", "100", "--ridges-only",
+                 "-q"]) == 0
+    assert read(seg_out).attributes["barrier"].sum() < seg.attributes["barrier"].sum()
     assert (tmp_path / "seg.segments.csv").exists()
 
 

@@ -190,3 +190,68 @@ def test_one_plane_in_two_raw_clusters_is_merged_two_planes_are_not(rng):
     assert seg.table["n_s"][k] == np.count_nonzero(np.isin(lab, [1, 2]))
     apart = refine_raw_clusters(pts, lab, threshold=3.0, w_radius=0.5, merge_alpha=None)
     assert apart.n_segments == 3
+
+
+def test_touching_raw_clusters_of_one_plane_merge_under_the_null(rng):
+    """Units grown from two raw clusters of one plane share the points between them, and
+    the best-fit assignment splits those by the sign of their residuals; the Chow test
+    is therefore run on the raw clusters (a test on the residual-selected final sets
+    rejected one plane on the synthetic town). Under the null the merge must happen at
+    about 1 - merge_alpha."""
+    merged = 0
+    for _ in range(10):
+        xy = rng.uniform(0, [24, 10], (2400, 2))
+        z = 5 + 0.4 * xy[:, 0] - 0.2 * xy[:, 1] + rng.normal(0, 0.03, 2400)
+        lab = np.where(xy[:, 0] < 11, 1, np.where(xy[:, 0] > 13, 2, 0))
+        seg = refine_raw_clusters(np.c_[xy, z], lab, threshold=3.0, w_radius=0.5)
+        merged += seg.n_segments == 1
+    assert merged >= 9
+
+
+def test_noise_is_reestimated_on_the_units_when_strips_disagree(rng):
+    """Ground seen by one strip, two gable roofs by two overlapping strips with a 6 cm
+    height offset: the lower-quartile local noise is the single-strip noise (0.02); the
+    roof units' residual spread is about sqrt(0.02^2 + 0.03^2), so a second pass uses it
+    and more of the roofs are segmented."""
+    def gables(xy):
+        z = np.zeros(len(xy))
+        for x0 in (4.0, 18.0):
+            inside = (xy[:, 0] > x0) & (xy[:, 0] < x0 + 10) & (xy[:, 1] > 5) & (xy[:, 1] < 15)
+            z[inside] = 6.0 - 0.5 * np.abs(xy[inside, 1] - 10)
+        return z
+
+    xy = rng.uniform(0, [32, 20], (5000, 2))
+    roof_xy = np.r_[rng.uniform([4, 5], [14, 15], (1500, 2)),
+                    rng.uniform([18, 5], [28, 15], (1500, 2))]
+    pts = np.r_[np.c_[xy, gables(xy) + rng.normal(0, 0.02, len(xy))],
+                np.c_[roof_xy, gables(roof_xy) + 0.06 + rng.normal(0, 0.02, len(roof_xy))]]
+    roof = pts[:, 2] > 1.0
+    seg = segment_sar(pts, bandwidth=1.0)
+    p = seg.params
+    assert p["sigma_local"] < 0.026, p
+    assert p["sigma_passes"] == 2 and p["sigma_units"] > 1.25 * p["sigma_local"]
+    one = segment_sar(pts, bandwidth=1.0, sigma=p["sigma_local"])
+    assert np.mean(seg.labels[roof] > 0) > np.mean(one.labels[roof] > 0) + 0.05
+
+
+def test_refinement_models_a_wall_in_its_own_plane(rng):
+    """Seed-000 variant with a wall: z(E, N) degenerates on it, so the unit is modelled
+    as a height field over its own plane (table column frame = 1)."""
+    ground = np.c_[rng.uniform(0, 8, (2500, 2)), np.zeros(2500)]
+    wall = np.c_[np.full(1500, 4.0), rng.uniform(0, 8, 1500), rng.uniform(0.05, 3, 1500)]
+    pts = np.r_[ground, wall] + rng.normal(0, 0.01, (4000, 3))
+    is_wall = np.r_[np.zeros(2500, bool), np.ones(1500, bool)]
+    seg = segment_curvature(pts, radius=0.6, sigma=0.01, refine=True, frame="pca",
+                            noise="normal")
+    frame = np.asarray(seg.table["frame"])
+    assert frame.sum() == 1
+    k = int(np.flatnonzero(frame == 1)[0])
+    nrm = np.array([seg.table[f"normal_{c}"][k] for c in "xyz"])
+    assert np.degrees(np.arccos(min(1.0, abs(nrm[0])))) < 0.5
+    assert np.mean(seg.labels[is_wall] == k + 1) > 0.9
+    assert np.mean(is_wall[seg.labels == k + 1]) > 0.97
+    assert np.isnan(seg.table["c_10"][k])  # coefficients of z(E, N) do not exist
+    for a, b in zip(seg.lines.attributes["segment_a"], seg.lines.attributes["segment_b"]):
+        assert k + 1 not in (a, b)
+    # the ground units remain height fields with vertical normals
+    assert np.all(np.abs(np.asarray(seg.table["normal_z"])[frame == 0]) > 0.9999)

@@ -94,3 +94,30 @@ def test_bad_input(rng):
         sar_fit(z[:3], A[:3], W[:3, :3])
     with pytest.raises(InvalidParameterError, match="'method'"):
         LogDet(W, "magic")
+
+
+def test_sar_trend_is_least_squares_with_the_sar_sandwich(rng):
+    from lidarstat.stats import sar_trend
+
+    n = 300
+    xy = rng.uniform(0, 10, (n, 2))
+    nb = radius_neighbors(np.c_[xy, np.zeros(n)], 1.0, dim=2)
+    W = weights_matrix(nb.indptr, nb.indices, n)
+    A = np.c_[np.ones(n), xy]
+    z = A @ [1.0, 0.3, -0.2] + rng.normal(0, 0.05, n)
+    for rho in (0.0, 0.4, -0.3):
+        coef, cov = sar_trend(z, A, W, rho, 0.0025)
+        np.testing.assert_allclose(coef, np.linalg.lstsq(A, z, rcond=None)[0], rtol=1e-10)
+        Minv = np.linalg.inv(np.eye(n) - rho * W.toarray())
+        bread = np.linalg.inv(A.T @ A)
+        ref = bread @ A.T @ (0.0025 * Minv @ Minv.T) @ A @ bread
+        np.testing.assert_allclose(cov, ref, rtol=1e-8, atol=1e-14)
+    # the sandwich is the actual spread of the least-squares trend under SAR noise
+    rho, reps = 0.5, 400
+    Minv = np.linalg.inv(np.eye(n) - rho * W.toarray())
+    est = np.array([np.linalg.lstsq(A, A @ [1.0, 0.3, -0.2] + Minv @ rng.normal(0, 0.05, n),
+                                    rcond=None)[0] for _ in range(reps)])
+    _, cov = sar_trend(z, A, W, rho, 0.0025)
+    ratio = est.var(axis=0, ddof=1) / np.diag(cov)
+    # var ratio ~ chi2(reps - 1) / (reps - 1): 99.9 % interval about [0.79, 1.24]
+    assert np.all((ratio > 0.79) & (ratio < 1.24)), ratio

@@ -285,7 +285,8 @@ def curved_surface_test(points, features, query, sigma, *, sensor=None):
     bad = ~(nrm[:, 0] > 1e-12)
     axis = np.where(bad[:, None], features.major, axis / np.where(bad[:, None], 1.0, nrm))
     indptr, idx = _neighbour_rows(points, features, query)
-    stat, dof, radius = cylinder_test(points, query, indptr, idx, axis, sigma, sensor=sensor)
+    stat, dof, radius = cylinder_test(points, query, indptr, idx, axis[query], sigma,
+                                      sensor=sensor)
     with np.errstate(invalid="ignore"):
         p = _sp.chdtrc(np.where(dof > 0, dof, np.nan), stat)
     return p, radius

@@ -50,6 +50,17 @@ def _basis(a):
 
 
 @njit
+def _radial(ux, uy, dx, dy, has_sensor, sr, scale):
+    """Distance from the circle centre, radial unit vector and the point's radial noise
+    (scaled coordinates) for the offset (ux, uy) and the projected ray (dx, dy)."""
+    dist = np.sqrt(ux * ux + uy * uy)
+    if dist > 0:
+        ux, uy = ux / dist, uy / dist
+    c = abs(dx * ux + dy * uy) if has_sensor else 1.0
+    return dist, ux, uy, sr * max(c, _FLOOR) / scale
+
+
+@njit
 def _solve3(A, b):
     """Solve a 3x3 system by Cramer's rule; returns (x, ok)."""
     det = (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
@@ -71,13 +82,14 @@ def _solve3(A, b):
 
 @njit_parallel
 def cylinder_rows(pts, query, indptr, idx, axes, sensor, has_sensor, sig_pt, stat, dof,
-                  radius):
-    """Weighted circle fit perpendicular to `axes[q]` over each query row (see module doc).
+                  radius, centre):
+    """Weighted circle fit perpendicular to `axes[r]` over each query row r (module doc).
 
     `pts` local coordinates; row r lists the neighbours of point ``query[r]``. Noise of
     neighbour j: ``sig_pt[j] * max(|d . rho|, 0.1)`` with a sensor (`sig_pt` along the
     rays), else ``sig_pt[j]`` (across the surface). Writes the weighted RSS, its degrees of freedom (n - 3) and the
-    fitted radius (inf for a straight line); NaN where fewer than 7 neighbours.
+    fitted radius (inf for a straight line) and a point of the axis (the circle centre
+    lifted to 3-D, local coordinates; NaN for a line); NaN where fewer than 7 neighbours.
     """
     m = query.size
     for r in numba.prange(m):
@@ -87,9 +99,12 @@ def cylinder_rows(pts, query, indptr, idx, axes, sensor, has_sensor, sig_pt, sta
         stat[r] = np.nan
         dof[r] = n - 3
         radius[r] = np.nan
+        centre[r, 0] = np.nan
+        centre[r, 1] = np.nan
+        centre[r, 2] = np.nan
         if n < 7:
             continue
-        a = axes[i]
+        a = axes[r]
         e10, e11, e12, e20, e21, e22 = _basis(a)
         x = np.empty(n)
         y = np.empty(n)
@@ -153,12 +168,8 @@ def cylinder_rows(pts, query, indptr, idx, axes, sensor, has_sensor, sig_pt, sta
                 J = np.zeros((3, 3))
                 g = np.zeros(3)
                 for t in range(n):
-                    ux, uy = x[t] - cx, y[t] - cy
-                    dist = np.sqrt(ux * ux + uy * uy)
-                    if dist > 0:
-                        ux, uy = ux / dist, uy / dist
-                    c = abs(dx[t] * ux + dy[t] * uy) if has_sensor else 1.0
-                    sg = sr[t] * max(c, _FLOOR) / scale
+                    dist, ux, uy, sg = _radial(x[t] - cx, y[t] - cy, dx[t], dy[t],
+                                               has_sensor, sr[t], scale)
                     w[t] = 1.0 / (sg * sg)
                     res[t] = dist - R
                     j0, j1, j2 = -ux, -uy, -1.0
@@ -184,16 +195,17 @@ def cylinder_rows(pts, query, indptr, idx, axes, sensor, has_sensor, sig_pt, sta
             if not line:
                 q = 0.0
                 for t in range(n):
-                    ux, uy = x[t] - cx, y[t] - cy
-                    dist = np.sqrt(ux * ux + uy * uy)
-                    if dist > 0:
-                        ux, uy = ux / dist, uy / dist
-                    c = abs(dx[t] * ux + dy[t] * uy) if has_sensor else 1.0
-                    sg = sr[t] * max(c, _FLOOR) / scale
+                    dist, ux, uy, sg = _radial(x[t] - cx, y[t] - cy, dx[t], dy[t],
+                                               has_sensor, sr[t], scale)
                     rr = dist - R
                     q += rr * rr / (sg * sg)
                 stat[r] = q
                 radius[r] = R * scale
+                ccx, ccy = cx * scale + mx, cy * scale + my
+                for d3 in range(3):
+                    e1d = e10 if d3 == 0 else (e11 if d3 == 1 else e12)
+                    e2d = e20 if d3 == 0 else (e21 if d3 == 1 else e22)
+                    centre[r, d3] = pts[i, d3] + ccx * e1d + ccy * e2d
         if line:  # straight line in the projection: total least squares, 2 parameters
             sxx = 0.0
             sxy = 0.0
@@ -222,7 +234,8 @@ def cylinder_rows(pts, query, indptr, idx, axes, sensor, has_sensor, sig_pt, sta
             radius[r] = np.inf
 
 
-def cylinder_test(points, query, indptr, idx, axes, sigma, *, sensor=None):
+def cylinder_test(points, query, indptr, idx, axes, sigma, *, sensor=None,
+                  return_centre=False):
     """Cylinder test of the rows of `query` (see the module doc).
 
     Parameters
@@ -231,8 +244,8 @@ def cylinder_test(points, query, indptr, idx, axes, sigma, *, sensor=None):
     query : (M,) ndarray of int
         The points tested; row r of the CSR (`indptr`, `idx`) lists the neighbours of
         ``query[r]`` (indices into `points`, the point itself included).
-    axes : (N, 3) ndarray
-        Unit axis direction per point (minimum-curvature direction).
+    axes : (M, 3) ndarray
+        Unit axis direction per row (e.g. the point's minimum-curvature direction).
     sigma : float or (N,) array_like
         Noise std per point: along the rays with a `sensor`, else across the surface.
     sensor : (3,) array_like, optional
@@ -243,12 +256,15 @@ def cylinder_test(points, query, indptr, idx, axes, sigma, *, sensor=None):
     stat, dof, radius : (M,) ndarray
         Weighted residual sum of squares (``~ chi2(dof)`` on a cylinder), ``n - 3`` and
         the fitted radius (inf: straight in the projection, i.e. planar).
+    centre : (M, 3) ndarray
+        A point of the fitted axis (NaN when straight); with ``return_centre`` only.
     """
     pts = np.asarray(points, dtype=np.float64)
     origin = pts.mean(axis=0)
     local = np.ascontiguousarray(pts - origin)
     m = len(query)
     stat, dof, radius = np.empty(m), np.empty(m), np.empty(m)
+    centre = np.empty((m, 3))
     has_sensor = sensor is not None
     sens = (np.asarray(sensor, dtype=np.float64) - origin) if has_sensor else np.zeros(3)
     sig = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma, dtype=np.float64),
@@ -256,5 +272,7 @@ def cylinder_test(points, query, indptr, idx, axes, sigma, *, sensor=None):
     cylinder_rows(local, np.ascontiguousarray(query, dtype=np.int64),
                   np.ascontiguousarray(indptr, dtype=np.int64), np.ascontiguousarray(idx),
                   np.ascontiguousarray(axes, dtype=np.float64), sens, has_sensor, sig, stat,
-                  dof, radius)
+                  dof, radius, centre)
+    if return_centre:
+        return stat, dof, radius, centre + origin
     return stat, dof, radius

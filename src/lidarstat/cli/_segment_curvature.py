@@ -11,6 +11,13 @@ def add_arguments(group):
     """Options only the curvature method has."""
     group.add_argument("--normal-angle", type=float, default=10.0,
                        help="largest normal angle between neighbours of a unit (degrees)")
+    group.add_argument("--curvature-frame", default="z", choices=("z", "auto", "pca"),
+                       help="local frame of the curvature quadrics (default z; 'auto' or "
+                       "'pca' with --curvature-noise normal also find walls, which --refine "
+                       "models in their own plane)")
+    group.add_argument("--curvature-noise", default=None, choices=("z", "range", "normal"),
+                       help="direction of the noise sigma (default z, or range with --sensor; "
+                       "'normal' for isotropic noise, needed for walls)")
     group.add_argument("--refine", action="store_true",
                        help="refine the units by SAR-FS (order 1 planar, 2 curved) and "
                        "intersect adjacent surfaces")
@@ -27,4 +34,6 @@ def run(args, cloud):
     return segment_curvature(cloud.xyz, radius=args.radius, sigma=args.sigma,
                              alpha=args.alpha, max_angle=args.normal_angle,
                              min_size=args.min_size or 30, refine=args.refine,
+                             frame=args.curvature_frame, noise=args.curvature_noise,
+                             sensor=args.sensor,
                              diagnostics=getattr(args, "diagnostics", None))

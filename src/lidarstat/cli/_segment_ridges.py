@@ -13,11 +13,17 @@ def add_arguments(group):
                        help="neighbours of the region-growing graph")
     group.add_argument("--band", type=float, default=None,
                        help="half-width of the barrier band around ridge lines")
+    group.add_argument("--extend", type=float, default=None,
+                       help="longest extension of ridge lines at their ends (default the "
+                            "jet radius; 0 none)")
+    group.add_argument("--ridges-only", action="store_true",
+                       help="barrier = ridge band only (no chi-square rejections, no "
+                            "jet-consistent edges, barrier points not assigned): session 2")
     add_jet_arguments(group)
 
 
 def run(args, cloud):
-    """Ridges, then region growing with the ridge band as a barrier."""
+    """Ridges, then the units between the ridge band and the jets the chi-square rejects."""
     from ..errors import InvalidParameterError
     from ..segment import ridge_segments, ridges
 
@@ -28,4 +34,7 @@ def run(args, cloud):
                  sigma=args.sigma, alpha=args.alpha, weight=args.weight, sensor=args.sensor,
                  noise=args.noise, ratio=args.ratio, min_length=args.min_length)
     min_size = args.min_size if args.min_size is not None else 50
-    return ridge_segments(cloud.xyz, res, k=args.ridge_grow_k, width=args.band, min_size=min_size)
+    full = not args.ridges_only
+    return ridge_segments(cloud.xyz, res, k=args.ridge_grow_k, width=args.band,
+                          min_size=min_size, extend=args.extend, chi2_barrier=full,
+                          consistent=full, assign=full)

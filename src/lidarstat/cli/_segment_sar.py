@@ -11,8 +11,11 @@ def add_arguments(group):
     """Options only the SAR method has."""
     group.add_argument("--criterion", default="rice", choices=("rice", "gcv", "press"),
                        help="bandwidth selector when --radius is omitted (default rice)")
-    group.add_argument("--adaptive", action="store_true",
-                       help="per-point bandwidths from Geary's local indicator")
+    group.add_argument("--adaptive", nargs="?", const="geary", default="multiscale",
+                       choices=("multiscale", "geary", "none"),
+                       help="per-point bandwidths: 'multiscale' (default: the largest of b, "
+                       "0.75 b, 0.5 b whose local plane passes the planarity test), 'geary' "
+                       "(Geary's local indicator; also the bare flag) or 'none'")
     group.add_argument("--sar-degree", default="1",
                        help="polynomial order of the units: 1 (planes), 2, 3 or 'auto' "
                        "(t tests up to 3)")

@@ -22,6 +22,11 @@ from . import _plane_kernels as _k
 #: (u = mean leverage of the points themselves); 'press' uses leave-one-out residuals.
 CRITERIA = ("press", "gcv", "rice")
 
+#: Per-point bandwidth choices of :func:`local_planes` (``adaptive``).
+ADAPTIVE_MODES = ("none", "geary", "multiscale")
+#: Bandwidth ratios tried by the multi-scale choice, largest first.
+MULTISCALE = (1.0, 0.75, 0.5)
+
 #: Fields written by :meth:`LocalPlaneFit.to_fields`.
 PLANE_FIELDS = ("z0", "slope_e", "slope_n", "se_z0", "se_slope_e", "se_slope_n",
                 "plane_p", "plane_pass", "bandwidth", "neighbors")
@@ -127,32 +132,40 @@ def _run_kernel(points, nbh, bandwidth, min_neighbors):
 CHUNK = 200_000
 
 
-def _chunks(points, radius):
-    """Yield CSR neighbourhoods (2-D discs) of consecutive spatially coherent chunks."""
+def _chunks(points, radius, query=None):
+    """Yield CSR neighbourhoods (2-D discs) of consecutive spatially coherent chunks of
+    the query points (all points by default)."""
     from ..neighbors import CellIndex
 
     n = points.shape[0]
-    if n <= CHUNK:
-        yield radius_neighbors(points, radius, dim=2)
+    m = n if query is None else query.size
+    if m <= CHUNK:
+        yield radius_neighbors(points, radius, dim=2, query=query)
         return
     index = CellIndex(points, radius, dim=2)
-    for start in range(0, n, CHUNK):
-        q = np.sort(index.order[start:start + CHUNK])
+    order = index.order
+    if query is not None:
+        wanted = np.zeros(n, dtype=bool)
+        wanted[query] = True
+        order = order[wanted[order]]
+    for start in range(0, m, CHUNK):
+        q = np.sort(order[start:start + CHUNK])
         indptr, idx, dist = index.query(points[q])
         yield Neighborhoods(indptr, idx, dist, n, kind="disc", radius=radius, query=q)
 
 
-def _chunked(points, radius, bw, min_neighbors):
+def _chunked(points, radius, bw, min_neighbors, query=None, out=None):
+    """Fit the query points (all by default) into `out` (new NaN arrays by default)."""
     n = points.shape[0]
-    beta = np.full((n, 3), np.nan)
-    cof = np.full((n, 3, 3), np.nan)
-    st = np.full((n, 7), np.nan)
-    status = np.zeros(n, dtype=np.uint8)
-    for nbh in _chunks(points, radius):
+    if out is None:
+        out = (np.full((n, 3), np.nan), np.full((n, 3, 3), np.nan), np.full((n, 7), np.nan),
+               np.zeros(n, dtype=np.uint8))
+    beta, cof, st, status = out
+    for nbh in _chunks(points, radius, query):
         q = nbh.query_indices()
-        out = _run_kernel(points, nbh, bw[q], min_neighbors)
-        beta[q], cof[q], st[q], status[q] = out
-    return beta, cof, st, status
+        res = _run_kernel(points, nbh, bw[q], min_neighbors)
+        beta[q], cof[q], st[q], status[q] = res
+    return out
 
 
 #: Quantile of the local variances used for the noise estimate.
@@ -189,7 +202,8 @@ def _check_neighborhoods(nbh, n, radius, func):
 
 
 def local_planes(points, bandwidth, *, sigma=None, alpha=0.05, adaptive=False,
-                 adaptive_range=(0.5, 2.0), min_neighbors=6, neighborhoods=None):
+                 adaptive_range=(0.5, 2.0), scales=MULTISCALE, min_neighbors=6,
+                 neighborhoods=None):
     """Fit a tricube-weighted local plane around every point (eq. 6-7 of seed 002).
 
     Parameters
@@ -203,10 +217,15 @@ def local_planes(points, bandwidth, *, sigma=None, alpha=0.05, adaptive=False,
         the local variances (:data:`SIGMA_QUANTILE`), corrected by the chi-square quantile.
     alpha : float, optional
         Level of the planarity test.
-    adaptive : bool, optional
-        Per-point bandwidths from Geary's local indicator (:func:`geary_bandwidths`).
+    adaptive : bool or {'none', 'geary', 'multiscale'}, optional
+        Per-point bandwidths. ``True`` or ``'geary'``: from Geary's local indicator
+        (:func:`geary_bandwidths`). ``'multiscale'``: the largest ``b * scale`` (over
+        `scales`) whose local plane passes the planarity test, so that windows near roof
+        edges shrink until they hold one plane (points no scale accepts keep b).
     adaptive_range : (float, float), optional
-        Bounds of ``b_i / b`` for the adaptive bandwidth.
+        Bounds of ``b_i / b`` for the Geary bandwidth.
+    scales : sequence of float, optional
+        Decreasing bandwidth ratios of the multi-scale choice, starting at 1.
     min_neighbors : int, optional
         Fewest neighbours with positive weight for a fit (at least 3).
     neighborhoods : Neighborhoods, optional
@@ -249,8 +268,17 @@ def local_planes(points, bandwidth, *, sigma=None, alpha=0.05, adaptive=False,
                                  closed="left", integer=True)
     if sigma is not None:
         sigma = check_scalar(sigma, "sigma", func=func, low=0.0)
+    mode = _adaptive_mode(adaptive, func)
     lo, hi = (1.0, 1.0)
-    if adaptive:
+    if mode == "multiscale":
+        scales = np.asarray(scales, dtype=np.float64).ravel()
+        if scales.size == 0 or scales[0] != 1.0 or np.any(np.diff(scales) >= 0) \
+                or scales[-1] <= 0:
+            raise InvalidParameterError(f"The 'scales' parameter of {func} must decrease "
+                                        f"from 1 to a positive ratio. Got {scales!r}.")
+        return _multiscale_planes(points, b, scales, sigma, alpha, min_neighbors,
+                                  neighborhoods, func)
+    if mode == "geary":
         lo, hi = (float(v) for v in adaptive_range)
         if not 0 < lo <= 1.0 <= hi:
             raise InvalidParameterError(f"The 'adaptive_range' parameter of {func} must "
@@ -260,21 +288,100 @@ def local_planes(points, bandwidth, *, sigma=None, alpha=0.05, adaptive=False,
     if neighborhoods is not None:
         _check_neighborhoods(neighborhoods, n, radius, func)
         bw = geary_bandwidths(points, b, neighborhoods=neighborhoods, bounds=(lo, hi)) \
-            if adaptive else np.full(n, b)
+            if mode == "geary" else np.full(n, b)
         beta, cof, st, status = _run_kernel(points, neighborhoods, bw, min_neighbors)
     else:
-        bw = geary_bandwidths(points, b, bounds=(lo, hi)) if adaptive else np.full(n, b)
+        bw = geary_bandwidths(points, b, bounds=(lo, hi)) if mode == "geary" \
+            else np.full(n, b)
         beta, cof, st, status = _chunked(points, radius, bw, min_neighbors)
+    return _assemble(beta, cof, st, status, bw, sigma, alpha,
+                     {"bandwidth": b, "adaptive": mode, "alpha": alpha})
+
+
+def _adaptive_mode(adaptive, func):
+    if adaptive is False or adaptive is None:
+        return "none"
+    if adaptive is True:
+        return "geary"
+    check_option(adaptive, "adaptive", ADAPTIVE_MODES, func=func)
+    return adaptive
+
+
+def _local_variances(st):
     with np.errstate(invalid="ignore", divide="ignore"):
-        local_s2 = st[:, 0] / st[:, 1]
-        nu = st[:, 1] ** 2 / st[:, 2]
-    sigma2 = sigma ** 2 if sigma is not None else _robust_sigma2(local_s2, nu)
+        return st[:, 0] / st[:, 1], st[:, 1] ** 2 / st[:, 2]
+
+
+def _assemble(beta, cof, st, status, bw, sigma, alpha, params, sigma2=None):
+    local_s2, nu = _local_variances(st)
+    if sigma2 is None:
+        sigma2 = sigma ** 2 if sigma is not None else _robust_sigma2(local_s2, nu)
     planarity = variance_test_satterthwaite(st[:, 0], st[:, 1], st[:, 2], sigma2, alpha)
     return LocalPlaneFit(beta=beta, cofactor=cof, sigma2=float(sigma2), local_sigma2=local_s2,
                          planarity=planarity, leverage=st[:, 3], resid=st[:, 4],
                          neighbors=np.nan_to_num(st[:, 5]).astype(np.int32), status=status,
-                         bandwidth=bw, params={"bandwidth": b, "adaptive": bool(adaptive),
-                                               "alpha": alpha})
+                         bandwidth=bw, params=params)
+
+
+def _multiscale_planes(points, b, scales, sigma, alpha, min_neighbors, neighborhoods, func):
+    """Per point, the largest bandwidth ``b * scale`` whose local plane passes the
+    planarity test (an intersection-of-confidence-intervals / Lepski-type choice: the
+    widest window still consistent with one plane); points no scale accepts keep b.
+
+    sigma^2 is estimated once at b (lower quartile of the local variances), so every scale
+    is tested against the same noise level.
+    """
+    n = points.shape[0]
+    bw = np.full(n, b)
+    if neighborhoods is not None:
+        _check_neighborhoods(neighborhoods, n, b, func)
+        out = _run_kernel(points, neighborhoods, bw, min_neighbors)
+    else:
+        out = _chunked(points, b, bw, min_neighbors)
+    beta, cof, st, status = out
+    local_s2, nu = _local_variances(st)
+    sigma2 = sigma ** 2 if sigma is not None else _robust_sigma2(local_s2, nu)
+
+    def failing(st_, status_):
+        test = variance_test_satterthwaite(st_[:, 0], st_[:, 1], st_[:, 2], sigma2, alpha)
+        return (status_ != _k.STATUS_OK) | test.reject
+
+    todo = np.flatnonzero(failing(st, status))
+    for scale in scales[1:]:
+        if todo.size == 0:
+            break
+        bw_s = np.full(n, b * scale)
+        if neighborhoods is not None:
+            sub = _subset_neighborhoods(neighborhoods, todo)
+            res = _run_kernel(points, sub, bw_s[todo], min_neighbors)
+        else:
+            res = _fit_subset(points, b * scale, bw_s, min_neighbors, todo)
+        ok = ~failing(res[2], res[3])
+        take = todo[ok]
+        beta[take], cof[take], st[take], status[take] = (a[ok] for a in res)
+        bw[take] = b * scale
+        todo = todo[~ok]
+    return _assemble(beta, cof, st, status, bw, sigma, alpha,
+                     {"bandwidth": b, "adaptive": "multiscale", "alpha": alpha,
+                      "scales": tuple(float(v) for v in scales)}, sigma2=sigma2)
+
+
+def _fit_subset(points, radius, bw, min_neighbors, query):
+    """Fits of the `query` points only, as (len(query), ...) arrays."""
+    full = _chunked(points, radius, bw, min_neighbors, query=query)
+    return tuple(a[query] for a in full)
+
+
+def _subset_neighborhoods(nbh, rows):
+    """The CSR rows `rows` of `nbh` as a query-subset Neighborhoods."""
+    starts, ends = nbh.indptr[rows], nbh.indptr[rows + 1]
+    counts = ends - starts
+    indptr = np.concatenate(([0], np.cumsum(counts))).astype(nbh.indptr.dtype)
+    take = np.concatenate([np.arange(a, e) for a, e in zip(starts, ends)]) if rows.size \
+        else np.empty(0, np.int64)
+    q = nbh.query_indices()[rows]
+    return Neighborhoods(indptr, nbh.indices[take], nbh.distances[take], nbh.n_points,
+                         kind=nbh.kind, radius=nbh.radius, query=q)
 
 
 def geary_bandwidths(points, bandwidth, *, neighborhoods=None, bounds=(0.5, 2.0)):

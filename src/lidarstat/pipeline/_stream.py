@@ -7,15 +7,17 @@ with the file. The steps:
 2. stream it again, appending each point (index, x, y, z) to the scratch file of every
    tile whose core or halo contains it;
 3. run the method on each tile (one after the other, in threads, or as Dask tasks) and
-   store its core points' results in disk-backed arrays (``numpy.memmap``) indexed by
-   point number;
+   append its core points' results, with their point numbers, to one scratch file per
+   output chunk and field (the points of a tile are spread over the whole file, so
+   results written into file-sized arrays would touch every page of them for every
+   tile: memory would grow with the file);
 4. stream the input a third time, writing every original field plus the results chunk by
-   chunk to a temporary output renamed when complete.
+   chunk to a temporary output renamed when complete; each chunk's results are read back
+   from its own scratch files.
 """
 
 from __future__ import annotations
 
-import mmap
 import os
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
@@ -71,18 +73,6 @@ def _bucket(src, grid, workdir, points_per_chunk):
     return sorted(used)
 
 
-def _release(results):
-    """Write dirty result pages to disk and drop them from this process's memory.
-
-    Pages of a file-backed map count in the resident set once touched; without this the
-    memory of a tiled run would grow with the file after all.
-    """
-    for arr in results.values():
-        arr.flush()
-        if hasattr(mmap, "MADV_DONTNEED"):
-            arr._mmap.madvise(mmap.MADV_DONTNEED)
-
-
 def process_file(func: Callable, src, dst, *, size: float, halo: float,
                  scheduler: str = "sync", workers: int | None = None,
                  points_per_chunk: int = 1_000_000, workdir=None, progress=None) -> Path:
@@ -130,7 +120,8 @@ def process_file(func: Callable, src, dst, *, size: float, halo: float,
     with tempfile.TemporaryDirectory(prefix=".lidarstat-tiles-", dir=parent) as tmp:
         tmp = Path(tmp)
         keys = _bucket(src, grid, tmp, points_per_chunk)
-        results: dict[str, np.memmap] = {}
+        # name -> (number, dtype, trailing shape) of every result field, first come
+        registry: dict[str, tuple] = {}
         done = 0
 
         def compute(key):
@@ -143,13 +134,23 @@ def process_file(func: Callable, src, dst, *, size: float, halo: float,
             return rec["i"][core], {name: arr[core] for name, arr in fields.items()}
 
         def put(rows, fields):
+            """Append the results of `rows` to the scratch file of their chunk and field."""
             nonlocal done
+            chunk = rows // points_per_chunk
+            order = np.argsort(chunk, kind="stable")
+            chunk = chunk[order]
+            cuts = np.flatnonzero(np.r_[True, chunk[1:] != chunk[:-1], True]) \
+                if rows.size else np.zeros(1, dtype=np.int64)
             for name, arr in fields.items():
-                if name not in results:
-                    results[name] = np.lib.format.open_memmap(
-                        tmp / f"field_{len(results)}.npy", mode="w+", dtype=arr.dtype,
-                        shape=(n,) + arr.shape[1:])
-                results[name][rows] = arr
+                if name not in registry:
+                    registry[name] = (len(registry), arr.dtype, arr.shape[1:])
+                j, dtype, shape = registry[name]
+                rec = np.empty(rows.size, [("row", "<i8"), ("v", dtype, shape)])
+                rec["row"] = rows[order]
+                rec["v"] = arr[order]
+                for s, e in zip(cuts[:-1], cuts[1:]):
+                    with open(tmp / f"result_{int(chunk[s])}_{j}.bin", "ab") as fh:
+                        rec[s:e].tofile(fh)
             done += rows.size
             if progress is not None:
                 progress(done, n)
@@ -171,17 +172,26 @@ def process_file(func: Callable, src, dst, *, size: float, halo: float,
                     out = dask.compute(*[dask.delayed(compute)(k) for k in part])
                 for rows, fields in out:
                     put(rows, fields)
-                _release(results)
         finally:
             if pool is not None:
                 pool.shutdown()
+
         def fields_of(start, chunk):
-            out = {name: np.array(arr[start:start + len(chunk)]) for name, arr in
-                   results.items()}
-            _release(results)
+            """The results of points ``start .. start + len(chunk)`` (zeros where none)."""
+            m = len(chunk)
+            out = {}
+            for name, (j, dtype, shape) in registry.items():
+                arr = np.zeros((m,) + shape, dtype=dtype)
+                rec_type = np.dtype([("row", "<i8"), ("v", dtype, shape)])
+                for c in range(start // points_per_chunk,
+                               (start + max(m, 1) - 1) // points_per_chunk + 1):
+                    path = tmp / f"result_{c}_{j}.bin"
+                    if path.exists():
+                        rec = np.fromfile(path, dtype=rec_type)
+                        inside = (rec["row"] >= start) & (rec["row"] < start + m)
+                        arr[rec["row"][inside] - start] = rec["v"][inside]
+                out[name] = arr
             return out
 
         rewrite(src, dst, fields_of, points_per_chunk=points_per_chunk)
-        for arr in results.values():  # release the maps before the folder is removed
-            arr._mmap.close()
     return dst

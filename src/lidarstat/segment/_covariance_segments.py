@@ -201,13 +201,7 @@ def reintegrate(points, labels, candidates, normals, centroids, nbh, sigma, *, n
         Labels with the reintegrated points set; unchanged elsewhere.
     """
     out = labels.copy()
-    # edges from an unlabelled candidate to a labelled point
-    rows = nbh.query_indices()
-    cand = np.ascontiguousarray(candidates, dtype=bool)
-    lab = np.ascontiguousarray(labels)
-    m = _ek.count_reintegration(nbh.indptr, nbh.indices, rows, cand, lab)
-    s, t = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
-    _ek.fill_reintegration(nbh.indptr, nbh.indices, rows, cand, lab, s, t)
+    s, t = _ek.reintegration_pairs(nbh, candidates, labels)  # unlabelled -> labelled
     sig = np.broadcast_to(np.asarray(sigma, dtype=np.float64), labels.shape)[t]
     dist = np.abs(np.einsum("ij,ij->i", points[s] - centroids[t], normals[t])) / sig
     fit = dist <= nsigma
@@ -221,8 +215,29 @@ def reintegrate(points, labels, candidates, normals, centroids, nbh, sigma, *, n
     return out
 
 
+def _union_plane_rms(points, labels, a, b):
+    """Orthogonal RMS of the plane fitted to the union of segments a and b (1-based ids)."""
+    from ._cylinders import group_outer
+
+    s = int(labels.max())
+    origin = points.mean(axis=0)
+    x = points - origin
+    ins = labels > 0
+    lab = labels[ins] - 1
+    cnt = np.bincount(lab, minlength=s).astype(np.float64)
+    cen = np.stack([np.bincount(lab, weights=x[ins, j], minlength=s) for j in range(3)], 1)
+    cen /= np.maximum(cnt, 1)[:, None]
+    S = group_outer(x[ins] - cen[lab], lab, s)
+    a0, b0 = a - 1, b - 1
+    na, nb = cnt[a0], cnt[b0]
+    dc = cen[a0] - cen[b0]
+    U = S[a0] + S[b0] + (na * nb / (na + nb))[:, None, None] * np.einsum("ij,ik->ijk", dc, dc)
+    w = np.linalg.eigvalsh(U)[:, 0]
+    return np.sqrt(np.maximum(w, 0.0) / (na + nb))
+
+
 def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=None,
-                   centroids=None):
+                   centroids=None, tolerance=1.5):
     """Merge touching segments that are one surface (split by a window, a pipe in front, ...).
 
     Two segments that share neighbour pairs merge when their plane normals differ by less
@@ -230,8 +245,11 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
     (plus the first's) of the other's plane, or - with per-point `normals` - when the
     median angle between the local normals of their touching points is below `max_angle`
     and the touching points lie on each other's local planes (median distance within the
-    plane tolerance): a smooth continuation, as a pipe or tank cut by spurious edge
-    points. Ids are renumbered by size.
+    plane tolerance): a smooth continuation. Either way the plane fitted to the union
+    must have an orthogonal RMS at most `tolerance` times the larger RMS of the two
+    (two parallel planes a recess apart are not one surface; pieces of one cylinder are
+    merged by :func:`lidarstat.segment._cylinders.merge_cylinders`). Ids are renumbered
+    by size.
     """
     from ._grow import adjacency, relabel
 
@@ -266,6 +284,15 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
         smooth[found] = (med[pos[found]] >= np.cos(np.radians(max_angle))) & \
             (moff[pos[found]] <= tol[found])
         ok |= smooth
+    if ok.any():
+        # one plane must fit the union about as well as each part: two parallel planes
+        # a recess apart (a window's back and its wall) are not one surface
+        pooled = np.sqrt((t["rms"][a] ** 2 * t["n_points"][a] + t["rms"][b] ** 2 *
+                          t["n_points"][b]) / (t["n_points"][a] + t["n_points"][b]))
+        cand = np.flatnonzero(ok)
+        union = _union_plane_rms(points, labels, pairs[cand, 0], pairs[cand, 1])
+        ok[cand] = union <= tolerance * np.maximum(pooled[cand], np.maximum(
+            t["rms"][a[cand]], t["rms"][b[cand]]))
     if not ok.any():
         return labels
     parent = np.arange(len(t["segment_id"]) + 1)
@@ -325,7 +352,10 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
     Returns
     -------
     Segmentation
-        ``labels``; ``table`` from :func:`segment_planes`; ``lines`` (Polylines);
+        ``labels``; ``table`` from :func:`segment_planes` plus the cylinder model of
+        :func:`lidarstat.segment._cylinders.segment_cylinders` (``model`` 1 plane, 2
+        cylinder, ``radius``, ``axis_x/y/z``, ``axis_point_x/y/z``, ``cylinder_p``);
+        ``lines`` (Polylines);
         ``fields``: ``point_class``, ``reintegrated``, ``NormalX/Y/Z``,
         ``SurfaceVariation``.
     """
@@ -397,6 +427,17 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         labels = new
     labels = merge_coplanar(pts, labels, grow_nbh, max_angle=min_angle / 4,
                             normals=feats.normals, centroids=feats.centroid)
+    from ._cylinders import merge_cylinders
+
+    pdir = np.stack([feats["PrincipalDirX"], feats["PrincipalDirY"], feats["PrincipalDirZ"]],
+                    axis=1)
+    # per-point axes (minimum-curvature directions) of the curved surface points only
+    curved_pts = surface & ~(classes["plane_p"] >= classes.alpha)
+    pt_axes = np.where(curved_pts[:, None], np.cross(feats.normals, pdir), np.nan)
+    labels, cylinders = merge_cylinders(
+        pts, labels, feats.normals, classes.sigma, max_angle=min_angle / 4,
+        sensor=feats.sensor if classes.meta.get("noise") == "range" else None,
+        point_axes=pt_axes)
     lines_out = None
     if lines:
         rk = nbh.distances.reshape(len(nbh), -1)[:, -1] if nbh.kind == "knn" else \
@@ -412,6 +453,9 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
                                       max_distance=2.0 * float(np.median(rk)))
         lines_out = fit_lines(x0, seg)
     table = segment_planes(pts, labels)
+    for key in ("model", "radius", "axis_x", "axis_y", "axis_z", "axis_point_x",
+                "axis_point_y", "axis_point_z", "cylinder_p"):
+        table[key] = cylinders[key]
     fields = {"point_class": pc.astype(np.uint8), "reintegrated": reint,
               "NormalX": feats["NormalX"], "NormalY": feats["NormalY"],
               "NormalZ": feats["NormalZ"], "SurfaceVariation": sv, **extra}

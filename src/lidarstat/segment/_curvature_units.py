@@ -63,7 +63,8 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_size=30):
 
 def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
                       grow_radius=None, min_size=30, refine=False, threshold=None,
-                      w_radius=None, fs_alpha=0.001, diagnostics=None, curv=None):
+                      w_radius=None, fs_alpha=0.001, diagnostics=None, curv=None,
+                      frame="z", noise=None, sensor=None):
     """Segment by tested curvature classes, optionally refined by SAR-FS (seed 000).
 
     Parameters
@@ -89,6 +90,15 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
         Refinement settings (:func:`refine_raw_clusters`); defaults radius and radius / 2.
     curv : CurvatureResult, optional
         Precomputed curvature of `points`.
+    frame : {'z', 'auto', 'pca'}
+        Local frame of the curvature quadrics (:func:`lidarstat.features.curvature`); with
+        'auto' or 'pca' walls get tested classes too. In the refinement, units more than
+        70 degrees from horizontal are modelled in their own plane's frame (table column
+        ``frame`` 1; see :func:`refine_cluster`).
+    noise, sensor
+        Direction of the noise and scanner position (:func:`lidarstat.features.curvature`);
+        the default airborne noise along z gives a wall no height noise, so walls need
+        ``noise='normal'`` (isotropic) or a `sensor` ('range').
 
     Returns
     -------
@@ -114,7 +124,8 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
     points = check_points(points, min_points=10)
     radius = check_scalar(radius, "radius", func=func, low=0.0)
     if curv is None:
-        curv = curvature(points, radius=radius, sigma=sigma, alpha=alpha)
+        curv = curvature(points, radius=radius, sigma=sigma, alpha=alpha, frame=frame,
+                         noise=noise, sensor=sensor)
     grow_radius = grow_radius or radius / 2.0
     labels, types = curvature_units(points, curv, grow_radius=grow_radius, max_angle=max_angle,
                                     min_size=min_size)

@@ -41,21 +41,12 @@ def _label_pair(la, lb, mode):
 
 
 @njit
-def count_label_pairs(indptr, indices, rows, labels, mode):
-    """Number of edges whose ends have labels ``0 < la < lb`` (mode 0) or ``la != lb > 0``."""
-    c = 0
-    for r in range(indptr.size - 1):
-        la = labels[rows[r]]
-        if la <= 0:
-            continue
-        for e in range(indptr[r], indptr[r + 1]):
-            c += _label_pair(la, labels[indices[e]], mode)
-    return c
+def label_pair_edges(indptr, indices, rows, labels, mode, fill, src, dst):
+    """Edges whose ends have labels ``0 < la < lb`` (mode 0) or ``la != lb``, both > 0.
 
-
-@njit
-def fill_label_pairs(indptr, indices, rows, labels, mode, src, dst):
-    """The edges counted by :func:`count_label_pairs`, in CSR order."""
+    Returns their number; with `fill` also writes them, in CSR order, to `src`, `dst`
+    (call once to count, allocate, once to fill).
+    """
     c = 0
     for r in range(indptr.size - 1):
         p = rows[r]
@@ -65,27 +56,16 @@ def fill_label_pairs(indptr, indices, rows, labels, mode, src, dst):
         for e in range(indptr[r], indptr[r + 1]):
             q = indices[e]
             if _label_pair(la, labels[q], mode):
-                src[c] = p
-                dst[c] = q
+                if fill:
+                    src[c] = p
+                    dst[c] = q
                 c += 1
-
-
-@njit
-def count_reintegration(indptr, indices, rows, candidates, labels):
-    """Edges from an unlabelled candidate point to a labelled one."""
-    c = 0
-    for r in range(indptr.size - 1):
-        p = rows[r]
-        if not candidates[p] or labels[p] != 0:
-            continue
-        for e in range(indptr[r], indptr[r + 1]):
-            c += labels[indices[e]] > 0
     return c
 
 
 @njit
-def fill_reintegration(indptr, indices, rows, candidates, labels, src, dst):
-    """The edges counted by :func:`count_reintegration`, in CSR order."""
+def reintegration_edges(indptr, indices, rows, candidates, labels, fill, src, dst):
+    """Edges from an unlabelled candidate point to a labelled one (count, then fill)."""
     c = 0
     for r in range(indptr.size - 1):
         p = rows[r]
@@ -94,9 +74,28 @@ def fill_reintegration(indptr, indices, rows, candidates, labels, src, dst):
         for e in range(indptr[r], indptr[r + 1]):
             q = indices[e]
             if labels[q] > 0:
-                src[c] = p
-                dst[c] = q
+                if fill:
+                    src[c] = p
+                    dst[c] = q
                 c += 1
+    return c
+
+
+def _two_pass(kernel, *args):
+    """Run a count-then-fill edge kernel: the selected ``(src, dst)`` as int64 arrays."""
+    none = np.empty(0, dtype=np.int64)
+    m = kernel(*args, False, none, none)
+    src = np.empty(m, dtype=np.int64)
+    dst = np.empty(m, dtype=np.int64)
+    kernel(*args, True, src, dst)
+    return src, dst
+
+
+def reintegration_pairs(nbh, candidates, labels):
+    """``(src, dst)`` of the edges from an unlabelled `candidates` point to a labelled one."""
+    return _two_pass(reintegration_edges, nbh.indptr, nbh.indices, nbh.query_indices(),
+                     np.ascontiguousarray(candidates, dtype=np.bool_),
+                     np.ascontiguousarray(labels))
 
 
 @njit
@@ -117,14 +116,8 @@ def label_pairs(nbh, labels, *, different_only=False):
     Default: ``0 < labels[src] < labels[dst]`` (each touching pair of points once per CSR
     direction it appears in); `different_only`: ``labels[src] != labels[dst]``, both > 0.
     """
-    labels = np.ascontiguousarray(labels)
-    rows = nbh.query_indices()
-    mode = 1 if different_only else 0
-    m = count_label_pairs(nbh.indptr, nbh.indices, rows, labels, mode)
-    src = np.empty(m, dtype=np.int64)
-    dst = np.empty(m, dtype=np.int64)
-    fill_label_pairs(nbh.indptr, nbh.indices, rows, labels, mode, src, dst)
-    return src, dst
+    return _two_pass(label_pair_edges, nbh.indptr, nbh.indices, nbh.query_indices(),
+                     np.ascontiguousarray(labels), 1 if different_only else 0)
 
 
 @njit

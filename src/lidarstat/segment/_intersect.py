@@ -79,6 +79,8 @@ def intersection_lines(points, labels, units, contact_points, contact_segments, 
                         "rms_gap": []}
     for a, b in pairs:
         ua, ub = units[a - 1], units[b - 1]
+        if getattr(ua, "frame", None) is not None or getattr(ub, "frame", None) is not None:
+            continue  # a unit in its own frame (a wall) is not a height field z(E, N)
         touch = np.unique(contact_points[key == a * base + b])
         if touch.size < 2:
             continue

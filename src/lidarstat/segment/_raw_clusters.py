@@ -123,20 +123,31 @@ def plane_edges(points, fit, neighborhoods, *, alpha=0.01, max_slope_diff=np.inf
     return edge_ok, ok
 
 
-def raw_clusters(points, fit, neighborhoods, *, alpha=0.01, min_size=10, **kwargs):
+def raw_clusters(points, fit, neighborhoods, *, alpha=0.01, min_size=10, core=None,
+                 **kwargs):
     """Region growing of raw clusters on the tested plane agreement (section 5.2).
 
     Connected components of the accepted edges among growable points (union-find,
     deterministic ids by decreasing size, the lead's :func:`components` kernel);
     clusters smaller than `min_size` are dropped (label 0).
 
+    With `core` (e.g. the points whose plane passed at the full bandwidth of a
+    multi-scale fit), only core points expand a cluster; other growable points are
+    attached to the first cluster that reaches them through an accepted edge but never
+    expand it, so the small windows near roof edges (whose slopes change gradually
+    across a hip line) cannot bridge two faces.
+
     Returns
     -------
     RawClusters
     """
-    from . import components, relabel
+    from . import components, grow_regions, relabel
 
     edge_ok, ok = plane_edges(points, fit, neighborhoods, alpha=alpha, **kwargs)
-    labels = components(neighborhoods, edge_ok=edge_ok, mask=ok)
+    if core is None:
+        labels = components(neighborhoods, edge_ok=edge_ok, mask=ok)
+    else:
+        core = np.asarray(core, dtype=bool)
+        labels = grow_regions(neighborhoods, edge_ok=edge_ok, can_grow=ok & core, mask=ok)
     labels = relabel(labels, min_size)
     return RawClusters(np.asarray(labels, dtype=np.int32), edge_ok, ok)

@@ -297,17 +297,7 @@ def assign_by_jets(pts, query, cand, labels, monge, frames, offset, per_unit, ou
             i = cand[r, t]
             if i < 0:
                 continue
-            w0 = pts[p, 0] - pts[i, 0]
-            w1 = pts[p, 1] - pts[i, 1]
-            w2 = pts[p, 2] - pts[i, 2]
-            o = offset[i]
-            w0 -= o * frames[i, 2, 0]
-            w1 -= o * frames[i, 2, 1]
-            w2 -= o * frames[i, 2, 2]
-            X = w0 * frames[i, 0, 0] + w1 * frames[i, 0, 1] + w2 * frames[i, 0, 2]
-            Y = w0 * frames[i, 1, 0] + w1 * frames[i, 1, 1] + w2 * frames[i, 1, 2]
-            Z = w0 * frames[i, 2, 0] + w1 * frames[i, 2, 1] + w2 * frames[i, 2, 2]
-            e = abs(Z - monge_height(monge[i], X, Y))
+            e = abs(_jet_residual(pts, p, i, monge, frames, offset))
             if math.isnan(e):
                 continue
             res[m] = e
@@ -364,3 +354,41 @@ def unit_boundaries(pts, indptr, idx, dist, labels, normals, max_dist, out):
                 s += acc
         if hit:
             out[i] = CREST if s > 0.0 else RAVINE
+
+
+@njit
+def _jet_residual(pts, p, i, monge, frames, offset):
+    """Height of pts[p] above the degree-4 Monge surface fitted at point i."""
+    w0 = pts[p, 0] - pts[i, 0] - offset[i] * frames[i, 2, 0]
+    w1 = pts[p, 1] - pts[i, 1] - offset[i] * frames[i, 2, 1]
+    w2 = pts[p, 2] - pts[i, 2] - offset[i] * frames[i, 2, 2]
+    X = w0 * frames[i, 0, 0] + w1 * frames[i, 0, 1] + w2 * frames[i, 0, 2]
+    Y = w0 * frames[i, 1, 0] + w1 * frames[i, 1, 1] + w2 * frames[i, 1, 2]
+    Z = w0 * frames[i, 2, 0] + w1 * frames[i, 2, 1] + w2 * frames[i, 2, 2]
+    return Z - monge_height(monge[i], X, Y)
+
+
+@njit_parallel
+def jet_consistent_edges(pts, indptr, idx, monge, frames, offset, tol, ok):
+    """Edges (i, j) along which each end lies on the other's fitted jet: |residual| <= tol.
+
+    A neighbour across a crease that the chi-square test missed (a one-sided neighbourhood
+    at a face corner, a weak fold) lies off the point's jet and the edge is cut. Points
+    without a jet (NaN) are judged by the other end's jet only.
+    """
+    n = indptr.size - 1
+    for i in prange(n):
+        for t in range(indptr[i], indptr[i + 1]):
+            j = idx[t]
+            if j == i:
+                ok[t] = True
+                continue
+            a = abs(_jet_residual(pts, j, i, monge, frames, offset))
+            b = abs(_jet_residual(pts, i, j, monge, frames, offset))
+            # a point without a jet (too few neighbours) gives no evidence: the other
+            # end's jet decides, and an edge between two such points is kept
+            if math.isnan(a):
+                a = 0.0 if math.isnan(b) else b
+            if math.isnan(b):
+                b = a
+            ok[t] = a <= tol and b <= tol

@@ -321,18 +321,27 @@ SEGMENT_FIELDS = {
 
 
 def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_size=50,
-                   chi2_barrier=True, assign=True):
+                   extend=None, chi2_barrier=True, consistent=True, assign=True):
     """Direct segmentation: surface units are the regions that creases and ridges separate.
 
     1. **Barrier.** Ridge points, the points within `width` of a ridge line (sampled every
-       width/4), and, with `chi2_barrier`, every point whose degree-4 jet the chi-square
-       test of the variance factor rejects (or that could not be fitted): a crease (a C0
+       width/4) or of its straight extensions beyond both ends (along the end tangent, up
+       to `extend`, as long as the cloud has a point within `width`: the detector fails
+       within about a jet radius of a border or of another crease, where lines stop short
+       of face corners), and, with `chi2_barrier`, every point whose degree-4 jet the
+       chi-square test of the variance factor rejects (points with too few neighbours for
+       a jet are no evidence either way and are not barriers): a crease (a C0
        discontinuity) inside a neighbourhood is exactly what a smooth jet cannot fit, so
        the rejections form a band about one jet radius wide on each side of every crease,
        and they close the gaps where the ridge lines stop (weak k'', thinly sampled faces,
        line ends at silhouettes).
     2. **Units.** Connected components of the other points over the k-nearest-neighbour
-       graph (:func:`lidarstat.segment.components`), smaller than `min_size` dropped.
+       graph (:func:`lidarstat.segment.components`), smaller than `min_size` dropped. With
+       `consistent`, an edge is used only when each end lies on the other's fitted jet
+       within the noise (``|residual| <= sqrt(2) z_{alpha/2} sigma``, sigma the jets'
+       noise): growth stays within a curvature-consistent band, and a crease that the
+       chi-square test missed (a face corner where the neighbourhood is one-sided, a
+       weak fold) still cuts the graph.
     3. **Assignment** (`assign`): each barrier point joins the unit whose jet explains it
        best: among the (up to 24) nearest unit points within the jet radius, each unit
        scores the median, over its five nearest, of the height of the point above their
@@ -357,9 +366,13 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_si
         the median distance to the k-th neighbour (so that no edge jumps over the band).
     min_size : int
         Smaller units get 0 (their points are then assigned like barrier points).
+    extend : float, optional
+        Longest extension of the ridge lines at their ends; default the jet radius (0: none).
     chi2_barrier : bool
-        Jets rejected by the chi-square test are barriers (default; False reproduces the
-        ridge-only barrier).
+        Jets rejected by the chi-square test are barriers (default; False, with
+        ``consistent=False`` and ``assign=False``, reproduces the ridge-only barrier).
+    consistent : bool
+        Grow only along jet-consistent edges (default).
     assign : bool
         Assign barrier points to units by their jets (default); False leaves them 0.
 
@@ -388,15 +401,34 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_si
     lines = ridge_result.lines
     ridge = ridge_result.fields["ridge"]
     ridge_band = ridge > 0
+    if extend is None:
+        extend = ridge_result.params.get("radius")
+        if extend is None:
+            extend = float(np.median(ridge_result.jets.fit.bandwidth))
+    extend = check_scalar(extend, "extend", func=func, low=0.0, closed="left")
     if len(lines):
         sampled, _ = lines.sample(width / 4.0)
-        dist, _ = cKDTree(sampled - origin).query(local, k=1)
+        tree = cKDTree(local)
+        ext = [_extend_ends(v - origin, tree, width, extend) for v in lines.vertices]
+        sampled = np.vstack([sampled - origin] + [e for e in ext if len(e)])
+        dist, _ = cKDTree(sampled).query(local, k=1)
         ridge_band |= dist < width
     band = ridge_band.copy()
-    if chi2_barrier:
-        band |= ridge_result.fields["chi2_pass"] != 1
-    labels = components(nb, mask=~band, min_size=min_size)
+    if chi2_barrier:  # rejected jets; unfitted points (too few neighbours) are no evidence
+        band |= ridge_result.fields["status"] == FitStatus.MODEL_REJECTED
     fit = ridge_result.jets.fit
+    monge = np.ascontiguousarray(fit.monge)
+    frames = np.ascontiguousarray(fit.frame)
+    offset = np.nan_to_num(fit.offset)
+    edge_ok = None
+    if consistent:
+        # growth only along edges where each end lies on the other's jet (within the
+        # noise, two-sided z at alpha): creases the chi-square test missed cut the graph
+        tol = float(_st.norm.isf(ridge_result.params["alpha"] / 2)) * ridge_result.jets.sigma
+        edge_ok = np.empty(nb.indices.size, np.bool_)
+        _rk.jet_consistent_edges(local, nb.indptr, nb.indices, monge, frames, offset,
+                                 np.sqrt(2.0) * tol, edge_ok)
+    labels = components(nb, edge_ok=edge_ok, mask=~band, min_size=min_size)
     if assign:
         labels = _assign_by_jets(local, labels, ~ridge_band, fit, ridge_result)
         # the ridge band (a line, smooth or not) is split by the nearest unit point
@@ -416,7 +448,30 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_si
                         method="ridges",
                         params={**ridge_result.params, "grow_k": k, "width": width,
                                 "min_size": min_size, "chi2_barrier": bool(chi2_barrier),
+                                "consistent": bool(consistent), "extend": extend,
                                 "assign": bool(assign)})
+
+
+def _extend_ends(v, tree, width, extend):
+    """Points every width/4 along the straight extensions of polyline `v` beyond both ends
+    (end tangent over the last ~2 widths), up to `extend`, while the cloud (`tree`) has a
+    point within `width`."""
+    if extend <= 0 or len(v) < 2:
+        return np.empty((0, 3))
+    out = []
+    steps = np.arange(1, int(extend / (width / 4.0)) + 1) * (width / 4.0)
+    for end, inner in ((v[-1], v[:-1][::-1]), (v[0], v[1:])):
+        d = np.linalg.norm(inner - end, axis=1)
+        back = inner[min(int(np.searchsorted(d, 2.0 * width)), len(inner) - 1)]
+        t = end - back
+        nt = np.linalg.norm(t)
+        if not nt > 0:
+            continue
+        cand = end + steps[:, None] * (t / nt)
+        near, _ = tree.query(cand, k=1, distance_upper_bound=width)
+        stop = np.flatnonzero(~np.isfinite(near))
+        out.append(cand[: stop[0] if stop.size else len(cand)])
+    return np.vstack(out) if out else np.empty((0, 3))
 
 
 def _assign_by_jets(local, labels, allowed, fit, ridge_result, n_candidates=24, per_unit=5):

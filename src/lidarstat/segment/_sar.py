@@ -35,6 +35,11 @@ from ._search_area import delaunay_graph, search_areas
 
 logger = logging.getLogger(__name__)
 
+#: When the noise is estimated, a second pass uses the median residual standard deviation
+#: of the first pass's units if it exceeds the local (lower-quartile) estimate by this
+#: factor (see :func:`segment_sar`, `sigma`).
+SIGMA_RATIO = 1.25
+
 #: Forward Search stop reasons written to the table (``fs_stop``).
 STOP_CODES = {"exhausted": 0, "f": 1, "residual": 2, "not searched": 3}
 
@@ -58,6 +63,31 @@ def _two_hop_contacts(graph, labels):
     p, s = reach.row, reach.col + 1
     keep = lab[p] & (labels[p] != s)
     return p[keep], s[keep]
+
+
+def _area_contacts(points, graph, labels, threshold):
+    """(point, other segment) pairs: labelled points touching another segment's search area.
+
+    The search area of a segment (its points plus the unlabelled points reachable within
+    a Delaunay path of `threshold`, :func:`search_areas`) is widened by one triangulation
+    edge; labelled points of other segments inside it are contacts. Two parts of one roof
+    plane separated by a dormer or a chimney (unlabelled points a few metres wide) are
+    thereby candidates for the merge, which two-hop adjacency misses.
+    """
+    n = labels.size
+    indptr, idx, _ = graph
+    lab = labels > 0
+    s_max = int(labels.max()) if n else 0
+    areas = search_areas(points, labels, threshold, graph=graph)
+    owner = np.repeat(np.arange(s_max), np.diff(areas.indptr))
+    rows = np.r_[np.flatnonzero(lab), areas.indices]
+    cols = np.r_[labels[lab] - 1, owner]
+    M = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, s_max))
+    G = sp.csr_matrix((np.ones(idx.size), idx, indptr), shape=(n, n))
+    reach = (G @ M + M).tocoo()
+    p, c = reach.row, reach.col + 1
+    keep = lab[p] & (labels[p] != c)
+    return p[keep], c[keep]
 
 
 def _assign(units, n):
@@ -88,7 +118,8 @@ def _table(points, labels, units, keep_units):
     powers = [(i - j, j) for i in range(max_deg + 1) for j in range(i + 1)]
     cols = {k: np.full(s, np.nan) for k in
             ["degree", "n_s", "n_sa", "m", "rho", "se_rho", "sigma_sar", "sigma", "E0", "N0",
-             "normal_x", "normal_y", "normal_z", "slope_deg", "fs_stop", "rho_points"]}
+             "normal_x", "normal_y", "normal_z", "slope_deg", "fs_stop", "rho_points",
+             "frame"]}
     for pe, pn in powers:
         cols[f"c_{pe}{pn}"] = np.full(s, np.nan)
         cols[f"se_c_{pe}{pn}"] = np.full(s, np.nan)
@@ -101,18 +132,22 @@ def _table(points, labels, units, keep_units):
         cols["sigma_sar"][k] = np.sqrt(unit.fit.sigma2)
         cols["sigma"][k] = unit.sigma
         cols["E0"][k], cols["N0"][k] = unit.basis.center
-        pw, coef, se = unit.monomials()
-        for (pe, pn), c, e in zip(pw, coef, se):
-            cols[f"c_{pe}{pn}"][k] = c
-            cols[f"se_c_{pe}{pn}"][k] = e
-        cen = np.array([[table["centroid_x"][k], table["centroid_y"][k]]])
-        g = unit.basis.gradient(unit.surface, cen)[0]
-        nrm = np.array([-g[0], -g[1], 1.0]) / np.sqrt(1.0 + g @ g)
+        cols["frame"][k] = 0 if unit.frame is None else 1
+        if unit.frame is None:  # coefficients of z(E, N); a wall's are in its own frame
+            pw, coef, se = unit.monomials()
+            for (pe, pn), c, e in zip(pw, coef, se):
+                cols[f"c_{pe}{pn}"][k] = c
+                cols[f"se_c_{pe}{pn}"][k] = e
+        else:
+            cols["E0"][k] = cols["N0"][k] = np.nan
+        cen = np.array([[table["centroid_x"][k], table["centroid_y"][k],
+                         table["centroid_z"][k]]])
+        nrm = unit.normal(cen)[0]
         cols["normal_x"][k], cols["normal_y"][k], cols["normal_z"][k] = nrm
         cols["slope_deg"][k] = np.degrees(np.arccos(nrm[2]))
         cols["fs_stop"][k] = STOP_CODES[unit.fs.stop_reason]
         cols["rho_points"][k] = unit.rho_points
-    for k in ("degree", "n_s", "n_sa", "m", "fs_stop", "rho_points"):
+    for k in ("degree", "n_s", "n_sa", "m", "fs_stop", "rho_points", "frame"):
         cols[k] = cols[k].astype(np.int64)
     table.update(cols)
     return table
@@ -157,8 +192,11 @@ def _chow_pvalue(ma, mb):
     return float(_st.f.sf(f, r, df2))
 
 
-def _merge_groups(points, unit_labels, units, graph, alpha):
-    """Union of adjacent units whose surfaces do not differ (Chow test at `alpha`)."""
+def _merge_groups(points, unit_labels, units, graph, alpha, threshold):
+    """Union of nearby units whose surfaces do not differ (Chow test at `alpha`).
+
+    Candidates are pairs with at least 4 contacts (:func:`_area_contacts` within
+    `threshold`)."""
     n_units = len(units)
     parent = np.arange(n_units + 1)
 
@@ -170,27 +208,30 @@ def _merge_groups(points, unit_labels, units, graph, alpha):
 
     if n_units < 2:
         return parent
-    pts_c, seg_c = _two_hop_contacts(graph, unit_labels)
+    pts_c, seg_c = _area_contacts(points, graph, unit_labels, threshold)
     a = unit_labels[pts_c]
     lo, hi = np.minimum(a, seg_c), np.maximum(a, seg_c)
     base = n_units + 1
     keys, counts = np.unique(lo.astype(np.int64) * base + hi, return_counts=True)
-    order = np.argsort(unit_labels, kind="stable")
-    starts = np.searchsorted(unit_labels[order], np.arange(n_units + 2))
     origin = points[:, :2].min(axis=0)
     scale = max(float(np.ptp(points[:, :2], axis=0).max()), 1.0)
     z0 = float(points[:, 2].min())
     moments = {}
 
     def mom(u):
+        # the raw cluster, not the unit's final points: the best-fit assignment splits the
+        # points of one plane between two units by the sign of their residuals, and on
+        # such a residual-selected split the Chow test rejects one common plane (p down to
+        # 1e-5 on the synthetic town); the raw clusters are selected by the local tests.
         if u not in moments:
-            idx = order[starts[u]:starts[u + 1]]
-            moments[u] = _moments(points, idx, units[u - 1].degree, origin, scale, z0)
+            moments[u] = _moments(points, units[u - 1].raw, units[u - 1].degree, origin,
+                                  scale, z0)
         return moments[u]
 
     for key in keys[counts >= 4]:
         ua, ub = int(key // base), int(key % base)
-        if units[ua - 1].degree != units[ub - 1].degree:
+        if units[ua - 1].degree != units[ub - 1].degree or units[ua - 1].frame is not None \
+                or units[ub - 1].frame is not None:
             continue
         if _chow_pvalue(mom(ua), mom(ub)) >= alpha:
             ra, rb = find(ua), find(ub)
@@ -199,14 +240,46 @@ def _merge_groups(points, unit_labels, units, graph, alpha):
     return np.array([find(u) for u in range(n_units + 1)])
 
 
-def _merged_unit(points, idx, group, w_radius, degree):
-    """One unit over the union of a group's points, Table 6 sizes summed."""
-    unit = refine_cluster(points, idx, np.empty(0, np.int64), w_radius=w_radius,
-                          degree=degree)
+def _refit_unit(points, idx, group, w_radius):
+    """A unit refitted on its final points `idx` (rho by ML, theta, sigma^2, the surface),
+    keeping the Table 6 sizes (summed over a merged group) and the Forward Search record."""
     big = max(group, key=lambda u: u.m)
+    unit = refine_cluster(points, idx, np.empty(0, np.int64), w_radius=w_radius,
+                          degree=group[0].degree, rho_hint=big.fit.rho)
     return dataclasses.replace(unit, n_s=sum(u.n_s for u in group),
                                n_sa=sum(u.n_sa for u in group), m=sum(u.m for u in group),
                                fs=big.fs, raw=np.concatenate([u.raw for u in group]))
+
+
+def _final_units(points, labels, units, w_radius):
+    """Every segment refitted on its final points (after the best-fit assignment, the
+    merge and the size filter): the accepted sets of the Forward Search overlap, and the
+    points given to a neighbouring unit no longer pull this unit's plane. A segment whose
+    refit fails keeps its Forward Search fit."""
+    order = np.argsort(labels, kind="stable")
+    starts = np.searchsorted(labels[order], np.arange(len(units) + 2))
+    out = []
+    for s, unit in enumerate(units, start=1):
+        idx = order[starts[s]:starts[s + 1]]
+        try:
+            out.append(_refit_unit(points, idx, [unit], w_radius))
+        except (np.linalg.LinAlgError, InvalidParameterError, ValueError):
+            out.append(unit)
+    return out
+
+
+#: Units whose residual standard deviation exceeds this multiple of the local noise
+#: estimate are not planes at that noise (terrain, trees, curved or merged faces) and do
+#: not enter the units' noise estimate.
+SIGMA_UNIT_MAX = 3.0
+
+
+def _units_noise(units, sigma_local):
+    """Median residual standard deviation of the units that can be planes at the noise
+    level: those within :data:`SIGMA_UNIT_MAX` times the local estimate (NaN if none)."""
+    sd = np.array([u.sigma for u in units])
+    sd = sd[np.isfinite(sd) & (sd <= SIGMA_UNIT_MAX * sigma_local)]
+    return float(np.median(sd)) if sd.size else np.nan
 
 
 def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, max_degree=3,
@@ -259,7 +332,7 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
             unit = refine_cluster(points, raw, extra, w_radius=w_radius,
                                   degree=deg, max_degree=max_degree, alpha=alpha,
                                   alpha_residual=alpha_residual, stop=stop, block=block,
-                                  max_steps=max_steps)
+                                  max_steps=max_steps, covariance=False)
             units.append(unit)
         except (np.linalg.LinAlgError, InvalidParameterError, ValueError) as exc:
             skipped.append((c, int(raw.size), str(exc)))
@@ -271,7 +344,7 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
                       LidarstatWarning, stacklevel=3)
     unit_labels = _assign(units, n)
     if merge_alpha is not None and len(units) > 1:
-        root = _merge_groups(points, unit_labels, units, graph, merge_alpha)
+        root = _merge_groups(points, unit_labels, units, graph, merge_alpha, threshold)
         groups = {}
         for u in range(1, len(units) + 1):
             groups.setdefault(int(root[u]), []).append(u)
@@ -281,8 +354,8 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
             if len(members) > 1:
                 idx = np.flatnonzero(np.isin(unit_labels, members))
                 try:
-                    merged = _merged_unit(points, idx, [units[u - 1] for u in members],
-                                          w_radius, units[members[0] - 1].degree)
+                    merged = _refit_unit(points, idx, [units[u - 1] for u in members],
+                                         w_radius)
                 except (np.linalg.LinAlgError, InvalidParameterError, ValueError):
                     merged = None  # keep the members apart
             if merged is not None:
@@ -300,8 +373,8 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
     for s in range(1, int(labels.max()) + 1 if n else 1):
         u = np.bincount(unit_labels[labels == s]).argmax() - 1
         keep_units.append(int(u))
-    table = _table(points, labels, units, keep_units)
-    kept = [units[u] for u in keep_units]
+    kept = _final_units(points, labels, [units[u] for u in keep_units], w_radius)
+    table = _table(points, labels, kept, list(range(len(kept))))
     if len(kept) > 1:
         pts_c, seg_c = _two_hop_contacts(graph, labels)
         lines = intersection_lines(points, labels, kept, pts_c, seg_c, max_shift=threshold)
@@ -329,7 +402,7 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
 
 def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.05,
                 fs_alpha=0.001, alpha_residual=0.001, stop="both", degree=1, max_degree=3,
-                adaptive=False, grow_radius=None, threshold=None, w_radius=None,
+                adaptive="multiscale", grow_radius=None, threshold=None, w_radius=None,
                 min_size=30, block=1, max_steps=500, diagnostics=None, progress=None,
                 rng=0):
     """Segment a cloud into planar (or polynomial) surface units by SAR-FS (seed 002).
@@ -341,7 +414,14 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
     bandwidth : float, optional
         Plane-regression bandwidth b; default chosen by :func:`select_plane_bandwidth`.
     sigma : float, optional
-        Height noise; default estimated from the local planes.
+        Height noise. Default: estimated in up to two passes. The first uses the lower
+        quartile of the local-plane variances (the noise of the smoothest surfaces); when
+        the median residual standard deviation of the resulting units about their
+        fitted surfaces (units within :data:`SIGMA_UNIT_MAX` times that estimate: the
+        others are not planes at this noise) exceeds it by more than
+        :data:`SIGMA_RATIO` (real surveys: strip offsets, roof texture), the
+        segmentation is redone with that median, the noise about actual roof planes. ``params`` records ``sigma_local``, ``sigma_units`` and
+        ``sigma_passes``.
     alpha : float
         Level of the local planarity test.
     edge_alpha : float
@@ -352,8 +432,13 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
         Polynomial order of every unit (1: planes); None chooses it by t tests.
     max_degree : int
         Largest order considered when `degree` is None.
-    adaptive : bool
-        Geary adaptive bandwidths (section 4.1).
+    adaptive : bool or {'multiscale', 'geary', 'none'}
+        Per-point bandwidths of the local planes. ``'multiscale'`` (default): every point
+        takes the largest of b, 0.75 b, 0.5 b whose local plane passes the planarity test,
+        and raw clusters grow only through points planar at b (the others are attached,
+        never expand), so faces narrower than the automatic b keep their edge points
+        without windows bridging hip lines. ``True``/``'geary'``: Geary's local
+        indicator (section 4.1). ``False``/``'none'``: one b for the whole cloud.
     grow_radius : float, optional
         Radius of the region-growing graph (default ``min(b, 2 * spacing)``).
     threshold : float, optional
@@ -400,18 +485,33 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
     grow_radius = grow_radius or min(b, 2.0 * spacing)
     threshold = threshold or 3.0 * b
     w_radius = w_radius or 1.5 * spacing
-    fit = local_planes(points, b, sigma=sigma, alpha=alpha, adaptive=adaptive)
+    graph = delaunay_graph(points)
     nbh = radius_neighbors(points, grow_radius, dim=2)
-    raw = raw_clusters(points, fit, nbh, alpha=edge_alpha, min_size=min_size)
-    seg = refine_raw_clusters(points, raw.labels, threshold=threshold, w_radius=w_radius,
-                              degrees=degree, max_degree=max_degree, alpha=fs_alpha,
-                              alpha_residual=alpha_residual, stop=stop, block=block,
-                              max_steps=max_steps, min_size=min_size, diagnostics=diagnostics,
-                              progress=progress)
+
+    def one_pass(noise):
+        fit = local_planes(points, b, sigma=noise, alpha=alpha, adaptive=adaptive)
+        core = (fit.bandwidth >= b) if fit.params.get("adaptive") == "multiscale" else None
+        raw = raw_clusters(points, fit, nbh, alpha=edge_alpha, min_size=min_size, core=core)
+        seg = refine_raw_clusters(points, raw.labels, threshold=threshold, w_radius=w_radius,
+                                  degrees=degree, max_degree=max_degree, alpha=fs_alpha,
+                                  alpha_residual=alpha_residual, stop=stop, block=block,
+                                  max_steps=max_steps, min_size=min_size, graph=graph,
+                                  diagnostics=diagnostics, progress=progress)
+        return fit, seg
+
+    fit, seg = one_pass(sigma)
+    sigma_local = float(np.sqrt(fit.sigma2))
+    sigma_units = _units_noise(seg.units, sigma_local)
+    passes = 1
+    if sigma is None and sigma_units > SIGMA_RATIO * sigma_local:
+        fit, seg = one_pass(sigma_units)
+        passes = 2
     f = fit.to_fields()
     seg.fields.update({"z0": f["z0"], "slope_e": f["slope_e"], "slope_n": f["slope_n"],
                        "plane_pass": f["plane_pass"]})
     seg.params.update({"bandwidth": b, "sigma": float(np.sqrt(fit.sigma2)),
+                       "sigma_local": sigma_local, "sigma_units": sigma_units,
+                       "sigma_passes": passes,
                        "grow_radius": grow_radius, "spacing": spacing, "adaptive": adaptive,
                        "degree": degree})
     return seg

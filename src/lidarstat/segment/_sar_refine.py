@@ -9,8 +9,11 @@
    held at its raw-cluster value: each step is a rank-one least-squares update, the paper's
    F test of ``theta(m) - theta(n_s)`` and the deletion-residual envelope are monitored.
 5. theta and sigma^2 re-estimated on the m accepted points (eq. 3.1-3.2, rho from step
-   3); the surface reported is the polynomial closest to the SAR mean
-   ``(I - rho W)^-1 A theta``.
+   3); the surface reported is the least-squares trend of the accepted points, the
+   direct estimate of the polynomial closest to the SAR mean ``(I - rho W)^-1 A theta``,
+   with its covariance under the SAR model (:func:`lidarstat.stats.sar_trend`).
+   :func:`lidarstat.segment.refine_raw_clusters` refits every final segment (rho by ML
+   included) on its final points.
 """
 
 from __future__ import annotations
@@ -19,15 +22,18 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-
+import scipy.sparse as sp
 from scipy.spatial import cKDTree
-from ..stats._sar import (PolynomialBasis, SARFit, sar_fit, sar_mean_surface, select_degree,
-                          weights_matrix)
+
+from ..stats._sar import PolynomialBasis, SARFit, sar_fit, sar_trend, select_degree
 from ._forward_search import ForwardSearchResult, forward_search
 
 #: Largest subset on which rho is estimated by full ML; larger clusters estimate rho on
 #: their `SAR_MAX` points nearest to the medoid (a contiguous patch) and theta on all.
 SAR_MAX = 3000
+#: Units whose raw cluster's normal is more than this many degrees from vertical (walls)
+#: are modelled in their own frame (:func:`refine_cluster`, ``frame='auto'``).
+FRAME_SLOPE = 70.0
 #: Largest raw cluster the Forward Search grows (see :func:`refine_cluster`).
 MAX_SEARCH = 20000
 
@@ -52,9 +58,11 @@ class SurfaceUnit:
         Final fit on the accepted points: rho (and its standard error) from the ML fit
         on the raw cluster, theta and sigma^2 by eq. 3.1-3.2 on the m accepted points.
     surface : (r,) ndarray
-        Orthogonal-basis coefficients of the surface (projection of the SAR mean).
+        Orthogonal-basis coefficients of the surface: the least-squares trend of the
+        accepted points (:func:`lidarstat.stats.sar_trend`), which estimates the
+        polynomial closest to the SAR mean ``(I - rho W)^-1 A theta``.
     surface_cov : (r, r) ndarray
-        Approximate covariance of `surface`: ``cov(theta) / (1 - rho)^2``.
+        Covariance of `surface` under the fitted SAR model (sandwich).
     sigma : float
         Residual standard deviation of the accepted points about `surface`.
     fs : ForwardSearchResult
@@ -64,6 +72,12 @@ class SurfaceUnit:
         :data:`SAR_MAX` of its points).
     raw : (n_s,) ndarray of int64
         Indices of the raw cluster.
+    frame : (4, 3) ndarray or None
+        None: the surface is a height field z(E, N) (the paper's model). Otherwise the
+        unit is steeper than :data:`FRAME_SLOPE` and is modelled in its own frame: row 0
+        the origin, rows 1-3 the unit vectors u, v, n (n the raw cluster's normal);
+        local coordinates are ``(x - origin) @ rows[1:].T``, the "height" is along n
+        and `basis`, `surface`, `residuals` are in that frame.
     """
 
     accepted: np.ndarray
@@ -80,10 +94,27 @@ class SurfaceUnit:
     fs: ForwardSearchResult
     rho_points: int
     raw: np.ndarray
+    frame: np.ndarray | None = None
 
     def height(self, xy):
-        """Surface height at planimetric positions `xy` (file coordinates)."""
+        """Surface height at planimetric positions `xy` (file coordinates; only for units
+        modelled as z(E, N), ``frame is None``)."""
         return self.basis.evaluate(self.surface, xy)
+
+    def normal(self, xyz):
+        """Unit normals (3,) of the surface at points `xyz` (k, 3), in file coordinates,
+        upward (or, for a vertical unit, as its frame's third axis)."""
+        xyz = np.atleast_2d(np.asarray(xyz, dtype=np.float64))
+        if self.frame is None:
+            g = self.basis.gradient(self.surface, xyz[:, :2])
+            n = np.c_[-g, np.ones(len(g))]
+            return n / np.linalg.norm(n, axis=1, keepdims=True)
+        origin, rot = self.frame[0], self.frame[1:]
+        local = (xyz - origin) @ rot.T
+        g = self.basis.gradient(self.surface, local[:, :2])
+        n = np.c_[-g, np.ones(len(g))] @ rot
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        return np.where(n[:, 2:3] < 0, -n, n)
 
     def monomials(self):
         """Coefficients in metres of ``(E - E0)^p (N - N0)^q`` and their standard errors.
@@ -100,27 +131,56 @@ class SurfaceUnit:
         return b.powers, coef, se
 
 
-def _weights(xy, radius):
-    """Row-standardised binary adjacency of points within `radius` in plan."""
+def _adjacency(xy, radius):
+    """Binary adjacency (CSR, no self-pairs) of points within `radius` in plan."""
     n = xy.shape[0]
     pairs = cKDTree(xy).query_pairs(radius, output_type="ndarray")
     i = np.r_[pairs[:, 0], pairs[:, 1]]
     j = np.r_[pairs[:, 1], pairs[:, 0]]
-    o = np.argsort(i, kind="stable")
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.add.at(indptr, i + 1, 1)
-    return weights_matrix(np.cumsum(indptr), j[o], n)
+    return sp.csr_matrix((np.ones(i.size), (i, j)), shape=(n, n))
 
 
-def _ml_fit(z, A, xy, w_radius):
-    """ML SAR fit; above SAR_MAX points rho comes from a contiguous patch."""
+def _standardised(B, idx=None):
+    """Row-standardised weights of the binary adjacency `B` restricted to `idx`."""
+    if idx is not None:
+        B = B[idx][:, idx]
+    rs = np.asarray(B.sum(axis=1)).ravel()
+    with np.errstate(divide="ignore"):
+        inv = np.where(rs > 0, 1.0 / rs, 0.0)
+    return sp.csr_matrix(sp.diags(inv) @ B)
+
+
+#: Half-width of the rho interval searched when a previous estimate is known (the refit
+#: of a final segment starts from its raw cluster's rho).
+RHO_WINDOW = 0.2
+
+
+def _ml_fit(z, A, xy, B, rho_hint=None, covariance=True):
+    """ML SAR fit (binary adjacency `B` of the points); above SAR_MAX points rho comes
+    from a contiguous patch.
+
+    With `rho_hint` the profile likelihood is searched on a 5-point grid over
+    ``rho_hint +- RHO_WINDOW`` (then refined), not over the whole admissible interval;
+    if the maximum falls on the window's edge the whole interval is searched."""
     n = z.size
+    if n > SAR_MAX:
+        med = np.median(xy, axis=0)
+        patch = np.argsort(np.sum((xy - med) ** 2, axis=1))[:SAR_MAX]
+        z_s, A_s, W = z[patch], A[patch], _standardised(B, patch)
+    else:
+        z_s, A_s, W = z, A, _standardised(B)
+    sub = None
+    if rho_hint is not None and np.isfinite(rho_hint):
+        lo, hi = max(rho_hint - RHO_WINDOW, -0.999), min(rho_hint + RHO_WINDOW, 0.999)
+        sub = sar_fit(z_s, A_s, W, bounds=(lo, hi), grid=5, xatol=1e-6,
+                      covariance=covariance)
+        if min(sub.rho - lo, hi - sub.rho) < 1e-3 * (hi - lo):
+            sub = None  # on the edge of the window: search everywhere
+    if sub is None:
+        sub = sar_fit(z_s, A_s, W, covariance=covariance)
     if n <= SAR_MAX:
-        return sar_fit(z, A, _weights(xy, w_radius)), n
-    med = np.median(xy, axis=0)
-    patch = np.argsort(np.sum((xy - med) ** 2, axis=1))[:SAR_MAX]
-    sub = sar_fit(z[patch], A[patch], _weights(xy[patch], w_radius))
-    return _conditional_fit(z, A, _weights(xy, w_radius), sub), SAR_MAX
+        return sub, n
+    return _conditional_fit(z, A, _standardised(B), sub), SAR_MAX
 
 
 def _conditional_fit(z, A, W, ref):
@@ -139,7 +199,7 @@ def _conditional_fit(z, A, W, ref):
 
 def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alpha=0.01,
                    alpha_residual=0.001, stop="both", block=1, max_steps=500,
-                   max_search=MAX_SEARCH):
+                   max_search=MAX_SEARCH, rho_hint=None, frame="auto", covariance=True):
     """Refine one raw cluster by SAR-FS within its search area.
 
     Parameters
@@ -160,6 +220,18 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
         Raw clusters larger than this (terrain, large flat roofs) are not searched: the
         unit is the raw cluster (``m = n_s``, ``fs_stop`` 3), which bounds the cost of the
         O(n_sa) steps.
+    rho_hint : float, optional
+        A previous estimate of rho: the ML search starts in a window around it.
+    frame : {'auto', 'z'}
+        'z': the paper's height field z(E, N). 'auto': the same, unless the raw cluster's
+        principal-axis normal is more than :data:`FRAME_SLOPE` degrees from vertical
+        (walls, facades), where z(E, N) degenerates (the points are nearly collinear in
+        plan); such a unit is modelled as a height field over its own plane (heights
+        along the normal, W and the search in the plane's coordinates).
+    covariance : bool
+        Compute the standard errors (information matrix of the ML fit, sandwich of the
+        surface). False leaves them NaN: :func:`refine_raw_clusters` refits every final
+        segment, so the search stage skips them.
 
     Returns
     -------
@@ -168,21 +240,28 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
     raw = np.asarray(raw, dtype=np.int64)
     extra = np.asarray(extra, dtype=np.int64)
     area = np.concatenate([raw, extra])
-    origin = points[area].min(axis=0)
-    xy_area = points[area, :2] - origin[:2]
-    z_area = points[area, 2] - origin[2]
+    coords = points[area]
+    rows = _steep_frame(points[raw]) if frame == "auto" else None
+    if rows is not None:
+        coords = (coords - rows[0]) @ rows[1:].T
+    origin = coords.min(axis=0)
+    xy_area = coords[:, :2] - origin[:2]
+    z_area = coords[:, 2] - origin[2]
     in_raw = np.zeros(area.size, dtype=bool)
     in_raw[:raw.size] = True
     xy_raw, z_raw = xy_area[in_raw], z_area[in_raw]
+    B_area = _adjacency(xy_area, w_radius)
+    raw_idx = np.flatnonzero(in_raw)
+    B_raw = B_area[raw_idx][:, raw_idx] if extra.size else B_area
     if degree is None:
-        degree, _, basis = select_degree(z_raw, xy_raw, _weights(xy_raw, w_radius),
+        degree, _, basis = select_degree(z_raw, xy_raw, _standardised(B_raw),
                                          max_degree=max_degree, alpha=alpha)
         basis = PolynomialBasis.fit(xy_raw, degree)
     else:
         basis = PolynomialBasis.fit(xy_raw, int(degree))
     A_area = basis(xy_area)
-    fit0, rho_points = _ml_fit(z_raw, A_area[in_raw], xy_raw, w_radius)
-    W_area = _weights(xy_area, w_radius)
+    fit0, rho_points = _ml_fit(z_raw, A_area[in_raw], xy_raw, B_raw, rho_hint, covariance)
+    W_area = _standardised(B_area)
     ystar = z_area - fit0.rho * (W_area @ z_area)
     if raw.size > max_search:
         in_raw = in_raw[:raw.size]
@@ -195,11 +274,12 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
     if raw.size > max_search:
         fs = dataclasses.replace(fs, stop_reason="not searched")
     acc = fs.accepted
-    W_acc = _weights(xy_area[acc], w_radius)
+    full = acc.size == W_area.shape[0] and acc.all()
+    W_acc = W_area if full else _standardised(B_area, np.flatnonzero(acc))
     fit = _conditional_fit(z_area[acc], A_area[acc], W_acc, fit0)
-    surface = sar_mean_surface(fit, A_area[acc], W_acc)
+    surface, cov = sar_trend(z_area[acc], A_area[acc], W_acc, fit.rho, fit.sigma2,
+                             covariance=covariance)
     r = basis.n_terms
-    cov = fit.cov[:r, :r] / (1.0 - fit.rho) ** 2
     res = z_area[acc] - A_area[acc] @ surface
     sigma = float(np.sqrt(res @ res / max(acc.sum() - r, 1)))
     # report in file coordinates: shift the basis centre by the local origin
@@ -209,5 +289,22 @@ def refine_cluster(points, raw, extra, *, w_radius, degree=1, max_degree=3, alph
     surface_shift = origin[2]
     # the constant term: orthogonal column 0 is constant (= 1 / R00); add the origin height
     surface[0] += surface_shift * basis.R[0, 0]
-    return SurfaceUnit(area[acc], res, int(raw.size), int(raw.size + extra.size), int(acc.sum()), int(degree),
-                       basis, fit, surface, cov, sigma, fs, int(rho_points), raw)
+    return SurfaceUnit(area[acc], res, int(raw.size), int(raw.size + extra.size),
+                       int(acc.sum()), int(degree), basis, fit, surface, cov, sigma, fs,
+                       int(rho_points), raw, rows)
+
+
+def _steep_frame(xyz):
+    """(4, 3) frame [origin; u; v; n] of a point set whose principal-axis normal is more
+    than FRAME_SLOPE degrees from vertical, else None."""
+    if xyz.shape[0] < 3:
+        return None
+    c = xyz.mean(axis=0)
+    _, vec = np.linalg.eigh(np.cov((xyz - c).T))
+    n = vec[:, 0]
+    if np.degrees(np.arccos(min(abs(n[2]), 1.0))) <= FRAME_SLOPE:
+        return None
+    u = np.cross([0.0, 0.0, 1.0], n)
+    u /= np.linalg.norm(u)  # horizontal axis in the plane
+    v = np.cross(n, u)  # up the plane
+    return np.vstack([c, u, v, n])

@@ -135,7 +135,8 @@ def make_agpart(*, spacing=(0.02, 0.0168), sigma=0.0, rng=None, tilt=40.0,
     -------
     SyntheticCloud
         ``face`` indexes ``meta["faces"]`` (names ``shaft_side``, ``shaft_cap_top``,
-        ``disk_side``, ``disk_cap_top``, ``bore_side``, ...; each with ``n_points``).
+        ``disk_side``, ``disk_cap_top``, ``bore_side``, ...; each with ``n_points``);
+        ``meta["creases"]`` holds the solid's true creases (:func:`crease_lines`).
 
     Examples
     --------
@@ -202,6 +203,7 @@ def make_column(*, spacing=(0.02, 0.0168), sigma=0.0, rng=None, tilt=30.0,
     Returns
     -------
     SyntheticCloud
+        ``meta["creases"]`` holds the solid's true creases (:func:`crease_lines`).
 
     Examples
     --------
