@@ -31,6 +31,7 @@ from ..errors import InvalidParameterError, LidarstatWarning
 from ..stats._moments import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
                               sequential_moments)
 from ._cycle import CycleChoice, choose_cycle, skewness_balance_cycle
+from ._continuity import raised_patches
 from ._outliers import low_outliers
 from ._roads import cell_median, road_cut
 from ._surface import cell_keys, ground_surface
@@ -161,6 +162,7 @@ class _Params:
     tile_size: float = 64.0
     min_tile_size: float = 16.0
     min_tile_points: int = 40
+    ground_spread: float = 3.0
 
 
 def _analyse(values, category, p: _Params, *, tile, step, population, dips, record=True):
@@ -250,6 +252,8 @@ def _progressive(xy, h, idx, size, parent_thr, p, tile_id, steps, tiles, record)
                            record=record)
         if ch.cycle is not None:
             thr = min(ch.threshold, parent_thr)
+            if p.ground_spread > 0 and p.method == "moments":
+                thr = max(thr, _cluster_bound(v[v <= thr], p.ground_spread))
     info = {"tile": tile_id, "size": size, "n": int(idx.size),
             "x0": float(xy[idx, 0].min()) if idx.size else None,
             "y0": float(xy[idx, 1].min()) if idx.size else None,
@@ -274,6 +278,20 @@ def _progressive(xy, h, idx, size, parent_thr, p, tile_id, steps, tiles, record)
     if rec is not None:
         steps.append(rec)
     return [(idx, thr)]
+
+
+def _cluster_bound(kept, z):
+    """``median + z x 1.4826 MAD`` of the kept heights (-inf for fewer than 8 values).
+
+    The sequential cut stops where what is left is symmetric; on ground that the surface
+    follows only roughly (sparse or steep terrain) that stop lies inside the ground's own
+    upper tail. The cut is never placed closer to the ground cluster's centre than `z`
+    robust standard deviations of that cluster.
+    """
+    if kept.size < 8:
+        return -np.inf
+    med = np.median(kept)
+    return float(med + z * 1.4826 * np.median(np.abs(kept - med)))
 
 
 class _TileOut:
@@ -404,6 +422,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                      vegetation_heights=(0.5, 2.0), min_object_height: float = 0.5,
                      elevation_rule: str = "symmetry", low_noise: bool = True,
                      road_rule: str = "antimode", road_cell_points: float = 8.0,
+                     ground_spread: float = 3.0, continuity: bool = True,
                      workers: int | None = None, scheduler: str = "threads", units=1.0,
                      source: str | None = None) -> MomentsClassification:
     """Classify points as ground, road, building, vegetation or unclassified without training.
@@ -445,6 +464,14 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
         Heights above ground separating low (3), medium (4) and high (5) vegetation.
     min_object_height : float
         Points closer than this to the ground surface and not ground are unclassified (1).
+    ground_spread : float
+        The cut of a tile is never closer to the centre of the ground cluster it leaves
+        than this many robust standard deviations (median + z 1.4826 MAD) of that cluster
+        (0 switches it off; the skewness-balancing baseline never uses it).
+    continuity : bool
+        After the last cut, ground points in a patch of the lowest-point grid that stands
+        above its surroundings on (almost) every side (a roof the surface ran over) become
+        objects (:func:`~lidarstat.classify._continuity.raised_patches`).
     road_rule : {'antimode', 'kurtosis-peak'}
         Cut of the ground's intensity into road and the rest (:func:`road_cut`): the
         antimode of the density between its two main modes (default) or the paper's
@@ -529,6 +556,8 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     surface_cell = check_scalar(surface_cell, "surface_cell", func=func, low=0)
     check_option(scheduler, "scheduler", ("threads", "sync", "dask"), func=func)
     check_option(road_rule, "road_rule", ("antimode", "kurtosis-peak"), func=func)
+    ground_spread = check_scalar(ground_spread, "ground_spread", func=func, low=0,
+                                 closed="left")
     road_cell_points = check_scalar(road_cell_points, "road_cell_points", func=func, low=1,
                                     closed="left")
     if cycle is not None:
@@ -572,7 +601,8 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     p = _Params(alpha=alpha, min_cluster=min_cluster, smoothing=smoothing, cycle=cycle,
                 bandwidth=bandwidth, method=method, max_steps=6,
                 elevation_rule=elevation_rule, tile_size=tile_size / ux,
-                min_tile_size=min_tile_size / ux, min_tile_points=4 * min_cluster)
+                min_tile_size=min_tile_size / ux, min_tile_points=4 * min_cluster,
+                ground_spread=float(ground_spread))
     origin = pts.min(axis=0)
     local = pts - origin
     xy = np.ascontiguousarray(local[:, :2])
@@ -596,6 +626,14 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
         if ground.sum() < 3:
             ground[:] = True
         if not last:
+            surf = ground_surface(xy[ground], z[ground], cell=surface_cell / ux)
+            height = _heights(z, surf(xy))
+
+    if continuity and method == "moments":
+        raised = ground & raised_patches(xy, z, step=0.3 / uz)
+        if raised.any() and (ground & ~raised).sum() >= 3:
+            ground &= ~raised
+            # heights of the patches above the surface refitted without them
             surf = ground_surface(xy[ground], z[ground], cell=surface_cell / ux)
             height = _heights(z, surf(xy))
 
@@ -648,6 +686,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                   min_object_height=min_object_height, intensity=inten is not None,
                   returns=nret is not None and rnum is not None, low_noise=low_noise,
                   road_rule=road_rule, road_cell_points=road_cell_points,
+                  ground_spread=ground_spread, continuity=continuity,
                   n_low_noise=int(noise.sum()), units={"horizontal_m": ux, "vertical_m": uz})
     if noise.any():
         cls, cluster_id, height, ground = _expand(keep, n_all, cls, cluster_id, height,

@@ -32,6 +32,7 @@ def _run(args):
         elevation_rule=args.elevation_rule, workers=args.workers, scheduler=args.scheduler,
         opening_window=args.opening_window, iterations=args.iterations, units=units,
         low_noise=not args.no_low_noise, road_rule=args.road_rule,
+        ground_spread=args.ground_spread, continuity=not args.no_continuity,
         source=str(args.input))
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
@@ -91,6 +92,11 @@ def register(sub):
                    help="metres per coordinate unit (overrides --units), e.g. 0.3048")
     s.add_argument("--iterations", type=int, default=4,
                    help="refits of the ground surface")
+    s.add_argument("--ground-spread", type=float, default=3.0,
+                   help="a tile's cut stays at least this many robust SDs above the centre "
+                        "of the ground cluster it leaves (0: off)")
+    s.add_argument("--no-continuity", action="store_true",
+                   help="skip the raised-patch check of the ground (faster on large files)")
     s.add_argument("--road-rule", choices=("antimode", "kurtosis-peak"), default="antimode",
                    help="cut of the ground's intensity into road and the rest")
     s.add_argument("--no-intensity", action="store_true", help="analyse elevation only")
