@@ -651,12 +651,14 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     road = np.zeros(n, bool)
     gi = np.flatnonzero(ground)
     if inten is not None and gi.size >= 2 * min_cluster:
-        smoothed = cell_median(xy[gi], inten[gi], points_per_cell=road_cell_points)
-        ch, sm, de, dips = road_cut(smoothed, alpha=alpha, rule=road_rule,
+        smoothed, cells = cell_median(xy[gi], inten[gi], points_per_cell=road_cell_points,
+                                      return_cells=True)
+        ch, sm, de, dips = road_cut(cells, alpha=alpha, rule=road_rule,
                                     min_cluster=min_cluster, smoothing=smoothing,
                                     bandwidth=bandwidth)
-        steps.append(MomentsStep(tile=-1, step=len(steps) + 1, population="ground cluster",
-                                 category="intensity", n=int(gi.size),
+        steps.append(MomentsStep(tile=-1, step=len(steps) + 1,
+                                 population="ground cluster (cell medians)",
+                                 category="intensity", n=int(cells.size),
                                  dip={"intensity": dips}, choice=ch, curves=_thin(sm),
                                  density=de))
         if ch.cycle is not None:

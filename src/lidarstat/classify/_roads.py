@@ -35,7 +35,7 @@ from ._surface import cell_keys, cell_median_values
 __all__ = ["cell_median", "road_cut"]
 
 
-def cell_median(xy, values, *, points_per_cell: float = 8.0) -> np.ndarray:
+def cell_median(xy, values, *, points_per_cell: float = 8.0, return_cells: bool = False):
     """Median of `values` over square cells holding about `points_per_cell` points each.
 
     Parameters
@@ -48,10 +48,17 @@ def cell_median(xy, values, *, points_per_cell: float = 8.0) -> np.ndarray:
         Mean points per cell; the side is ``sqrt(points_per_cell * area / N)`` over the
         bounding box.
 
+    return_cells : bool, optional
+        Also return the median of every occupied cell (one value per cell).
+
     Returns
     -------
     (N,) ndarray of float64
         Each point's cell median.
+    (C,) ndarray of float64
+        With `return_cells`: one median per occupied cell. Test and cut these, not the
+        per-point copies: the copies are ties, and the dip test reads a staircase of
+        ties as many modes.
 
     Examples
     --------
@@ -65,7 +72,12 @@ def cell_median(xy, values, *, points_per_cell: float = 8.0) -> np.ndarray:
     n = v.size
     span = np.maximum(np.ptp(xy, axis=0), 1e-9) if n else np.ones(2)
     cell = float(np.sqrt(points_per_cell * span[0] * span[1] / max(n, 1)))
-    return cell_median_values(cell_keys(xy, cell), v)
+    key = cell_keys(xy, cell)
+    out = cell_median_values(key, v)
+    if not return_cells:
+        return out
+    _, first = np.unique(key, return_index=True)
+    return out, out[first]
 
 
 def _antimode(de):
@@ -93,7 +105,8 @@ def road_cut(values, *, alpha: float = 0.05, rule: str = "antimode",
     Parameters
     ----------
     values : (N,) ndarray
-        Smoothed intensity of the ground points (:func:`cell_median`).
+        Smoothed intensity of the ground, one value per cell (:func:`cell_median` with
+        ``return_cells=True``).
     alpha : float, optional
         Level of the dip test; without a rejection there is no sub-cluster.
     rule : {'antimode', 'kurtosis-peak'}, optional
