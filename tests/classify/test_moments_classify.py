@@ -211,3 +211,47 @@ def test_raised_patches_roof_wider_than_the_opening_but_not_a_terrace(rng):
     on = classify_moments(xyz, rng.normal(100, 10, n), tile_size=60)
     assert (on.classification[roof] == ASPRS["building"]).mean() > 0.95
     assert on.ground[~roof].mean() > 0.97
+
+
+def _raised_patches_scipy(xy, z, k=8, step=0.3, slope=1.0, above_fraction=0.95,
+                          min_points=10):
+    """Reference: the former scipy implementation (COO graph + connected_components)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    n = z.size
+    kk = min(k + 1, n)
+    d, nb = cKDTree(xy).query(xy, k=kk)
+    i = np.repeat(np.arange(n), kk - 1)
+    j = nb[:, 1:].ravel()
+    dz = z[j] - z[i]
+    ok = np.abs(dz) <= step + slope * d[:, 1:].ravel()
+    g = coo_matrix((np.ones(ok.sum(), np.int8), (i[ok], j[ok])), shape=(n, n))
+    ncomp, lab = connected_components(g, directed=False)
+    ci, cj, cup = i[~ok], j[~ok], dz[~ok] < 0
+    other = lab[ci] != lab[cj]
+    li = lab[ci[other]]
+    n_above = np.bincount(li[cup[other]], minlength=ncomp)
+    n_step = np.bincount(li, minlength=ncomp)
+    size = np.bincount(lab, minlength=ncomp)
+    raised = (n_step > 0) & (n_above >= above_fraction * n_step) & (size >= min_points)
+    raised[np.argmax(size)] = False
+    return raised[lab]
+
+
+def test_raised_patches_numba_union_find_equals_scipy_components(rng):
+    """The Numba union-find (chunked) gives exactly the scipy graph's raised points."""
+    from lidarstat.classify._continuity import raised_patches
+
+    n = 30_000
+    xy = rng.uniform(0, 300, (n, 2))
+    z = 0.1 * xy[:, 0] + rng.normal(0, 0.05, n)
+    cells = np.floor(xy / 30).astype(int)
+    roof = ((xy % 30) > 8).all(axis=1) & ((cells.sum(axis=1) % 3) == 0)
+    z[roof] += (3 + (7 * cells[:, 0] + 3 * cells[:, 1]) % 9)[roof]  # one height a roof
+    z[rng.random(n) < 0.002] -= 5  # isolated low echoes: cut edges everywhere
+    ref = _raised_patches_scipy(xy, z)
+    got = raised_patches(xy, z, chunk=7_001)
+    assert ref.sum() > 0.05 * n
+    assert np.array_equal(got, ref)

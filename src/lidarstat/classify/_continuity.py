@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._shared._jit import njit
+
 __all__ = ["raised_patches"]
 
 
@@ -67,8 +69,6 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     >>> bool(r[roof].mean() > 0.95 and r[~roof].mean() < 0.01)
     True
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
     xy = np.asarray(xy, dtype=np.float64)
@@ -78,24 +78,16 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
         return np.zeros(n, bool)
     kk = min(k + 1, n)
     tree = cKDTree(xy)
-    si, sj, ci, cj, cup = [], [], [], [], []
+    parent = np.arange(n, dtype=np.int64)
+    ci, cj, cup = [], [], []
     for s in range(0, n, chunk):
-        q = np.arange(s, min(n, s + chunk))
-        d, nb = tree.query(xy[q], k=kk, workers=-1)
-        i = np.repeat(q, kk - 1).astype(np.int32)
-        j = nb[:, 1:].ravel().astype(np.int32)
-        dz = z[j] - z[i]
-        ok = np.abs(dz) <= step + slope * d[:, 1:].ravel()
-        si.append(i[ok])
-        sj.append(j[ok])
-        ci.append(i[~ok])
-        cj.append(j[~ok])
-        cup.append(dz[~ok] < 0)  # i higher than j
-    si, sj = np.concatenate(si), np.concatenate(sj)
-    g = coo_matrix((np.ones(si.size, np.int8), (si, sj)), shape=(n, n))
-    del si, sj
-    ncomp, lab = connected_components(g, directed=False)
-    del g
+        stop = min(n, s + chunk)
+        d, nb = tree.query(xy[s:stop], k=kk, workers=-1)
+        i, j, up = _join_smooth(parent, z, nb, d, s, step, slope)
+        ci.append(i)
+        cj.append(j)
+        cup.append(up)
+    lab, ncomp = _component_labels(parent)
     ci, cj, cup = np.concatenate(ci), np.concatenate(cj), np.concatenate(cup)
     other = lab[ci] != lab[cj]
     li = lab[ci[other]]
@@ -106,3 +98,72 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     raised = (n_step > 0) & (n_above >= above_fraction * n_step) & (size >= min_points)
     raised[np.argmax(size)] = False
     return raised[lab]
+
+
+@njit
+def _find(parent, i):
+    root = i
+    while parent[root] != root:
+        root = parent[root]
+    while parent[i] != root:  # path compression
+        nxt = parent[i]
+        parent[i] = root
+        i = nxt
+    return root
+
+
+@njit
+def _join_smooth(parent, z, nb, d, start, step, slope):
+    """Union the smooth kNN edges of rows ``start..`` into `parent`; return the others.
+
+    Row ``r`` of `nb`/`d` is point ``start + r``; column 0 is the point itself.  An edge
+    is smooth when ``|z[j] - z[i]| <= step + slope * d``.  Returns the non-smooth edges
+    (i, j as int32, and whether i is the higher end) in row order.
+    """
+    m, kk = nb.shape
+    n_cut = 0
+    for r in range(m):
+        i = start + r
+        for c in range(1, kk):
+            j = nb[r, c]
+            if abs(z[j] - z[i]) <= step + slope * d[r, c]:
+                a = _find(parent, i)
+                b = _find(parent, j)
+                if a != b:
+                    if a < b:
+                        parent[b] = a
+                    else:
+                        parent[a] = b
+            else:
+                n_cut += 1
+    ci = np.empty(n_cut, np.int32)
+    cj = np.empty(n_cut, np.int32)
+    up = np.empty(n_cut, np.bool_)
+    t = 0
+    for r in range(m):
+        i = start + r
+        for c in range(1, kk):
+            j = nb[r, c]
+            dz = z[j] - z[i]
+            if not abs(dz) <= step + slope * d[r, c]:
+                ci[t] = i
+                cj[t] = j
+                up[t] = dz < 0
+                t += 1
+    return ci, cj, up
+
+
+@njit
+def _component_labels(parent):
+    """Component ids numbered by each component's lowest point index (scipy's order)."""
+    n = parent.size
+    lab = np.empty(n, np.int64)
+    root_label = np.full(n, -1, np.int64)
+    nlab = 0
+    for i in range(n):
+        root = _find(parent, i)
+        if root_label[root] < 0:
+            root_label[root] = nlab
+            nlab += 1
+        lab[i] = root_label[root]
+    return lab, nlab
