@@ -73,11 +73,7 @@ def cell_median(xy, values, *, points_per_cell: float = 8.0, return_cells: bool 
     span = np.maximum(np.ptp(xy, axis=0), 1e-9) if n else np.ones(2)
     cell = float(np.sqrt(points_per_cell * span[0] * span[1] / max(n, 1)))
     key = cell_keys(xy, cell)
-    out = cell_median_values(key, v)
-    if not return_cells:
-        return out
-    _, first = np.unique(key, return_index=True)
-    return out, out[first]
+    return cell_median_values(key, v, return_cells=return_cells)
 
 
 def _antimode(de):

@@ -156,11 +156,16 @@ def _median_per_cell(order, v, starts, out):  # pragma: no cover - compiled
             out[order[j]] = m
 
 
-def cell_median_values(key, values):
-    """Each point's median of `values` over the points sharing its cell `key` (O(N))."""
+def cell_median_values(key, values, *, return_cells: bool = False):
+    """Each point's median of `values` over the points sharing its cell `key` (O(N)).
+
+    With `return_cells`, also one median per non-empty cell (keys ascending).
+    """
     order, starts = cell_order(key)
     out = np.empty(len(values))
     _median_per_cell(order, np.ascontiguousarray(values, dtype=np.float64), starts, out)
+    if return_cells:
+        return out, out[order[starts[:-1]]]
     return out
 
 
