@@ -19,6 +19,9 @@ def add_arguments(group):
     group.add_argument("--no-adaptive-scale", action="store_true",
                        help="grow only through k-neighbourhood surface points (no planar "
                        "prefixes of 8..k neighbours: narrow faces are then missed)")
+    group.add_argument("--no-refine", action="store_true",
+                       help="no segment-level plane models: border points stay where the "
+                       "growing put them and no strip segments (faces on 1-2 scan rows)")
 
 
 def run(args, cloud):
@@ -33,4 +36,4 @@ def run(args, cloud):
         curved_alpha=args.curved_alpha, min_size=args.min_size or 50,
         grow_k=args.grow_k, seeds=args.seeds, min_angle=args.min_angle,
         reintegration=not args.no_reintegration,
-        adaptive_scale=not args.no_adaptive_scale)
+        adaptive_scale=not args.no_adaptive_scale, refine=not args.no_refine)

@@ -315,7 +315,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
                        boundary_alpha=0.001, curvature_threshold=None, variance_threshold=None,
                        curved="cylinder", curved_alpha=None, adaptive_scale=True, min_size=50,
                        grow_k=20, seeds="curvature", min_angle=20.0, reintegration=True,
-                       lines=True, result=None) -> Segmentation:
+                       lines=True, refine=True, result=None) -> Segmentation:
     """Covariance classification, region growing (Fig. 4), intersection lines (eq. 9-17).
 
     Parameters
@@ -344,6 +344,12 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         Smallest angle (degrees) between normals for a local intersection (eq. 9).
     reintegration : bool
         Give edge points the segment whose local plane they fit (within 3 sigma).
+    refine : bool
+        Segment-level plane models (:mod:`lidarstat.segment._refine`): a point of a planar
+        segment that is an outlier of its plane (beyond 3 noise units) and an inlier of a
+        touching planar segment's plane moves there; points no segment explains
+        (unlabelled, or plane outliers) are searched for planes of narrow faces (RANSAC
+        on connected strips, kept when the plane is identified and passes the plane test).
     lines : bool
         Compute the intersection lines.
     result : CovarianceClassification, optional
@@ -356,7 +362,9 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         :func:`lidarstat.segment._cylinders.segment_cylinders` (``model`` 1 plane, 2
         cylinder, ``radius``, ``axis_x/y/z``, ``axis_point_x/y/z``, ``cylinder_p``);
         ``lines`` (Polylines);
-        ``fields``: ``point_class``, ``reintegrated``, ``NormalX/Y/Z``,
+        ``fields``: ``point_class``, ``reintegrated`` (1 edge point given to the segment
+        whose local plane it fits, 2 moved by the border refinement, 3 in a strip
+        segment), ``NormalX/Y/Z``,
         ``SurfaceVariation``.
     """
     from ..classify import PointClass, covariance
@@ -425,6 +433,24 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         new = reintegrate(pts, labels, cand & (labels == 0), normals, centroids, nbh, across)
         reint[(new > 0) & (labels == 0)] = 1
         labels = new
+    if refine:
+        from ._refine import plane_outliers, refine_borders, strip_segments
+
+        rsensor = feats.sensor if classes.meta.get("noise") == "range" else None
+        labels, moved = refine_borders(pts, labels, nbh, classes.sigma, sensor=rsensor)
+        reint[moved] = 2
+        if nbh.kind == "knn":
+            before = labels
+            free = ((labels == 0) & (pc != PointClass.UNDETERMINED)) | plane_outliers(
+                pts, labels, classes.sigma, sensor=rsensor)
+            labels = strip_segments(pts, labels, nbh, classes.sigma, sensor=rsensor,
+                                    candidates=free,
+                                    alpha=classes.alpha, min_size=min_size)
+            reint[labels > before.max()] = 3
+            if labels.max() > before.max():  # the new planes take their border points too
+                labels, moved = refine_borders(pts, labels, nbh, classes.sigma,
+                                               sensor=rsensor)
+                reint[moved] = 2
     labels = merge_coplanar(pts, labels, grow_nbh, max_angle=min_angle / 4,
                             normals=feats.normals, centroids=feats.centroid)
     from ._cylinders import merge_cylinders
