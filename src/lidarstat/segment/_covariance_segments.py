@@ -434,23 +434,23 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         reint[(new > 0) & (labels == 0)] = 1
         labels = new
     if refine:
-        from ._refine import plane_outliers, refine_borders, strip_segments
+        from ._refine import refine_borders, strip_segments
 
         rsensor = feats.sensor if classes.meta.get("noise") == "range" else None
-        labels, moved = refine_borders(pts, labels, nbh, classes.sigma, sensor=rsensor)
+        labels, moved, models = refine_borders(pts, labels, nbh, classes.sigma,
+                                               sensor=rsensor)
         reint[moved] = 2
         if nbh.kind == "knn":
             before = labels
-            free = ((labels == 0) & (pc != PointClass.UNDETERMINED)) | plane_outliers(
-                pts, labels, classes.sigma, sensor=rsensor)
+            free = ((labels == 0) & (pc != PointClass.UNDETERMINED)) | models.outliers()
             labels = strip_segments(pts, labels, nbh, classes.sigma, sensor=rsensor,
-                                    candidates=free,
-                                    alpha=classes.alpha, min_size=min_size)
-            reint[labels > before.max()] = 3
-            if labels.max() > before.max():  # the new planes take their border points too
-                labels, moved = refine_borders(pts, labels, nbh, classes.sigma,
-                                               sensor=rsensor)
-                reint[moved] = 2
+                                    candidates=free, alpha=classes.alpha, min_size=min_size)
+            new = labels > before.max()
+            reint[new] = 3
+            if new.any():  # the new planes take their border points too
+                labels, moved, _ = refine_borders(pts, labels, nbh, classes.sigma,
+                                                  sensor=rsensor, models=models.fit(labels))
+                reint[moved & ~new] = 2
     labels = merge_coplanar(pts, labels, grow_nbh, max_angle=min_angle / 4,
                             normals=feats.normals, centroids=feats.centroid)
     from ._cylinders import merge_cylinders

@@ -26,10 +26,11 @@ Once the segments exist their own planes decide instead:
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from scipy import special as _sp
 
-from ._cylinders import group_outer
+from .._shared._jit import njit, njit_parallel
 
 
 def _rays(points, sensor):
@@ -39,25 +40,169 @@ def _rays(points, sensor):
     return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
 
 
-def _noise_units(points, idx, normal, centre, sigma, rays):
-    """``|n . (p - c)| / s(n)`` per row of `idx` (one plane per row)."""
-    res = np.abs(np.einsum("ij,ij->i", points[idx] - centre, normal))
-    sig = sigma[idx]
-    if rays is not None:
-        sig = np.maximum(sig * np.abs(np.einsum("ij,ij->i", rays[idx], normal)), 0.1 * sig)
-    return res / np.maximum(sig, 1e-300)
+@njit
+def _seg_moments(pts, lab, w, s):
+    """Per segment (ids 1..s): weight sum, first and second moments about the segment's
+    first point (no cancellation for coordinates far from the origin)."""
+    ref = np.full((s, 3), np.nan)
+    mom = np.zeros((s, 10))
+    for i in range(lab.size):
+        g = lab[i] - 1
+        if g < 0 or w[i] == 0.0:
+            continue
+        if np.isnan(ref[g, 0]):
+            ref[g, 0], ref[g, 1], ref[g, 2] = pts[i, 0], pts[i, 1], pts[i, 2]
+        x, y, z = pts[i, 0] - ref[g, 0], pts[i, 1] - ref[g, 1], pts[i, 2] - ref[g, 2]
+        m = mom[g]
+        m[0] += 1.0
+        m[1] += x
+        m[2] += y
+        m[3] += z
+        m[4] += x * x
+        m[5] += x * y
+        m[6] += x * z
+        m[7] += y * y
+        m[8] += y * z
+        m[9] += z * z
+    return ref, mom
 
 
-def _fit(x, lab, w, s):
-    """Weighted (0/1) TLS planes per segment of local coordinates `x`: centroid, normal,
-    eigenvalues."""
-    cnt = np.bincount(lab, weights=w, minlength=s)
-    safe = np.maximum(cnt, 1)
-    cen = np.stack([np.bincount(lab, weights=w * x[:, j], minlength=s) for j in range(3)],
-                   1) / safe[:, None]
-    d = (x - cen[lab]) * np.sqrt(w)[:, None]
-    ev, evec = np.linalg.eigh(group_outer(d, lab, s) / safe[:, None, None])
-    return cen, evec[:, :, 0], ev, cnt
+def _planes(ref, mom):
+    """Centroids, unit normals (smallest eigenvector) and eigenvalues from moments."""
+    n = np.maximum(mom[:, 0], 1.0)
+    c = mom[:, 1:4] / n[:, None]
+    cov = np.empty((len(mom), 3, 3))
+    k = 4
+    for a in range(3):
+        for b in range(a, 3):
+            v = mom[:, k] / n - c[:, a] * c[:, b]
+            cov[:, a, b] = v
+            cov[:, b, a] = v
+            k += 1
+    ev, evec = np.linalg.eigh(cov)
+    return np.nan_to_num(ref) + c, evec[:, :, 0], ev
+
+
+@njit_parallel
+def _residual_units(pts, lab, normal, cen, sig, rays, has_rays, out):
+    """``|n_L . (p - c_L)| / s_i(n_L)`` of every point on its own segment L (NaN off)."""
+    for i in numba.prange(lab.size):
+        g = lab[i] - 1
+        if g < 0:
+            out[i] = np.nan
+            continue
+        out[i] = _unit(pts, i, normal[g], cen[g], sig, rays, has_rays)
+
+
+@njit
+def _unit(pts, i, nrm, c, sig, rays, has_rays):
+    res = abs((pts[i, 0] - c[0]) * nrm[0] + (pts[i, 1] - c[1]) * nrm[1] +
+              (pts[i, 2] - c[2]) * nrm[2])
+    s = sig[i]
+    if has_rays:
+        s = max(s * abs(rays[i, 0] * nrm[0] + rays[i, 1] * nrm[1] + rays[i, 2] * nrm[2]),
+                0.1 * s)
+    return res / max(s, 1e-300)
+
+
+@njit
+def _propagate(pts, indptr, indices, rows, labels, cand, planar, normal, cen, sig, rays,
+               has_rays, nsigma, max_sweeps, moved):
+    """Sweeps over the candidate rows: a candidate p (an outlier of its own plane) moves
+    to the best-fitting planar segment among its neighbours' labels when it is an inlier
+    there; repeated while something moves (a move can bring the next point into reach)."""
+    pos = np.full(labels.size, -1, dtype=np.int64)
+    for r in range(rows.size):
+        pos[rows[r]] = r
+    todo = np.flatnonzero(cand)
+    for _ in range(max_sweeps):
+        changed = 0
+        for p in todo:
+            if not cand[p]:
+                continue
+            r = pos[p]
+            if r < 0:
+                continue
+            own = labels[p]
+            best = nsigma
+            bl = 0
+            for e in range(indptr[r], indptr[r + 1]):
+                lq = labels[indices[e]]
+                if lq <= 0 or lq == own or not planar[lq - 1]:
+                    continue
+                u = _unit(pts, p, normal[lq - 1], cen[lq - 1], sig, rays, has_rays)
+                if u <= best:
+                    best = u
+                    bl = lq
+            if bl > 0:
+                labels[p] = bl
+                cand[p] = False
+                moved[p] = True
+                changed += 1
+        if changed == 0:
+            break
+
+
+class PlaneModels:
+    """Trimmed planes of the segments of `labels` (see :func:`segment_plane_models`)."""
+
+    def __init__(self, points, labels, sigma, sensor=None, nsigma=3.0):
+        self.pts = np.ascontiguousarray(points, dtype=np.float64)
+        self.sig = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma, dtype=np.float64),
+                                                        (self.pts.shape[0],)))
+        r = _rays(self.pts, sensor)
+        self.has_rays = r is not None
+        self.rays = np.ascontiguousarray(r) if r is not None else np.zeros((1, 3))
+        self.nsigma = float(nsigma)
+        self.fit(labels)
+
+    def units(self, labels):
+        """Residual of every point from its own segment's plane, in noise units."""
+        out = np.empty(labels.size)
+        _residual_units(self.pts, np.ascontiguousarray(labels, dtype=np.int64), self.normal,
+                        self.centroid, self.sig, self.rays, self.has_rays, out)
+        return out
+
+    def fit(self, labels):
+        lab = np.ascontiguousarray(labels, dtype=np.int64)
+        s = int(lab.max()) if lab.size else 0
+        self.labels = lab
+        w = np.ones(lab.size)
+        for it in range(3):  # fit, trim at nsigma, refit on the inliers (twice)
+            ref, mom = _seg_moments(self.pts, lab, w, s)
+            self.centroid, self.normal, self.eigenvalues = _planes(ref, mom)
+            self.centroid = np.ascontiguousarray(self.centroid)
+            self.normal = np.ascontiguousarray(self.normal)
+            r = self.units(lab)
+            if it == 2:
+                break
+            w = (r <= self.nsigma).astype(np.float64)
+            few = np.bincount(lab, weights=w, minlength=s + 1)[1:] < 3
+            w[(lab > 0) & np.r_[False, few][lab]] = 1.0  # keep the plain fit
+        inl = r <= self.nsigma
+        ins = lab > 0
+        n = np.bincount(lab[ins], minlength=s + 1)[1:].astype(np.float64)
+        ni = np.bincount(lab[ins], weights=inl[ins], minlength=s + 1)[1:]
+        ss = np.bincount(lab[ins], weights=np.where(inl, r * r, 0.0)[ins], minlength=s + 1)[1:]
+        self.n_points = n.astype(np.int64)
+        self.inlier_fraction = ni / np.maximum(n, 1)
+        self.rms_units = np.sqrt(ss / np.maximum(ni, 1))
+        self.planar = (self.inlier_fraction >= 0.9) & (self.rms_units <= 2.0) & (ni >= 3)
+        self.r = r
+        return self
+
+    def as_dict(self):
+        return {"centroid": self.centroid, "normal": self.normal, "n_points": self.n_points,
+                "inlier_fraction": self.inlier_fraction, "rms_units": self.rms_units,
+                "planar": self.planar}
+
+    def outliers(self):
+        """Points of planar segments beyond `nsigma` noise units from their plane."""
+        lab = self.labels
+        out = np.zeros(lab.size, dtype=bool)
+        ins = lab > 0
+        out[ins] = self.planar[lab[ins] - 1] & (self.r[ins] > self.nsigma)
+        return out
 
 
 def segment_plane_models(points, labels, sigma, *, sensor=None, nsigma=3.0):
@@ -79,65 +224,32 @@ def segment_plane_models(points, labels, sigma, *, sensor=None, nsigma=3.0):
     dict of str -> (S,) or (S, 3) ndarray
         ``centroid``, ``normal`` (unit), ``n_points``, ``inlier_fraction``, ``rms_units``
         (RMS of the inliers' residuals in noise units) and ``planar``.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> p = np.c_[rng.uniform(0, 1, (500, 2)), rng.normal(0, 0.01, 500)]
+    >>> m = segment_plane_models(p, np.ones(500, dtype=int), 0.01)
+    >>> bool(m["planar"][0]), round(abs(float(m["normal"][0, 2])), 3)
+    (True, 1.0)
     """
-    pts = np.asarray(points, dtype=np.float64)
-    labels = np.asarray(labels)
-    s = int(labels.max()) if labels.size else 0
-    sig = np.broadcast_to(np.asarray(sigma, dtype=np.float64), labels.shape)
-    empty = {"centroid": np.zeros((0, 3)), "normal": np.zeros((0, 3)),
-             "n_points": np.zeros(0, np.int64), "inlier_fraction": np.zeros(0),
-             "rms_units": np.zeros(0), "planar": np.zeros(0, bool)}
-    if s == 0:
-        return empty
-    idx = np.flatnonzero(labels > 0)
-    lab = labels[idx].astype(np.int64) - 1
-    origin = pts[idx].mean(axis=0)
-    x = pts[idx] - origin
-    rays = _rays(pts, sensor)
-    w = np.ones(idx.size)
-    for it in range(3):  # fit, trim at nsigma, refit on the inliers (twice)
-        cen, nrm, _, _ = _fit(x, lab, w, s)
-        r = _noise_units(pts, idx, nrm[lab], cen[lab] + origin, sig, rays)
-        if it == 2:
-            break
-        w = (r <= nsigma).astype(np.float64)
-        few = np.bincount(lab, weights=w, minlength=s) < 3
-        w[few[lab]] = 1.0  # a segment without 3 inliers keeps its plain fit
-    inl = r <= nsigma
-    n = np.bincount(lab, minlength=s).astype(np.float64)
-    ni = np.bincount(lab, weights=inl, minlength=s)
-    ss = np.bincount(lab, weights=np.where(inl, r * r, 0.0), minlength=s)
-    frac = ni / np.maximum(n, 1)
-    rms = np.sqrt(ss / np.maximum(ni, 1))
-    return {"centroid": cen + origin, "normal": nrm, "n_points": n.astype(np.int64),
-            "inlier_fraction": frac, "rms_units": rms,
-            "planar": (frac >= 0.9) & (rms <= 2.0) & (ni >= 3)}
+    return PlaneModels(points, labels, sigma, sensor, nsigma).as_dict()
 
 
 def plane_outliers(points, labels, sigma, *, sensor=None, nsigma=3.0):
     """Points of planar segments farther than `nsigma` noise units from their plane."""
-    labels = np.asarray(labels)
-    m = segment_plane_models(points, labels, sigma, sensor=sensor, nsigma=nsigma)
-    out = np.zeros(labels.size, dtype=bool)
-    if not m["planar"].any():
-        return out
-    idx = np.flatnonzero(labels > 0)
-    lab = labels[idx] - 1
-    idx, lab = idx[m["planar"][lab]], lab[m["planar"][lab]]
-    sig = np.broadcast_to(np.asarray(sigma, dtype=np.float64), labels.shape)
-    r = _noise_units(np.asarray(points, dtype=np.float64), idx, m["normal"][lab],
-                     m["centroid"][lab], sig, _rays(points, sensor))
-    out[idx[r > nsigma]] = True
-    return out
+    return PlaneModels(points, labels, sigma, sensor, nsigma).outliers()
 
 
-def refine_borders(points, labels, nbh, sigma, *, sensor=None, nsigma=3.0, iterations=10):
+def refine_borders(points, labels, nbh, sigma, *, sensor=None, nsigma=3.0, rounds=2,
+                   models=None):
     """Move border points to the touching planar segment whose plane they fit.
 
     A point of planar segment A with a neighbour (in `nbh`) in planar segment B moves to B
     when its residual from A's plane exceeds `nsigma` noise units and its residual from B's
-    plane does not (the smallest residual among such B wins). Planes are refitted after
-    each round; at most `iterations` rounds.
+    plane does not (the smallest residual among such B wins); sweeps repeat while points
+    move (a moved point brings the next into reach). Planes are then refitted and the
+    whole is repeated, `rounds` times in all.
 
     Returns
     -------
@@ -145,36 +257,24 @@ def refine_borders(points, labels, nbh, sigma, *, sensor=None, nsigma=3.0, itera
         Refined labels (same ids; no segment is created or renumbered).
     moved : (N,) ndarray of bool
         Points whose segment changed.
+    models : PlaneModels
+        The planes of the returned labels.
     """
-    from ._edge_kernels import label_pairs
-
-    labels = np.asarray(labels).astype(np.int32, copy=True)
-    start = labels.copy()
-    pts = np.asarray(points, dtype=np.float64)
-    sig = np.broadcast_to(np.asarray(sigma, dtype=np.float64), labels.shape)
-    rays = _rays(pts, sensor)
-    for _ in range(iterations):
-        m = segment_plane_models(pts, labels, sig, sensor=sensor, nsigma=nsigma)
-        if not m["planar"].any():
+    lab = np.ascontiguousarray(labels, dtype=np.int64).copy()
+    m = models if models is not None else PlaneModels(points, lab, sigma, sensor, nsigma)
+    moved = np.zeros(lab.size, dtype=bool)
+    for _ in range(rounds):
+        cand = m.outliers()
+        if not cand.any():
             break
-        src, dst = label_pairs(nbh, labels, different_only=True)
-        a, b = labels[src] - 1, labels[dst] - 1
-        keep = m["planar"][a] & m["planar"][b]
-        src, b = src[keep], b[keep]
-        if not src.size:
+        before = moved.sum()
+        _propagate(m.pts, nbh.indptr, nbh.indices, np.ascontiguousarray(nbh.query_indices()),
+                   lab, cand, np.ascontiguousarray(m.planar), m.normal, m.centroid, m.sig,
+                   m.rays, m.has_rays, m.nsigma, 50, moved)
+        if moved.sum() == before:
             break
-        ra = _noise_units(pts, src, m["normal"][labels[src] - 1],
-                          m["centroid"][labels[src] - 1], sig, rays)
-        rb = _noise_units(pts, src, m["normal"][b], m["centroid"][b], sig, rays)
-        ok = (ra > nsigma) & (rb <= nsigma)
-        src, b, rb = src[ok], b[ok], rb[ok]
-        if not src.size:
-            break
-        order = np.lexsort((rb, src))
-        src, b = src[order], b[order]
-        first = np.r_[True, src[1:] != src[:-1]]
-        labels[src[first]] = b[first] + 1
-    return labels, labels != start
+        m.fit(lab)
+    return lab.astype(np.int32), moved, m
 
 
 def _across(sig, rays, idx, normal):
