@@ -111,7 +111,7 @@ def clean_plane_points(labels, clean, nbh):
 
 
 def local_intersections(points, labels, normals, centroids, nbh, *, min_angle=20.0,
-                        max_distance):
+                        max_distance, max_offset=np.inf, return_pairs=False):
     """Local intersection points of neighbouring points on different segments (eq. 9-17).
 
     Returns
@@ -120,6 +120,8 @@ def local_intersections(points, labels, normals, centroids, nbh, *, min_angle=20
         Intersection points (eq. 17), one per accepted pair.
     seg : (P, 2) ndarray of int
         The two segments (smaller id first).
+    pairs : (P, 2) ndarray of int
+        With `return_pairs`: the two points (in the order of `seg`).
     """
     i, j = _ek.label_pairs(nbh, labels)  # 0 < labels[i] < labels[j]
     n1, n2 = normals[i], normals[j]
@@ -137,8 +139,15 @@ def local_intersections(points, labels, normals, centroids, nbh, *, min_angle=20
                     np.einsum("ij,ij->i", a, m)], axis=1)
     x0 = np.linalg.solve(A, rhs[:, :, None])[:, :, 0]
     far = np.maximum(np.linalg.norm(x0 - p1, axis=1), np.linalg.norm(x0 - p2, axis=1))
-    good = far <= max_distance
+    # two faces that meet have their crease near the pair: the eq. 17 point is within
+    # |p1 - p2| / (2 sin(theta / 2)) of the pair's midpoint for an interior angle theta,
+    # at most |p1 - p2| from 60 degrees up; faces that do not meet (a roof and the soffit
+    # under its fascia, a wall under the eaves) have theirs off in the air
+    gap = np.linalg.norm(p1 - p2, axis=1)
+    good = (far <= max_distance) & (np.linalg.norm(x0 - m, axis=1) <= gap + max_offset)
     seg = np.stack([labels[i[good]], labels[j[good]]], axis=1)
+    if return_pairs:
+        return x0[good] + origin, seg, np.stack([i[good], j[good]], axis=1)
     return x0[good] + origin, seg
 
 
@@ -190,6 +199,54 @@ def fit_lines(x0, seg, *, min_points=5):
     if not starts:
         return Polylines([], attr)
     return Polylines.from_segments(np.array(starts), np.array(ends), attr)
+
+
+def _polyline_rms(v, pts):
+    """RMS distance of `pts` to the polyline of vertices `v`."""
+    a, b = v[:-1], v[1:]
+    ab = b - a
+    t = np.clip(np.einsum("pkj,kj->pk", pts[:, None, :] - a[None], ab) /
+                np.maximum(np.einsum("kj,kj->k", ab, ab), 1e-300), 0.0, 1.0)
+    d = np.linalg.norm(pts[:, None, :] - a[None] - t[:, :, None] * ab[None], axis=2).min(1)
+    return float(np.sqrt(np.mean(d ** 2)))
+
+
+def curved_lines(x0, seg, curved, *, min_points=5, max_gap, bin_angle=2.0, tolerance=None):
+    """Polylines through the local intersection points of segment pairs with a curved
+    member (`curved`: per segment, 1-based ids at index id - 1), chained by
+    :func:`lidarstat.segment._intersect.chain_curve`; pieces split at gaps above `max_gap`.
+
+    Returns
+    -------
+    Polylines
+        Attributes as :func:`fit_lines` (``rms``: RMS distance of the points to their
+        polyline), one line per piece.
+    """
+    from ._intersect import chain_curve
+
+    verts, attr = [], {"segment_a": [], "segment_b": [], "n_points": [], "rms": []}
+    if len(seg):
+        key = seg[:, 0].astype(np.int64) * (int(seg.max()) + 1) + seg[:, 1]
+        order = np.argsort(key, kind="stable")
+        key, x0s, segs = key[order], x0[order], seg[order]
+        bounds = np.flatnonzero(np.diff(key)) + 1
+        for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, key.size]):
+            a, b = segs[lo]
+            if hi - lo < min_points or not (curved[a - 1] or curved[b - 1]):
+                continue
+            pts = x0s[lo:hi]
+            for v in chain_curve(pts, bin_angle=bin_angle, max_gap=max_gap,
+                                 tolerance=tolerance):
+                verts.append(v)
+                attr["segment_a"].append(a)
+                attr["segment_b"].append(b)
+                attr["n_points"].append(hi - lo)
+                attr["rms"].append(_polyline_rms(v, pts))
+    attr = {"segment_a": np.asarray(attr["segment_a"], dtype=np.int32),
+            "segment_b": np.asarray(attr["segment_b"], dtype=np.int32),
+            "n_points": np.asarray(attr["n_points"], dtype=np.int64),
+            "rms": np.asarray(attr["rms"], dtype=np.float64)}
+    return Polylines(verts, attr)
 
 
 def reintegrate(points, labels, candidates, normals, centroids, nbh, sigma, *, nsigma=3.0):
@@ -464,6 +521,17 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         pts, labels, feats.normals, classes.sigma, max_angle=min_angle / 4,
         sensor=feats.sensor if classes.meta.get("noise") == "range" else None,
         point_axes=pt_axes)
+    from ._cylinders import absorb_into_cylinders, refine_cylinder_table, segment_cylinders
+
+    csensor = feats.sensor if classes.meta.get("noise") == "range" else None
+    cylinders = refine_cylinder_table(pts, labels, cylinders, classes.sigma, sensor=csensor)
+    labels, absorbed = absorb_into_cylinders(pts, labels, grow_nbh, cylinders, classes.sigma,
+                                             sensor=csensor)
+    if absorbed:
+        cylinders = refine_cylinder_table(
+            pts, labels, segment_cylinders(pts, labels, feats.normals, classes.sigma,
+                                           sensor=csensor, point_axes=pt_axes),
+            classes.sigma, sensor=csensor)
     lines_out = None
     if lines:
         rk = nbh.distances.reshape(len(nbh), -1)[:, -1] if nbh.kind == "knn" else \
@@ -473,11 +541,56 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         planar = (classes["plane_p"] >= classes.alpha) & (surface | boundary)
         ref = clean_plane_points(labels, planar, nbh)
         # a point with no such plane in its row (its own straddles the crease) takes no part
-        x0, seg = local_intersections(pts, labels * planar[ref], normals[ref], centroids[ref],
-                                      nbh,
-                                      min_angle=min_angle,
-                                      max_distance=2.0 * float(np.median(rk)))
-        lines_out = fit_lines(x0, seg)
+        use = labels * planar[ref]
+        n_loc, c_loc = normals[ref], centroids[ref]
+        # points of cylinder segments: the tangent plane of their segment's cylinder
+        from ._intersect import cylinder_tangent_planes, snap_to_cylinder
+
+        from ._refine import PlaneModels
+
+        # a point without a tested neighbourhood plane in its row, on a segment whose own
+        # trimmed plane the noise model accepts (a fascia, a soffit: narrow faces where no
+        # 50-neighbourhood is a plane), takes its segment's plane
+        pm = PlaneModels(pts, labels, classes.sigma, csensor)
+        seg_plane = (use == 0) & (labels > 0)
+        seg_plane[seg_plane] = pm.planar[labels[seg_plane] - 1]
+        sp = labels[seg_plane] - 1
+        n_loc[seg_plane], c_loc[seg_plane] = pm.normal[sp], pm.centroid[sp]
+        use[seg_plane] = labels[seg_plane]
+        on_cyl, cn, cf = cylinder_tangent_planes(pts, labels, cylinders)
+        n_loc[on_cyl], c_loc[on_cyl], use[on_cyl] = cn[on_cyl], cf[on_cyl], labels[on_cyl]
+        x0, seg, pr = local_intersections(pts, use, n_loc, c_loc, nbh, min_angle=min_angle,
+                                          max_distance=2.0 * float(np.median(rk)),
+                                          max_offset=3.0 * float(np.median(classes.sigma)),
+                                          return_pairs=True)
+        # a cylinder against a plane: the crease is their intersection curve; move the
+        # eq. 17 point of the tangent plane onto it
+        ci, pj = on_cyl[pr[:, 0]], on_cyl[pr[:, 1]]
+        one = ci ^ pj
+        if one.any():
+            cp = np.where(ci, pr[:, 0], pr[:, 1])[one]  # the cylinder side
+            pp = np.where(ci, pr[:, 1], pr[:, 0])[one]  # the plane side
+            s_ = labels[cp] - 1
+            ax = np.c_[cylinders["axis_x"], cylinders["axis_y"], cylinders["axis_z"]][s_]
+            ap = np.c_[cylinders["axis_point_x"], cylinders["axis_point_y"],
+                       cylinders["axis_point_z"]][s_]
+            # the plane side: its segment's trimmed plane when the noise model accepts it
+            # (a 50-neighbourhood's normal tilts by ~0.01 rad: 3 mm at the crease)
+            sp = labels[pp] - 1
+            glob = pm.planar[sp]
+            pn = np.where(glob[:, None], pm.normal[sp], n_loc[pp])
+            pc_ = np.where(glob[:, None], pm.centroid[sp], c_loc[pp])
+            x0[one] = snap_to_cylinder(x0[one], ap, ax, np.asarray(cylinders["radius"])[s_],
+                                       pn, pc_)
+        curved = np.asarray(cylinders["model"]) == 2
+        pair_curved = curved[seg[:, 0] - 1] | curved[seg[:, 1] - 1] if len(seg) else \
+            np.zeros(0, bool)
+        straight = fit_lines(x0[~pair_curved], seg[~pair_curved])
+        bent = curved_lines(x0, seg, curved, max_gap=2.0 * float(np.median(rk)),
+                            tolerance=float(np.median(classes.sigma)))
+        lines_out = Polylines(straight.vertices + bent.vertices,
+                              {k: np.r_[straight.attributes[k], bent.attributes[k]]
+                               for k in straight.attributes})
     table = segment_planes(pts, labels)
     for key in ("model", "radius", "axis_x", "axis_y", "axis_z", "axis_point_x",
                 "axis_point_y", "axis_point_z", "cylinder_p"):

@@ -118,3 +118,107 @@ def intersection_lines(points, labels, units, contact_points, contact_segments, 
         attrs["n_support"].append(int(near.sum()))
         attrs["rms_gap"].append(float(np.sqrt(np.mean(gap[near] ** 2))))
     return Polylines(verts, {k: np.asarray(v) for k, v in attrs.items()})
+
+
+# --- curved creases of the covariance segmentation (seed 003, eq. 9-17 on cylinders) ---
+
+def cylinder_tangent_planes(points, labels, table):
+    """Tangent planes of the fitted cylinders at the points of cylinder segments.
+
+    For a point p of a segment whose model is a cylinder (``table['model'] == 2``, axis
+    point a, unit axis u, radius R), the radial direction ``e = (p - a) - ((p - a) . u) u``
+    normalised is the surface normal there and ``a + ((p - a) . u) u + R e`` the foot of p
+    on the cylinder: the local plane of eq. 10-15 for a curved surface, where the
+    neighbourhood's own covariance plane is a secant, not a tangent.
+
+    Returns
+    -------
+    on : (N,) ndarray of bool
+        Points of cylinder segments.
+    normal, foot : (N, 3) ndarray
+        Normal and foot point (NaN off `on`).
+    """
+    labels = np.asarray(labels)
+    model = np.asarray(table["model"])
+    on = labels > 0
+    on[on] = model[labels[on] - 1] == 2
+    normal = np.full((labels.size, 3), np.nan)
+    foot = np.full((labels.size, 3), np.nan)
+    if not on.any():
+        return on, normal, foot
+    s = labels[on] - 1
+    u = np.c_[table["axis_x"], table["axis_y"], table["axis_z"]][s]
+    a = np.c_[table["axis_point_x"], table["axis_point_y"], table["axis_point_z"]][s]
+    w = points[on] - a
+    h = np.einsum("ij,ij->i", w, u)
+    e = w - h[:, None] * u
+    e /= np.maximum(np.linalg.norm(e, axis=1, keepdims=True), 1e-300)
+    normal[on] = e
+    foot[on] = a + h[:, None] * u + np.asarray(table["radius"])[s][:, None] * e
+    return on, normal, foot
+
+
+def snap_to_cylinder(x, axis_point, axis, radius, normal, centre, iterations=20):
+    """Points of the curve cylinder ∩ plane near `x`, by alternating projections.
+
+    Each row: a cylinder (axis point, unit axis, radius) and a plane (unit normal, a
+    point `centre`); `x` is alternately projected on the plane and radially on the
+    cylinder. Where the two surfaces cross at a clear angle this converges linearly to
+    the point of their intersection curve near the start (the eq. 17 point of the
+    tangent plane, already within ``spacing^2 / (2 R)`` of it).
+    """
+    x = np.array(x, dtype=np.float64, copy=True)
+    for _ in range(iterations):
+        x -= np.einsum("ij,ij->i", x - centre, normal)[:, None] * normal
+        w = x - axis_point
+        h = np.einsum("ij,ij->i", w, axis)
+        e = w - h[:, None] * axis
+        ln = np.maximum(np.linalg.norm(e, axis=1, keepdims=True), 1e-300)
+        x = axis_point + h[:, None] * axis + radius[:, None] * e / ln
+    return x
+
+
+def chain_curve(pts, *, bin_angle=2.0, max_gap=None, tolerance=None):
+    """Order the local intersection points of a curved crease into polylines.
+
+    The points are projected on their best-fitting plane, a circle is fitted there
+    (algebraic), and they are sorted by their angle about its centre, starting after the
+    largest empty angle (the unseen part of the crease); each `bin_angle` degrees of arc
+    gives one vertex, the component-wise median of its points. Consecutive vertices
+    farther apart than `max_gap` (a shadow on the crease) start a new polyline; with a
+    `tolerance`, also those whose chord would leave the fitted circle by more than it
+    (``chord > sqrt(8 R tolerance)``), so a polyline never cuts across an unseen arc.
+
+    Returns
+    -------
+    list of (m, 3) ndarray
+        Polylines with at least two vertices.
+    """
+    pts = np.asarray(pts, dtype=np.float64)
+    c = pts.mean(axis=0)
+    _, _, vt = np.linalg.svd(pts - c, full_matrices=False)
+    uv = (pts - c) @ vt[:2].T
+    A = np.c_[2 * uv, np.ones(len(uv))]
+    sol, *_ = np.linalg.lstsq(A, (uv ** 2).sum(axis=1), rcond=None)
+    ang = np.arctan2(uv[:, 1] - sol[1], uv[:, 0] - sol[0])
+    if tolerance is not None:
+        rad = np.sqrt(max(sol[2] + sol[0] ** 2 + sol[1] ** 2, 0.0))
+        chord = np.sqrt(8.0 * rad * tolerance)
+        max_gap = chord if max_gap is None else min(max_gap, chord)
+    o = np.argsort(ang)
+    ang, pts = ang[o], pts[o]
+    gaps = np.diff(np.r_[ang, ang[0] + 2 * np.pi])
+    g = int(np.argmax(gaps))
+    ang = np.mod(ang - ang[(g + 1) % ang.size], 2 * np.pi)
+    o = np.argsort(ang, kind="stable")
+    ang, pts = ang[o], pts[o]
+    b = np.floor(ang / np.radians(bin_angle)).astype(np.int64)
+    starts = np.flatnonzero(np.r_[True, b[1:] != b[:-1]])
+    verts = np.array([np.median(v, axis=0) for v in np.split(pts, starts[1:])])
+    if max_gap is None or len(verts) < 2:
+        pieces = [verts]
+    else:
+        step = np.linalg.norm(np.diff(verts, axis=0), axis=1)
+        cut = np.flatnonzero(step > max_gap) + 1
+        pieces = np.split(verts, cut)
+    return [v for v in pieces if len(v) >= 2]
