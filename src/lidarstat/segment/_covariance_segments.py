@@ -544,7 +544,8 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         use = labels * planar[ref]
         n_loc, c_loc = normals[ref], centroids[ref]
         # points of cylinder segments: the tangent plane of their segment's cylinder
-        from ._intersect import cylinder_tangent_planes, snap_to_cylinder
+        from ._intersect import (cylinder_tangent_planes, snap_between_cylinders,
+                                 snap_to_cylinder)
 
         from ._refine import PlaneModels
 
@@ -567,21 +568,31 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         # eq. 17 point of the tangent plane onto it
         ci, pj = on_cyl[pr[:, 0]], on_cyl[pr[:, 1]]
         one = ci ^ pj
+        ax3 = np.c_[cylinders["axis_x"], cylinders["axis_y"], cylinders["axis_z"]]
+        ap3 = np.c_[cylinders["axis_point_x"], cylinders["axis_point_y"],
+                    cylinders["axis_point_z"]]
+        rad = np.asarray(cylinders["radius"])
+        tol = 3.0 * float(np.median(classes.sigma))
+        keep = np.ones(len(seg), dtype=bool)
+        both = ci & pj
+        if both.any():  # two cylinders: a crease only where they cross (not two pipes
+            sa, sb = labels[pr[both, 0]] - 1, labels[pr[both, 1]] - 1  # side by side)
+            x0[both], gap2 = snap_between_cylinders(
+                x0[both], (ap3[sa], ax3[sa], rad[sa]), (ap3[sb], ax3[sb], rad[sb]))
+            keep[both] = gap2 <= tol
         if one.any():
             cp = np.where(ci, pr[:, 0], pr[:, 1])[one]  # the cylinder side
             pp = np.where(ci, pr[:, 1], pr[:, 0])[one]  # the plane side
             s_ = labels[cp] - 1
-            ax = np.c_[cylinders["axis_x"], cylinders["axis_y"], cylinders["axis_z"]][s_]
-            ap = np.c_[cylinders["axis_point_x"], cylinders["axis_point_y"],
-                       cylinders["axis_point_z"]][s_]
             # the plane side: its segment's trimmed plane when the noise model accepts it
             # (a 50-neighbourhood's normal tilts by ~0.01 rad: 3 mm at the crease)
             sp = labels[pp] - 1
             glob = pm.planar[sp]
             pn = np.where(glob[:, None], pm.normal[sp], n_loc[pp])
             pc_ = np.where(glob[:, None], pm.centroid[sp], c_loc[pp])
-            x0[one] = snap_to_cylinder(x0[one], ap, ax, np.asarray(cylinders["radius"])[s_],
-                                       pn, pc_)
+            x0[one], gap1 = snap_to_cylinder(x0[one], ap3[s_], ax3[s_], rad[s_], pn, pc_)
+            keep[one] = gap1 <= tol
+        x0, seg = x0[keep], seg[keep]
         curved = np.asarray(cylinders["model"]) == 2
         pair_curved = curved[seg[:, 0] - 1] | curved[seg[:, 1] - 1] if len(seg) else \
             np.zeros(0, bool)

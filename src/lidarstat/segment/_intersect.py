@@ -158,6 +158,25 @@ def cylinder_tangent_planes(points, labels, table):
     return on, normal, foot
 
 
+def _onto_cylinder(x, axis_point, axis, radius):
+    w = x - axis_point
+    h = np.einsum("ij,ij->i", w, axis)
+    e = w - h[:, None] * axis
+    ln = np.maximum(np.linalg.norm(e, axis=1, keepdims=True), 1e-300)
+    return axis_point + h[:, None] * axis + radius[:, None] * e / ln
+
+
+def snap_between_cylinders(x, cyl_a, cyl_b, iterations=20):
+    """Alternating projections of `x` on two cylinders (each ``(axis_point, axis,
+    radius)`` with one row per point); returns the points (on cylinder b) and their
+    distance to cylinder a (about 0 where the cylinders cross, the gap where they do
+    not)."""
+    x = np.array(x, dtype=np.float64, copy=True)
+    for _ in range(iterations):
+        x = _onto_cylinder(_onto_cylinder(x, *cyl_a), *cyl_b)
+    return x, np.linalg.norm(_onto_cylinder(x, *cyl_a) - x, axis=1)
+
+
 def snap_to_cylinder(x, axis_point, axis, radius, normal, centre, iterations=20):
     """Points of the curve cylinder ∩ plane near `x`, by alternating projections.
 
@@ -165,17 +184,15 @@ def snap_to_cylinder(x, axis_point, axis, radius, normal, centre, iterations=20)
     point `centre`); `x` is alternately projected on the plane and radially on the
     cylinder. Where the two surfaces cross at a clear angle this converges linearly to
     the point of their intersection curve near the start (the eq. 17 point of the
-    tangent plane, already within ``spacing^2 / (2 R)`` of it).
+    tangent plane, already within ``spacing^2 / (2 R)`` of it). Also returns each point's
+    distance to the plane (about 0 where the two surfaces cross, the gap where they do
+    not).
     """
     x = np.array(x, dtype=np.float64, copy=True)
     for _ in range(iterations):
         x -= np.einsum("ij,ij->i", x - centre, normal)[:, None] * normal
-        w = x - axis_point
-        h = np.einsum("ij,ij->i", w, axis)
-        e = w - h[:, None] * axis
-        ln = np.maximum(np.linalg.norm(e, axis=1, keepdims=True), 1e-300)
-        x = axis_point + h[:, None] * axis + radius[:, None] * e / ln
-    return x
+        x = _onto_cylinder(x, axis_point, axis, radius)
+    return x, np.abs(np.einsum("ij,ij->i", x - centre, normal))
 
 
 def chain_curve(pts, *, bin_angle=2.0, max_gap=None, tolerance=None):

@@ -363,10 +363,11 @@ def strip_segments(points, labels, nbh, sigma, *, candidates, sensor=None, alpha
     `nsigma` noise units across the hypothesis; deterministic with `seed`), refined by
     total least squares on their inliers, and each becomes a segment when
 
-    1. the plane is identified: the inliers' spread in the plane's second direction,
-       ``lambda1``, is significant against the noise, ``(m - 1) lambda1 / s^2 >
-       chi2_{1-alpha}(m - 2)`` (m inliers, s the largest noise across the plane among
-       them; a straight line of points gives at most chi2(m - 2) there), and
+    1. the plane is identified: the inliers' spread along the plane's second direction
+       e1 (the middle eigenvector) is more than the noise along e1 makes,
+       ``sum_i ((q_i . e1) / s_i(e1))^2 > chi2_{1-alpha}(m - 2)`` (m inliers, q centred,
+       ``s_i(e1)`` the noise std along e1 as for a normal; under "the strip is a straight
+       line" that sum is about chi2(m - 2)), and
     2. the plane passes the plane test on its m inliers: ``sum r_i^2 <=
        chi2_{1-alpha}(m - 3)`` (r in noise units), with ``m >= min_size``.
 
@@ -422,10 +423,12 @@ def strip_segments(points, labels, nbh, sigma, *, candidates, sensor=None, alpha
                 break
             m = int(inl.sum())
             q = pts[rest[inl]] - org - p0
-            ev = np.linalg.eigvalsh(np.cov(q.T))
+            q = q - q.mean(axis=0)
+            e1 = np.linalg.eigh(np.cov(q.T))[1][:, 1]  # the strip's second direction
             r = np.abs(q @ nrm) / _across(sig, rays, rest[inl], np.tile(nrm, (m, 1)))
-            smax = float(_across(sig, rays, rest[inl], np.tile(nrm, (m, 1))).max())
-            identified = (m - 1) * ev[1] / smax ** 2 > _sp.chdtri(m - 2.0, alpha)
+            # "the strip is a line": its spread along e1 is the noise along e1 only
+            t1 = (q @ e1) / _across(sig, rays, rest[inl], np.tile(e1, (m, 1)))
+            identified = float(np.sum(t1 * t1)) > _sp.chdtri(m - 2.0, alpha)
             passes = float(np.sum(r * r)) <= _sp.chdtri(m - 3.0, alpha)
             if not (identified and passes):
                 break
