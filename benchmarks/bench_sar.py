@@ -37,11 +37,14 @@ def _town(extent, density, rng=1):
 
 
 def _normal_errors(cloud, seg, min_size=30):
-    """Angle (degrees) between each correctly found roof plane's normal and the truth."""
+    """Per correctly found roof plane (Hoover 0.8, planes of at least `min_size` points):
+    the angle (degrees) between its table normal and the truth, the propagated angular
+    standard error ``normal_se_deg`` and ``t2``, the Mahalanobis distance of the true
+    gradient (chi-square(2) when the plane is unbiased and its covariance right)."""
     rp = cloud.fields["roof_plane"].astype(int)
     planes = cloud.meta["roof_planes"]
     normals = np.c_[seg.table["normal_x"], seg.table["normal_y"], seg.table["normal_z"]]
-    errors = []
+    errors, ses, t2s = [], [], []
     for pid, n_true in zip(planes["id"], planes["normal"]):
         mine = rp == pid
         if mine.sum() < min_size:
@@ -56,7 +59,67 @@ def _normal_errors(cloud, seg, min_size=30):
             continue  # not a correct detection at tolerance 0.8
         c = min(1.0, abs(float(normals[s - 1] @ np.asarray(n_true))))
         errors.append(float(np.degrees(np.arccos(c))))
-    return np.array(errors)
+        cen = [seg.table["centroid_x"][s - 1], seg.table["centroid_y"][s - 1],
+               seg.table["centroid_z"][s - 1]]
+        se, _, t2 = seg.units[s - 1].normal_error(cen, n_true)
+        ses.append(float(se[0]))
+        t2s.append(float(t2[0]))
+    return np.array(errors), np.array(ses), np.array(t2s)
+
+
+def _normal_stats(err, se, t2):
+    """The three normal figures: share within 0.5 degrees, calibration of the confidence
+    cones (coverage at 95 % with its binomial 99 % interval, KS test of t2 ~ chi2(2)) and
+    the share within 0.5 degrees where 0.5 degrees is at least 3 standard errors."""
+    from scipy import stats
+
+    if not err.size:
+        return {}
+    cover = int(np.count_nonzero(t2 <= stats.chi2.ppf(0.95, 2)))
+    lo, hi = stats.binom.interval(0.99, t2.size, 0.95)
+    ok = se < 0.5 / 3
+    return {"normal_error_median_deg": round(float(np.median(err)), 3),
+            "normal_error_max_deg": round(float(err.max()), 3),
+            "normals_within_0.5_deg": round(float(np.mean(err < 0.5)), 4),
+            "cone95_coverage": round(cover / t2.size, 4),
+            "cone95_covered": cover, "cone95_planes": int(t2.size),
+            "cone95_binomial99": [int(lo), int(hi)],
+            "t2_mean": round(float(t2.mean()), 3),
+            "t2_ks_pvalue_chi2_2": round(float(stats.kstest(t2, "chi2", args=(2,)).pvalue), 4),
+            "normal_se_median_deg": round(float(np.median(se)), 3),
+            "planes_se_below_0.167_deg": int(ok.sum()),
+            "within_0.5_deg_where_se_below_0.167": round(float(np.mean(err[ok] < 0.5)), 4)
+            if ok.any() else None}
+
+
+def _clutter(cloud, seg, sigma):
+    """Chimney/wall (building points off the roof planes) and vegetation points inside
+    roof segments (segments whose majority is one roof plane), and how many of them lie
+    farther than 3 sigma (vertically) from that roof plane."""
+    rp = cloud.fields["roof_plane"].astype(int)
+    cls = cloud.attributes["classification"]
+    planes = cloud.meta["roof_planes"]
+    row = {int(p): k for k, p in enumerate(planes["id"])}
+    out = {}
+    kinds = {"chimney_wall": (cloud.fields["building_id"] > 0) & (rp == 0),
+             "vegetation": np.isin(cls, [3, 4, 5])}
+    roof_of = np.zeros(seg.n_segments + 1, dtype=int)
+    for s in range(1, seg.n_segments + 1):
+        r = rp[seg.labels == s]
+        r = r[r > 0]
+        if r.size > 0.5 * np.count_nonzero(seg.labels == s):
+            roof_of[s] = np.bincount(r).argmax()
+    for name, sel in kinds.items():
+        idx = np.flatnonzero(sel & (roof_of[seg.labels] > 0))
+        far = 0
+        for i in idx:
+            k = row[int(roof_of[seg.labels[i]])]
+            n = np.asarray(planes["normal"][k])
+            dz = (cloud.xyz[i] @ n - planes["offset"][k]) / n[2]
+            far += abs(dz) > 3 * sigma
+        out[name] = {"points": int(sel.sum()), "in_roof_segments": int(idx.size),
+                     "farther_than_3_sigma": int(far)}
+    return out
 
 
 def bench_segment(cloud, bandwidth=None):
@@ -68,7 +131,7 @@ def bench_segment(cloud, bandwidth=None):
     rp = cloud.fields["roof_plane"].astype(int)
     h_all = hoover(seg.labels, rp, 0.8)
     h30 = hoover(seg.labels, rp, 0.8, min_size=30)
-    err = _normal_errors(cloud, seg)
+    err, se, t2 = _normal_errors(cloud, seg)
     return {"points": int(cloud.xyz.shape[0]), "seconds": round(dt, 2),
             "bandwidth": seg.params["bandwidth"], "adaptive": seg.params["adaptive"],
             "sigma": seg.params["sigma"], "sigma_passes": seg.params["sigma_passes"],
@@ -77,8 +140,9 @@ def bench_segment(cloud, bandwidth=None):
             "hoover_correct": h_all.correct, "hoover_missed": h_all.missed,
             "hoover_correct_rate_min30": round(h30.correct_rate, 3),
             "hoover_correct_min30": h30.correct,
-            "normal_error_median_deg": round(float(np.median(err)), 3) if err.size else None,
-            "normals_within_0.5_deg": round(float(np.mean(err < 0.5)), 3) if err.size else None}
+            **_normal_stats(err, se, t2),
+            "outliers_removed": int(np.count_nonzero(seg.fields["surface_outlier"])),
+            "clutter": _clutter(cloud, seg, float(cloud.sigma))}
 
 
 def _cluster(n, rng):
@@ -169,7 +233,16 @@ def main(argv=None):
     print(f"| roof planes correct (Hoover 0.8, planes >= 30 points) | "
           f"{seg['hoover_correct_min30']} ({seg['hoover_correct_rate_min30']:.1%}) |")
     print(f"| normals of correct planes within 0.5 deg | {seg['normals_within_0.5_deg']} "
-          f"(median {seg['normal_error_median_deg']} deg) |")
+          f"(median {seg['normal_error_median_deg']}, max {seg['normal_error_max_deg']} deg) |")
+    print(f"| 95 % normal cones covering the truth | {seg['cone95_covered']} / "
+          f"{seg['cone95_planes']} (binomial 99 % interval {seg['cone95_binomial99']}; "
+          f"KS t2 ~ chi2(2) p = {seg['t2_ks_pvalue_chi2_2']}) |")
+    print(f"| within 0.5 deg where the angular SE < 0.5/3 deg | "
+          f"{seg['within_0.5_deg_where_se_below_0.167']} of "
+          f"{seg['planes_se_below_0.167_deg']} planes |")
+    for name, c in seg["clutter"].items():
+        print(f"| {name} points in roof segments (> 3 sigma from the plane) | "
+              f"{c['in_roof_segments']} of {c['points']:,} ({c['farther_than_3_sigma']}) |")
     print(f"| sar_fit, {fit['n']} points ({fit['lidarstat_logdet']}) | "
           f"{fit['lidarstat_seconds']} s |")
     for m in methods:

@@ -33,6 +33,10 @@ def add_arguments(group):
                        help="Forward Search stopping rule")
     group.add_argument("--fs-block", type=int, default=1,
                        help="points added per Forward Search step (1 = unitary)")
+    group.add_argument("--outlier-alpha", type=float, default=0.01,
+                       help="per-point level of the final outlier test of the points the "
+                       "search added (prediction residual from the raw-cluster surface; "
+                       "0.01, |w| > 2.58); 0 disables it")
     group.add_argument("--diagnostics", default=None, metavar="DIR",
                        help="write Forward Search monitoring plots (PNG) to DIR")
 
@@ -58,4 +62,5 @@ def run(args, cloud):
                        alpha_residual=args.fs_envelope, stop=args.fs_stop, degree=deg,
                        adaptive=args.adaptive, threshold=args.search, w_radius=args.w_radius,
                        min_size=args.min_size or 30, block=args.fs_block,
+                       outlier_alpha=args.outlier_alpha or None,
                        diagnostics=args.diagnostics)

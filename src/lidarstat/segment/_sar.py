@@ -30,7 +30,7 @@ from ._grow import relabel
 from ._intersect import intersection_lines
 from ._raw_clusters import raw_clusters
 from ._result import Polylines, Segmentation, segment_table
-from ._sar_refine import refine_cluster
+from ._sar_refine import refine_cluster, refit_unit
 from ._search_area import delaunay_graph, search_areas
 
 logger = logging.getLogger(__name__)
@@ -118,8 +118,8 @@ def _table(points, labels, units, keep_units):
     powers = [(i - j, j) for i in range(max_deg + 1) for j in range(i + 1)]
     cols = {k: np.full(s, np.nan) for k in
             ["degree", "n_s", "n_sa", "m", "rho", "se_rho", "sigma_sar", "sigma", "E0", "N0",
-             "normal_x", "normal_y", "normal_z", "slope_deg", "fs_stop", "rho_points",
-             "frame"]}
+             "normal_x", "normal_y", "normal_z", "slope_deg", "normal_se_deg", "fs_stop",
+             "rho_points", "frame"]}
     for pe, pn in powers:
         cols[f"c_{pe}{pn}"] = np.full(s, np.nan)
         cols[f"se_c_{pe}{pn}"] = np.full(s, np.nan)
@@ -145,6 +145,8 @@ def _table(points, labels, units, keep_units):
         nrm = unit.normal(cen)[0]
         cols["normal_x"][k], cols["normal_y"][k], cols["normal_z"][k] = nrm
         cols["slope_deg"][k] = np.degrees(np.arccos(nrm[2]))
+        if np.all(np.isfinite(unit.surface_cov)):
+            cols["normal_se_deg"][k] = unit.normal_error(cen)[0]
         cols["fs_stop"][k] = STOP_CODES[unit.fs.stop_reason]
         cols["rho_points"][k] = unit.rho_points
     for k in ("degree", "n_s", "n_sa", "m", "fs_stop", "rho_points", "frame"):
@@ -241,14 +243,17 @@ def _merge_groups(points, unit_labels, units, graph, alpha, threshold):
 
 
 def _refit_unit(points, idx, group, w_radius):
-    """A unit refitted on its final points `idx` (rho by ML, theta, sigma^2, the surface),
-    keeping the Table 6 sizes (summed over a merged group) and the Forward Search record."""
+    """A unit refitted on its final points `idx` (rho by ML, theta, sigma^2 and the
+    surface from the group's raw clusters, residuals of every point), keeping the Table 6
+    sizes (summed over a merged group) and the Forward Search record."""
     big = max(group, key=lambda u: u.m)
-    unit = refine_cluster(points, idx, np.empty(0, np.int64), w_radius=w_radius,
-                          degree=group[0].degree, rho_hint=big.fit.rho)
+    raw = np.concatenate([u.raw for u in group])
+    raw = raw[np.isin(raw, idx)]
+    extra = idx[~np.isin(idx, raw)]
+    unit = refit_unit(points, raw, extra, w_radius=w_radius, degree=group[0].degree,
+                      rho_hint=big.fit.rho, fs=big.fs)
     return dataclasses.replace(unit, n_s=sum(u.n_s for u in group),
-                               n_sa=sum(u.n_sa for u in group), m=sum(u.m for u in group),
-                               fs=big.fs, raw=np.concatenate([u.raw for u in group]))
+                               n_sa=sum(u.n_sa for u in group), m=sum(u.m for u in group))
 
 
 def _final_units(points, labels, units, w_radius):
@@ -268,6 +273,55 @@ def _final_units(points, labels, units, w_radius):
     return out
 
 
+def _outlier_test(points, labels, units, alpha):
+    """Final outlier test of every segment's added points against its raw-cluster surface.
+
+    A point that the Forward Search or the best-fit assignment added to segment s (not in
+    its raw cluster) is a new observation for the surface fitted on the raw cluster, so
+    its prediction residual ``r_i / (s sqrt(1 + h_i))``, ``h_i = a_i'(A'A)^-1 a_i`` over
+    the raw cluster, is N(0, 1) when it lies on the surface (Baarda's w-test of one
+    observation). s is the robust scale ``1.4826 MAD`` of all the segment's residuals
+    (the raw cluster's own standard deviation is biased low: the local planarity test
+    selected its smoothest windows). Points with ``|w| > z(1 - alpha/2)`` leave the
+    segment (label 0). The raw clusters' points are not tested: they were accepted by the
+    local tests.
+
+    Returns the new labels, the units (accepted points and residuals updated)
+    and per point the segment it was removed from (0: none).
+    """
+    from scipy.special import ndtri
+
+    crit = float(ndtri(1.0 - alpha / 2.0))
+    labels = labels.copy()
+    removed = np.zeros(labels.size, dtype=np.uint32)
+    out = []
+    for s, unit in enumerate(units, start=1):
+        k = unit.raw.size
+        acc, res = unit.accepted, unit.residuals
+        if acc.size <= k or k <= unit.basis.n_terms:
+            out.append(unit)
+            continue
+        A = unit.basis(unit._local_xy(points[acc]))
+        G = A[:k].T @ A[:k]
+        ext = A[k:]
+        h = np.einsum("ij,ij->i", ext, np.linalg.solve(G, ext.T).T)
+        scale = 1.4826 * float(np.median(np.abs(res)))
+        if not scale > 0:
+            out.append(unit)
+            continue
+        w = res[k:] / (scale * np.sqrt(1.0 + h))
+        bad = np.abs(w) > crit
+        bad &= labels[acc[k:]] == s
+        if not bad.any():
+            out.append(unit)
+            continue
+        keep = np.r_[np.ones(k, dtype=bool), ~bad]
+        labels[acc[k:][bad]] = 0
+        removed[acc[k:][bad]] = s
+        out.append(dataclasses.replace(unit, accepted=acc[keep], residuals=res[keep]))
+    return labels, out, removed
+
+
 #: Units whose residual standard deviation exceeds this multiple of the local noise
 #: estimate are not planes at that noise (terrain, trees, curved or merged faces) and do
 #: not enter the units' noise estimate.
@@ -284,8 +338,8 @@ def _units_noise(units, sigma_local):
 
 def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, max_degree=3,
                         alpha=0.001, alpha_residual=0.001, stop="both", block=1,
-                        max_steps=500, min_size=10, merge_alpha=0.01, graph=None,
-                        diagnostics=None, progress=None):
+                        max_steps=500, min_size=10, merge_alpha=0.01, outlier_alpha=0.01,
+                        graph=None, diagnostics=None, progress=None):
     """SAR-FS refinement of given raw clusters; returns a :class:`Segmentation`.
 
     Parameters
@@ -309,6 +363,13 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
         one common surface at this level (a plane split into two raw clusters by a dormer
         or a chimney becomes one unit again; their Table 6 sizes are summed). None: no
         merging.
+    outlier_alpha : float or None
+        Level of the final outlier test, per point (Baarda's w-test; default 0.01,
+        |w| > 2.58; Baarda's usual 0.001 lets wall and leaf points 3-3.3 sigma off the
+        plane stay, docs/methods/sar.md): points added to a segment by the search (not in its raw cluster)
+        whose prediction residual from the raw-cluster surface is significant leave the
+        segment (field ``surface_outlier``: the segment they left; table ``n_outliers``).
+        None: no test.
     graph : tuple, optional
         Precomputed :func:`delaunay_graph`.
     diagnostics : path, optional
@@ -374,7 +435,11 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
         u = np.bincount(unit_labels[labels == s]).argmax() - 1
         keep_units.append(int(u))
     kept = _final_units(points, labels, [units[u] for u in keep_units], w_radius)
+    outlier = np.zeros(n, dtype=np.uint32)  # segment a point was removed from (0: none)
+    if outlier_alpha is not None:
+        labels, kept, outlier = _outlier_test(points, labels, kept, outlier_alpha)
     table = _table(points, labels, kept, list(range(len(kept))))
+    table["n_outliers"] = np.bincount(outlier, minlength=len(kept) + 1)[1:].astype(np.int64)
     if len(kept) > 1:
         pts_c, seg_c = _two_hop_contacts(graph, labels)
         lines = intersection_lines(points, labels, kept, pts_c, seg_c, max_shift=threshold)
@@ -391,7 +456,8 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
     for s, unit in enumerate(kept, start=1):
         mine = labels[unit.accepted] == s
         residual[unit.accepted[mine]] = unit.residuals[mine]
-    fields = {"raw_cluster": raw_labels.astype(np.uint32), "surface_residual": residual}
+    fields = {"raw_cluster": raw_labels.astype(np.uint32), "surface_residual": residual,
+              "surface_outlier": outlier}
     params = {"threshold": threshold, "w_radius": w_radius, "alpha": alpha,
               "alpha_residual": alpha_residual, "stop": stop, "block": block,
               "raw_clusters": c_max, "skipped": skipped}
@@ -403,8 +469,8 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
 def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.05,
                 fs_alpha=0.001, alpha_residual=0.001, stop="both", degree=1, max_degree=3,
                 adaptive="multiscale", grow_radius=None, threshold=None, w_radius=None,
-                min_size=30, block=1, max_steps=500, diagnostics=None, progress=None,
-                rng=0):
+                min_size=30, block=1, max_steps=500, outlier_alpha=0.01, diagnostics=None,
+                progress=None, rng=0):
     """Segment a cloud into planar (or polynomial) surface units by SAR-FS (seed 002).
 
     Parameters
@@ -447,6 +513,8 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
         Radius of the SAR adjacency W (default ``1.5 * spacing``).
     min_size : int
         Smallest raw cluster and final segment (points).
+    outlier_alpha : float or None
+        Level of the final per-point outlier test (:func:`refine_raw_clusters`).
     diagnostics : path, optional
         Folder for the Forward Search plots.
     progress : callable, optional
@@ -496,7 +564,8 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
                                   degrees=degree, max_degree=max_degree, alpha=fs_alpha,
                                   alpha_residual=alpha_residual, stop=stop, block=block,
                                   max_steps=max_steps, min_size=min_size, graph=graph,
-                                  diagnostics=diagnostics, progress=progress)
+                                  outlier_alpha=outlier_alpha, diagnostics=diagnostics,
+                                  progress=progress)
         return fit, seg
 
     fit, seg = one_pass(sigma)
