@@ -23,7 +23,13 @@ Three tests, each written beside the label as a p-value (see docs/methods/covari
    ``T2 = n (u^2 / lambda2 + v^2 / lambda1)``, with ``T2 (n - 2) / (2 (n - 1)) ~ F(2, n - 2)``
    under the hypothesis (Johnson and Wichern 2002, the confidence region of a mean).
    The paper's eq. 6 omits the factor n (a prediction region for one point, which no
-   boundary point leaves); rejected surface points -> boundary.
+   boundary point leaves); rejected surface points -> boundary (``boundary='centroid'``).
+   With a sensor the default is ``boundary='scan'``: the same Hotelling test on the
+   *complete disc* of the neighbourhood in linearised scan coordinates
+   (:mod:`lidarstat.features._scan_kernels`), where an interior point of any scan pattern
+   is the centre of a centrally symmetric set of grid nodes; it runs on every point
+   (a neighbourhood cut by the end of the visible surface is a boundary even when it also
+   reaches a crease, as at a pipe's silhouette), at 0.01 by default.
 """
 
 from __future__ import annotations
@@ -103,7 +109,8 @@ class CovarianceClasses:
             a, b = self.meta["range_noise"]
             sig = f"along the rays {a:.3g} + {b:.3g} r"
         lines = [f"{n} points, sigma {sig}" + (" (estimated)" if self.sigma_estimated else "")
-                 + f", alpha {self.alpha}, boundary alpha {self.boundary_alpha}"]
+                 + f", alpha {self.alpha}, boundary alpha {self.boundary_alpha}"
+                 + (f" ({self.meta['boundary']} test)" if "boundary" in self.meta else "")]
         if "curved" in self.meta:
             lines.append(f"consistent curvature: {self.meta['curved']} test at "
                          f"{self.meta['curved_alpha']}")
@@ -211,21 +218,40 @@ def variation_test(ratio, mu, sd):
         return _sp.ndtr(-(np.log(ratio) - mu) / sd)
 
 
+def hotelling_p(t2, counts):
+    """Upper-tail p-value of a bivariate Hotelling T^2 of a mean from `counts` points:
+    ``T2 (n - 2) / (2 (n - 1)) ~ F(2, n - 2)``."""
+    n = np.asarray(counts, dtype=np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = t2 * (n - 2) / (2 * (n - 1))
+        return _sp.fdtrc(2.0, np.where(n > 2, n - 2, np.nan), f)
+
+
 def boundary_test(offset_uv, evals, counts):
     """Hotelling T^2 of the centroid against the index point, and its F p-value."""
     n = np.asarray(counts, dtype=np.float64)
     u, v = offset_uv[:, 0], offset_uv[:, 1]
     with np.errstate(invalid="ignore", divide="ignore"):
         t2 = n * (u * u / evals[:, 2] + v * v / evals[:, 1])
-        f = t2 * (n - 2) / (2 * (n - 1))
-        p = _sp.fdtrc(2.0, np.where(n > 2, n - 2, np.nan), f)
-    return t2, p
+    return t2, hotelling_p(t2, n)
+
+
+def scan_boundary_test(scan_boundary):
+    """The ``'scan'`` boundary test from ``CovarianceResult.scan_boundary``: (T2, p)."""
+    t2 = scan_boundary[:, 0]
+    return t2, hotelling_p(t2, scan_boundary[:, 1])
 
 
 #: Default level of the boundary test: it runs on every surface point, so a small level
 #: keeps false boundary points rare (alpha = 0.05 would flag 5 % of interior points).
 BOUNDARY_ALPHA = 0.001
 
+#: Default level of the ``'scan'`` boundary test. On a scan grid it is conservative (an
+#: interior point is the exact centre of its complete disc), so a larger level costs few
+#: false boundaries and finds borders farther inside the neighbourhood.
+SCAN_BOUNDARY_ALPHA = 0.01
+
+BOUNDARY = ("scan", "centroid")
 
 NOISE = ("normal", "range")
 CURVED = ("cylinder", "variation")
@@ -293,9 +319,9 @@ def curved_surface_test(points, features, query, sigma, *, sensor=None):
 
 
 def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
-                        boundary_alpha=BOUNDARY_ALPHA, curvature_threshold=None,
+                        boundary_alpha=None, curvature_threshold=None,
                         variance_threshold=None, points=None, curved=None,
-                        curved_alpha=None) -> CovarianceClasses:
+                        curved_alpha=None, boundary=None) -> CovarianceClasses:
     """Label every point surface, edge or boundary from its covariance features.
 
     Parameters
@@ -314,8 +340,10 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         the walls facing the scanner rough and the grazing ground smooth.
     alpha : float
         Level of the plane and consistent-curvature tests.
-    boundary_alpha : float
-        Level of the boundary test (default 0.001: it runs on every surface point).
+    boundary_alpha : float, optional
+        Level of the boundary test. Default: 0.001 (``BOUNDARY_ALPHA``) for the centroid
+        test, which runs on every surface point, 0.01 (``SCAN_BOUNDARY_ALPHA``) for the
+        scan test, which is conservative on a scan grid.
     curvature_threshold : float, optional
         Paper mode: SurfaceVariation above this is "high curvature" (replaces test 1).
     variance_threshold : float, optional
@@ -332,6 +360,12 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     curved_alpha : float, optional
         Level of test 2 (rejected -> edge). Default: 0.001 (``CURVED_ALPHA``) for the
         cylinder test, `alpha` for the variation test.
+    boundary : {'scan', 'centroid'}, optional
+        Test 3. ``'scan'`` (default when the features were computed with a sensor): the
+        Hotelling test of the neighbourhood's complete disc in linearised scan
+        coordinates, on every point (boundary wins over edge);
+        ``'centroid'``: the paper's eq. 6-8 (with the factor n) in the tangent plane,
+        on surface points.
 
     Returns
     -------
@@ -343,6 +377,17 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     """
     func = "classify_covariance"
     alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0)
+    if boundary is None:
+        boundary = "scan" if getattr(features, "scan_boundary", None) is not None else "centroid"
+    if boundary not in BOUNDARY:
+        raise InvalidParameterError(
+            f"The 'boundary' parameter of {func} must be one of 'scan', 'centroid'. "
+            f"Got {boundary!r} instead.")
+    if boundary == "scan" and getattr(features, "scan_boundary", None) is None:
+        raise InvalidParameterError(f"{func}: boundary='scan' needs features computed with a "
+                                    "sensor")
+    if boundary_alpha is None:
+        boundary_alpha = SCAN_BOUNDARY_ALPHA if boundary == "scan" else BOUNDARY_ALPHA
     boundary_alpha = check_scalar(boundary_alpha, "boundary_alpha", func=func, low=0.0, high=1.0)
     if curvature_threshold is not None:
         curvature_threshold = check_scalar(curvature_threshold, "curvature_threshold",
@@ -363,7 +408,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     if noise == "range" and features.sensor is None:
         raise InvalidParameterError(f"{func}: noise='range' needs features computed with a sensor")
     estimated = sigma is None
-    meta = {"noise": noise}
+    meta = {"noise": noise, "boundary": boundary}
     if estimated and noise == "range":
         a, b = estimate_range_noise(evals, counts, features.ray_range, features.ray_cos)
         meta["range_noise"] = (a, b)
@@ -387,7 +432,10 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     valid = (counts >= 4) & np.isfinite(evals).all(axis=1)
     across = sigma if noise == "normal" else sigma * features.ray_cos
     plane_p = plane_test(evals, counts, across)
-    t2, boundary_p = boundary_test(features.offset_uv, evals, counts)
+    if boundary == "scan":
+        t2, boundary_p = scan_boundary_test(features.scan_boundary)
+    else:
+        t2, boundary_p = boundary_test(features.offset_uv, evals, counts)
     if curvature_threshold is None:
         low = plane_p >= alpha
     else:
@@ -429,11 +477,13 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     else:
         consistent = f["CurvatureVariance"] <= variance_threshold
     surface = valid & (low | consistent)
-    boundary = surface & (boundary_p < boundary_alpha)
+    tested = valid if boundary == "scan" else surface
+    with np.errstate(invalid="ignore"):
+        one_sided = tested & (boundary_p < boundary_alpha)
     pc = np.zeros(n, dtype=np.uint8)
     pc[valid] = PointClass.EDGE
     pc[surface] = PointClass.SURFACE
-    pc[boundary] = PointClass.BOUNDARY
+    pc[one_sided] = PointClass.BOUNDARY
     fields = {"point_class": pc, "plane_p": plane_p, "variation_p": variation_p,
               "boundary_T2": t2, "boundary_p": boundary_p}
     return CovarianceClasses(fields=fields, sigma=sigma, sigma_estimated=estimated, alpha=alpha,
@@ -477,9 +527,9 @@ class CovarianceClassification:
 
 
 def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None, alpha=0.05,
-               boundary_alpha=BOUNDARY_ALPHA, curvature_threshold=None, variance_threshold=None,
+               boundary_alpha=None, curvature_threshold=None, variance_threshold=None,
                curved="cylinder", curved_alpha=None, eigen_mode="raw", keep_neighbors=False,
-               progress=None):
+               progress=None, boundary=None):
     """Covariance features and surface / edge / boundary classes of every point (seed 003).
 
     One call of :func:`lidarstat.features.covariance_features` and
@@ -510,5 +560,6 @@ def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None
                                   boundary_alpha=boundary_alpha,
                                   curvature_threshold=curvature_threshold,
                                   variance_threshold=variance_threshold, points=points,
-                                  curved=curved, curved_alpha=curved_alpha)
+                                  curved=curved, curved_alpha=curved_alpha,
+                                  boundary=boundary)
     return CovarianceClassification(features=feats, classes=classes)

@@ -12,8 +12,8 @@ def add_neighbourhood_arguments(s, *, k_default=50):
     s.add_argument("--eigen-mode", choices=("raw", "sqrt", "normalized"), default="raw",
                    help="eigen features from eigenvalues, their square roots (PDAL's default) "
                    "or normalised eigenvalues")
-    s.add_argument("--boundary-alpha", type=float, default=0.001,
-                   help="level of the boundary (centroid) test [0.001]")
+    s.add_argument("--boundary-alpha", type=float, default=None,
+                   help="level of the boundary test [0.01 scan, 0.001 centroid]")
     s.add_argument("--curvature-threshold", type=float, default=None,
                    help="SurfaceVariation above this is high curvature (replaces the "
                    "automatic plane test)")
@@ -41,7 +41,7 @@ def cmd_covariance(args):
                      curvature_threshold=args.curvature_threshold,
                      variance_threshold=args.variance_threshold, curved=args.curved,
                      curved_alpha=args.curved_alpha, eigen_mode=args.eigen_mode,
-                     progress=progress(args.quiet))
+                     progress=progress(args.quiet), boundary=args.boundary)
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
     if not args.quiet:
@@ -54,7 +54,8 @@ def cmd_covariance(args):
                 "k": res.features.k, "radius": res.features.radius,
                 "sigma": c.sigma if isinstance(c.sigma, float) else None,
                 "sigma_estimated": c.sigma_estimated, "alpha": c.alpha,
-                "boundary_alpha": c.boundary_alpha, "curved": c.meta.get("curved"),
+                "boundary_alpha": c.boundary_alpha, "boundary": c.meta.get("boundary"),
+                "curved": c.meta.get("curved"),
                 "curved_alpha": c.meta.get("curved_alpha"), "point_class": c.counts()}
         write_summary_json(args.summary_json, meta)
     return 0
@@ -78,6 +79,10 @@ def register(sub):
     s.add_argument("--alpha", type=float, default=0.05,
                    help="level of the plane and consistent-curvature tests [0.05]")
     add_neighbourhood_arguments(s)
+    s.add_argument("--boundary", choices=("scan", "centroid"), default=None,
+                   help="boundary test: the complete disc in scan coordinates (default with "
+                   "a sensor; on every point) or the paper's centroid test (eq. 6-8, on "
+                   "surface points; the default without a sensor)")
     s.add_argument("--summary-json", default=None, help="write the summary as JSON here")
     s.add_argument("-q", "--quiet", action="store_true")
     s.set_defaults(func=cmd_covariance)

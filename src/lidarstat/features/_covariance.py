@@ -11,6 +11,7 @@ from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import CellIndex, Neighborhoods
 from . import _covariance_kernels as _ck
+from . import _scan_kernels as _sk
 
 logger = logging.getLogger(__name__)
 
@@ -70,6 +71,10 @@ class CovarianceResult:
     ray_range, ray_cos : (N,) ndarray or None
         With a sensor: distance from it and |cos| of the angle between the ray and the
         normal (the share of range noise that falls across the surface).
+    scan_boundary : (N, 3) ndarray or None
+        With a sensor: Hotelling T2 of the complete-disc centroid in linearised scan
+        coordinates, the disc's point count m and its radius over the neighbourhood's
+        (:mod:`lidarstat.features._scan_kernels`; the ``'scan'`` boundary test).
     """
 
     fields: dict
@@ -84,6 +89,7 @@ class CovarianceResult:
     sensor: np.ndarray | None = None
     ray_range: np.ndarray | None = None
     ray_cos: np.ndarray | None = None
+    scan_boundary: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
 
     def __getitem__(self, name):
@@ -334,6 +340,8 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         order = None
         keep = neighborhoods if keep_neighbors else None
         k, radius = neighborhoods.k, neighborhoods.radius
+        scan = None if sens is None else _scan_rows(local, np.arange(n), neighborhoods.indptr,
+                                                    neighborhoods.indices, raw, sens)
     elif kind == "radius":
         index = CellIndex(pts, radius)
         origin = index.origin
@@ -351,11 +359,16 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         var_sv = np.empty(n)
         spread = np.empty((n, 4))
         nrm = np.ascontiguousarray(raw[:, _ck.C_NX:_ck.C_NZ + 1])
+        scan = None if sens is None else np.empty((n, _sk.NSCAN))
+        angles = None if sens is None else _sk.scan_angles(index.sorted_points, sens)
         for c0, c1 in blocks:
             s0, s1 = index.cell_start[c0], index.cell_start[c1]
             indptr, idx, _ = index.query_cells(c0, c1)
             _ck.neighbourhood_variance(sv, indptr, idx, mean_sv[s0:s1], var_sv[s0:s1])
             _spread_block(nrm, s0, s1, indptr, idx, spread)
+            if scan is not None:
+                scan[s0:s1] = _scan_rows(index.sorted_points, np.arange(s0, s1), indptr, idx,
+                                         raw[s0:s1], sens, angles)
             if progress is not None:
                 progress(int(n + s1), 2 * n)
         order = index.order
@@ -376,6 +389,11 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         spread = np.empty((n, 4))
         _ck.normal_spread_table(np.ascontiguousarray(raw[:, _ck.C_NX:_ck.C_NZ + 1]), table,
                                 spread)
+        scan = None
+        if sensor is not None:
+            scan = _scan_rows(index.sorted_points, np.arange(n),
+                              np.arange(n + 1, dtype=np.int64) * k, table.reshape(-1), raw,
+                              np.asarray(sensor, float) - origin)
         if progress is not None:
             progress(2 * n, 2 * n)
         order = index.order
@@ -391,6 +409,11 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         object.__setattr__(res, "sensor", sensor)
         object.__setattr__(res, "ray_range", rng_)
         object.__setattr__(res, "ray_cos", cos)
+        if order is not None:
+            scan_in = np.empty_like(scan)
+            scan_in[order] = scan
+            scan = scan_in
+        object.__setattr__(res, "scan_boundary", scan)
     return res
 
 
@@ -398,6 +421,19 @@ def _rows(local, query, indptr, idx, sens):
     out = np.empty((query.size, _ck.NCOL))
     _ck.covariance_rows(local, np.ascontiguousarray(query, dtype=np.int64), indptr, idx,
                         np.zeros(3) if sens is None else sens, sens is not None, out)
+    return out
+
+
+def _scan_rows(pts, rowpoint, indptr, idx, raw, sens, angles=None):
+    """:func:`._scan_kernels.scan_centroid_rows` of CSR rows whose kernel output is `raw`."""
+    out = np.empty((rowpoint.size, _sk.NSCAN))
+    if angles is None:
+        angles = _sk.scan_angles(pts, sens)
+    _sk.scan_centroid_rows(pts, angles, np.ascontiguousarray(rowpoint, dtype=np.int64),
+                           np.ascontiguousarray(indptr, dtype=np.int64), idx,
+                           np.ascontiguousarray(raw[:, _ck.C_NX:_ck.C_NZ + 1]),
+                           np.ascontiguousarray(raw[:, _ck.C_AX:_ck.C_AZ + 1]),
+                           np.asarray(sens, dtype=np.float64), out)
     return out
 
 
