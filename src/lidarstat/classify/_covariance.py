@@ -144,12 +144,18 @@ def estimate_plane_sigma(evals, counts):
     return float(np.sqrt(np.median(ss) / med))
 
 
-def estimate_range_noise(evals, counts, ray_range, ray_cos, *, bins=8):
+#: Quantile of ``(n-1) lambda0 / cos^2`` per range bin used by :func:`estimate_range_noise`
+RANGE_NOISE_QUANTILE = 0.5
+
+
+def estimate_range_noise(evals, counts, ray_range, ray_cos, *, bins=8,
+                         quantile=RANGE_NOISE_QUANTILE):
     """Range-noise model ``sigma_r(r) = a + b r`` of a terrestrial scan, from the data.
 
     Per point, ``(n-1) lambda0 / cos^2(theta)`` estimates ``sigma_r^2 chi2(n-3)`` on planes
-    (theta: angle between ray and normal). Medians in range quantile bins, divided by the
-    chi-square median, give ``sigma_r`` per bin; a least-squares line through them gives
+    (theta: angle between ray and normal). The `quantile` (default the lower quartile,
+    robust while a quarter of each range bin is planar) in range quantile bins, divided by
+    the same quantile of the chi-square, gives ``sigma_r`` per bin; a least-squares line through them gives
     ``a, b`` (b clipped at 0). Points at grazing incidence (cos < 0.2) are left out.
 
     Returns
@@ -162,7 +168,7 @@ def estimate_range_noise(evals, counts, ray_range, ray_cos, *, bins=8):
     ok = (n >= 4) & np.isfinite(rho) & (ray_cos >= 0.2)
     if ok.sum() < 20:
         raise InvalidParameterError("cannot estimate the range noise: too few usable points")
-    med = _sp.chdtri(float(np.median(n[ok])) - 3, 0.5)
+    med = _sp.chdtri(float(np.median(n[ok])) - 3, 1.0 - quantile)
     r = ray_range[ok]
     edges = np.unique(np.quantile(r, np.linspace(0, 1, bins + 1)))
     which = np.clip(np.searchsorted(edges, r, side="right") - 1, 0, edges.size - 2)
@@ -171,7 +177,7 @@ def estimate_range_noise(evals, counts, ray_range, ray_cos, *, bins=8):
         sel = which == b
         if sel.sum() >= 10:
             rc.append(np.median(r[sel]))
-            sc.append(np.sqrt(np.median(rho[ok][sel]) / med))
+            sc.append(np.sqrt(np.quantile(rho[ok][sel], quantile) / med))
     rc, sc = np.asarray(rc), np.asarray(sc)
     if rc.size < 2 or np.ptp(rc) == 0:
         return float(np.median(sc)), 0.0
@@ -253,6 +259,12 @@ SCAN_BOUNDARY_ALPHA = 0.01
 
 BOUNDARY = ("scan", "centroid")
 
+#: Default level of the ``'scan'`` boundary test on the points that failed the surface
+#: tests (edge candidates): a neighbourhood cut by the end of the visible surface is a
+#: boundary even where it also bends (a pipe's occluded side); stricter than
+#: ``SCAN_BOUNDARY_ALPHA`` because beside a crease the complete disc is smaller.
+EDGE_BOUNDARY_ALPHA = 0.001
+
 NOISE = ("normal", "range")
 CURVED = ("cylinder", "variation")
 
@@ -321,7 +333,8 @@ def curved_surface_test(points, features, query, sigma, *, sensor=None):
 def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
                         boundary_alpha=None, curvature_threshold=None,
                         variance_threshold=None, points=None, curved=None,
-                        curved_alpha=None, boundary=None) -> CovarianceClasses:
+                        curved_alpha=None, boundary=None,
+                        edge_boundary_alpha=EDGE_BOUNDARY_ALPHA) -> CovarianceClasses:
     """Label every point surface, edge or boundary from its covariance features.
 
     Parameters
@@ -366,6 +379,9 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         coordinates, on every point (boundary wins over edge);
         ``'centroid'``: the paper's eq. 6-8 (with the factor n) in the tangent plane,
         on surface points.
+    edge_boundary_alpha : float or None
+        With the scan test: level at which a point that failed the surface tests (an
+        edge candidate) becomes a boundary (default 0.001); None: edges stay edges.
 
     Returns
     -------
@@ -389,6 +405,9 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     if boundary_alpha is None:
         boundary_alpha = SCAN_BOUNDARY_ALPHA if boundary == "scan" else BOUNDARY_ALPHA
     boundary_alpha = check_scalar(boundary_alpha, "boundary_alpha", func=func, low=0.0, high=1.0)
+    if edge_boundary_alpha is not None:
+        edge_boundary_alpha = check_scalar(edge_boundary_alpha, "edge_boundary_alpha",
+                                           func=func, low=0.0, high=1.0)
     if curvature_threshold is not None:
         curvature_threshold = check_scalar(curvature_threshold, "curvature_threshold",
                                            func=func, low=0.0, closed="left")
@@ -409,6 +428,8 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         raise InvalidParameterError(f"{func}: noise='range' needs features computed with a sensor")
     estimated = sigma is None
     meta = {"noise": noise, "boundary": boundary}
+    if boundary == "scan":
+        meta["edge_boundary_alpha"] = edge_boundary_alpha
     if estimated and noise == "range":
         a, b = estimate_range_noise(evals, counts, features.ray_range, features.ray_cos)
         meta["range_noise"] = (a, b)
@@ -477,9 +498,10 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     else:
         consistent = f["CurvatureVariance"] <= variance_threshold
     surface = valid & (low | consistent)
-    tested = valid if boundary == "scan" else surface
     with np.errstate(invalid="ignore"):
-        one_sided = tested & (boundary_p < boundary_alpha)
+        one_sided = surface & (boundary_p < boundary_alpha)
+        if boundary == "scan" and edge_boundary_alpha is not None:
+            one_sided |= valid & ~surface & (boundary_p < edge_boundary_alpha)
     pc = np.zeros(n, dtype=np.uint8)
     pc[valid] = PointClass.EDGE
     pc[surface] = PointClass.SURFACE
@@ -529,7 +551,7 @@ class CovarianceClassification:
 def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None, alpha=0.05,
                boundary_alpha=None, curvature_threshold=None, variance_threshold=None,
                curved="cylinder", curved_alpha=None, eigen_mode="raw", keep_neighbors=False,
-               progress=None, boundary=None):
+               progress=None, boundary=None, edge_boundary_alpha=EDGE_BOUNDARY_ALPHA):
     """Covariance features and surface / edge / boundary classes of every point (seed 003).
 
     One call of :func:`lidarstat.features.covariance_features` and
@@ -561,5 +583,6 @@ def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None
                                   curvature_threshold=curvature_threshold,
                                   variance_threshold=variance_threshold, points=points,
                                   curved=curved, curved_alpha=curved_alpha,
-                                  boundary=boundary)
+                                  boundary=boundary,
+                                  edge_boundary_alpha=edge_boundary_alpha)
     return CovarianceClassification(features=feats, classes=classes)
