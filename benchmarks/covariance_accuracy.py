@@ -15,8 +15,12 @@ automatic (range noise estimated along the rays from the scanner position). Prin
   times the point's own neighbourhood radius; ``band median`` - the same with one
   radius, the median over the cloud (the figures of session 2);
 * Hoover et al. (1996) counts at T = 0.8 over faces of more than 200 points;
-* the intersection lines with at least 50 supporting points and longer than 1 m: the
-  largest distance from the true creases at 20, 50 and 80 % of their length.
+* Hoover without the segment-level refinement (``refine=False``, session 3) and without
+  the adaptive scale; the number of distinct scan rows on every face;
+* the straight intersection lines with at least 50 supporting points and longer than
+  1 m: the largest distance at 20, 50 and 80 % of their length from the nearest listed
+  crease and from the crease of their own two faces; the curved lines (polylines of a
+  cylinder against a plane) at their vertices and edge midpoints against the true arcs.
 """
 
 from __future__ import annotations
@@ -59,17 +63,61 @@ def class_scores(cloud, res):
     return out
 
 
-def line_scores(cloud, lines, two_sigma):
+def _face_plane(cloud, f):
+    p = cloud.xyz[cloud.face == f]
+    c = p.mean(axis=0)
+    return np.linalg.svd(p - c, full_matrices=False)[2][2], c
+
+
+def line_scores(cloud, seg, two_sigma):
+    """Straight lines (n >= 50, longer than 1 m) at 20/50/80 % of their length, against two
+    truths: the nearest crease of ``meta['edges']`` (session 3's figure) and the crease of
+    the line's own two faces (the intersection of the planes fitted to the true faces'
+    points; the dominant face of each segment); curved lines (a cylinder segment on one
+    side) sampled at their vertices and edge midpoints against the true arcs of their two
+    faces."""
     from lidarstat.synth._edges import distance_to_creases
 
+    lines, labels = seg.lines, seg.labels
+    names = cloud.meta["face_names"]
+    cyl = seg.table["model"] == 2
     t = np.array([0.2, 0.5, 0.8])[:, None]
-    worst = []
-    for v, n in zip(lines.vertices, lines.attributes["n_points"]):
-        if n >= 50 and np.linalg.norm(v[-1] - v[0]) > 1.0:
-            worst.append(float(distance_to_creases(v[0] + t * (v[-1] - v[0]),
-                                                   cloud.meta["edges"]).max()))
-    return {"lines": len(lines), "long lines": len(worst),
-            "worst distance (m)": round(max(worst), 4) if worst else None,
+    nearest, pair, curved, no_crease = [], [], [], []
+    for v, a, b, n in zip(lines.vertices, lines.attributes["segment_a"],
+                          lines.attributes["segment_b"], lines.attributes["n_points"]):
+        fa = int(np.bincount(cloud.face[labels == a]).argmax())
+        fb = int(np.bincount(cloud.face[labels == b]).argmax())
+        tag = f"{names[fa]} / {names[fb]}"
+        if cyl[a - 1] or cyl[b - 1]:
+            arcs = [c for c in cloud.meta["edges"] if set(c["faces"]) == {fa, fb}]
+            q = np.concatenate([v[:-1], 0.5 * (v[:-1] + v[1:]), v[-1:]])
+            if not arcs:
+                no_crease.append({"faces": tag, "n_points": int(n)})
+                continue
+            d = distance_to_creases(q, arcs)
+            curved.append({"faces": tag, "vertices": len(v),
+                           "length (m)": round(float(np.linalg.norm(np.diff(v, axis=0),
+                                                                    axis=1).sum()), 3),
+                           "median (m)": round(float(np.median(d)), 5),
+                           "max (m)": round(float(d.max()), 5),
+                           "within 2 sigma": round(float(np.mean(d < two_sigma)), 3)})
+            continue
+        if n < 50 or np.linalg.norm(v[-1] - v[0]) <= 1.0:
+            continue
+        q = v[0] + t * (v[-1] - v[0])
+        nearest.append(float(distance_to_creases(q, cloud.meta["edges"]).max()))
+        (na, ca), (nb, cb) = _face_plane(cloud, fa), _face_plane(cloud, fb)
+        cos = abs(float(na @ nb))
+        if cos > np.cos(np.radians(5)):
+            no_crease.append({"faces": tag, "n_points": int(n)})
+            continue
+        pair.append({"faces": tag, "max (m)": round(float(max(np.abs((q - ca) @ na).max(),
+                                                               np.abs((q - cb) @ nb).max())), 5)})
+    return {"lines": len(lines), "long straight lines": len(nearest),
+            "worst distance, nearest listed crease (m)": round(max(nearest), 4)
+            if nearest else None,
+            "straight, own face pair": pair, "curved": curved,
+            "lines between parallel faces or faces without a listed arc": no_crease,
             "2 sigma (m)": two_sigma}
 
 
@@ -92,10 +140,29 @@ def tls(name, step):
     seg0 = segment_covariance(cloud.xyz, sensor=cloud.scanner, result=res,
                               adaptive_scale=False)
     h0 = hoover(seg0.labels, cloud.face + 1, 0.8, min_size=200)
+    seg1 = segment_covariance(cloud.xyz, sensor=cloud.scanner, result=res, refine=False)
+    h1 = hoover(seg1.labels, cloud.face + 1, 0.8, min_size=200)
+    # scan rows across each face: per azimuth column of the scan grid, the number of
+    # distinct elevation rows on the face (median and 90 % quantile over its columns)
+    d = cloud.xyz - cloud.scanner
+    rows = np.round(np.arcsin(d[:, 2] / np.linalg.norm(d, axis=1)) / step).astype(np.int64)
+    cols = np.round(np.arctan2(d[:, 1], d[:, 0]) / step).astype(np.int64)
+    big = np.flatnonzero(np.bincount(cloud.face) > 200)
+    nrows = {}
+    for f in big:
+        m = cloud.face == f
+        key = np.unique(np.c_[cols[m], rows[m]], axis=0)
+        per_col = np.unique(key[:, 0], return_counts=True)[1]
+        nrows[names[f]] = [float(np.median(per_col)), float(np.quantile(per_col, 0.9))]
+    fields = seg.fields["reintegrated"]
     out = {"points": len(cloud), "seconds": round(dt, 1), "classes": class_scores(cloud, res),
            "hoover": h.as_dict(), "not correct": missed,
+           "hoover without refinement (session 3)": h1.as_dict(),
            "hoover without adaptive scale": h0.as_dict(),
-           "lines": line_scores(cloud, seg.lines, 2 * (0.002 + 5e-5 * 30))}
+           "scan rows across faces > 200 points (median, 90 %)": nrows,
+           "points moved by the border refinement": int(np.sum(fields == 2)),
+           "points in strip segments": int(np.sum(fields == 3)),
+           "lines": line_scores(cloud, seg, 2 * (0.002 + 5e-5 * 30))}
     return out
 
 

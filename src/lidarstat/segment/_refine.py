@@ -7,7 +7,7 @@ of the fascia (two parallel rows are always coplanar), and the fascia's row join
 Once the segments exist their own planes decide instead:
 
 * :func:`segment_plane_models` fits a plane to every segment (total least squares, one
-  round of trimming at 3 noise units) and measures it against the noise model: the
+  round of trimming at 3 noise units, refitted on the inliers) and measures it against the noise model: the
   residual of point i from plane (n, c) in noise units is
   ``r_i = |n . (p_i - c)| / s_i(n)`` with ``s_i(n) = sigma_i |d_i . n|`` (floored at
   ``0.1 sigma_i``) for range noise along the unit ray ``d_i``, else ``sigma_i``. A segment
@@ -143,6 +143,33 @@ def _propagate(pts, indptr, indices, rows, labels, cand, planar, normal, cen, si
             break
 
 
+@njit
+def _seg_stats(lab, r, nsigma, s):
+    """Per segment: points, inliers (r <= nsigma) and the inliers' sum of r^2."""
+    n = np.zeros(s)
+    ni = np.zeros(s)
+    ss = np.zeros(s)
+    for i in range(lab.size):
+        g = lab[i] - 1
+        if g < 0:
+            continue
+        n[g] += 1.0
+        if r[i] <= nsigma:
+            ni[g] += 1.0
+            ss[g] += r[i] * r[i]
+    return n, ni, ss
+
+
+def _trim_weights(lab, r, nsigma, s):
+    """1 for the inliers, 0 for the rest; all 1 in a segment with fewer than 3 inliers
+    (it keeps its plain fit)."""
+    w = (r <= nsigma).astype(np.float64)
+    _, ni, _ = _seg_stats(lab, r, nsigma, s)
+    few = np.r_[False, ni < 3]
+    w[few[lab]] = 1.0
+    return w
+
+
 class PlaneModels:
     """Trimmed planes of the segments of `labels` (see :func:`segment_plane_models`)."""
 
@@ -168,22 +195,15 @@ class PlaneModels:
         s = int(lab.max()) if lab.size else 0
         self.labels = lab
         w = np.ones(lab.size)
-        for it in range(3):  # fit, trim at nsigma, refit on the inliers (twice)
+        for it in range(2):  # fit, trim at nsigma, refit on the inliers
             ref, mom = _seg_moments(self.pts, lab, w, s)
             self.centroid, self.normal, self.eigenvalues = _planes(ref, mom)
             self.centroid = np.ascontiguousarray(self.centroid)
             self.normal = np.ascontiguousarray(self.normal)
             r = self.units(lab)
-            if it == 2:
-                break
-            w = (r <= self.nsigma).astype(np.float64)
-            few = np.bincount(lab, weights=w, minlength=s + 1)[1:] < 3
-            w[(lab > 0) & np.r_[False, few][lab]] = 1.0  # keep the plain fit
-        inl = r <= self.nsigma
-        ins = lab > 0
-        n = np.bincount(lab[ins], minlength=s + 1)[1:].astype(np.float64)
-        ni = np.bincount(lab[ins], weights=inl[ins], minlength=s + 1)[1:]
-        ss = np.bincount(lab[ins], weights=np.where(inl, r * r, 0.0)[ins], minlength=s + 1)[1:]
+            if it == 0:
+                w = _trim_weights(lab, r, self.nsigma, s)
+        n, ni, ss = _seg_stats(lab, r, self.nsigma, s)
         self.n_points = n.astype(np.int64)
         self.inlier_fraction = ni / np.maximum(n, 1)
         self.rms_units = np.sqrt(ss / np.maximum(ni, 1))
