@@ -16,6 +16,13 @@
 * Reintegration: an edge point joins the segment of a neighbour whose local plane (centroid
   and normal of that neighbour's neighbourhood) it lies on within 3 sigma; the closest
   such plane wins.
+* Segment-level planes (:mod:`lidarstat.segment._refine`): border points that are
+  outliers of their segment's plane move to the touching segment whose plane they fit;
+  faces seen on one or two scan rows become strip segments when their plane is
+  identified and passes the plane test.
+* Curved creases: points of cylinder segments use their cylinder's tangent plane, the
+  eq. 17 point is moved onto the cylinder-plane intersection curve and the points of a
+  pair are chained into polylines (:mod:`lidarstat.segment._intersect`).
 """
 
 from __future__ import annotations
