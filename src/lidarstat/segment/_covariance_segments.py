@@ -550,10 +550,8 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         # a point with no such plane in its row (its own straddles the crease) takes no part
         use = labels * planar[ref]
         n_loc, c_loc = normals[ref], centroids[ref]
-        # points of cylinder segments: the tangent plane of their segment's cylinder
         from ._intersect import (cylinder_tangent_planes, snap_between_cylinders,
                                  snap_to_cylinder)
-
         from ._refine import PlaneModels
 
         # a point without a tested neighbourhood plane in its row, on a segment whose own
@@ -565,8 +563,9 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         sp = labels[seg_plane] - 1
         n_loc[seg_plane], c_loc[seg_plane] = pm.normal[sp], pm.centroid[sp]
         use[seg_plane] = labels[seg_plane]
+        # points of cylinder segments: the tangent plane of their segment's cylinder
         on_cyl, cn, cf = cylinder_tangent_planes(pts, labels, cylinders)
-        n_loc[on_cyl], c_loc[on_cyl], use[on_cyl] = cn[on_cyl], cf[on_cyl], labels[on_cyl]
+        n_loc[on_cyl], c_loc[on_cyl], use[on_cyl] = cn, cf, labels[on_cyl]
         x0, seg, pr = local_intersections(pts, use, n_loc, c_loc, nbh, min_angle=min_angle,
                                           max_distance=2.0 * float(np.median(rk)),
                                           max_offset=3.0 * float(np.median(classes.sigma)),

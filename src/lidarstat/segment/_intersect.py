@@ -135,17 +135,15 @@ def cylinder_tangent_planes(points, labels, table):
     -------
     on : (N,) ndarray of bool
         Points of cylinder segments.
-    normal, foot : (N, 3) ndarray
-        Normal and foot point (NaN off `on`).
+    normal, foot : (M, 3) ndarray
+        Normal and foot point of the M points of `on`, in index order.
     """
     labels = np.asarray(labels)
     model = np.asarray(table["model"])
     on = labels > 0
     on[on] = model[labels[on] - 1] == 2
-    normal = np.full((labels.size, 3), np.nan)
-    foot = np.full((labels.size, 3), np.nan)
     if not on.any():
-        return on, normal, foot
+        return on, np.zeros((0, 3)), np.zeros((0, 3))
     s = labels[on] - 1
     u = np.c_[table["axis_x"], table["axis_y"], table["axis_z"]][s]
     a = np.c_[table["axis_point_x"], table["axis_point_y"], table["axis_point_z"]][s]
@@ -153,9 +151,8 @@ def cylinder_tangent_planes(points, labels, table):
     h = np.einsum("ij,ij->i", w, u)
     e = w - h[:, None] * u
     e /= np.maximum(np.linalg.norm(e, axis=1, keepdims=True), 1e-300)
-    normal[on] = e
-    foot[on] = a + h[:, None] * u + np.asarray(table["radius"])[s][:, None] * e
-    return on, normal, foot
+    foot = a + h[:, None] * u + np.asarray(table["radius"])[s][:, None] * e
+    return on, e, foot
 
 
 def _onto_cylinder(x, axis_point, axis, radius):
