@@ -240,12 +240,24 @@ def _raised_patches_scipy(xy, z, k=8, step=0.3, slope=1.0, above_fraction=0.95,
     return raised[lab]
 
 
-def test_raised_patches_numba_union_find_equals_scipy_components(rng):
-    """The Numba union-find (chunked) gives exactly the scipy graph's raised points."""
+@pytest.mark.parametrize("layout", ["uniform", "clustered"])
+def test_raised_patches_grid_knn_union_find_equals_scipy_components(rng, layout):
+    """The grid kNN + Numba union-find (chunked, in grid order) gives exactly the raised
+    points of the former cKDTree query + scipy connected components: on a uniform cloud,
+    and on one whose density varies 40-fold with an empty hole (the grid search must
+    widen its block of cells there)."""
     from lidarstat.classify._continuity import raised_patches
 
     n = 30_000
-    xy = rng.uniform(0, 300, (n, 2))
+    if layout == "uniform":
+        xy = rng.uniform(0, 300, (n, 2))
+    else:
+        dense = rng.uniform(0, 60, (n // 2, 2)) + [120, 120]
+        sparse = rng.uniform(0, 300, (n, 2))
+        sparse = sparse[np.hypot(*(sparse - [60, 220]).T) > 40][: n - n // 2]
+        xy = np.r_[dense, sparse]
+        xy = xy[rng.permutation(len(xy))]
+        n = len(xy)
     z = 0.1 * xy[:, 0] + rng.normal(0, 0.05, n)
     cells = np.floor(xy / 30).astype(int)
     roof = ((xy % 30) > 8).all(axis=1) & ((cells.sum(axis=1) % 3) == 0)

@@ -22,8 +22,11 @@ samp41 11.5 % against 10.9 %.)
 from __future__ import annotations
 
 import numpy as np
+from numba import prange
 
-from .._shared._jit import njit
+from .._shared._jit import njit, njit_parallel
+from ..features._covariance_kernels import (_CELL_CHUNK, _block_ranges, _count, _gather,
+                                            _gather_within, _guaranteed, _nearest, _scratch)
 
 __all__ = ["raised_patches"]
 
@@ -40,7 +43,8 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     z : (N,) ndarray
         Elevations.
     k : int, optional
-        Planimetric nearest neighbours per point (the graph's edges).
+        Planimetric nearest neighbours per point (the graph's edges; the point itself is
+        not one of them).
     step, slope : float, optional
         Two neighbours are joined when their elevations differ by at most
         ``step + slope * distance`` (slopes up to 45 degrees stay joined; walls do not).
@@ -50,12 +54,22 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     min_points : int, optional
         Smallest patch that is judged.
     chunk : int, optional
-        Points queried at a time (bounds the memory of the neighbour table).
+        Points searched at a time (bounds the memory of the neighbour table).
 
     Returns
     -------
     (N,) ndarray of bool
         True for points in a raised patch (never the largest patch).
+
+    Notes
+    -----
+    The k nearest neighbours come from the exact grid search of the covariance features
+    (:func:`lidarstat.features._covariance_kernels.knn_cells`' distance binning over a
+    :class:`~lidarstat.neighbors.CellIndex` in 2-D), in parallel over cells, and the
+    points are processed in the grid's order, so the union-find touches memory locally.
+    The patches and the raised points equal those of a k-d tree query followed by
+    ``scipy.sparse.csgraph.connected_components`` (tested) up to the choice among
+    neighbours at exactly equal distances.
 
     Examples
     --------
@@ -69,25 +83,39 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     >>> bool(r[roof].mean() > 0.95 and r[~roof].mean() < 0.01)
     True
     """
-    from scipy.spatial import cKDTree
+    from ..neighbors import CellIndex
 
     xy = np.asarray(xy, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
     n = z.size
     if n < 2 * min_points:
         return np.zeros(n, bool)
-    kk = min(k + 1, n)
-    tree = cKDTree(xy)
+    k = min(k, n - 1)
+    flat = np.zeros((n, 3))
+    flat[:, :2] = xy
+    lo = xy.min(axis=0)
+    span = np.maximum(xy.max(axis=0) - lo, 1e-12)
+    # about k + 1 points per cell: the 3 x 3 block holds the k nearest of most points
+    cell = float(np.sqrt((k + 1) * span[0] * span[1] / n))
+    index = CellIndex(flat, cell, dim=2)
+    del flat
+    order = index.order
+    zs = z[order]
     parent = np.arange(n, dtype=np.int64)
     ci, cj, cup = [], [], []
-    for s in range(0, n, chunk):
-        stop = min(n, s + chunk)
-        d, nb = tree.query(xy[s:stop], k=kk, workers=-1)
-        i, j, up = _join_smooth(parent, z, nb, d, s, step, slope)
+    for c0, c1 in index.cell_blocks(chunk):
+        s0, s1 = index.cell_start[c0], index.cell_start[c1]
+        nbr = np.empty((s1 - s0, k), np.int32 if n < 2**31 - 1 else np.int64)
+        smooth = np.empty((s1 - s0, k), np.bool_)
+        _knn_smooth(c0, c1, index.sorted_points, zs, index.cell_keys, index.cell_start,
+                    index.dims, float(index.cell), k, float(index.cell), step, slope, nbr,
+                    smooth)
+        i, j, up = _join_smooth(parent, zs, nbr, smooth, s0)
         ci.append(i)
         cj.append(j)
         cup.append(up)
-    lab, ncomp = _component_labels(parent)
+    del nbr, smooth
+    lab, ncomp, first = _component_labels(parent, order)
     ci, cj, cup = np.concatenate(ci), np.concatenate(cj), np.concatenate(cup)
     other = lab[ci] != lab[cj]
     li = lab[ci[other]]
@@ -96,8 +124,85 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     n_step = np.bincount(li, minlength=ncomp)
     size = np.bincount(lab, minlength=ncomp)
     raised = (n_step > 0) & (n_above >= above_fraction * n_step) & (size >= min_points)
-    raised[np.argmax(size)] = False
-    return raised[lab]
+    # the largest patch (ties: the one holding the lowest input index, scipy's numbering)
+    big = np.flatnonzero(size == size.max())
+    raised[big[np.argmin(first[big])]] = False
+    out = np.empty(n, bool)
+    out[order] = raised[lab]
+    return out
+
+
+@njit_parallel
+def _knn_smooth(c0, c1, pts, zs, cell_keys, cell_start, dims, cell, k, tau0, step, slope,
+                nbr, smooth):  # pragma: no cover - compiled
+    """The `k` nearest other points of every point of cells ``c0..c1-1`` and the smooth flags.
+
+    `pts` are the grid's sorted local coordinates with z = 0 (2-D distances), `zs` the
+    elevations in the same order. Row r of `nbr` (sorted positions) is sorted position
+    ``cell_start[c0] + r``, ascending distance; ``smooth[r, t]`` says
+    ``|zs[j] - zs[i]| <= step + slope * d``. The search is :func:`knn_cells`' (3 x 3
+    cells, widened until the k-th distance is guaranteed) with ``k + 1`` candidates so
+    that the point itself can be left out.
+    """
+    base = cell_start[c0]
+    ncell = c1 - c0
+    kk = k + 1
+    nchunks = (ncell + _CELL_CHUNK - 1) // _CELL_CHUNK
+    maxrad = max(dims[0], dims[1])
+    for ch in prange(nchunks):
+        cap = 1024
+        bd = np.empty(cap + 1)
+        bi = np.empty(cap + 1, dtype=np.int64)
+        td, ti, tb, sd, si, cnt = _scratch(cap)
+        ranges = np.empty((9, 2), dtype=np.int64)
+        for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
+            key = cell_keys[c]
+            ix0 = key // dims[1]
+            iy0 = key % dims[1]
+            nr = _block_ranges(ix0, iy0, 0, 1, cell_keys, cell_start, dims, ranges)
+            need = _count(ranges, nr)
+            if need > cap:
+                cap = max(need, 2 * cap)
+                bd = np.empty(cap + 1)
+                bi = np.empty(cap + 1, dtype=np.int64)
+                td, ti, tb, sd, si, cnt = _scratch(cap)
+            tau2 = tau0 * tau0
+            for i in range(cell_start[c], cell_start[c + 1]):
+                px = pts[i, 0]
+                py = pts[i, 1]
+                m = _gather_within(px, py, 0.0, pts, ranges, nr, tau2, bd, bi)
+                if m < kk:
+                    m = _gather(px, py, 0.0, pts, ranges, nr, bd, bi)
+                rad = 1
+                kth = np.inf
+                if m >= kk:
+                    kth = _nearest(bd, bi, m, kk, True, td, ti, tb, sd, si, cnt)
+                while m < kk or kth > _guaranteed(px, py, 0.0, ix0, iy0, 0, rad, cell,
+                                                  dims) ** 2:
+                    if rad > maxrad:
+                        break
+                    rad += 1
+                    big = np.empty(((2 * rad + 1) ** 2, 2), dtype=np.int64)
+                    nb = _block_ranges(ix0, iy0, 0, rad, cell_keys, cell_start, dims, big)
+                    need = _count(big, nb)
+                    if need > cap:
+                        cap = max(need, 2 * cap)
+                        bd = np.empty(cap + 1)
+                        bi = np.empty(cap + 1, dtype=np.int64)
+                        td, ti, tb, sd, si, cnt = _scratch(cap)
+                    m = _gather(px, py, 0.0, pts, big, nb, bd, bi)
+                    if m >= kk:
+                        kth = _nearest(bd, bi, m, kk, True, td, ti, tb, sd, si, cnt)
+                tau2 = kth * 1.3225  # (1.15 r_k)^2 for the next point of the cell
+                r = i - base
+                t = 0
+                for q in range(min(m, kk)):
+                    j = ti[q]
+                    if j == i or t == k:
+                        continue
+                    nbr[r, t] = j
+                    smooth[r, t] = abs(zs[j] - zs[i]) <= step + slope * np.sqrt(td[q])
+                    t += 1
 
 
 @njit
@@ -113,22 +218,20 @@ def _find(parent, i):
 
 
 @njit
-def _join_smooth(parent, z, nb, d, start, step, slope):
-    """Union the smooth kNN edges of rows ``start..`` into `parent`; return the others.
+def _join_smooth(parent, zs, nbr, smooth, start):  # pragma: no cover - compiled
+    """Union the smooth edges of rows ``start..`` into `parent`; return the others.
 
-    Row ``r`` of `nb`/`d` is point ``start + r``; column 0 is the point itself.  An edge
-    is smooth when ``|z[j] - z[i]| <= step + slope * d``.  Returns the non-smooth edges
-    (i, j as int32, and whether i is the higher end) in row order.
+    Row ``r`` of `nbr`/`smooth` is sorted position ``start + r``. Returns the non-smooth
+    edges (i, j as sorted positions, and whether i is the higher end) in row order.
     """
-    m, kk = nb.shape
+    m, k = nbr.shape
     n_cut = 0
     for r in range(m):
         i = start + r
-        for c in range(1, kk):
-            j = nb[r, c]
-            if abs(z[j] - z[i]) <= step + slope * d[r, c]:
+        for c in range(k):
+            if smooth[r, c]:
                 a = _find(parent, i)
-                b = _find(parent, j)
+                b = _find(parent, nbr[r, c])
                 if a != b:
                     if a < b:
                         parent[b] = a
@@ -136,34 +239,35 @@ def _join_smooth(parent, z, nb, d, start, step, slope):
                         parent[a] = b
             else:
                 n_cut += 1
-    ci = np.empty(n_cut, np.int32)
-    cj = np.empty(n_cut, np.int32)
+    ci = np.empty(n_cut, nbr.dtype)
+    cj = np.empty(n_cut, nbr.dtype)
     up = np.empty(n_cut, np.bool_)
     t = 0
     for r in range(m):
-        i = start + r
-        for c in range(1, kk):
-            j = nb[r, c]
-            dz = z[j] - z[i]
-            if not abs(dz) <= step + slope * d[r, c]:
-                ci[t] = i
+        for c in range(k):
+            if not smooth[r, c]:
+                j = nbr[r, c]
+                ci[t] = start + r
                 cj[t] = j
-                up[t] = dz < 0
+                up[t] = zs[j] < zs[start + r]
                 t += 1
     return ci, cj, up
 
 
 @njit
-def _component_labels(parent):
-    """Component ids numbered by each component's lowest point index (scipy's order)."""
+def _component_labels(parent, order):  # pragma: no cover - compiled
+    """Component ids in sorted order, their count and each one's lowest input index."""
     n = parent.size
     lab = np.empty(n, np.int64)
     root_label = np.full(n, -1, np.int64)
+    first = np.empty(n, np.int64)
     nlab = 0
     for i in range(n):
         root = _find(parent, i)
         if root_label[root] < 0:
             root_label[root] = nlab
+            first[nlab] = order[i]
             nlab += 1
         lab[i] = root_label[root]
-    return lab, nlab
+        first[lab[i]] = min(first[lab[i]], order[i])
+    return lab, nlab, first[:nlab]
