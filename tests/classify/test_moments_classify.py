@@ -267,3 +267,21 @@ def test_raised_patches_grid_knn_union_find_equals_scipy_components(rng, layout)
     got = raised_patches(xy, z, chunk=7_001)
     assert ref.sum() > 0.05 * n
     assert np.array_equal(got, ref)
+
+
+def test_raised_patches_of_a_reordered_cloud_with_ranks(rng):
+    """A reordered cloud with its input indices as `rank` gives the raised points of the
+    cloud in input order (positions on a half-metre lattice: equal distances everywhere)."""
+    from lidarstat.classify._continuity import raised_patches
+
+    n = 20000
+    xy = np.round(rng.uniform(0, 100, (n, 2)) / 0.5) * 0.5
+    z = 0.1 * xy[:, 0] + rng.normal(0, 0.05, n) + np.where(rng.random(n) < 0.05, 0.6, 0)
+    cells = np.floor(xy / 20).astype(int)
+    roof = ((xy % 20) > 6).all(axis=1) & ((cells.sum(axis=1) % 2) == 0)
+    z[roof] += 3
+    ref = raised_patches(xy, z)
+    perm = rng.permutation(n)
+    got = raised_patches(xy[perm], z[perm], rank=perm)
+    assert ref[roof].mean() > 0.9
+    assert np.array_equal(got, ref[perm])

@@ -10,12 +10,12 @@ from lidarstat.classify import classify_moments
 from classify.test_moments_classify import _scene
 
 
-def _scipy_surface(xy_ground, z_ground, *, cell, which="median"):
+def _scipy_surface(xy_ground, z_ground, *, cell, which="median", rank=None):
     """The scipy surface: LinearNDInterpolator, the nearest vertices' plane outside."""
     from scipy.interpolate import LinearNDInterpolator
     from scipy.spatial import Delaunay, cKDTree
 
-    sel = _surface._cell_pick(xy_ground, z_ground, cell, which)
+    sel = _surface._cell_pick(xy_ground, z_ground, cell, which, rank)
     P, V = xy_ground[sel], z_ground[sel]
     lin, tree = LinearNDInterpolator(Delaunay(P), V), cKDTree(P)
 
@@ -65,6 +65,10 @@ def test_cell_pick_equals_lexsort(rng, which):
     b = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1], True])
     ref = o[b[:-1]] if which == "min" else o[(b[:-1] + b[1:] - 1) // 2]
     assert np.array_equal(_surface._cell_pick(xy, z, 4.0, which), ref)
+    # on a reordered cloud, ties go to the lower rank (input index): the same points
+    perm = rng.permutation(z.size)
+    got = _surface._cell_pick(xy[perm], z[perm], 4.0, which, rank=perm)
+    assert np.array_equal(np.sort(perm[got]), np.sort(ref))
     far = xy * [1, 1e4]  # sparse cells over a huge box: the argsort path
     key = _surface.cell_keys(far, 4.0)
     assert _surface._cell_pick(far, z, 4.0, which).size == np.unique(key).size
@@ -148,3 +152,43 @@ def test_low_outlier_and_road_cell_kernels_equal_lexsort(rng):
     ref[o] = np.repeat(0.5 * (vs[(b[:-1] + b[1:] - 1) // 2] + vs[(b[:-1] + b[1:]) // 2]),
                        np.diff(b))
     assert np.array_equal(_roads.cell_median(xy, v, points_per_cell=8), ref)
+
+
+def test_tile_order_changes_no_label(rng, monkeypatch):
+    """Working in root-tile order (contiguous tiles) gives exactly the labels, heights,
+    ids, tiles and report steps of working in input order, on a cloud in random order
+    with ties everywhere: centimetre coordinates, duplicated positions, low echoes."""
+    xyz, inten, nret, rnum, _ = _scene(rng, 16000)
+    xyz = np.round(xyz, 2)
+    dup = rng.choice(len(xyz), 800, replace=False)  # same x, y, another z (two echoes)
+    xyz = np.r_[xyz, xyz[dup] + [0, 0, 0.5]]
+    inten, nret, rnum = (np.r_[a, a[dup]] for a in (inten, nret, rnum))
+    xyz[rng.choice(len(xyz), 10, replace=False), 2] -= 4.0
+    o = rng.permutation(len(xyz))
+    xyz, inten, nret, rnum = xyz[o], inten[o], nret[o], rnum[o]
+    kw = dict(number_of_returns=nret, return_number=rnum, tile_size=42, min_tile_size=10)
+    fast = classify_moments(xyz, inten, **kw)
+    monkeypatch.setattr(_moments, "_tile_order",
+                        lambda roots: (np.arange(sum(t.points.size for t in roots)), roots))
+    ref = classify_moments(xyz, inten, **kw)
+    assert fast.params["n_low_noise"] > 0
+    for name in ("classification", "cluster_id", "height", "ground"):
+        assert np.array_equal(getattr(fast, name), getattr(ref, name), equal_nan=True), name
+    assert [s.to_dict() for s in fast.steps] == [s.to_dict() for s in ref.steps]
+    assert fast.tiles == ref.tiles
+
+
+def test_cell_keys_equal_the_numpy_expression(rng):
+    """The compiled cell keys equal NumPy's ``floor((xy - origin) / cell)`` expression,
+    with the default origin and a given one (UTM-sized and quantised coordinates)."""
+    def ref(xy, cell, origin=None):
+        o = xy.min(axis=0) if origin is None else np.asarray(origin, dtype=float)
+        ij = np.floor((xy - o) / cell).astype(np.int64)
+        return ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+
+    for xy in (rng.uniform(0, 100, (20000, 2)), rng.uniform(4.5e5, 4.6e5, (20000, 2)),
+               np.round(rng.uniform(0, 50, (20000, 2)), 1)):
+        for cell in (0.1, 1.0, 3.7):
+            assert np.array_equal(_surface.cell_keys(xy, cell), ref(xy, cell))
+            o = xy.min(axis=0) + 3.3  # some points below the origin: negative indices
+            assert np.array_equal(_surface.cell_keys(xy, cell, o), ref(xy, cell, o))

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numba import prange
 
+from .._shared._columns import column_max, column_min
 from .._shared._jit import njit, njit_parallel
 from ..features._covariance_kernels import (_CELL_CHUNK, _block_ranges, _count, _gather,
                                             _gather_within, _guaranteed, _nearest, _scratch)
@@ -33,7 +34,7 @@ __all__ = ["raised_patches"]
 
 def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
                    above_fraction: float = 0.95, min_points: int = 10,
-                   chunk: int = 1_000_000) -> np.ndarray:
+                   chunk: int = 1_000_000, rank=None) -> np.ndarray:
     """Points whose smooth patch stands above its surroundings on (almost) every side.
 
     Parameters
@@ -55,6 +56,10 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
         Smallest patch that is judged.
     chunk : int, optional
         Points searched at a time (bounds the memory of the neighbour table).
+    rank : (N,) ndarray of int, optional
+        Input index of each point when the caller has reordered the cloud (a permutation
+        of ``0..N-1``): neighbours at equal distances are then chosen as for the cloud in
+        input order, so the result does not depend on the order.
 
     Returns
     -------
@@ -92,15 +97,20 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
         return np.zeros(n, bool)
     k = min(k, n - 1)
     flat = np.zeros((n, 3))
-    flat[:, :2] = xy
-    lo = xy.min(axis=0)
-    span = np.maximum(xy.max(axis=0) - lo, 1e-12)
+    if rank is None:
+        flat[:, :2] = xy
+    else:  # index the points in input order
+        by_rank = np.empty(n, np.int64)
+        by_rank[rank] = np.arange(n)
+        flat[:, :2] = xy[by_rank]
+    lo = column_min(xy)
+    span = np.maximum(column_max(xy) - lo, 1e-12)
     # about k + 1 points per cell: the 3 x 3 block holds the k nearest of most points
     cell = float(np.sqrt((k + 1) * span[0] * span[1] / n))
     index = CellIndex(flat, cell, dim=2)
     del flat
-    order = index.order
-    zs = z[order]
+    pos = index.order if rank is None else by_rank[index.order]  # grid order -> rows
+    zs = z[pos]
     parent = np.arange(n, dtype=np.int64)
     ci, cj, cup = [], [], []
     for c0, c1 in index.cell_blocks(chunk):
@@ -115,7 +125,7 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
         cj.append(j)
         cup.append(up)
     del nbr, smooth
-    lab, ncomp, first = _component_labels(parent, order)
+    lab, ncomp, first = _component_labels(parent, index.order)
     ci, cj, cup = np.concatenate(ci), np.concatenate(cj), np.concatenate(cup)
     other = lab[ci] != lab[cj]
     li = lab[ci[other]]
@@ -128,7 +138,7 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     big = np.flatnonzero(size == size.max())
     raised[big[np.argmin(first[big])]] = False
     out = np.empty(n, bool)
-    out[order] = raised[lab]
+    out[pos] = raised[lab]
     return out
 
 

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .._shared._columns import column_max, column_min
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatWarning
 from ..stats._moments import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
@@ -203,8 +204,8 @@ def opening_surface(xy, z, *, window: float, cell: float = 1.0) -> np.ndarray:
     """
     from scipy import ndimage as ndi
 
-    ij = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64)
-    shape = tuple(ij.max(axis=0) + 1)
+    ij = np.floor((xy - column_min(xy)) / cell).astype(np.int64)
+    shape = tuple(column_max(ij) + 1)
     g = np.full(shape, np.inf)
     np.minimum.at(g, (ij[:, 0], ij[:, 1]), z)
     empty = ~np.isfinite(g)
@@ -338,6 +339,19 @@ def _classify_tile(xyh, attrs, p, record, final):
         cats["intensity"] = inten
     lab, next_id = _five_step(cats, p, -1, steps, 1)
     return _TileOut({"ground": ground, "cluster_id": lab}, gsteps, infos, steps, next_id - 1)
+
+
+def _tile_order(roots):
+    """Order of the points tile by tile (input order inside a tile), and the root tiles
+    of the cloud in that order: each tile's points become the block of positions it
+    occupies (core points only: no halo)."""
+    perm = np.concatenate([t.points for t in roots])
+    out, start = [], 0
+    for t in roots:
+        m = t.points.size
+        out.append(replace(t, points=np.arange(start, start + m)))
+        start += m
+    return perm, out
 
 
 def _tile_pass(xyh, roots, p, inten, scheduler, workers, record, final):
@@ -603,18 +617,29 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                 elevation_rule=elevation_rule, tile_size=tile_size / ux,
                 min_tile_size=min_tile_size / ux, min_tile_points=4 * min_cluster,
                 ground_spread=float(ground_spread))
-    origin = pts.min(axis=0)
-    local = pts - origin
-    xy = np.ascontiguousarray(local[:, :2])
-    z = local[:, 2]
+    multi = np.zeros(n, bool)
+    if nret is not None and rnum is not None:
+        multi = (nret.astype(int) > 1) & (rnum.astype(int) < nret.astype(int))
+    origin = column_min(pts)
+
+    # ---- work in root-tile order: every tile is a contiguous block of points, so the
+    # tile passes copy slices and the grid and TIN kernels touch memory locally. Inside a
+    # tile the input order is kept (the dip test's subsample sees the same sequence) and
+    # every tie is broken by the input index `perm` (classes do not depend on the order).
+    from ..pipeline import tile_grid
+
+    xyh = np.empty((n, 3))  # x, y and the current heights, in tile order
+    xyh[:, :2] = pts[:, :2] - origin[:2]
+    xyh[:, 2] = 0.0
+    perm, roots = _tile_order(tile_grid(xyh, p.tile_size))
+    xyh = xyh[perm]
+    z = pts[perm, 2] - origin[2]
+    inten = None if inten is None else inten[perm]
+    multi = multi[perm]
+    xy = np.ascontiguousarray(xyh[:, :2])
 
     # ---- ground: lower envelope, then cuts on heights above a surface refitted to the
     # ground of the previous pass (progressive tiles through lidarstat.pipeline)
-    from ..pipeline import tile_grid
-
-    xyh = np.zeros((n, 3))  # x, y and the current heights
-    xyh[:, :2] = xy
-    roots = tile_grid(xyh, p.tile_size)
     height = _heights(z, opening_surface(xy, z, window=opening_window / ux, cell=1.0 / ux))
     surf = None
     for it in range(iterations + 1):
@@ -626,15 +651,17 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
         if ground.sum() < 3:
             ground[:] = True
         if not last:
-            surf = ground_surface(xy[ground], z[ground], cell=surface_cell / ux)
+            surf = ground_surface(xy[ground], z[ground], cell=surface_cell / ux,
+                                  rank=perm[ground])
             height = _heights(z, surf(xy))
 
     if continuity and method == "moments":
-        raised = ground & raised_patches(xy, z, step=0.3 / uz)
+        raised = ground & raised_patches(xy, z, step=0.3 / uz, rank=perm)
         if raised.any() and (ground & ~raised).sum() >= 3:
             ground &= ~raised
             # heights of the patches above the surface refitted without them
-            surf = ground_surface(xy[ground], z[ground], cell=surface_cell / ux)
+            surf = ground_surface(xy[ground], z[ground], cell=surface_cell / ux,
+                                  rank=perm[ground])
             height = _heights(z, surf(xy))
 
     # ---- the paper's five steps per root tile (clusters), run with the last cut above:
@@ -669,9 +696,6 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     cls[ground] = ASPRS["ground"]
     cls[ground & road] = ASPRS["road"]
     obj = ~ground & (height >= min_object_height / uz)
-    multi = np.zeros(n, bool)
-    if nret is not None and rnum is not None:
-        multi = (nret.astype(int) > 1) & (rnum.astype(int) < nret.astype(int))
     h0, h1 = (v / uz for v in vegetation_heights)
     veg = obj & _vegetation_like(xy, height, obj, multi, surface_cell / ux,
                                  4 * surface_cell / uz)
@@ -690,6 +714,9 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                   road_rule=road_rule, road_cell_points=road_cell_points,
                   ground_spread=ground_spread, continuity=continuity,
                   n_low_noise=int(noise.sum()), units={"horizontal_m": ux, "vertical_m": uz})
+    # back to the input order
+    cls, cluster_id, height, ground = _expand(perm, n, cls, cluster_id, height, ground,
+                                              fill=(0, 0, 0.0, False))
     if noise.any():
         cls, cluster_id, height, ground = _expand(keep, n_all, cls, cluster_id, height,
                                                   ground, fill=(ASPRS["low_noise"], 0,
@@ -715,12 +742,13 @@ def _unit_factors(units, source):
     return float(pair[0]), float(pair[1])
 
 
-def _expand(keep, n, *arrays, fill):
-    """Scatter per-point arrays of the kept points back to all ``n`` points."""
+def _expand(where, n, *arrays, fill):
+    """Scatter per-point arrays to positions `where` (a mask or indices) of ``n`` points;
+    the others get `fill`."""
     out = []
     for a, f in zip(arrays, fill):
         b = np.full(n, f, dtype=a.dtype)
-        b[keep] = a
+        b[where] = a
         out.append(b)
     return out
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._shared._columns import column_max, column_min
 from .._shared._jit import njit
 
 __all__ = ["low_outliers"]
@@ -96,13 +97,13 @@ def low_outliers(xy, z, *, points_per_cell: float = 4.0, k: float = 5.0,
     out = np.zeros(n, bool)
     if n < 16:
         return out
-    lo = xy.min(axis=0)
-    span = np.maximum(xy.max(axis=0) - lo, 1e-9)
+    lo = column_min(xy)
+    span = np.maximum(column_max(xy) - lo, 1e-9)
     cell = float(np.sqrt(points_per_cell * span[0] * span[1] / n))
     if not cell > 0:
         return out
     ij_all = np.floor((xy - lo) / cell).astype(np.int64)
-    shape = tuple(ij_all.max(axis=0) + 1)
+    shape = tuple(column_max(ij_all) + 1)
     for _ in range(iterations):
         live = np.flatnonzero(~out)
         z1, arg = _cell_lowest(ij_all[live], z[live], shape)

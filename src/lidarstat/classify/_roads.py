@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._shared._columns import column_max, column_min
 from ..stats._moments import density_estimate, dip_test, sequential_moments
 from ._cycle import CycleChoice, choose_cycle
 from ._surface import cell_keys, cell_median_values
@@ -70,7 +71,7 @@ def cell_median(xy, values, *, points_per_cell: float = 8.0, return_cells: bool 
     xy = np.asarray(xy, dtype=np.float64)
     v = np.asarray(values, dtype=np.float64)
     n = v.size
-    span = np.maximum(np.ptp(xy, axis=0), 1e-9) if n else np.ones(2)
+    span = np.maximum(column_max(xy) - column_min(xy), 1e-9) if n else np.ones(2)
     cell = float(np.sqrt(points_per_cell * span[0] * span[1] / max(n, 1)))
     key = cell_keys(xy, cell)
     return cell_median_values(key, v, return_cells=return_cells)

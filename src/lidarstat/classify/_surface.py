@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import prange
 
+from .._shared._columns import column_max, column_min
 from .._shared._jit import njit, njit_parallel
 
 __all__ = ["ground_surface", "cell_keys", "TinSurface"]
@@ -25,38 +26,60 @@ _EPS_BROAD = float(np.sqrt(np.finfo(float).eps))  # scipy's tolerance at the hul
 
 
 def cell_keys(xy: np.ndarray, cell: float, origin=None) -> np.ndarray:
-    """One int64 key per point naming its ``cell x cell`` square (row-major, collision-free)."""
-    o = xy.min(axis=0) if origin is None else np.asarray(origin, dtype=float)
-    ij = np.floor((xy - o) / cell).astype(np.int64)
-    ncol = int(ij[:, 1].max()) + 1 if ij.size else 1
-    return ij[:, 0] * ncol + ij[:, 1]
+    """One int64 key per point naming its ``cell x cell`` square (row-major, collision-free).
+
+    ``floor((xy - origin) / cell)`` per axis, ``ix * ncol + iy`` with ``ncol`` one more than
+    the largest ``iy``: the arithmetic of NumPy's vectorised expression, in one compiled
+    pass without (N, 2) temporaries.
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    out = np.empty(len(xy), np.int64)
+    if not out.size:
+        return out
+    o = column_min(xy) if origin is None else np.asarray(origin, dtype=float)
+    # floor((y - oy) / cell) is monotone in y: the largest row index is the top point's
+    ncol = int(np.floor((xy[:, 1].max() - o[1]) / cell)) + 1
+    _cell_keys(xy, float(o[0]), float(o[1]), float(cell), ncol, out)
+    return out
+
+
+@njit
+def _cell_keys(xy, ox, oy, cell, ncol, out):  # pragma: no cover - compiled
+    for i in range(xy.shape[0]):
+        out[i] = (np.int64(np.floor((xy[i, 0] - ox) / cell)) * ncol
+                  + np.int64(np.floor((xy[i, 1] - oy) / cell)))
 
 
 # --------------------------------------------------------------------------- cell picks
 @njit
-def _less(z, a, b):  # pragma: no cover - compiled
-    """Order by z, ties by input index (the order of ``np.lexsort((z, key))``)."""
-    return z[a] < z[b] or (z[a] == z[b] and a < b)
+def _less(z, a, b, rank):  # pragma: no cover - compiled
+    """Order by z, ties by input index (the order of ``np.lexsort((z, key))``), or by
+    ``rank`` when it is not empty (the input index of a point of a reordered cloud)."""
+    if z[a] != z[b]:
+        return z[a] < z[b]
+    if rank.size:
+        return rank[a] < rank[b]
+    return a < b
 
 
 @njit
-def _select(buf, k, z):  # pragma: no cover - compiled
+def _select(buf, k, z, rank):  # pragma: no cover - compiled
     """Put the k-th smallest of `buf` (by :func:`_less`) at ``buf[k]``: quickselect, O(n)."""
     lo = 0
     hi = buf.size - 1
     while hi > lo:
         mid = (lo + hi) // 2
         # median of three as the pivot, moved to hi
-        if _less(z, buf[mid], buf[lo]):
+        if _less(z, buf[mid], buf[lo], rank):
             buf[mid], buf[lo] = buf[lo], buf[mid]
-        if _less(z, buf[hi], buf[lo]):
+        if _less(z, buf[hi], buf[lo], rank):
             buf[hi], buf[lo] = buf[lo], buf[hi]
-        if _less(z, buf[mid], buf[hi]):
+        if _less(z, buf[mid], buf[hi], rank):
             buf[mid], buf[hi] = buf[hi], buf[mid]
         pivot = buf[hi]
         store = lo
         for i in range(lo, hi):
-            if _less(z, buf[i], pivot):
+            if _less(z, buf[i], pivot, rank):
                 buf[i], buf[store] = buf[store], buf[i]
                 store += 1
         buf[store], buf[hi] = buf[hi], buf[store]
@@ -69,9 +92,9 @@ def _select(buf, k, z):  # pragma: no cover - compiled
 
 
 @njit
-def _pick_per_cell(order, z, starts, which_median):  # pragma: no cover - compiled
+def _pick_per_cell(order, z, starts, which_median, rank):  # pragma: no cover - compiled
     """Per cell (points ``order[starts[c]:starts[c+1]]``): the lowest or the lower median
-    by z, ties broken by input index (as ``np.lexsort((z, key))``)."""
+    by z, ties broken by input index (as ``np.lexsort((z, key))``) or by `rank`."""
     m = starts.size - 1
     out = np.empty(m, np.int64)
     buf = np.empty(order.size, np.int64)
@@ -80,14 +103,14 @@ def _pick_per_cell(order, z, starts, which_median):  # pragma: no cover - compil
         if not which_median:
             best = order[a]
             for i in range(a + 1, b):
-                if _less(z, order[i], best):
+                if _less(z, order[i], best, rank):
                     best = order[i]
             out[c] = best
             continue
         w = buf[: b - a]
         w[:] = order[a:b]
         k = (b - a - 1) // 2
-        _select(w, k, z)
+        _select(w, k, z, rank)
         out[c] = w[k]
     return out
 
@@ -139,12 +162,13 @@ def cell_order(key):
 def _median_per_cell(order, v, starts, out):  # pragma: no cover - compiled
     """``out[i]`` = median of `v` over the cell of point i (mean of the two middle values)."""
     buf = np.empty(order.size, np.int64)
+    no_rank = np.empty(0, np.int64)  # values only: how ties are ordered does not matter
     for c in range(starts.size - 1):
         a, b = starts[c], starts[c + 1]
         w = buf[: b - a]
         w[:] = order[a:b]
         k = (b - a - 1) // 2
-        _select(w, k, v)
+        _select(w, k, v, no_rank)
         lo = v[w[k]]
         hi = lo
         if (b - a) % 2 == 0:  # the upper middle: the smallest value above position k
@@ -169,11 +193,16 @@ def cell_median_values(key, values, *, return_cells: bool = False):
     return out
 
 
-def _cell_pick(xy, z, cell, which):
-    """Index of the lowest (``'min'``) or lower-median (``'median'``) point of every cell."""
+def _cell_pick(xy, z, cell, which, rank=None):
+    """Index of the lowest (``'min'``) or lower-median (``'median'``) point of every cell.
+
+    Ties in z go to the lower index, or to the lower `rank` (the points' input indices
+    when the caller works on a reordered cloud, so the pick does not depend on the order).
+    """
     order, starts = cell_order(cell_keys(xy, cell))
+    rank = np.empty(0, np.int64) if rank is None else np.ascontiguousarray(rank, np.int64)
     return _pick_per_cell(order, np.ascontiguousarray(z, dtype=np.float64), starts,
-                          which == "median")
+                          which == "median", rank)
 
 
 # --------------------------------------------------------------------------- TIN kernels
@@ -324,8 +353,8 @@ class TinSurface:
             except QhullError:  # collinear vertices
                 d = None
             if d is not None and d.nsimplex > 0:
-                lo = self.P.min(axis=0)
-                span = self.P.max(axis=0) - lo
+                lo = column_min(self.P)
+                span = column_max(self.P) - lo
                 # half-cell bins: about 3 candidate triangles per bin instead of 8
                 g = max(0.5 * float(cell), float(span.max()) / 4096.0, 1e-12)
                 nx, ny = (np.floor(span / g).astype(np.int64) + 1).tolist()
@@ -370,7 +399,7 @@ def _extrapolate(P, V, tree, q, k=8):
     return out
 
 
-def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median"):
+def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median", rank=None):
     """Return ``f(xy) -> z`` interpolating ground points (one per cell) linearly on a TIN.
 
     Parameters
@@ -383,6 +412,8 @@ def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median"):
         Thinning cell: one point per cell (the median or the lowest) becomes a TIN vertex,
         so the model costs O(cells) whatever the density.
     which : {'median', 'min'}
+    rank : (M,) ndarray of int, optional
+        Input index of each point, breaking ties in z (default: the position).
 
     Returns
     -------
@@ -393,5 +424,5 @@ def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median"):
         whole border strip of a sloped scene). Evaluating N points costs O(N) in any
         order.
     """
-    sel = _cell_pick(xy_ground, z_ground, cell, which)
+    sel = _cell_pick(xy_ground, z_ground, cell, which, rank)
     return TinSurface(xy_ground[sel], z_ground[sel], cell)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._shared._columns import column_max, column_min
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
 from . import _kernels
@@ -49,8 +50,8 @@ class CellIndex:
         self.dim = dim
         self.radius = radius
         self.n_points = points.shape[0]
-        self.origin = points.min(axis=0)
-        extent = points.max(axis=0) - self.origin  # == (points - origin).max(axis=0)
+        self.origin = column_min(points)
+        extent = column_max(points) - self.origin  # == (points - origin).max(axis=0)
         cell = max(radius, float(extent[:dim].max()) / _MAX_CELLS_PER_AXIS)
         self.cell = cell
         dims = np.floor(extent / cell).astype(np.int64) + 1

@@ -15,6 +15,7 @@ from typing import Callable
 
 import numpy as np
 
+from .._shared._columns import column_max, column_min
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
 
@@ -146,7 +147,7 @@ def tile_grid(xyz, size: float, halo: float = 0.0) -> list[Tile]:
     size = check_scalar(size, "size", func="tile_grid", low=0, closed="neither")
     halo = check_scalar(halo, "halo", func="tile_grid", low=0, high=size, closed="left")
     xy = xyz[:, :2]
-    grid = TileGrid.covering(xy.min(axis=0), xy.max(axis=0), size, halo)
+    grid = TileGrid.covering(column_min(xy), column_max(xy), size, halo)
     pid, key, is_core = grid.memberships(xy)
     if halo > 0:
         order = np.lexsort((pid, key))
