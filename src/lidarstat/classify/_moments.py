@@ -35,6 +35,7 @@ from ._cycle import CycleChoice, choose_cycle, skewness_balance_cycle
 from ._continuity import raised_patches
 from ._outliers import low_outliers
 from ._roads import cell_median, road_cut
+from ._seams import interpolate_cuts
 from ._surface import cell_keys, ground_surface
 
 logger = logging.getLogger(__name__)
@@ -112,6 +113,10 @@ class MomentsClassification:
         Tile boxes, sizes, split decisions and ground thresholds.
     params : dict
         Parameters used.
+    cut : (N,) ndarray of float64
+        Height cut of the last pass at each point (ground when ``height <= cut``): its
+        tile's cut, interpolated between tiles unless ``cut_interpolation=False``; inf
+        where a root tile found no cut, NaN for low noise.
     """
 
     classification: np.ndarray
@@ -121,6 +126,7 @@ class MomentsClassification:
     steps: list = field(default_factory=list)
     tiles: list = field(default_factory=list)
     params: dict = field(default_factory=dict)
+    cut: np.ndarray | None = None
 
     def to_fields(self) -> dict:
         """Per-point output fields: ``classification`` and ``cluster_id``."""
@@ -310,35 +316,39 @@ class _TileOut:
 
 
 def _cut_tile(xyh, p, record):
-    """Progressive cuts of one root tile on heights (column 2 of `xyh`): ground mask."""
+    """Progressive cuts of one root tile on heights (column 2 of `xyh`): ground mask and
+    each point's (sub-)tile cut (inf where the root tile found none)."""
     xy, h = xyh[:, :2], xyh[:, 2]
     steps, infos = [], []
     parts = _progressive(xy, h, np.arange(h.size), p.tile_size, np.inf, p, "", steps, infos,
                          record)
     ground = np.zeros(h.size, bool)
+    cut = np.empty(h.size)
     for idx, thr in parts:
         ground[idx] = h[idx] <= thr
-    return ground, steps, infos
+        cut[idx] = thr
+    return ground, cut, steps, infos
 
 
 def _classify_tile(xyh, attrs, p, record, final):
     """One root tile: its ground cut, and on the final pass also the paper's five steps
     (cluster ids local, from 1)."""
-    ground, gsteps, infos = _cut_tile(xyh, p, record)
+    ground, cut, gsteps, infos = _cut_tile(xyh, p, record)
     if not final:
-        return _TileOut({"ground": ground}, gsteps, infos)
+        return _TileOut({"ground": ground, "cut": cut}, gsteps, infos)
     h = xyh[:, 2]
     inten = attrs.get("intensity")
     n = h.size
     steps = []
     if n < 2 * p.min_cluster:
-        return _TileOut({"ground": ground, "cluster_id": np.ones(n, np.int32)}, gsteps,
-                        infos, steps, 1)
+        return _TileOut({"ground": ground, "cut": cut, "cluster_id": np.ones(n, np.int32)},
+                        gsteps, infos, steps, 1)
     cats = {"elevation": h}
     if inten is not None:
         cats["intensity"] = inten
     lab, next_id = _five_step(cats, p, -1, steps, 1)
-    return _TileOut({"ground": ground, "cluster_id": lab}, gsteps, infos, steps, next_id - 1)
+    return _TileOut({"ground": ground, "cut": cut, "cluster_id": lab}, gsteps, infos, steps,
+                    next_id - 1)
 
 
 def _tile_order(roots):
@@ -437,6 +447,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                      elevation_rule: str = "symmetry", low_noise: bool = True,
                      road_rule: str = "antimode", road_cell_points: float = 8.0,
                      ground_spread: float = 3.0, continuity: bool = True,
+                     cut_interpolation: bool = True,
                      workers: int | None = None, scheduler: str = "threads", units=1.0,
                      source: str | None = None) -> MomentsClassification:
     """Classify points as ground, road, building, vegetation or unclassified without training.
@@ -486,6 +497,11 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
         After the last cut, ground points in a patch of the lowest-point grid that stands
         above its surroundings on (almost) every side (a roof the surface ran over) become
         objects (:func:`~lidarstat.classify._continuity.raised_patches`).
+    cut_interpolation : bool
+        Interpolate the tile cuts bilinearly between the centres of the finest tiles
+        (:func:`~lidarstat.classify._seams.interpolate_cuts`) so the cut is continuous
+        and no class step appears at a tile border; False applies each tile's cut as a
+        step.
     road_rule : {'antimode', 'kurtosis-peak'}
         Cut of the ground's intensity into road and the rest (:func:`road_cut`): the
         antimode of the density between its two main modes (default) or the paper's
@@ -642,12 +658,18 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     # ground of the previous pass (progressive tiles through lidarstat.pipeline)
     height = _heights(z, opening_surface(xy, z, window=opening_window / ux, cell=1.0 / ux))
     surf = None
+    finest = p.tile_size
+    while finest / 2 >= p.min_tile_size:  # the smallest tile _progressive can make
+        finest /= 2
     for it in range(iterations + 1):
         last = it == iterations
         xyh[:, 2] = height
         fields, outs, steps, tiles = _tile_pass(xyh, roots, p, inten, scheduler, workers,
                                                 record=last, final=last)
-        ground = fields["ground"]
+        ground, cut = fields["ground"], fields["cut"]
+        if cut_interpolation:  # no class step at tile borders (_seams.py)
+            cut = interpolate_cuts(xy, cut, finest)
+            ground = height <= cut
         if ground.sum() < 3:
             ground[:] = True
         if not last:
@@ -713,19 +735,21 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                   returns=nret is not None and rnum is not None, low_noise=low_noise,
                   road_rule=road_rule, road_cell_points=road_cell_points,
                   ground_spread=ground_spread, continuity=continuity,
+                  cut_interpolation=cut_interpolation,
                   n_low_noise=int(noise.sum()), units={"horizontal_m": ux, "vertical_m": uz})
     # back to the input order
-    cls, cluster_id, height, ground = _expand(perm, n, cls, cluster_id, height, ground,
-                                              fill=(0, 0, 0.0, False))
+    cls, cluster_id, height, ground, cut = _expand(perm, n, cls, cluster_id, height, ground,
+                                                   cut, fill=(0, 0, 0.0, False, 0.0))
     if noise.any():
-        cls, cluster_id, height, ground = _expand(keep, n_all, cls, cluster_id, height,
-                                                  ground, fill=(ASPRS["low_noise"], 0,
-                                                                np.nan, False))
+        cls, cluster_id, height, ground, cut = _expand(
+            keep, n_all, cls, cluster_id, height, ground, cut,
+            fill=(ASPRS["low_noise"], 0, np.nan, False, np.nan))
         if surf is not None:  # heights of the low noise under the final ground surface
             q = pts_all[noise] - origin
             height[noise] = _heights(q[:, 2], surf(q[:, :2]))
     return MomentsClassification(classification=cls, cluster_id=cluster_id, height=height,
-                                 ground=ground, steps=steps, tiles=tiles, params=params)
+                                 ground=ground, steps=steps, tiles=tiles, params=params,
+                                 cut=cut)
 
 
 def _unit_factors(units, source):

@@ -33,7 +33,7 @@ def _run(args):
         opening_window=args.opening_window, iterations=args.iterations, units=units,
         low_noise=not args.no_low_noise, road_rule=args.road_rule,
         ground_spread=args.ground_spread, continuity=not args.no_continuity,
-        source=str(args.input))
+        cut_interpolation=not args.step_cuts, source=str(args.input))
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
     report = None
@@ -97,6 +97,9 @@ def register(sub):
                         "of the ground cluster it leaves (0: off)")
     s.add_argument("--no-continuity", action="store_true",
                    help="skip the raised-patch check of the ground (faster on large files)")
+    s.add_argument("--step-cuts", action="store_true",
+                   help="apply each tile's cut as a step (default: interpolated between "
+                        "tiles, no class step at tile borders)")
     s.add_argument("--road-rule", choices=("antimode", "kurtosis-peak"), default="antimode",
                    help="cut of the ground's intensity into road and the rest")
     s.add_argument("--no-intensity", action="store_true", help="analyse elevation only")
