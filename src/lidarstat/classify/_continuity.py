@@ -26,6 +26,7 @@ from numba import prange
 
 from .._shared._columns import column_max, column_min
 from .._shared._jit import njit, njit_parallel
+from ._surface import cell_keys, cell_order
 from ..features._covariance_kernels import (_CELL_CHUNK, _block_ranges, _count, _gather,
                                             _gather_within, _guaranteed, _nearest, _scratch)
 
@@ -70,8 +71,9 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     -----
     The k nearest neighbours come from the exact grid search of the covariance features
     (:func:`lidarstat.features._covariance_kernels.knn_cells`' distance binning over a
-    :class:`~lidarstat.neighbors.CellIndex` in 2-D), in parallel over cells, and the
-    points are processed in the grid's order, so the union-find touches memory locally.
+    uniform 2-D grid, sorted by the O(N) counting sort of the ground surface), in
+    parallel over cells, and the points are processed in the grid's order, so the
+    union-find touches memory locally.
     The patches and the raised points equal those of a k-d tree query followed by
     ``scipy.sparse.csgraph.connected_components`` (tested) up to the choice among
     neighbours at exactly equal distances.
@@ -88,44 +90,35 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     >>> bool(r[roof].mean() > 0.95 and r[~roof].mean() < 0.01)
     True
     """
-    from ..neighbors import CellIndex
-
     xy = np.asarray(xy, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
     n = z.size
     if n < 2 * min_points:
         return np.zeros(n, bool)
     k = min(k, n - 1)
-    flat = np.zeros((n, 3))
-    if rank is None:
-        flat[:, :2] = xy
-    else:  # index the points in input order
-        by_rank = np.empty(n, np.int64)
-        by_rank[rank] = np.arange(n)
-        flat[:, :2] = xy[by_rank]
     lo = column_min(xy)
     span = np.maximum(column_max(xy) - lo, 1e-12)
     # about k + 1 points per cell: the 3 x 3 block holds the k nearest of most points
     cell = float(np.sqrt((k + 1) * span[0] * span[1] / n))
-    index = CellIndex(flat, cell, dim=2)
-    del flat
-    pos = index.order if rank is None else by_rank[index.order]  # grid order -> rows
-    zs = z[pos]
+    cell = max(cell, float(span.max()) / 2**20)  # at most 2^20 cells a side (CellIndex)
+    grid = _Grid2D(xy, cell, lo, rank)
+    zs = z[grid.pos]
     parent = np.arange(n, dtype=np.int64)
     ci, cj, cup = [], [], []
-    for c0, c1 in index.cell_blocks(chunk):
-        s0, s1 = index.cell_start[c0], index.cell_start[c1]
+    for c0, c1 in grid.blocks(chunk):
+        s0, s1 = grid.cell_start[c0], grid.cell_start[c1]
         nbr = np.empty((s1 - s0, k), np.int32 if n < 2**31 - 1 else np.int64)
         smooth = np.empty((s1 - s0, k), np.bool_)
-        _knn_smooth(c0, c1, index.sorted_points, zs, index.cell_keys, index.cell_start,
-                    index.dims, float(index.cell), k, float(index.cell), step, slope, nbr,
-                    smooth)
+        _knn_smooth(c0, c1, grid.points, zs, grid.cell_keys, grid.cell_start, grid.dims,
+                    cell, k, cell, step, slope, nbr, smooth)
         i, j, up = _join_smooth(parent, zs, nbr, smooth, s0)
         ci.append(i)
         cj.append(j)
         cup.append(up)
-    del nbr, smooth
-    lab, ncomp, first = _component_labels(parent, index.order)
+    del nbr, smooth, zs
+    pos, order = grid.pos, grid.order
+    del grid
+    lab, ncomp, first = _component_labels(parent, order)
     ci, cj, cup = np.concatenate(ci), np.concatenate(cj), np.concatenate(cup)
     other = lab[ci] != lab[cj]
     li = lab[ci[other]]
@@ -140,6 +133,47 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     out = np.empty(n, bool)
     out[pos] = raised[lab]
     return out
+
+
+class _Grid2D:
+    """The points sorted by ``cell x cell`` squares, laid out for the covariance kNN kernel.
+
+    A :class:`~lidarstat.neighbors.CellIndex` in 2-D, built with the counting sort of the
+    ground surface (:func:`~lidarstat.classify._surface.cell_order`) straight from the
+    (N, 2) coordinates: no (N, 3) copy of the input besides the sorted points. Inside a
+    cell the points keep their `rank` order (input order without one). ``points`` are the
+    sorted local coordinates with z = 0, ``pos`` the row of each sorted point in the
+    caller's arrays, ``order`` its rank, ``cell_keys``/``cell_start``/``dims`` the grid.
+    """
+
+    def __init__(self, xy, cell, lo, rank=None):
+        key = cell_keys(xy, cell, lo)
+        ny = int(np.floor((xy[:, 1].max() - lo[1]) / cell)) + 1
+        if rank is None:
+            by_rank = None
+        else:  # visit the points in rank order so that ties follow it
+            by_rank = np.empty(key.size, np.int64)
+            by_rank[rank] = np.arange(key.size)
+            key = key[by_rank]
+        self.order, self.cell_start = cell_order(key)
+        self.cell_keys = key[self.order[self.cell_start[:-1]]]
+        del key
+        self.pos = self.order if by_rank is None else by_rank[self.order]
+        self.dims = np.array([self.cell_keys[-1] // ny + 1, ny, 1], np.int64)
+        self.points = np.zeros((self.pos.size, 3))
+        self.points[:, 0] = xy[self.pos, 0] - lo[0]
+        self.points[:, 1] = xy[self.pos, 1] - lo[1]
+
+    def blocks(self, max_points):
+        """Consecutive cell ranges of about `max_points` points (CellIndex.cell_blocks)."""
+        starts = self.cell_start
+        out, c, m = [], 0, starts.size - 1
+        while c < m:
+            nxt = int(np.searchsorted(starts, starts[c] + max_points, side="right")) - 1
+            nxt = min(max(nxt, c + 1), m)
+            out.append((c, nxt))
+            c = nxt
+        return out
 
 
 @njit_parallel

@@ -380,6 +380,7 @@ def _tile_pass(xyh, roots, p, inten, scheduler, workers, record, final):
                        collect=keep)
     steps, infos = [], []
     for i, o in enumerate(outs):
+        o.fields = None  # assembled in `fields`; keep only the ids and records
         steps.extend(replace(s, tile=f"{i}{s.tile}") for s in o.ground_steps)
         infos.extend({**t, "tile": f"{i}{t['tile']}"} for t in o.infos)
     return fields, outs, steps, infos
@@ -633,9 +634,11 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                 elevation_rule=elevation_rule, tile_size=tile_size / ux,
                 min_tile_size=min_tile_size / ux, min_tile_points=4 * min_cluster,
                 ground_spread=float(ground_spread))
+    has_returns = nret is not None and rnum is not None
     multi = np.zeros(n, bool)
-    if nret is not None and rnum is not None:
+    if has_returns:
         multi = (nret.astype(int) > 1) & (rnum.astype(int) < nret.astype(int))
+    del nret, rnum
     origin = column_min(pts)
 
     # ---- work in root-tile order: every tile is a contiguous block of points, so the
@@ -649,7 +652,9 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     xyh[:, 2] = 0.0
     perm, roots = _tile_order(tile_grid(xyh, p.tile_size))
     xyh = xyh[perm]
-    z = pts[perm, 2] - origin[2]
+    z = pts[:, 2][perm]
+    z -= origin[2]
+    del pts  # the caller's array (or its copy without the low noise): not needed again
     inten = None if inten is None else inten[perm]
     multi = multi[perm]
     xy = np.ascontiguousarray(xyh[:, :2])
@@ -676,6 +681,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
             surf = ground_surface(xy[ground], z[ground], cell=surface_cell / ux,
                                   rank=perm[ground])
             height = _heights(z, surf(xy))
+    del xyh
 
     if continuity and method == "moments":
         raised = ground & raised_patches(xy, z, step=0.3 / uz, rank=perm)
@@ -732,7 +738,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
                   bandwidth=bandwidth, surface_cell=surface_cell,
                   vegetation_heights=list(vegetation_heights),
                   min_object_height=min_object_height, intensity=inten is not None,
-                  returns=nret is not None and rnum is not None, low_noise=low_noise,
+                  returns=has_returns, low_noise=low_noise,
                   road_rule=road_rule, road_cell_points=road_cell_points,
                   ground_spread=ground_spread, continuity=continuity,
                   cut_interpolation=cut_interpolation,
