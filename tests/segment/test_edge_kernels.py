@@ -68,7 +68,8 @@ def test_adaptive_edges_and_clean_points(rng):
     first = prefix_edges(nbh, np.full(n, 12))
     cos = np.abs(np.einsum("ij,ij->i", pn[src], pn[dst]))
     smooth = (kstar[dst] == 0) | (cos >= cmin)
-    ref = (surface_prefix_edges(nbh, joinable) & first & surface[src]) | \
+    agree = (kstar[src] == 0) | (kstar[dst] == 0) | (cos >= cmin)
+    ref = (surface_prefix_edges(nbh, joinable) & first & surface[src] & agree) | \
         (prefix_edges(nbh, kstar) & smooth)
     out = np.empty(nbh.nnz, dtype=bool)
     ek.adaptive_edges(nbh.indptr, nbh.indices, nbh.query_indices(), joinable, surface, kstar,

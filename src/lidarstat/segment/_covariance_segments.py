@@ -158,6 +158,25 @@ def local_intersections(points, labels, normals, centroids, nbh, *, min_angle=20
     return x0[good] + origin, seg
 
 
+def _pair_groups(x0, seg):
+    """The local intersection points grouped by segment pair: yields ``(a, b, points)``."""
+    if not len(seg):
+        return
+    key = seg[:, 0].astype(np.int64) * (int(seg.max()) + 1) + seg[:, 1]
+    order = np.argsort(key, kind="stable")
+    key, x0s, segs = key[order], x0[order], seg[order]
+    bounds = np.flatnonzero(np.diff(key)) + 1
+    for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, key.size]):
+        yield segs[lo, 0], segs[lo, 1], x0s[lo:hi]
+
+
+def _line_attributes(attr):
+    return {"segment_a": np.asarray(attr["segment_a"], dtype=np.int32),
+            "segment_b": np.asarray(attr["segment_b"], dtype=np.int32),
+            "n_points": np.asarray(attr["n_points"], dtype=np.int64),
+            "rms": np.asarray(attr["rms"], dtype=np.float64)}
+
+
 def fit_lines(x0, seg, *, min_points=5):
     """A straight line per segment pair through its local intersection points.
 
@@ -171,38 +190,29 @@ def fit_lines(x0, seg, *, min_points=5):
         trimmed points to the line).
     """
     starts, ends, attr = [], [], {"segment_a": [], "segment_b": [], "n_points": [], "rms": []}
-    if len(seg):
-        key = seg[:, 0].astype(np.int64) * (int(seg.max()) + 1) + seg[:, 1]
-        order = np.argsort(key, kind="stable")
-        key, x0s, segs = key[order], x0[order], seg[order]
-        bounds = np.flatnonzero(np.diff(key)) + 1
-        for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, key.size]):
-            pts = x0s[lo:hi]
-            if len(pts) < min_points:
-                continue
-            for _ in range(2):
-                c = pts.mean(axis=0)
-                _, _, vt = np.linalg.svd(pts - c, full_matrices=False)
-                u = vt[0]
-                r = pts - c - np.outer((pts - c) @ u, u)
-                dist = np.linalg.norm(r, axis=1)
-                med = np.median(dist)
-                mad = np.median(np.abs(dist - med)) * 1.4826
-                inl = dist <= med + 3 * mad + 1e-12
-                if inl.all() or inl.sum() < min_points:
-                    break
-                pts = pts[inl]
-            t = (pts - c) @ u
-            starts.append(c + t.min() * u)
-            ends.append(c + t.max() * u)
-            attr["segment_a"].append(segs[lo, 0])
-            attr["segment_b"].append(segs[lo, 1])
-            attr["n_points"].append(len(pts))
-            attr["rms"].append(float(np.sqrt(np.mean(dist[inl] ** 2))) if len(dist) else 0.0)
-    attr = {"segment_a": np.asarray(attr["segment_a"], dtype=np.int32),
-            "segment_b": np.asarray(attr["segment_b"], dtype=np.int32),
-            "n_points": np.asarray(attr["n_points"], dtype=np.int64),
-            "rms": np.asarray(attr["rms"], dtype=np.float64)}
+    for a, b, pts in _pair_groups(x0, seg):
+        if len(pts) < min_points:
+            continue
+        for _ in range(2):
+            c = pts.mean(axis=0)
+            _, _, vt = np.linalg.svd(pts - c, full_matrices=False)
+            u = vt[0]
+            r = pts - c - np.outer((pts - c) @ u, u)
+            dist = np.linalg.norm(r, axis=1)
+            med = np.median(dist)
+            mad = np.median(np.abs(dist - med)) * 1.4826
+            inl = dist <= med + 3 * mad + 1e-12
+            if inl.all() or inl.sum() < min_points:
+                break
+            pts = pts[inl]
+        t = (pts - c) @ u
+        starts.append(c + t.min() * u)
+        ends.append(c + t.max() * u)
+        attr["segment_a"].append(a)
+        attr["segment_b"].append(b)
+        attr["n_points"].append(len(pts))
+        attr["rms"].append(float(np.sqrt(np.mean(dist[inl] ** 2))) if len(dist) else 0.0)
+    attr = _line_attributes(attr)
     if not starts:
         return Polylines([], attr)
     return Polylines.from_segments(np.array(starts), np.array(ends), attr)
@@ -232,27 +242,16 @@ def curved_lines(x0, seg, curved, *, min_points=5, max_gap, bin_angle=2.0, toler
     from ._intersect import chain_curve
 
     verts, attr = [], {"segment_a": [], "segment_b": [], "n_points": [], "rms": []}
-    if len(seg):
-        key = seg[:, 0].astype(np.int64) * (int(seg.max()) + 1) + seg[:, 1]
-        order = np.argsort(key, kind="stable")
-        key, x0s, segs = key[order], x0[order], seg[order]
-        bounds = np.flatnonzero(np.diff(key)) + 1
-        for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, key.size]):
-            a, b = segs[lo]
-            if hi - lo < min_points or not (curved[a - 1] or curved[b - 1]):
-                continue
-            pts = x0s[lo:hi]
-            for v in chain_curve(pts, bin_angle=bin_angle, max_gap=max_gap,
-                                 tolerance=tolerance):
-                verts.append(v)
-                attr["segment_a"].append(a)
-                attr["segment_b"].append(b)
-                attr["n_points"].append(hi - lo)
-                attr["rms"].append(_polyline_rms(v, pts))
-    attr = {"segment_a": np.asarray(attr["segment_a"], dtype=np.int32),
-            "segment_b": np.asarray(attr["segment_b"], dtype=np.int32),
-            "n_points": np.asarray(attr["n_points"], dtype=np.int64),
-            "rms": np.asarray(attr["rms"], dtype=np.float64)}
+    for a, b, pts in _pair_groups(x0, seg):
+        if len(pts) < min_points or not (curved[a - 1] or curved[b - 1]):
+            continue
+        for v in chain_curve(pts, bin_angle=bin_angle, max_gap=max_gap, tolerance=tolerance):
+            verts.append(v)
+            attr["segment_a"].append(a)
+            attr["segment_b"].append(b)
+            attr["n_points"].append(len(pts))
+            attr["rms"].append(_polyline_rms(v, pts))
+    attr = _line_attributes(attr)
     return Polylines(verts, attr)
 
 
@@ -375,6 +374,25 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
     return relabel(root[labels] * (labels > 0))
 
 
+def surface_tested(feats, classes):
+    """Points whose neighbourhood passed a surface test (plane or consistent curvature),
+    whatever their final class: the tests of
+    :func:`lidarstat.classify.classify_covariance`, with the user's thresholds when it had
+    them."""
+    sv = feats["SurfaceVariation"]
+    with np.errstate(invalid="ignore"):
+        if classes.curvature_threshold is not None:
+            low = sv <= classes.curvature_threshold
+        else:
+            low = classes["plane_p"] >= classes.alpha
+        if classes.variance_threshold is not None:
+            consistent = feats["CurvatureVariance"] <= classes.variance_threshold
+        else:
+            alpha = classes.meta.get("curved_alpha", classes.alpha)
+            consistent = classes["variation_p"] >= alpha
+    return (classes.point_class != 0) & (low | consistent)
+
+
 def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, alpha=0.05,
                        boundary_alpha=0.001, curvature_threshold=None, variance_threshold=None,
                        curved="cylinder", curved_alpha=None, adaptive_scale=True, min_size=50,
@@ -454,7 +472,11 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         raise InvalidParameterError(f"{func}: `result` must be computed with keep_neighbors=True")
     pc = classes.point_class
     surface = pc == PointClass.SURFACE
-    boundary = pc == PointClass.BOUNDARY
+    # a boundary point is a border of a surface only when its neighbourhood passed a
+    # surface test; the scan boundary test also labels edge candidates beside an
+    # occlusion or a crease "boundary", and those must cut the rows like edges
+    boundary = (pc == PointClass.BOUNDARY) & surface_tested(feats, classes)
+    edge_like = (pc == PointClass.EDGE) | ((pc == PointClass.BOUNDARY) & ~boundary)
     grow_nbh = truncate_rows(nbh, grow_k)
     sv = feats["SurfaceVariation"]
     order = np.argsort(np.where(np.isfinite(sv), sv, np.inf), kind="stable") \
@@ -493,7 +515,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         across = np.maximum(classes.sigma * feats.ray_cos, 1e-12)
     reint = np.zeros(pts.shape[0], dtype=np.uint8)
     if reintegration:
-        cand = (pc == PointClass.EDGE) | (pc == PointClass.UNDETERMINED)
+        cand = edge_like | (pc == PointClass.UNDETERMINED)
         new = reintegrate(pts, labels, cand & (labels == 0), normals, centroids, nbh, across)
         reint[(new > 0) & (labels == 0)] = 1
         labels = new

@@ -136,8 +136,10 @@ def adaptive_edges(indptr, indices, rows, joinable, surface, kstar, pn, grow_k, 
     ``out[e]`` for the entry e (position t in row r of point p, neighbour q) is
 
     * Fig. 4 on the first `grow_k` neighbours of surface points: ``t < grow_k``, p is
-      `surface` and no non-`joinable` neighbour other than p itself comes before or at
-      e; or
+      `surface`, no non-`joinable` neighbour other than p itself comes before or at e,
+      and, when both have a planar prefix, their prefix normals agree (a ground point
+      seen at grazing incidence passes its plane test with the foot of a wall in its
+      row: the wall's points there are surface or boundary, nothing cuts the row); or
     * the largest planar prefix of the row: ``t < kstar[r]`` and q has no planar prefix
       (``kstar[q] == 0``) or the two prefix normals agree: ``|pn[p] . pn[q]| >= cos_min``
       (summed as NumPy's einsum does, so equal to it bit for bit here).
@@ -153,11 +155,11 @@ def adaptive_edges(indptr, indices, rows, joinable, surface, kstar, pn, grow_k, 
             t = e - s
             if q != p and not joinable[q]:
                 bad = True
-            ok = grow and not bad and t < grow_k
+            agree = True  # two planar prefixes: their normals must agree
+            if kp > 0 and kstar[q] > 0:
+                c = abs((pn[p, 0] * pn[q, 0] + pn[p, 2] * pn[q, 2]) + pn[p, 1] * pn[q, 1])
+                agree = c >= cos_min
+            ok = grow and not bad and t < grow_k and agree
             if not ok and t < kp:
-                if kstar[q] == 0:
-                    ok = True
-                else:
-                    c = abs((pn[p, 0] * pn[q, 0] + pn[p, 2] * pn[q, 2]) + pn[p, 1] * pn[q, 1])
-                    ok = c >= cos_min
+                ok = kstar[q] == 0 or agree
             out[e] = ok
