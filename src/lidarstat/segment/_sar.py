@@ -273,51 +273,63 @@ def _final_units(points, labels, units, w_radius):
     return out
 
 
+#: Most points the final outlier test removes from one segment (one per iteration).
+OUTLIER_MAX = 200
+
+
 def _outlier_test(points, labels, units, alpha):
-    """Final outlier test of every segment's added points against its raw-cluster surface.
+    """Final outlier test of the points the search added to every segment (iterated
+    data snooping).
 
-    A point that the Forward Search or the best-fit assignment added to segment s (not in
-    its raw cluster) is a new observation for the surface fitted on the raw cluster, so
-    its prediction residual ``r_i / (s sqrt(1 + h_i))``, ``h_i = a_i'(A'A)^-1 a_i`` over
-    the raw cluster, is N(0, 1) when it lies on the surface (Baarda's w-test of one
-    observation). s is the robust scale ``1.4826 MAD`` of all the segment's residuals
-    (the raw cluster's own standard deviation is biased low: the local planarity test
-    selected its smoothest windows). Points with ``|w| > z(1 - alpha/2)`` leave the
-    segment (label 0). The raw clusters' points are not tested: they were accepted by the
-    local tests.
+    The points of a segment that are not in its raw cluster (the Forward Search or the
+    best-fit assignment added them) are tested one at a time with their externally
+    studentised residual from the least-squares surface of the segment's other points,
+    ``t_i = e_i / (s_(i) sqrt(1 - h_ii))`` ~ t(n - r - 1) when the point lies on the
+    surface (Baarda's data snooping; the deletion residual, so the point does not pull
+    the surface it is tested against). The most significant point beyond
+    ``t(1 - alpha/2)`` leaves the segment (label 0), the surface is refitted and the
+    search repeats (at most :data:`OUTLIER_MAX` points per segment), so a gross outlier
+    does not mask the others. The raw clusters' points are not tested: the local tests
+    accepted them. The segment's reported surface stays the raw cluster's.
 
-    Returns the new labels, the units (accepted points and residuals updated)
-    and per point the segment it was removed from (0: none).
+    Returns the new labels, the units (accepted points and residuals updated) and per
+    point the segment it was removed from (0: none).
     """
-    from scipy.special import ndtri
+    from scipy.stats import t as t_dist
 
-    crit = float(ndtri(1.0 - alpha / 2.0))
     labels = labels.copy()
     removed = np.zeros(labels.size, dtype=np.uint32)
     out = []
     for s, unit in enumerate(units, start=1):
         k = unit.raw.size
         acc, res = unit.accepted, unit.residuals
-        if acc.size <= k or k <= unit.basis.n_terms:
+        r = unit.basis.n_terms
+        if acc.size <= k or acc.size <= r + 2:
             out.append(unit)
             continue
         A = unit.basis(unit._local_xy(points[acc]))
-        G = A[:k].T @ A[:k]
-        ext = A[k:]
-        h = np.einsum("ij,ij->i", ext, np.linalg.solve(G, ext.T).T)
-        scale = 1.4826 * float(np.median(np.abs(res)))
-        if not scale > 0:
+        tested = (np.arange(acc.size) >= k) & (labels[acc] == s)
+        keep = np.ones(acc.size, dtype=bool)
+        for _ in range(OUTLIER_MAX):
+            idx = np.flatnonzero(keep)
+            df = idx.size - r - 1
+            if df < 1:
+                break
+            q, _ = np.linalg.qr(A[idx])
+            e = res[idx] - q @ (q.T @ res[idx])
+            h = np.minimum(np.einsum("ij,ij->i", q, q), 1.0 - 1e-12)
+            s2 = np.maximum((e @ e - e * e / (1.0 - h)) / df, 1e-300)
+            t = np.where(tested[idx], np.abs(e) / np.sqrt(s2 * (1.0 - h)), 0.0)
+            j = int(np.argmax(t))
+            if t[j] <= t_dist.isf(alpha / 2.0, df):
+                break
+            keep[idx[j]] = False
+        if keep.all():
             out.append(unit)
             continue
-        w = res[k:] / (scale * np.sqrt(1.0 + h))
-        bad = np.abs(w) > crit
-        bad &= labels[acc[k:]] == s
-        if not bad.any():
-            out.append(unit)
-            continue
-        keep = np.r_[np.ones(k, dtype=bool), ~bad]
-        labels[acc[k:][bad]] = 0
-        removed[acc[k:][bad]] = s
+        gone = acc[~keep]
+        labels[gone] = 0
+        removed[gone] = s
         out.append(dataclasses.replace(unit, accepted=acc[keep], residuals=res[keep]))
     return labels, out, removed
 
@@ -364,12 +376,12 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
         or a chimney becomes one unit again; their Table 6 sizes are summed). None: no
         merging.
     outlier_alpha : float or None
-        Level of the final outlier test, per point (Baarda's w-test; default 0.01,
-        |w| > 2.58; Baarda's usual 0.001 lets wall and leaf points 3-3.3 sigma off the
-        plane stay, docs/methods/sar.md): points added to a segment by the search (not in its raw cluster)
-        whose prediction residual from the raw-cluster surface is significant leave the
-        segment (field ``surface_outlier``: the segment they left; table ``n_outliers``).
-        None: no test.
+        Level of the final outlier test, per point (iterated data snooping with deletion
+        residuals, :func:`_outlier_test`; default 0.01; Baarda's usual 0.001 lets wall
+        and leaf points 3-3.5 sigma off the plane stay, docs/methods/sar.md): points
+        added to a segment by the search (not in its raw cluster) whose residual is
+        significant leave the segment (field ``surface_outlier``: the segment they left;
+        table ``n_outliers``). None: no test.
     graph : tuple, optional
         Precomputed :func:`delaunay_graph`.
     diagnostics : path, optional
