@@ -139,14 +139,20 @@ def test_tls_plant_pipes_and_tanks_one_cylinder_segment_each():
     assert found >= 4  # of tank1, tank2, pipe_a, pipe_b, pipe_c
 
 
+@pytest.mark.slow
 def test_curved_creases_are_polylines_on_the_true_circles():
-    """tls_plant (coarse step): pipe-support, pipe-pump and tank-ground creases are circles;
-    their polylines lie within 2 sigma of the true arcs of their two faces."""
+    """tls_plant at the default step: every face > 200 points found (the foot of support1
+    once leaked into the ground through a grazing ground point's row when the scan
+    boundary test called the crease points 'boundary'); pipe-support, pipe-pump and
+    tank-ground creases are circles, and their polylines lie within 2 sigma of the true
+    arcs of their two faces."""
     from lidarstat.synth import make_tls_plant
     from lidarstat.synth._edges import distance_to_creases
 
-    sc = make_tls_plant(step=0.004, rng=0)
+    sc = make_tls_plant(rng=0)
     seg = segment_covariance(sc.xyz, sensor=sc.scanner)
+    h = hoover(seg.labels, sc.face + 1, 0.8, min_size=200)
+    assert h.correct == h.n_truth == 11
     cyl = seg.table["model"] == 2
     two_sigma = 2 * (0.002 + 5e-5 * 25)
     names = sc.meta["face_names"]
@@ -163,7 +169,8 @@ def test_curved_creases_are_polylines_on_the_true_circles():
         if len(v) >= 5:
             found.add(frozenset((names[fa], names[fb])))
     assert {frozenset(("ground_+z", "tank1_side")), frozenset(("pipe_b_side", "support2_-x")),
-            frozenset(("pipe_c_side", "support2_-x"))} <= found
+            frozenset(("pipe_c_side", "support2_-x")), frozenset(("pipe_a_side", "pump_-x"))} \
+        <= found
 
 
 def test_cylinder_refit_recovers_a_tilted_axis(rng):

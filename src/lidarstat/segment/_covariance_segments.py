@@ -537,6 +537,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
                 labels, moved, _ = refine_borders(pts, labels, nbh, classes.sigma,
                                                   sensor=rsensor, models=models.fit(labels))
                 reint[moved & ~new] = 2
+        del models  # per-point residuals and labels: not kept beside the neighbourhoods
     labels = merge_coplanar(pts, labels, grow_nbh, max_angle=min_angle / 4,
                             normals=feats.normals, centroids=feats.centroid)
     from ._cylinders import merge_cylinders
@@ -580,10 +581,12 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         # trimmed plane the noise model accepts (a fascia, a soffit: narrow faces where no
         # 50-neighbourhood is a plane), takes its segment's plane
         pm = PlaneModels(pts, labels, classes.sigma, csensor)
+        pm_planar, pm_normal, pm_centroid = pm.planar, pm.normal, pm.centroid
+        del pm  # only the per-segment planes are needed from here
         seg_plane = (use == 0) & (labels > 0)
-        seg_plane[seg_plane] = pm.planar[labels[seg_plane] - 1]
+        seg_plane[seg_plane] = pm_planar[labels[seg_plane] - 1]
         sp = labels[seg_plane] - 1
-        n_loc[seg_plane], c_loc[seg_plane] = pm.normal[sp], pm.centroid[sp]
+        n_loc[seg_plane], c_loc[seg_plane] = pm_normal[sp], pm_centroid[sp]
         use[seg_plane] = labels[seg_plane]
         # points of cylinder segments: the tangent plane of their segment's cylinder
         on_cyl, cn, cf = cylinder_tangent_planes(pts, labels, cylinders)
@@ -615,9 +618,9 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
             # the plane side: its segment's trimmed plane when the noise model accepts it
             # (a 50-neighbourhood's normal tilts by ~0.01 rad: 3 mm at the crease)
             sp = labels[pp] - 1
-            glob = pm.planar[sp]
-            pn = np.where(glob[:, None], pm.normal[sp], n_loc[pp])
-            pc_ = np.where(glob[:, None], pm.centroid[sp], c_loc[pp])
+            glob = pm_planar[sp]
+            pn = np.where(glob[:, None], pm_normal[sp], n_loc[pp])
+            pc_ = np.where(glob[:, None], pm_centroid[sp], c_loc[pp])
             x0[one], gap1 = snap_to_cylinder(x0[one], ap3[s_], ax3[s_], rad[s_], pn, pc_)
             keep[one] = gap1 <= tol
         x0, seg = x0[keep], seg[keep]
