@@ -69,26 +69,16 @@ def segment_planes(points, labels):
         ``segment_id, n_points, centroid_x/y/z, normal_x/y/z, d`` (plane ``n . x + d = 0``),
         ``rms`` (orthogonal residuals), ``surface_variation`` (lambda0 / sum).
     """
-    labels = np.asarray(labels)
+    from ._refine import _planes, _seg_moments
+
+    labels = np.ascontiguousarray(labels, dtype=np.int64)
     s = int(labels.max()) if labels.size else 0
-    cnt = np.bincount(labels, minlength=s + 1)[1:].astype(np.float64)
-    origin = points.mean(axis=0) if len(points) else np.zeros(3)
-    x = points - origin
-    safe = np.maximum(cnt, 1)
-    cen = np.stack([np.bincount(labels, weights=x[:, j], minlength=s + 1)[1:] / safe
-                    for j in range(3)], axis=1)
-    inseg = labels > 0
-    d = x[inseg] - cen[labels[inseg] - 1]
-    cov = np.zeros((s, 3, 3))
-    for a in range(3):
-        for b in range(a, 3):
-            v = np.bincount(labels[inseg] - 1, weights=d[:, a] * d[:, b], minlength=s) / safe
-            cov[:, a, b] = v
-            cov[:, b, a] = v
-    w, v = np.linalg.eigh(cov)
-    normal = v[:, :, 0]
-    normal *= np.where(normal[:, 2] < 0, -1.0, 1.0)[:, None]
-    cen_file = cen + origin
+    # one Numba pass of moments about each segment's first point (no O(N) temporaries)
+    ref, mom = _seg_moments(np.ascontiguousarray(points, dtype=np.float64), labels,
+                            np.ones(labels.size), s)
+    cnt = mom[:, 0]
+    cen_file, normal, w = _planes(ref, mom)
+    normal = normal * np.where(normal[:, 2] < 0, -1.0, 1.0)[:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
         sv = w[:, 0] / w.sum(axis=1)
     return {
