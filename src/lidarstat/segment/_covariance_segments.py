@@ -527,16 +527,22 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
                 labels, moved, _ = refine_borders(pts, labels, nbh, classes.sigma,
                                                   sensor=rsensor, models=models.fit(labels))
                 reint[moved & ~new] = 2
-        del models  # per-point residuals and labels: not kept beside the neighbourhoods
+        del models, moved  # per-point arrays: not kept beside the neighbourhoods
+        if nbh.kind == "knn":
+            del free, before, new
     labels = merge_coplanar(pts, labels, grow_nbh, max_angle=min_angle / 4,
                             normals=feats.normals, centroids=feats.centroid)
     from ._cylinders import merge_cylinders
 
-    pdir = np.stack([feats["PrincipalDirX"], feats["PrincipalDirY"], feats["PrincipalDirZ"]],
-                    axis=1)
     # per-point axes (minimum-curvature directions) of the curved surface points only
+    # (computed for those points: no (N, 3) temporaries at the segmentation's peak)
     curved_pts = surface & ~(classes["plane_p"] >= classes.alpha)
-    pt_axes = np.where(curved_pts[:, None], np.cross(feats.normals, pdir), np.nan)
+    pt_axes = np.full((pts.shape[0], 3), np.nan)
+    ci_ = np.flatnonzero(curved_pts)
+    pdir = np.stack([feats["PrincipalDirX"][ci_], feats["PrincipalDirY"][ci_],
+                     feats["PrincipalDirZ"][ci_]], axis=1)
+    pt_axes[ci_] = np.cross(feats.normals[ci_], pdir)
+    del pdir, ci_
     labels, cylinders = merge_cylinders(
         pts, labels, feats.normals, classes.sigma, max_angle=min_angle / 4,
         sensor=feats.sensor if classes.meta.get("noise") == "range" else None,
