@@ -68,6 +68,10 @@ class _Phases:
              "tile passes": (_moments, "_tile_pass"),
              "surface fit": (_moments, "ground_surface"),
              "surface eval": (_surface.TinSurface, "__call__"),
+             "low noise": (_moments, "low_outliers"),
+             "continuity": (_moments, "raised_patches"),
+             "cut interpolation": (_moments, "interpolate_cuts"),
+             "roads": (_moments, "cell_median"),
              "vegetation": (_moments, "_vegetation_like")}
 
     def __init__(self):

@@ -150,10 +150,12 @@ class MomentsClassification:
 
 # --------------------------------------------------------------------------- helpers
 def _thin(sm: SequentialMoments) -> dict:
+    """About `_CURVE_SAMPLES` samples of each curve, as copies: a strided view would keep
+    the whole curve (one value per point analysed) alive in the report records."""
     step = max(1, sm.cycle.size // _CURVE_SAMPLES)
     s = slice(None, None, step)
-    return {"cycle": sm.cycle[s], "skewness": sm.skewness[s], "kurtosis": sm.kurtosis[s],
-            "threshold": sm.threshold[s], "remaining": sm.remaining[s]}
+    return {name: getattr(sm, name)[s].copy()
+            for name in ("cycle", "skewness", "kurtosis", "threshold", "remaining")}
 
 
 @dataclass
