@@ -183,7 +183,8 @@ def _knn_smooth(c0, c1, pts, zs, cell_keys, cell_start, dims, cell, k, tau0, ste
 
     `pts` are the grid's sorted local coordinates with z = 0 (2-D distances), `zs` the
     elevations in the same order. Row r of `nbr` (sorted positions) is sorted position
-    ``cell_start[c0] + r``, ascending distance; ``smooth[r, t]`` says
+    ``cell_start[c0] + r`` (the k nearest, not sorted by distance: the union-find and
+    the step counts do not depend on the order); ``smooth[r, t]`` says
     ``|zs[j] - zs[i]| <= step + slope * d``. The search is :func:`knn_cells`' (3 x 3
     cells, widened until the k-th distance is guaranteed) with ``k + 1`` candidates so
     that the point itself can be left out.
@@ -220,7 +221,7 @@ def _knn_smooth(c0, c1, pts, zs, cell_keys, cell_start, dims, cell, k, tau0, ste
                 rad = 1
                 kth = np.inf
                 if m >= kk:
-                    kth = _nearest(bd, bi, m, kk, True, td, ti, tb, sd, si, cnt)
+                    kth = _nearest(bd, bi, m, kk, False, td, ti, tb, sd, si, cnt)
                 while m < kk or kth > _guaranteed(px, py, 0.0, ix0, iy0, 0, rad, cell,
                                                   dims) ** 2:
                     if rad > maxrad:
@@ -236,7 +237,7 @@ def _knn_smooth(c0, c1, pts, zs, cell_keys, cell_start, dims, cell, k, tau0, ste
                         td, ti, tb, sd, si, cnt = _scratch(cap)
                     m = _gather(px, py, 0.0, pts, big, nb, bd, bi)
                     if m >= kk:
-                        kth = _nearest(bd, bi, m, kk, True, td, ti, tb, sd, si, cnt)
+                        kth = _nearest(bd, bi, m, kk, False, td, ti, tb, sd, si, cnt)
                 tau2 = kth * 1.3225  # (1.15 r_k)^2 for the next point of the cell
                 r = i - base
                 t = 0
