@@ -27,8 +27,8 @@ from numba import prange
 from .._shared._columns import column_max, column_min
 from .._shared._jit import njit, njit_parallel
 from ._surface import cell_keys, cell_order
-from ..features._covariance_kernels import (_CELL_CHUNK, _block_ranges, _count, _gather,
-                                            _gather_within, _guaranteed, _nearest, _scratch)
+from ..features._covariance_kernels import (_CELL_CHUNK, _block_ranges, _count, _knn_point,
+                                            _scratch)
 
 __all__ = ["raised_patches"]
 
@@ -193,12 +193,9 @@ def _knn_smooth(c0, c1, pts, zs, cell_keys, cell_start, dims, cell, k, tau0, ste
     ncell = c1 - c0
     kk = k + 1
     nchunks = (ncell + _CELL_CHUNK - 1) // _CELL_CHUNK
-    maxrad = max(dims[0], dims[1])
     for ch in prange(nchunks):
         cap = 1024
-        bd = np.empty(cap + 1)
-        bi = np.empty(cap + 1, dtype=np.int64)
-        td, ti, tb, sd, si, cnt = _scratch(cap)
+        bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
         ranges = np.empty((9, 2), dtype=np.int64)
         for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
             key = cell_keys[c]
@@ -208,36 +205,18 @@ def _knn_smooth(c0, c1, pts, zs, cell_keys, cell_start, dims, cell, k, tau0, ste
             need = _count(ranges, nr)
             if need > cap:
                 cap = max(need, 2 * cap)
-                bd = np.empty(cap + 1)
-                bi = np.empty(cap + 1, dtype=np.int64)
-                td, ti, tb, sd, si, cnt = _scratch(cap)
+                bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
             tau2 = tau0 * tau0
             for i in range(cell_start[c], cell_start[c + 1]):
-                px = pts[i, 0]
-                py = pts[i, 1]
-                m = _gather_within(px, py, 0.0, pts, ranges, nr, tau2, bd, bi)
-                if m < kk:
-                    m = _gather(px, py, 0.0, pts, ranges, nr, bd, bi)
-                rad = 1
-                kth = np.inf
-                if m >= kk:
-                    kth = _nearest(bd, bi, m, kk, False, td, ti, tb, sd, si, cnt)
-                while m < kk or kth > _guaranteed(px, py, 0.0, ix0, iy0, 0, rad, cell,
-                                                  dims) ** 2:
-                    if rad > maxrad:
-                        break
-                    rad += 1
-                    big = np.empty(((2 * rad + 1) ** 2, 2), dtype=np.int64)
-                    nb = _block_ranges(ix0, iy0, 0, rad, cell_keys, cell_start, dims, big)
-                    need = _count(big, nb)
-                    if need > cap:
+                need = 1
+                while need:
+                    kth, m, need = _knn_point(pts[i, 0], pts[i, 1], 0.0, ix0, iy0, 0, pts,
+                                              cell_keys, cell_start, dims, cell, kk, False,
+                                              tau2, ranges, nr, bd, bi, td, ti, tb, sd, si,
+                                              cnt)
+                    if need:
                         cap = max(need, 2 * cap)
-                        bd = np.empty(cap + 1)
-                        bi = np.empty(cap + 1, dtype=np.int64)
-                        td, ti, tb, sd, si, cnt = _scratch(cap)
-                    m = _gather(px, py, 0.0, pts, big, nb, bd, bi)
-                    if m >= kk:
-                        kth = _nearest(bd, bi, m, kk, False, td, ti, tb, sd, si, cnt)
+                        bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
                 tau2 = kth * 1.3225  # (1.15 r_k)^2 for the next point of the cell
                 r = i - base
                 t = 0

@@ -57,8 +57,10 @@ _SMALL = 32  # a bin with more candidates (duplicates, ties) is sorted by merges
 
 @njit
 def _scratch(cap):
-    """Work arrays of :func:`_nearest` for up to `cap` candidates."""
+    """Work arrays of :func:`_knn_point` for up to `cap` candidates: the candidates'
+    squared distances and indices (bd, bi) and those of :func:`_nearest`."""
     return (np.empty(cap + 1), np.empty(cap + 1, dtype=np.int64),
+            np.empty(cap + 1), np.empty(cap + 1, dtype=np.int64),
             np.empty(cap + 1, dtype=np.int32), np.empty(cap + 1),
             np.empty(cap + 1, dtype=np.int64), np.empty(_NBIN + 1, dtype=np.int64))
 
@@ -251,6 +253,43 @@ def _count(ranges, nr):
     return n
 
 
+@njit
+def _knn_point(px, py, pz, ix0, iy0, iz0, pts, cell_keys, cell_start, dims, cell, k, sort,
+               tau2, ranges, nr, bd, bi, td, ti, tb, sd, si, cnt):
+    """Exact `k` nearest of the point (px, py, pz) of cell (ix0, iy0, iz0) into ``td[:k]``
+    (squared distances) and ``ti[:k]`` (sorted positions), in ascending distance if `sort`.
+
+    The candidates are the points of `ranges` (the 3 x 3 (x 3) cells around the point)
+    within ``sqrt(tau2)``, all of them if fewer than k; while the k-th distance exceeds the
+    radius the block of cells is guaranteed to cover (:func:`_guaranteed`), the block
+    grows by one cell. Returns ``(kth, m, need)``: the k-th squared distance, the number
+    of candidates, and 0, or the number of candidates a grown block needs when the work
+    arrays (:func:`_scratch`) are too small; then call again with larger ones.
+    """
+    cap = bd.size - 1
+    maxrad = max(dims[0], max(dims[1], dims[2]))
+    m = _gather_within(px, py, pz, pts, ranges, nr, tau2, bd, bi)
+    if m < k:
+        m = _gather(px, py, pz, pts, ranges, nr, bd, bi)
+    rad = 1
+    kth = np.inf
+    if m >= k:
+        kth = _nearest(bd, bi, m, k, sort, td, ti, tb, sd, si, cnt)
+    while m < k or kth > _guaranteed(px, py, pz, ix0, iy0, iz0, rad, cell, dims) ** 2:
+        if rad > maxrad:
+            break
+        rad += 1
+        big = np.empty(((2 * rad + 1) ** 2, 2), dtype=np.int64)
+        nb = _block_ranges(ix0, iy0, iz0, rad, cell_keys, cell_start, dims, big)
+        need = _count(big, nb)
+        if need > cap:
+            return kth, m, need
+        m = _gather(px, py, pz, pts, big, nb, bd, bi)
+        if m >= k:
+            kth = _nearest(bd, bi, m, k, sort, td, ti, tb, sd, si, cnt)
+    return kth, m, 0
+
+
 @njit_parallel
 def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out_idx,
               order, nbr_idx, nbr_dist, sensor, has_sensor, out_feat):
@@ -273,12 +312,9 @@ def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out
     base = cell_start[c0]
     ncell = c1 - c0
     nchunks = (ncell + _CELL_CHUNK - 1) // _CELL_CHUNK
-    maxrad = max(dims[0], max(dims[1], dims[2]))
     for ch in prange(nchunks):
         cap = 1024
-        bd = np.empty(cap + 1)
-        bi = np.empty(cap + 1, dtype=np.int64)
-        td, ti, tb, sd, si, cnt = _scratch(cap)
+        bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
         ranges = np.empty((9, 2), dtype=np.int64)
         cov = np.empty((3, 3))
         evals = np.empty(3)
@@ -293,37 +329,18 @@ def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out
             need = _count(ranges, nr)
             if need > cap:
                 cap = max(need, 2 * cap)
-                bd = np.empty(cap + 1)
-                bi = np.empty(cap + 1, dtype=np.int64)
-                td, ti, tb, sd, si, cnt = _scratch(cap)
+                bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
             tau2 = tau0 * tau0
             for i in range(cell_start[c], cell_start[c + 1]):
-                px = pts[i, 0]
-                py = pts[i, 1]
-                pz = pts[i, 2]
-                m = _gather_within(px, py, pz, pts, ranges, nr, tau2, bd, bi)
-                if m < k:
-                    m = _gather(px, py, pz, pts, ranges, nr, bd, bi)
-                rad = 1
-                kth = np.inf
-                if m >= k:
-                    kth = _nearest(bd, bi, m, k, sort, td, ti, tb, sd, si, cnt)
-                while m < k or kth > _guaranteed(px, py, pz, ix0, iy0, iz0, rad, cell,
-                                                 dims) ** 2:
-                    if rad > maxrad:
-                        break
-                    rad += 1
-                    big = np.empty(((2 * rad + 1) ** 2, 2), dtype=np.int64)
-                    nb = _block_ranges(ix0, iy0, iz0, rad, cell_keys, cell_start, dims, big)
-                    need = _count(big, nb)
-                    if need > cap:
+                need = 1
+                while need:
+                    kth, m, need = _knn_point(pts[i, 0], pts[i, 1], pts[i, 2], ix0, iy0, iz0,
+                                              pts, cell_keys, cell_start, dims, cell, k, sort,
+                                              tau2, ranges, nr, bd, bi, td, ti, tb, sd, si,
+                                              cnt)
+                    if need:
                         cap = max(need, 2 * cap)
-                        bd = np.empty(cap + 1)
-                        bi = np.empty(cap + 1, dtype=np.int64)
-                        td, ti, tb, sd, si, cnt = _scratch(cap)
-                    m = _gather(px, py, pz, pts, big, nb, bd, bi)
-                    if m >= k:
-                        kth = _nearest(bd, bi, m, k, sort, td, ti, tb, sd, si, cnt)
+                        bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
                 tau2 = kth * 1.3225  # (1.15 r_k)^2 for the next point of the cell
                 r = i - base
                 for t in range(k):
