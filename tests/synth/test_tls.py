@@ -301,3 +301,18 @@ def test_plant_platform_station_sees_tank_tops():
         assert np.allclose(c.meta["xyz_true"][m, 2], top, atol=1e-9)
         assert np.allclose(c.normal[m], [0, 0, 1])
     assert _face_residual(c).max() < 1e-9
+
+
+def test_crease_where_three_planes_share_the_line():
+    # The eave line y = 9.6, z = 6 carries three planes: the south roof, its fascia and
+    # the top plane of the wall behind the fascia.  The crease is roof | fascia; keeping
+    # one pair of planes per geometric line used to lose it (and bias edge_distance
+    # there by up to 0.2 m).
+    c = make_tls_building(step=0.05, rng=0)
+    names = c.meta["face_names"]
+    pairs = {tuple(sorted((names[a], names[b]))): e for e in crease_lines(c.meta["solid"])
+             for a, b in [e["faces"]]}
+    for side, y in (("south", 9.6), ("north", 18.4)):
+        e = pairs[tuple(sorted((f"house_roof_{side}", f"house_roof_fascia_{side}")))]
+        assert np.allclose(e["vertices"][:, 1:], [[y, 6.0], [y, 6.0]])
+        assert np.isclose(abs(e["vertices"][1, 0] - e["vertices"][0, 0]), 12.8)

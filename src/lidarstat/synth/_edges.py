@@ -109,12 +109,12 @@ def _straight_creases(solid, planes, cyls, lo, hi):
     A = np.stack([N[I], N[J], ell], axis=1)
     rhs = np.stack([D[I], D[J], np.zeros(I.size)], axis=1)[..., None]
     p0 = np.linalg.solve(A, rhs)[..., 0]
-    # one representative pair per geometric line (three planes through a line: done once)
-    sg = np.sign(ell[np.arange(ell.shape[0]), np.argmax(np.abs(ell), axis=1)])
-    key = np.round(np.hstack([ell * sg[:, None], p0]), 9)
-    _, first = np.unique(key, axis=0, return_index=True)
-    first = np.sort(first)
-    I, J, ell, p0 = I[first], J[first], ell[first], p0[first]
+    # Every pair of planes is a candidate, even when three or more planes share a line:
+    # which two of them are the faces meeting there can change from piece to piece (a
+    # roof, its fascia and the top plane of the wall behind the fascia share the eave
+    # line; keeping one pair per line lost the roof-fascia crease).  A piece is kept
+    # below only where both planes are boundaries beside it, and repeated pieces are
+    # dropped at the end.
     # clip to the bounding box
     with np.errstate(divide="ignore", invalid="ignore"):
         ta, tb = (lo - p0) / ell, (hi - p0) / ell
@@ -162,9 +162,15 @@ def _straight_creases(solid, planes, cyls, lo, hi):
     ell_p, p0_p, ta_, tb_ = ell_p[keep], p0_p[keep], ta_[keep], tb_[keep]
     fa = _side_faces(solid, q, na, _unit_rows(np.cross(ell_p, na)))
     fb = _side_faces(solid, q, nb, _unit_rows(np.cross(ell_p, nb)))
-    out, lines = [], []
+    out, lines, seen = [], [], set()
     for k in range(q.shape[0]):
+        if fa[k] < 0 or fb[k] < 0 or fa[k] == fb[k]:
+            continue  # one of the planes is not a face beside this piece
         f = tuple(sorted((int(fa[k]), int(fb[k]))))
+        key = (f, tuple(np.round(q[k], 9)))
+        if key in seen:
+            continue  # the same piece from another pair of planes through its line
+        seen.add(key)
         start, end = p0_p[k] + ta_[k] * ell_p[k], p0_p[k] + tb_[k] * ell_p[k]
         if (out and lines[-1] == li[k] and out[-1]["faces"] == f
                 and np.allclose(out[-1]["vertices"][1], start, atol=1e-9)):
