@@ -16,7 +16,8 @@ too: Gauss-Newton on (centre, radius, two tilt components) from the 3-parameter 
 the projection of neighbour j moving by ``(b, g) t_j``; the statistic is the smaller of
 the two weighted RSS (the 5-parameter minimum, or an upper bound of it if the refinement
 fails) and is referred to ``chi2(n - 5)``. On tls_plant this takes the pipe and tank
-points labelled edge from 1.1 % to 0.1 %. A plane is the limit of large radius (a straight line in
+points labelled edge from 1.1 % to 0.14 %.
+A plane is the limit of large radius (a straight line in
 the projection); a crease projects to a V, which no circle fits.
 
 Per-neighbour noise: with a sensor, the range noise ``sigma_r(r) = a + b r`` runs along the
@@ -183,7 +184,8 @@ def cylinder_rows(pts, query, indptr, idx, axes, sensor, has_sensor, sig_pt, sta
 
     `pts` local coordinates; row r lists the neighbours of point ``query[r]``. Noise of
     neighbour j: ``sig_pt[j] * max(|d . rho|, 0.1)`` with a sensor (`sig_pt` along the
-    rays), else ``sig_pt[j]`` (across the surface). Writes the weighted RSS, its degrees of freedom (n - 3) and the
+    rays), else ``sig_pt[j]`` (across the surface). Writes the weighted RSS, its degrees
+    of freedom (n - 3; n - 5 for a circle with `refine_axis`, the tilt fitted too) and the
     fitted radius (inf for a straight line) and a point of the axis (the circle centre
     lifted to 3-D, local coordinates; NaN for a line); NaN where fewer than 7 neighbours.
     """

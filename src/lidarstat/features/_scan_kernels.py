@@ -19,7 +19,8 @@ floored at 0.05). The angular offsets are differences of each point's azimuth an
 elevation, not of its unit vector: the second-order terms of ``d_j - d_i`` are even in
 the offset and would bend the scan lines into the arcs they are on the ground (a grazing
 row bows toward the scanner by ``x^2 / 2r`` across a neighbourhood, which alone moves the
-centroid off the index point). In these coordinates the scan lines are straight and equally spaced and
+centroid off the index point). In these coordinates the scan lines are straight and
+equally spaced and
 the mirror image ``-x_j`` of a grid node is a grid node, at exactly the same distance.
 Distances ``L_j = |x_j|`` differ from the 3-D distances ``D_j`` by the local density
 gradient; with ``g = max_j D_j / L_j`` (over ``D_j > 0.2 r``, r the farthest neighbour)
@@ -53,7 +54,8 @@ def scan_centroid_rows(pts, angles, rowpoint, indptr, idx, normals, major, senso
     """Complete-disc centroid statistic of every CSR row (module doc).
 
     Row r lists the neighbours (indices into `pts`, the point itself allowed) of point
-    ``rowpoint[r]``; ``angles[j]`` is (azimuth, elevation) of point j seen from `sensor`; ``normals[r]``, ``major[r]`` are that point's normal and largest
+    ``rowpoint[r]``; ``angles[j]`` is (azimuth, elevation) of point j seen from `sensor`;
+    ``normals[r]``, ``major[r]`` are that point's normal and largest
     eigenvector. `pts` and `sensor` share one (local) origin. ``out`` is (M, NSCAN):
     T2, m and rho / r; T2 is NaN where m < 4 or the disc is degenerate.
     """
