@@ -5,7 +5,7 @@ import pytest
 
 from lidarstat.segment import (hoover, local_intersections, segment_covariance,
                                segment_planes)
-from lidarstat.synth import make_tls_building
+from lidarstat.synth import distance_to_creases, make_tls_building
 
 
 def _gable(rng, n=30000, sigma=0.003):
@@ -83,9 +83,9 @@ def test_tls_building_hoover_and_lines():
     fascia (3 scan rows, its border points given back by the segment-level planes) and the
     soffit (1-2 rows: a strip segment); 12 of 14 without those refinements.
 
-    Lines with support lie within 2 sigma of the true crease of their two faces (the
-    intersection of the planes fitted to the true faces' points: the roof-fascia crease is
-    missing from ``meta['edges']``, see docs/methods/covariance.md).
+    Lines with support lie within 2 sigma of both true faces' planes and of the nearest
+    listed true crease (``meta['edges']``, which holds the roof-fascia creases since the
+    three-planes fix of ``synth.crease_lines``).
     """
     sc = make_tls_building(rng=0)
     seg = segment_covariance(sc.xyz, sensor=sc.scanner)
@@ -106,6 +106,8 @@ def test_tls_building_hoover_and_lines():
         q = v[0] + t * (v[-1] - v[0])
         assert np.abs((q - ca) @ na).max() < two_sigma, (names[fa], names[fb])
         assert np.abs((q - cb) @ nb).max() < two_sigma, (names[fa], names[fb])
+        assert distance_to_creases(q, sc.meta["edges"]).max() < two_sigma, (names[fa],
+                                                                             names[fb])
         pairs.add(frozenset((names[fa], names[fb])))
     assert {frozenset(("house_roof_south", "house_roof_fascia_south")),
             frozenset(("house_roof_fascia_south", "house_roof_soffit")),
@@ -147,7 +149,6 @@ def test_curved_creases_are_polylines_on_the_true_circles():
     tank-ground creases are circles, and their polylines lie within 2 sigma of the true
     arcs of their two faces."""
     from lidarstat.synth import make_tls_plant
-    from lidarstat.synth._edges import distance_to_creases
 
     sc = make_tls_plant(rng=0)
     seg = segment_covariance(sc.xyz, sensor=sc.scanner)
