@@ -34,7 +34,7 @@ def test_scan_test_is_conservative_on_a_scan_grid_and_finds_the_borders():
     alpha = 0.05
     for sc in _scans():
         res = covariance(sc.xyz, sensor=sc.scanner, k=50, keep_neighbors=True,
-                         boundary_alpha=alpha)
+                         boundary_alpha=alpha, boundary="scan")
         assert res.classes.meta["boundary"] == "scan"
         nbh = res.features.neighborhoods
         rk = nbh.distances.reshape(len(nbh), -1)[:, -1]
@@ -58,7 +58,7 @@ def test_scan_test_size_on_a_poisson_plane(rng, k):
     rej = []
     for _ in range(3):
         pts = _plane(rng, sigma=0.003)
-        res = covariance(pts, sensor=(10.0, 10.0, 200.0), k=k)
+        res = covariance(pts, sensor=(10.0, 10.0, 200.0), k=k, boundary="scan")
         sel = _separated(pts, 2.2 * np.sqrt(k / (np.pi * 100.0)), 1.0, rng)
         rej.append(res["boundary_p"][sel] < alpha)
     ok, rate, n = _binomial_ok(np.concatenate(rej), alpha)
@@ -70,7 +70,8 @@ def test_scan_test_power_at_a_straight_border(rng):
     are boundaries at alpha = 0.01 (> 90 %); points farther than 1.5 r_k are not."""
     pts = _plane(rng, n=30000, size=20.0, sigma=0.003)
     pts = pts[pts[:, 0] < 10.0]
-    res = covariance(pts, sensor=(10.0, 10.0, 200.0), k=50, keep_neighbors=True)
+    res = covariance(pts, sensor=(10.0, 10.0, 200.0), k=50, keep_neighbors=True,
+                     boundary="scan")
     nbh = res.features.neighborhoods
     rk = nbh.distances.reshape(len(nbh), -1)[:, -1]
     d = 10.0 - pts[:, 0]
@@ -91,7 +92,7 @@ def test_scan_statistic_is_the_same_on_every_neighbourhood_path(rng):
     b = covariance_features(pts, neighborhoods=knn_neighbors(pts, 20), sensor=sensor)
     np.testing.assert_allclose(a, b.scan_boundary, rtol=1e-9, atol=1e-9)
     c = covariance_features(pts, radius=0.4, sensor=sensor).scan_boundary
-    assert c.shape == (3000, 3) and np.isfinite(c[:, 0]).mean() > 0.99
+    assert c.shape == (3000, 4) and np.isfinite(c[:, 0]).mean() > 0.99
     assert covariance_features(pts, k=20).scan_boundary is None
 
 

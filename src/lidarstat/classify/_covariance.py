@@ -51,6 +51,8 @@ FIELDS = {
     "variation_p": ("float64", "p-value of the consistent-curvature test"),
     "boundary_T2": ("float64", "Hotelling T2 of the centroid offset"),
     "boundary_p": ("float64", "p-value of the boundary test"),
+    "jump_z": ("float64", "largest range-continuity z of the grid edges"),
+    "jump_p": ("float64", "p-value: a depth jump at the point"),
 }
 
 
@@ -287,7 +289,19 @@ BOUNDARY_ALPHA = 0.001
 #: false boundaries and finds borders farther inside the neighbourhood.
 SCAN_BOUNDARY_ALPHA = 0.01
 
-BOUNDARY = ("scan", "centroid")
+BOUNDARY = ("visible", "scan", "centroid")
+
+#: Default levels of the ``'visible'`` boundary test (the visible disc on the scan grid,
+#: :mod:`._visible`) on surface points and on edge candidates. On a grid the F null is
+#: conservative: interior points have T2 = 0 to rounding (a complete disc is centrally
+#: symmetric), so the level sets how far inside the disc a border is seen, not a rate of
+#: false boundaries (measured: docs/methods/covariance.md).
+VISIBLE_BOUNDARY_ALPHA = 0.05
+VISIBLE_EDGE_BOUNDARY_ALPHA = 0.01
+
+#: Level of the range-continuity test of one grid edge (a depth jump cuts the visible
+#: disc there).
+JUMP_ALPHA = 0.001
 
 #: Default level of the ``'scan'`` boundary test on the points that failed the surface
 #: tests (edge candidates): a neighbourhood cut by the end of the visible surface is a
@@ -364,7 +378,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
                         boundary_alpha=None, curvature_threshold=None,
                         variance_threshold=None, points=None, curved=None,
                         curved_alpha=None, boundary=None,
-                        edge_boundary_alpha=EDGE_BOUNDARY_ALPHA) -> CovarianceClasses:
+                        edge_boundary_alpha="auto", jump_alpha=JUMP_ALPHA) -> CovarianceClasses:
     """Label every point surface, edge or boundary from its covariance features.
 
     Parameters
@@ -403,15 +417,21 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     curved_alpha : float, optional
         Level of test 2 (rejected -> edge). Default: 0.001 (``CURVED_ALPHA``) for the
         cylinder test, `alpha` for the variation test.
-    boundary : {'scan', 'centroid'}, optional
-        Test 3. ``'scan'`` (default when the features were computed with a sensor): the
-        Hotelling test of the neighbourhood's complete disc in linearised scan
-        coordinates, on every point (boundary wins over edge);
-        ``'centroid'``: the paper's eq. 6-8 (with the factor n) in the tangent plane,
-        on surface points.
-    edge_boundary_alpha : float or None
-        With the scan test: level at which a point that failed the surface tests (an
-        edge candidate) becomes a boundary (default 0.001); None: edges stay edges.
+    boundary : {'visible', 'scan', 'centroid'}, optional
+        Test 3. ``'visible'`` (default when the features were computed with a sensor and
+        `points` are given): the Hotelling test of the point's *visible disc*, the grid
+        directions within its complete disc reached from it over grid edges without a
+        depth jump (:mod:`lidarstat.classify._visible`), on every point (boundary wins
+        over edge); writes ``jump_z`` / ``jump_p`` (range continuity at the point).
+        ``'scan'`` (the default with a sensor and no `points`): the same test on the
+        complete disc of the kNN table; ``'centroid'``: the paper's eq. 6-8 (with the
+        factor n) in the tangent plane, on surface points.
+    edge_boundary_alpha : float, None or 'auto'
+        With the scan or visible test: level at which a point that failed the surface
+        tests (an edge candidate) becomes a boundary ('auto': 0.001 scan, 0.01 visible);
+        None: edges stay edges.
+    jump_alpha : float
+        Level of the range-continuity test of one grid edge (``'visible'``).
 
     Returns
     -------
@@ -423,18 +443,28 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     """
     func = "classify_covariance"
     alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0)
+    scan_feats = getattr(features, "scan_boundary", None) is not None
     if boundary is None:
-        boundary = "scan" if getattr(features, "scan_boundary", None) is not None else "centroid"
+        boundary = ("centroid" if not scan_feats else
+                    "visible" if points is not None else "scan")
     if boundary not in BOUNDARY:
         raise InvalidParameterError(
-            f"The 'boundary' parameter of {func} must be one of 'scan', 'centroid'. "
-            f"Got {boundary!r} instead.")
-    if boundary == "scan" and getattr(features, "scan_boundary", None) is None:
-        raise InvalidParameterError(f"{func}: boundary='scan' needs features computed with a "
-                                    "sensor")
+            f"The 'boundary' parameter of {func} must be one of 'visible', 'scan', "
+            f"'centroid'. Got {boundary!r} instead.")
+    if boundary in ("scan", "visible") and not scan_feats:
+        raise InvalidParameterError(f"{func}: boundary={boundary!r} needs features computed "
+                                    "with a sensor")
+    if boundary == "visible" and points is None:
+        raise InvalidParameterError(f"{func}: boundary='visible' needs the `points`")
     if boundary_alpha is None:
-        boundary_alpha = SCAN_BOUNDARY_ALPHA if boundary == "scan" else BOUNDARY_ALPHA
+        boundary_alpha = {"scan": SCAN_BOUNDARY_ALPHA, "visible": VISIBLE_BOUNDARY_ALPHA,
+                          "centroid": BOUNDARY_ALPHA}[boundary]
     boundary_alpha = check_scalar(boundary_alpha, "boundary_alpha", func=func, low=0.0, high=1.0)
+    jump_alpha = check_scalar(jump_alpha, "jump_alpha", func=func, low=0.0, high=1.0,
+                              closed="neither")
+    if isinstance(edge_boundary_alpha, str) and edge_boundary_alpha == "auto":
+        edge_boundary_alpha = (VISIBLE_EDGE_BOUNDARY_ALPHA if boundary == "visible" else
+                               EDGE_BOUNDARY_ALPHA)
     if edge_boundary_alpha is not None:
         edge_boundary_alpha = check_scalar(edge_boundary_alpha, "edge_boundary_alpha",
                                            func=func, low=0.0, high=1.0)
@@ -458,7 +488,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         raise InvalidParameterError(f"{func}: noise='range' needs features computed with a sensor")
     estimated = sigma is None
     meta = {"noise": noise, "boundary": boundary}
-    if boundary == "scan":
+    if boundary != "centroid":
         meta["edge_boundary_alpha"] = edge_boundary_alpha
     if estimated and noise == "range":
         a, b = estimate_range_noise(evals, counts, features.ray_range, features.ray_cos)
@@ -483,8 +513,27 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     valid = (counts >= 4) & np.isfinite(evals).all(axis=1)
     across = sigma if noise == "normal" else sigma * features.ray_cos
     plane_p = plane_test(evals, counts, across)
+    extra = {}
     if boundary == "scan":
         t2, boundary_p = scan_boundary_test(features.scan_boundary)
+    elif boundary == "visible":
+        from ._visible import visible_boundary
+
+        pts = np.asarray(points, dtype=np.float64)
+        if pts.shape != (n, 3):
+            raise InvalidParameterError(
+                f"{func}: `points` must be the {n} points of the features, got shape "
+                f"{pts.shape}")
+        along = sigma if noise == "range" else sigma / np.maximum(features.ray_cos, 0.05)
+        sb = features.scan_boundary
+        # the complete disc's radius rho (the reach shrunk by the density gradient g)
+        vis = visible_boundary(pts, features.sensor, features.normals, features.major, along,
+                               sb[:, 2] * sb[:, 3], jump_alpha=jump_alpha)
+        t2 = vis["t2"]
+        boundary_p = hotelling_p(t2, vis["m"])
+        extra = {"jump_z": vis["jump_z"], "jump_p": vis["jump_p"]}
+        meta["jump_alpha"] = jump_alpha
+        meta["grid_step"] = vis["step"]
     else:
         t2, boundary_p = boundary_test(features.offset_uv, evals, counts)
     if curvature_threshold is None:
@@ -530,14 +579,14 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     surface = valid & (low | consistent)
     with np.errstate(invalid="ignore"):
         one_sided = surface & (boundary_p < boundary_alpha)
-        if boundary == "scan" and edge_boundary_alpha is not None:
+        if boundary != "centroid" and edge_boundary_alpha is not None:
             one_sided |= valid & ~surface & (boundary_p < edge_boundary_alpha)
     pc = np.zeros(n, dtype=np.uint8)
     pc[valid] = PointClass.EDGE
     pc[surface] = PointClass.SURFACE
     pc[one_sided] = PointClass.BOUNDARY
     fields = {"point_class": pc, "plane_p": plane_p, "variation_p": variation_p,
-              "boundary_T2": t2, "boundary_p": boundary_p}
+              "boundary_T2": t2, "boundary_p": boundary_p, **extra}
     return CovarianceClasses(fields=fields, sigma=sigma, sigma_estimated=estimated, alpha=alpha,
                              boundary_alpha=boundary_alpha,
                              curvature_threshold=curvature_threshold,
@@ -581,7 +630,7 @@ class CovarianceClassification:
 def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None, alpha=0.05,
                boundary_alpha=None, curvature_threshold=None, variance_threshold=None,
                curved="cylinder", curved_alpha=None, eigen_mode="raw", keep_neighbors=False,
-               progress=None, boundary=None, edge_boundary_alpha=EDGE_BOUNDARY_ALPHA):
+               progress=None, boundary=None, edge_boundary_alpha="auto", jump_alpha=JUMP_ALPHA):
     """Covariance features and surface / edge / boundary classes of every point (seed 003).
 
     One call of :func:`lidarstat.features.covariance_features` and
@@ -614,5 +663,6 @@ def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None
                                   variance_threshold=variance_threshold, points=points,
                                   curved=curved, curved_alpha=curved_alpha,
                                   boundary=boundary,
-                                  edge_boundary_alpha=edge_boundary_alpha)
+                                  edge_boundary_alpha=edge_boundary_alpha,
+                                  jump_alpha=jump_alpha)
     return CovarianceClassification(features=feats, classes=classes)

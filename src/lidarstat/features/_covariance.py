@@ -71,10 +71,11 @@ class CovarianceResult:
     ray_range, ray_cos : (N,) ndarray or None
         With a sensor: distance from it and |cos| of the angle between the ray and the
         normal (the share of range noise that falls across the surface).
-    scan_boundary : (N, 3) ndarray or None
+    scan_boundary : (N, 4) ndarray or None
         With a sensor: Hotelling T2 of the complete-disc centroid in linearised scan
-        coordinates, the disc's point count m and its radius over the neighbourhood's
-        (:mod:`lidarstat.features._scan_kernels`; the ``'scan'`` boundary test).
+        coordinates, the disc's point count m, its radius over the neighbourhood's and the
+        neighbourhood's reach (:mod:`lidarstat.features._scan_kernels`; the ``'scan'`` and
+        ``'visible'`` boundary tests).
     """
 
     fields: dict

@@ -31,7 +31,9 @@ point - whatever the scan pattern; where the visible surface ends inside the dis
 nodes beyond it are missing and the centroid moves away from the border.
 
 Output per point: Hotelling's ``T2 = m c' S^-1 c`` of the complete disc's centroid c
-(m points, S their covariance) against the index point, m, and ``rho / r``.
+(m points, S their covariance) against the index point, m, ``rho / r`` and the reach r
+(the farthest neighbour, which the ``'visible'`` boundary test of
+:mod:`lidarstat.classify._visible` uses as its disc radius).
 """
 
 from __future__ import annotations
@@ -45,7 +47,8 @@ from .._shared._jit import njit_parallel
 S_T2 = 0
 S_M = 1
 S_RHO = 2
-NSCAN = 3
+S_REACH = 3
+NSCAN = 4
 _MIN_COS = 0.05
 
 
@@ -57,7 +60,7 @@ def scan_centroid_rows(pts, angles, rowpoint, indptr, idx, normals, major, senso
     ``rowpoint[r]``; ``angles[j]`` is (azimuth, elevation) of point j seen from `sensor`;
     ``normals[r]``, ``major[r]`` are that point's normal and largest
     eigenvector. `pts` and `sensor` share one (local) origin. ``out`` is (M, NSCAN):
-    T2, m and rho / r; T2 is NaN where m < 4 or the disc is degenerate.
+    T2, m, rho / r and r; T2 is NaN where m < 4 or the disc is degenerate.
     """
     nrow = indptr.size - 1
     for r in prange(nrow):
@@ -66,6 +69,7 @@ def scan_centroid_rows(pts, angles, rowpoint, indptr, idx, normals, major, senso
         out[r, S_T2] = np.nan
         out[r, S_M] = 0.0
         out[r, S_RHO] = np.nan
+        out[r, S_REACH] = np.nan
         px = pts[i, 0] - sensor[0]
         py = pts[i, 1] - sensor[1]
         pz = pts[i, 2] - sensor[2]
@@ -118,6 +122,7 @@ def scan_centroid_rows(pts, angles, rowpoint, indptr, idx, normals, major, senso
                 dd[t] = 0.0
                 ll[t] = 0.0
             reach = max(reach, dd[t])
+        out[r, S_REACH] = reach
         if not reach > 0:
             continue
         g = 1.0

@@ -384,7 +384,7 @@ def surface_tested(feats, classes):
 
 
 def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, alpha=0.05,
-                       boundary_alpha=0.001, curvature_threshold=None, variance_threshold=None,
+                       boundary_alpha=None, curvature_threshold=None, variance_threshold=None,
                        curved="cylinder", curved_alpha=None, adaptive_scale=True, min_size=50,
                        grow_k=20, seeds="curvature", min_angle=20.0, reintegration=True,
                        lines=True, refine=True, result=None) -> Segmentation:

@@ -1,0 +1,371 @@
+"""Range continuity on the scan grid and the ``'visible'`` boundary test (terrestrial scans).
+
+A terrestrial scanner samples a regular grid of directions; the *visible surface* of a point
+is what its rays see without a break in range. Two things end it: a ray that returns
+nothing (sky, the scan window) and a *depth jump* (an occlusion: the visible surface ends and
+the ray passes to a background farther away). A crease does not end it: across a crease the
+range is continuous, only its slope changes.
+
+**Range continuity of a grid edge.** For two grid-adjacent points a, b take the points a', b'
+that continue the grid line beyond each of them (a' = the neighbour of a nearest the direction
+``2 d_a - d_b``, b' likewise; accepted within half the step). In inverse range ``s = 1 / R``
+a plane is exactly linear in the ray direction (``n . (R d) = c`` gives ``1 / R = n . d / c``),
+so along a grid line the steps ``D_a = s_a - s_a'``, ``D = s_b - s_a``, ``D_b = s_b' - s_b`` are
+equal on a plane and, across a crease between a and b, ``D`` lies *between* ``D_a`` and ``D_b``
+(the profile is piecewise linear, the step across the crease a convex combination of the two
+slopes). At a depth jump ``D`` lies outside them by the depth. With the second differences
+``E_a = D - D_a`` and ``E_b = D - D_b``,
+
+    z_ab = min(|E_a| / sd(E_a), |E_b| / sd(E_b))    if E_a and E_b have the same sign, else 0
+
+(``sd(E_a)^2 = sigma_b^2 + 4 sigma_a^2 + sigma_a'^2`` with ``sigma = sigma_r(R) / R^2`` the
+noise of s). Null hypothesis: a, b and the points beyond them lie on one continuous surface,
+linear in s along the grid line on either side of some point between a and b (a plane, or
+two planes meeting at a crease; curved surfaces add second differences of order
+``(R step)^2 / radius``, far below the noise). The null is composite: on a plane both E are
+noise (correlation ``(2 sigma_a^2 + 2 sigma_b^2) / (sd_a sd_b)``, about 2/3) and
+``P(z > t) = 2 P(Z1 > t, Z2 > t)`` (:func:`same_sign_p`); at a crease beside a or b one E
+carries the whole change of slope and the other is noise, so ``P(z > t) -> 1 - Phi(t)``,
+the largest value over the null. The p-value is therefore ``p = 1 - Phi(z)``: exact at the
+least favourable null (a sharp crease next to an endpoint), conservative on planes. An
+edge whose grid line does not continue on both sides is not tested (p = 1: with one side,
+a crease cannot be told from a jump). Per point, ``jump_z`` is the largest z of its grid
+edges and ``jump_p`` the Bonferroni p-value over its m edges, ``min(1, m min p)``: "a depth
+jump at this point".
+
+**The visible disc.** The ``'scan'`` test (:mod:`lidarstat.features._scan_kernels`) takes the
+complete disc from the kNN table, whose 3-D ball loses grid nodes across a crease (the other
+face bends away: holes, false boundaries at the foot of a wall) and gains nodes across a small
+depth jump (a background within the ball fills the gap: missed boundaries). Here the disc is
+gathered on the grid instead: starting at the point, a breadth-first walk over grid edges that
+pass the continuity test, kept to the nodes whose linearised scan coordinates (the same map as
+the ``'scan'`` test, on the point's tangent plane) lie within the radius rho of the point's
+complete disc (the kNN reach r shrunk by the density gradient, ``rho = r / g``: on a curved
+surface the linearised distance of a node underestimates its 3-D distance, by a factor 2 near
+a pipe's silhouette, which without the shrink makes borders up to 1 r away look near).
+For a point whose visible surface does not end within rho every node of that centrally
+symmetric set of directions is reached, so their centroid is the point; where it ends, the
+nodes beyond are missing (no return, or across a jump) and the centroid moves away from the
+border. The statistic is the same Hotelling ``T2`` (F(2, m - 2) null, exact for a uniform
+sample of the disc, conservative on a grid).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import prange
+
+from .._shared._jit import njit, njit_parallel
+
+#: Grid neighbours kept per point (8-neighbourhood of a regular angular grid).
+SLOTS = 8
+#: A grid neighbour is farther than this many angular steps: not adjacent (a missing node).
+ADJ_STEPS = 1.75
+#: Cap on the nodes of one visible disc (a safety bound; a k = 50 disc holds 50-300).
+MAX_NODES = 16384
+_MIN_COS = 0.05
+
+
+def grid_adjacency(dirs):
+    """Grid neighbours of every point from its unit ray direction.
+
+    Parameters
+    ----------
+    dirs : (N, 3) ndarray
+        Unit vectors from the scanner to the points.
+
+    Returns
+    -------
+    adj : (N, SLOTS) int64 ndarray
+        Indices of the up to 8 nearest directions within ``ADJ_STEPS`` angular steps, -1
+        padded.
+    step : float
+        The angular step: the median angle to the nearest other direction.
+    """
+    from scipy.spatial import cKDTree
+
+    n = dirs.shape[0]
+    kk = min(SLOTS + 1, n)
+    dist, idx = cKDTree(dirs).query(dirs, k=kk, workers=-1)
+    dist = np.asarray(dist).reshape(n, kk)
+    idx = np.asarray(idx).reshape(n, kk)
+    step = float(np.median(dist[:, 1])) if kk > 1 else 0.0
+    adj = np.full((n, SLOTS), -1, dtype=np.int64)
+    ok = (dist[:, 1:] <= ADJ_STEPS * step) & (dist[:, 1:] > 0)
+    adj[:, :kk - 1] = np.where(ok, idx[:, 1:], -1)
+    return adj, step
+
+
+@njit
+def _continuation(dirs, adj, a, tx, ty, tz, tol2):
+    """Neighbour of `a` nearest the direction (tx, ty, tz), within sqrt(tol2); else -1."""
+    best = -1
+    bd = tol2
+    for k in range(adj.shape[1]):
+        c = adj[a, k]
+        if c < 0:
+            continue
+        x = dirs[c, 0] - tx
+        y = dirs[c, 1] - ty
+        z = dirs[c, 2] - tz
+        q = x * x + y * y + z * z
+        if q < bd:
+            bd = q
+            best = c
+    return best
+
+
+#: Gauss-Legendre nodes and weights on [-1, 1] (the same-sign tail integral below).
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(48)
+
+
+@njit
+def _phibar(x):
+    return 0.5 * math.erfc(x / math.sqrt(2.0))
+
+
+@njit
+def same_sign_p(t, rho, gx, gw):
+    """``P(min(Z1, Z2) > t) + P(max(Z1, Z2) < -t)`` for standard normals of correlation rho.
+
+    ``2 int_t^inf phi(x) Phibar((t - rho x) / sqrt(1 - rho^2)) dx``, by Gauss-Legendre on
+    [t, t + 9].
+    """
+    if t <= 0:
+        return 1.0
+    q = math.sqrt(max(1.0 - rho * rho, 1e-12))
+    acc = 0.0
+    for k in range(gx.size):
+        x = t + 4.5 * (gx[k] + 1.0)
+        acc += gw[k] * math.exp(-0.5 * x * x) * _phibar((t - rho * x) / q)
+    return min(1.0, 2.0 * 4.5 * acc / math.sqrt(2.0 * math.pi))
+
+
+@njit_parallel
+def edge_jumps(dirs, s, sig, adj, z_out, p_out):
+    """Range-continuity statistic ``z`` and its p-value for every grid edge (module doc).
+
+    `s` is the inverse range and `sig` its noise std per point. `z_out`, `p_out` are
+    (N, SLOTS): z and ``p = 1 - Phi(z)`` (z = 0, p = 1 where the second differences differ
+    in sign or the grid line does not continue on both sides), NaN for empty slots.
+    """
+    n = adj.shape[0]
+    for a in prange(n):
+        for k in range(adj.shape[1]):
+            b = adj[a, k]
+            z_out[a, k] = np.nan
+            p_out[a, k] = np.nan
+            if b < 0:
+                continue
+            ex = dirs[b, 0] - dirs[a, 0]
+            ey = dirs[b, 1] - dirs[a, 1]
+            ez = dirs[b, 2] - dirs[a, 2]
+            tol2 = 0.25 * (ex * ex + ey * ey + ez * ez)
+            ap = _continuation(dirs, adj, a, dirs[a, 0] - ex, dirs[a, 1] - ey, dirs[a, 2] - ez,
+                               tol2)
+            bp = _continuation(dirs, adj, b, dirs[b, 0] + ex, dirs[b, 1] + ey, dirs[b, 2] + ez,
+                               tol2)
+            d = s[b] - s[a]
+            va = sig[a] * sig[a]
+            vb = sig[b] * sig[b]
+            za = 0.0
+            zb = 0.0
+            ea = 0.0
+            eb = 0.0
+            if ap >= 0:
+                ea = d - (s[a] - s[ap])
+                za = abs(ea) / math.sqrt(vb + 4.0 * va + sig[ap] * sig[ap])
+            if bp >= 0:
+                eb = d - (s[bp] - s[b])
+                zb = abs(eb) / math.sqrt(va + 4.0 * vb + sig[bp] * sig[bp])
+            if ap >= 0 and bp >= 0 and ea * eb > 0:
+                z = min(za, zb)
+                z_out[a, k] = z
+                p_out[a, k] = _phibar(z)
+            else:
+                # a crease between a and b, or no continuation on one side (a crease
+                # cannot be told from a jump with one side only): not tested
+                z_out[a, k] = 0.0
+                p_out[a, k] = 1.0
+
+
+@njit
+def _frame(pts, angles, sensor, normal, major, i):
+    """Coefficients of the linearised scan map of point i (see _scan_kernels)."""
+    px = pts[i, 0] - sensor[0]
+    py = pts[i, 1] - sensor[1]
+    pz = pts[i, 2] - sensor[2]
+    ri = math.sqrt(px * px + py * py + pz * pz)
+    f = np.empty(17)
+    f[0] = ri
+    if not ri > 0:
+        return f
+    d0, d1, d2 = px / ri, py / ri, pz / ri
+    ce, se = math.cos(angles[i, 1]), math.sin(angles[i, 1])
+    ca, sa = math.cos(angles[i, 0]), math.sin(angles[i, 0])
+    n0, n1, n2 = normal[0], normal[1], normal[2]
+    a0, a1, a2 = major[0], major[1], major[2]
+    nd = n0 * d0 + n1 * d1 + n2 * d2
+    if abs(nd) < _MIN_COS:
+        nd = _MIN_COS if nd >= 0 else -_MIN_COS
+    f[1], f[2], f[3] = d0, d1, d2
+    f[4], f[5] = -ce * sa, ce * ca  # d(ray)/d(azimuth)
+    f[6], f[7], f[8] = -se * ca, -se * sa, ce  # d(ray)/d(elevation)
+    f[9], f[10], f[11] = n0 / nd, n1 / nd, n2 / nd
+    f[12], f[13], f[14] = a0, a1, a2
+    f[15], f[16] = angles[i, 0], angles[i, 1]
+    return f
+
+
+@njit
+def _map(f, angles, j, bx):
+    """Linearised scan coordinates (u, v) of node j in the frame f; bx = major x normal."""
+    da = angles[j, 0] - f[15]
+    if da > np.pi:
+        da -= 2.0 * np.pi
+    elif da < -np.pi:
+        da += 2.0 * np.pi
+    de = angles[j, 1] - f[16]
+    e0 = da * f[4] + de * f[6]
+    e1 = da * f[5] + de * f[7]
+    e2 = de * f[8]
+    k = f[9] * e0 + f[10] * e1 + f[11] * e2
+    x0 = f[0] * (e0 - f[1] * k)
+    x1 = f[0] * (e1 - f[2] * k)
+    x2 = f[0] * (e2 - f[3] * k)
+    return (x0 * f[12] + x1 * f[13] + x2 * f[14], x0 * bx[0] + x1 * bx[1] + x2 * bx[2])
+
+
+@njit_parallel
+def visible_disc(pts, angles, adj, cut, normals, major, sensor, radius, nchunk, out):
+    """Hotelling T2 and node count of every point's visible disc (module doc).
+
+    ``cut[a, k]``: the grid edge (a, adj[a, k]) failed the continuity test. ``radius`` is the
+    disc radius per point in linearised scan coordinates. ``out`` is (N, 2): T2 (NaN where
+    fewer than 4 nodes or a degenerate disc) and m.
+    """
+    n = pts.shape[0]
+    for c in prange(nchunk):
+        mark = np.full(n, -1, dtype=np.int64)
+        queue = np.empty(MAX_NODES, dtype=np.int64)
+        uu = np.empty(MAX_NODES)
+        vv = np.empty(MAX_NODES)
+        bx = np.empty(3)
+        for i in range(c, n, nchunk):
+            out[i, 0] = np.nan
+            out[i, 1] = 0.0
+            rad = radius[i]
+            if not rad > 0:
+                continue
+            f = _frame(pts, angles, sensor, normals[i], major[i], i)
+            if not f[0] > 0:
+                continue
+            n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
+            bx[0] = n1 * f[14] - n2 * f[13]
+            bx[1] = n2 * f[12] - n0 * f[14]
+            bx[2] = n0 * f[13] - n1 * f[12]
+            r2 = rad * rad
+            mark[i] = i
+            queue[0] = i
+            head = 0
+            tail = 1
+            while head < tail:
+                a = queue[head]
+                head += 1
+                for k in range(adj.shape[1]):
+                    b = adj[a, k]
+                    if b < 0 or mark[b] == i or cut[a, k]:
+                        continue
+                    mark[b] = i
+                    u, v = _map(f, angles, b, bx)
+                    if u * u + v * v >= r2 or tail >= MAX_NODES:
+                        continue
+                    queue[tail] = b
+                    uu[tail] = u
+                    vv[tail] = v
+                    tail += 1
+            su = 0.0
+            sv = 0.0
+            suu = 0.0
+            suv = 0.0
+            svv = 0.0
+            m = 0
+            for t in range(1, tail):
+                u = uu[t]
+                v = vv[t]
+                su += u
+                sv += v
+                suu += u * u
+                suv += u * v
+                svv += v * v
+                m += 1
+            out[i, 1] = m
+            if m < 4:
+                continue
+            cu = su / m
+            cv = sv / m
+            xx = suu - m * cu * cu
+            xy = suv - m * cu * cv
+            yy = svv - m * cv * cv
+            det = xx * yy - xy * xy
+            if not det > 1e-12 * (xx + yy) * (xx + yy):
+                continue
+            out[i, 0] = m * (m - 1) * (cu * cu * yy - 2.0 * cu * cv * xy + cv * cv * xx) / det
+
+
+def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_alpha):
+    """The ``'visible'`` boundary statistic and the range-continuity fields of every point.
+
+    Parameters
+    ----------
+    points : (N, 3) ndarray
+    sensor : (3,) ndarray
+    normals, major : (N, 3) ndarray
+        Normal and largest eigenvector of every point's neighbourhood.
+    ray_sigma : float or (N,) ndarray
+        Range noise std along the rays.
+    radius : (N,) ndarray
+        Disc radius (the neighbourhood's reach).
+    jump_alpha : float
+        Level of the continuity test of a grid edge; failed edges are not crossed.
+
+    Returns
+    -------
+    dict with ``t2``, ``m`` (visible disc), ``jump_z``, ``jump_p`` (per point) and ``step``.
+    """
+    from ..features._scan_kernels import scan_angles
+
+    origin = np.asarray(points[0], dtype=np.float64)
+    pts = np.ascontiguousarray(points - origin)
+    sens = np.asarray(sensor, dtype=np.float64) - origin
+    ray = pts - sens
+    rng = np.linalg.norm(ray, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dirs = np.ascontiguousarray(ray / rng[:, None])
+        s = 1.0 / rng
+        sig = np.broadcast_to(np.asarray(ray_sigma, dtype=np.float64), rng.shape) / rng ** 2
+    adj, step = grid_adjacency(dirs)
+    z = np.empty(adj.shape, dtype=np.float64)
+    pe = np.empty(adj.shape, dtype=np.float64)
+    edge_jumps(dirs, s, np.ascontiguousarray(sig), adj, z, pe)
+    cut = np.ascontiguousarray(pe < jump_alpha)
+    angles = scan_angles(pts, sens)
+    out = np.empty((pts.shape[0], 2))
+    import numba
+
+    visible_disc(pts, angles, adj, cut, np.ascontiguousarray(normals, dtype=np.float64),
+                 np.ascontiguousarray(major, dtype=np.float64), sens,
+                 np.ascontiguousarray(radius, dtype=np.float64),
+                 4 * numba.get_num_threads(), out)
+    n_edges = np.count_nonzero(adj >= 0, axis=1)
+    has = n_edges > 0
+    jz = np.full(len(pts), np.nan)
+    jp = np.full(len(pts), np.nan)
+    jz[has] = np.max(np.where(adj[has] >= 0, z[has], -np.inf), axis=1)
+    # Bonferroni over the point's grid edges (valid under any dependence between them)
+    jp[has] = np.minimum(1.0, n_edges[has] * np.min(np.where(adj[has] >= 0, pe[has], np.inf),
+                                                    axis=1))
+    return {"t2": out[:, 0], "m": out[:, 1], "jump_z": jz, "jump_p": jp, "step": step,
+            "edge_z": z, "edge_p": pe, "adjacency": adj}
