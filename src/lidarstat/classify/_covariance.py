@@ -579,6 +579,12 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     surface = valid & (low | consistent)
     with np.errstate(invalid="ignore"):
         one_sided = surface & (boundary_p < boundary_alpha)
+        if boundary == "visible":
+            # a surface point beside a depth jump is where its visible surface ends: the
+            # union of the two tests has level <= boundary_alpha + jump_alpha there (edge
+            # candidates are left to the disc test: a face narrower than two grid steps,
+            # a soffit or a window jamb, looks like a jump to the continuity test)
+            one_sided |= surface & (extra["jump_p"] < jump_alpha)
         if boundary != "centroid" and edge_boundary_alpha is not None:
             one_sided |= valid & ~surface & (boundary_p < edge_boundary_alpha)
     pc = np.zeros(n, dtype=np.uint8)

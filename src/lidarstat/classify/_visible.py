@@ -61,41 +61,78 @@ from .._shared._jit import njit, njit_parallel
 
 #: Grid neighbours kept per point (8-neighbourhood of a regular angular grid).
 SLOTS = 8
-#: A grid neighbour is farther than this many angular steps: not adjacent (a missing node).
+#: A grid neighbour is farther than this many grid steps: not adjacent (a missing node).
 ADJ_STEPS = 1.75
 #: Cap on the nodes of one visible disc (a safety bound; a k = 50 disc holds 50-300).
 MAX_NODES = 16384
 _MIN_COS = 0.05
 
 
-def grid_adjacency(dirs):
-    """Grid neighbours of every point from its unit ray direction.
+def grid_adjacency(angles, *, sample=20000):
+    """Grid neighbours of every point from its (azimuth, elevation) seen from the scanner.
+
+    A scanner's grid is regular in azimuth and elevation, with steps that need not be
+    equal (the real pump scan: 1 : 3.4). The two steps are estimated (per axis, the median
+    over up to `sample` points of the smallest step to a neighbour lying more along that
+    axis than across it), the angles are divided by them and the 8 nearest nodes within
+    ``ADJ_STEPS`` grid units are the neighbours. The azimuth is cut at its largest gap
+    (a full turn is cut at one seam, which then looks like the end of the scan).
 
     Parameters
     ----------
-    dirs : (N, 3) ndarray
-        Unit vectors from the scanner to the points.
+    angles : (N, 2) ndarray
+        Azimuth and elevation (radians).
+    sample : int
+        Points used to estimate the steps.
 
     Returns
     -------
     adj : (N, SLOTS) int64 ndarray
-        Indices of the up to 8 nearest directions within ``ADJ_STEPS`` angular steps, -1
-        padded.
-    step : float
-        The angular step: the median angle to the nearest other direction.
+        Indices of the grid neighbours, -1 padded.
+    steps : (float, float)
+        The azimuth and elevation steps (radians).
     """
     from scipy.spatial import cKDTree
 
-    n = dirs.shape[0]
-    kk = min(SLOTS + 1, n)
-    dist, idx = cKDTree(dirs).query(dirs, k=kk, workers=-1)
-    dist = np.asarray(dist).reshape(n, kk)
-    idx = np.asarray(idx).reshape(n, kk)
-    step = float(np.median(dist[:, 1])) if kk > 1 else 0.0
+    n = angles.shape[0]
     adj = np.full((n, SLOTS), -1, dtype=np.int64)
-    ok = (dist[:, 1:] <= ADJ_STEPS * step) & (dist[:, 1:] > 0)
-    adj[:, :kk - 1] = np.where(ok, idx[:, 1:], -1)
-    return adj, step
+    if n < 2:
+        return adj, (0.0, 0.0)
+    az = np.asarray(angles[:, 0], dtype=np.float64)
+    el = np.asarray(angles[:, 1], dtype=np.float64)
+    a = np.sort(az)
+    gaps = np.diff(np.r_[a, a[0] + 2.0 * np.pi])
+    g = int(np.argmax(gaps))
+    az = np.mod(az - (a[g] + 0.5 * gaps[g]), 2.0 * np.pi)
+    xy = np.c_[az, el]
+    tree = cKDTree(xy)
+    pick = np.unique(np.linspace(0, n - 1, min(n, sample)).astype(np.int64))
+    kq = min(17, n)
+    _, idx = tree.query(xy[pick], k=kq)
+    d = np.abs(xy[np.asarray(idx).reshape(pick.size, kq)[:, 1:]] - xy[pick, None, :])
+    with np.errstate(invalid="ignore"):
+        s_az = np.nanmedian(_row_min(d[..., 0], d[..., 1]))
+        s_el = np.nanmedian(_row_min(d[..., 1], d[..., 0]))
+    if not (np.isfinite(s_az) and s_az > 0):
+        s_az = s_el
+    if not (np.isfinite(s_el) and s_el > 0):
+        s_el = s_az
+    if not (np.isfinite(s_az) and s_az > 0):
+        return adj, (0.0, 0.0)
+    grid = np.c_[az / s_az, el / s_el]
+    kk = min(SLOTS + 1, n)
+    dist, nb = cKDTree(grid).query(grid, k=kk, workers=-1)
+    dist = np.asarray(dist).reshape(n, kk)[:, 1:]
+    nb = np.asarray(nb).reshape(n, kk)[:, 1:]
+    adj[:, :kk - 1] = np.where((dist <= ADJ_STEPS) & (dist > 0), nb, -1)
+    return adj, (float(s_az), float(s_el))
+
+
+def _row_min(along, across):
+    """Per row, the smallest `along` step of the neighbours lying more along than across
+    (NaN when there is none)."""
+    v = np.where(along > across, along, np.inf).min(axis=1)
+    return np.where(np.isfinite(v), v, np.nan)
 
 
 @njit
@@ -333,7 +370,8 @@ def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_
 
     Returns
     -------
-    dict with ``t2``, ``m`` (visible disc), ``jump_z``, ``jump_p`` (per point) and ``step``.
+    dict with ``t2``, ``m`` (visible disc), ``jump_z``, ``jump_p`` (per point), ``step``
+    (azimuth and elevation steps), ``edge_z``, ``edge_p`` and ``adjacency`` (per grid edge).
     """
     from ..features._scan_kernels import scan_angles
 
@@ -346,12 +384,12 @@ def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_
         dirs = np.ascontiguousarray(ray / rng[:, None])
         s = 1.0 / rng
         sig = np.broadcast_to(np.asarray(ray_sigma, dtype=np.float64), rng.shape) / rng ** 2
-    adj, step = grid_adjacency(dirs)
+    angles = scan_angles(pts, sens)
+    adj, step = grid_adjacency(angles)
     z = np.empty(adj.shape, dtype=np.float64)
     pe = np.empty(adj.shape, dtype=np.float64)
     edge_jumps(dirs, s, np.ascontiguousarray(sig), adj, z, pe)
     cut = np.ascontiguousarray(pe < jump_alpha)
-    angles = scan_angles(pts, sens)
     out = np.empty((pts.shape[0], 2))
     import numba
 

@@ -13,7 +13,7 @@ def add_neighbourhood_arguments(s, *, k_default=50):
                    help="eigen features from eigenvalues, their square roots (PDAL's default) "
                    "or normalised eigenvalues")
     s.add_argument("--boundary-alpha", type=float, default=None,
-                   help="level of the boundary test [0.01 scan, 0.001 centroid]")
+                   help="level of the boundary test [0.05 visible, 0.01 scan, 0.001 centroid]")
     s.add_argument("--curvature-threshold", type=float, default=None,
                    help="SurfaceVariation above this is high curvature (replaces the "
                    "automatic plane test)")
@@ -41,7 +41,8 @@ def cmd_covariance(args):
                      curvature_threshold=args.curvature_threshold,
                      variance_threshold=args.variance_threshold, curved=args.curved,
                      curved_alpha=args.curved_alpha, eigen_mode=args.eigen_mode,
-                     progress=progress(args.quiet), boundary=args.boundary)
+                     progress=progress(args.quiet), boundary=args.boundary,
+                     jump_alpha=args.jump_alpha)
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
     if not args.quiet:
@@ -55,6 +56,7 @@ def cmd_covariance(args):
                 "sigma": c.sigma if isinstance(c.sigma, float) else None,
                 "sigma_estimated": c.sigma_estimated, "alpha": c.alpha,
                 "boundary_alpha": c.boundary_alpha, "boundary": c.meta.get("boundary"),
+                "jump_alpha": c.meta.get("jump_alpha"),
                 "curved": c.meta.get("curved"),
                 "curved_alpha": c.meta.get("curved_alpha"), "point_class": c.counts()}
         write_summary_json(args.summary_json, meta)
@@ -79,10 +81,14 @@ def register(sub):
     s.add_argument("--alpha", type=float, default=0.05,
                    help="level of the plane and consistent-curvature tests [0.05]")
     add_neighbourhood_arguments(s)
-    s.add_argument("--boundary", choices=("scan", "centroid"), default=None,
-                   help="boundary test: the complete disc in scan coordinates (default with "
-                   "a sensor; on every point) or the paper's centroid test (eq. 6-8, on "
-                   "surface points; the default without a sensor)")
+    s.add_argument("--boundary", choices=("visible", "scan", "centroid"), default=None,
+                   help="boundary test: the visible disc on the scan grid, cut at depth jumps "
+                   "(default with a sensor; on every point), the complete disc of the kNN "
+                   "in scan coordinates, or the paper's centroid test (eq. 6-8, on surface "
+                   "points; the default without a sensor)")
+    s.add_argument("--jump-alpha", type=float, default=0.001,
+                   help="level of the range-continuity test of a scan-grid edge (a depth "
+                   "jump cuts the visible disc there) [0.001]")
     s.add_argument("--summary-json", default=None, help="write the summary as JSON here")
     s.add_argument("-q", "--quiet", action="store_true")
     s.set_defaults(func=cmd_covariance)

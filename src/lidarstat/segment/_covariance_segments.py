@@ -480,16 +480,20 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
                                       "range" else None)
         extra = {"scale_k": kstar.astype(np.uint8), "scale_plane_p": kp}
         # Fig. 4 on the first grow_k neighbours of surface points, plus every point's
-        # largest planar prefix; members of either may be joined, only tested points grow.
+        # largest planar prefix; members of either may be joined, only tested points grow
+        # (surface points, and boundary points whose neighbourhood passed a surface test:
+        # on a thin pipe crossed by shadows most points are near a border, and with the
+        # 'visible' boundary test pipe_b of tls_plant at step 0.004 fell apart otherwise).
         # Two growing points of a prefix must also agree in their prefix normals: on a
         # scan whose rows run along a crease, two rows (one per face) are two parallel
         # lines, always coplanar, so a small prefix can pass the test across the crease.
         # (one Numba pass over the rows: no per-edge arrays besides the mask)
         edge_ok = np.empty(nbh.nnz, dtype=bool)
         _ek.adaptive_edges(nbh.indptr, nbh.indices, nbh.query_indices(), surface | boundary,
-                           surface, np.ascontiguousarray(kstar), np.ascontiguousarray(pn),
+                           surface | boundary, np.ascontiguousarray(kstar),
+                           np.ascontiguousarray(pn),
                            int(grow_k), float(np.cos(np.radians(min_angle / 2))), edge_ok)
-        labels = grow_regions(nbh, edge_ok, order=order, can_grow=surface | (kstar > 0),
+        labels = grow_regions(nbh, edge_ok, order=order, can_grow=surface | boundary | (kstar > 0),
                               mask=pc != PointClass.UNDETERMINED, merge=True,
                               min_size=min_size)
     else:
