@@ -7,7 +7,9 @@ terrestrial scans ``tls_building`` and ``tls_plant`` (one station, default step 
 noise 0.002 + 5e-5 r, seed 0; ``--quick``: step 0.004). Parameters: k = 50, everything
 automatic (range noise estimated along the rays from the scanner position). Printed:
 
-* edge and boundary precision / recall / F1 against three truths (docs/methods/
+* edge and boundary precision / recall / F1 against three truths (boundary test: the
+  default ``'visible'`` one; the session-4 ``'scan'`` test against the support truth
+  beside it) (docs/methods/
   covariance.md argues which is sound): ``support`` - a point is an edge when its own
   k-neighbourhood holds a point of another face (:func:`neighborhood_class_truth`),
   a boundary when the end of the visible surface is within 0.5 of its own neighbourhood
@@ -155,7 +157,15 @@ def tls(name, step):
         per_col = np.unique(key[:, 0], return_counts=True)[1]
         nrows[names[f]] = [float(np.median(per_col)), float(np.quantile(per_col, 0.9))]
     fields = seg.fields["reintegrated"]
+    # the session-4 boundary test (complete disc of the kNN table) on the same features
+    from lidarstat.classify import classify_covariance
+    from lidarstat.synth import neighborhood_class_truth
+
+    old = classify_covariance(res.features, points=cloud.xyz, boundary="scan")
+    sup = neighborhood_class_truth(cloud, res.features.neighborhoods)
     out = {"points": len(cloud), "seconds": round(dt, 1), "classes": class_scores(cloud, res),
+           "boundary, scan test (session 4), support truth": prf(old.point_class == 3,
+                                                                 sup == 3),
            "hoover": h.as_dict(), "not correct": missed,
            "hoover without refinement (session 3)": h1.as_dict(),
            "hoover without adaptive scale": h0.as_dict(),

@@ -24,12 +24,16 @@ Three tests, each written beside the label as a p-value (see docs/methods/covari
    under the hypothesis (Johnson and Wichern 2002, the confidence region of a mean).
    The paper's eq. 6 omits the factor n (a prediction region for one point, which no
    boundary point leaves); rejected surface points -> boundary (``boundary='centroid'``).
-   With a sensor the default is ``boundary='scan'``: the same Hotelling test on the
-   *complete disc* of the neighbourhood in linearised scan coordinates
-   (:mod:`lidarstat.features._scan_kernels`), where an interior point of any scan pattern
-   is the centre of a centrally symmetric set of grid nodes. It runs on surface points
-   at 0.01 and on the points that failed the surface tests at 0.001 (a neighbourhood cut
-   by the end of the visible surface is a boundary even where it also bends or reaches a
+   ``boundary='scan'``: the same Hotelling test on the *complete disc* of the
+   neighbourhood in linearised scan coordinates (:mod:`lidarstat.features._scan_kernels`),
+   where an interior point of any scan pattern is the centre of a centrally symmetric set
+   of grid nodes. With a sensor the default is ``boundary='visible'``
+   (:mod:`._visible`): that disc gathered on the scan grid, over grid edges that pass a
+   range-continuity test (a crease keeps the range continuous, an occlusion does not),
+   written as ``jump_z`` / ``jump_p``. Both run on surface points (0.05 visible, 0.01
+   scan; a surface point with a depth jump at it is a boundary too) and on the points
+   that failed the surface tests (0.01 visible, 0.001 scan: a neighbourhood cut by the
+   end of the visible surface is a boundary even where it also bends or reaches a
    crease, as on the occluded side of a pipe).
 """
 

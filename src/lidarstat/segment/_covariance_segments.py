@@ -5,7 +5,8 @@
   of edge and boundary points); a point already in another region merges the two
   (union-find). This is :func:`lidarstat.segment.grow_regions` with ``merge=True`` over
   the CSR edges before the first non-surface neighbour of each row; boundary points join
-  a region but do not grow it. Seeds in order of increasing surface variation (option).
+  a region but do not grow it (with adaptive scales, those whose neighbourhood passed a
+  surface test grow). Seeds in order of increasing surface variation (option).
 * Local intersections (eq. 9-17): for neighbouring points of two segments whose normals
   differ by more than ``min_angle``, the planes through their neighbourhood centroids
   meet in the line ``l(t) = x0 + t a`` with ``a = n1 x n2``; the point of the line that
