@@ -35,8 +35,15 @@ def add_arguments(group):
                        help="points added per Forward Search step (1 = unitary)")
     group.add_argument("--outlier-alpha", type=float, default=0.01,
                        help="per-point level of the final outlier test of the points the "
-                       "search added (prediction residual from the raw-cluster surface; "
-                       "0.01, |w| > 2.58); 0 disables it")
+                       "search added (iterated data snooping, deletion residuals with a "
+                       "robust segment scale fixed before the iterations; 0.01); 0 "
+                       "disables it")
+    group.add_argument("--gof-alpha", type=float, default=0.001,
+                       help="level of the per-segment goodness-of-fit test (residual scale "
+                       "against the noise, chi-square with the SAR correlation); a "
+                       "segment it rejects is split into two surfaces when that removes "
+                       "at least half of its residual sum of squares (0.001); 0 disables "
+                       "it")
     group.add_argument("--diagnostics", default=None, metavar="DIR",
                        help="write Forward Search monitoring plots (PNG) to DIR")
 
@@ -63,4 +70,4 @@ def run(args, cloud):
                        adaptive=args.adaptive, threshold=args.search, w_radius=args.w_radius,
                        min_size=args.min_size or 30, block=args.fs_block,
                        outlier_alpha=args.outlier_alpha or None,
-                       diagnostics=args.diagnostics)
+                       gof_alpha=args.gof_alpha or None, diagnostics=args.diagnostics)

@@ -4,12 +4,12 @@ from ._moments import (DensityEstimate, SequentialMoments, density_estimate, dip
                        sequential_moments, standard_moments)
 from ._results import TestResult
 from ._sar import (LogDet, PolynomialBasis, SARFit, sar_fit, sar_mean_surface, sar_trend,
-                   select_degree, weights_matrix)
+                   sar_variance_test, select_degree, weights_matrix)
 from ._tests import (f_test_paper, variance_test_paper, variance_test_satterthwaite, wald_test,
                      z_test)
 
 __all__ = ["TestResult", "variance_test_paper", "variance_test_satterthwaite", "wald_test",
            "z_test", "f_test_paper", "LogDet", "PolynomialBasis", "SARFit", "sar_fit",
-           "sar_mean_surface", "sar_trend", "select_degree", "weights_matrix", "SequentialMoments",
-           "sequential_moments", "standard_moments", "DensityEstimate", "density_estimate",
+           "sar_mean_surface", "sar_trend", "sar_variance_test", "select_degree", "weights_matrix",
+           "SequentialMoments", "sequential_moments", "standard_moments", "DensityEstimate", "density_estimate",
            "dip_test"]
