@@ -122,6 +122,31 @@ def _clutter(cloud, seg, sigma):
     return out
 
 
+def _outlier_rate(cloud, seg):
+    """The outlier test's rate on true roof points: points of each segment's majority
+    roof plane that it tested (not in the segment's raw cluster; every point of a
+    segment made by a goodness-of-fit split), and how many of them it removed."""
+    rp = cloud.fields["roof_plane"].astype(int)
+    removed = seg.fields["surface_outlier"].astype(np.int64)
+    split = seg.table.get("split", np.zeros(seg.n_segments, dtype=np.int64))
+    key = np.where(seg.labels > 0, seg.labels, removed)
+    order = np.argsort(key, kind="stable")
+    starts = np.searchsorted(key[order], np.arange(seg.n_segments + 2))
+    tested = rem = 0
+    for s, unit in enumerate(seg.units, start=1):
+        ids = order[starts[s]:starts[s + 1]]
+        r = rp[ids]
+        if not r.size or np.bincount(r).argmax() == 0:
+            continue
+        t = (r == np.bincount(r).argmax())
+        if split[s - 1] == 0:
+            t &= ~np.isin(ids, unit.raw)
+        tested += int(t.sum())
+        rem += int(np.count_nonzero(removed[ids[t]] == s))
+    return {"tested_true_roof_points": tested, "removed": rem,
+            "rate": round(rem / tested, 4) if tested else None}
+
+
 def bench_segment(cloud, bandwidth=None):
     from lidarstat.segment import hoover, segment_sar
 
@@ -139,7 +164,13 @@ def bench_segment(cloud, bandwidth=None):
             "roof_planes": int(np.unique(rp[rp > 0]).size),
             "hoover_correct": h_all.correct, "hoover_missed": h_all.missed,
             "hoover_correct_rate_min30": round(h30.correct_rate, 3),
-            "hoover_correct_min30": h30.correct,
+            "hoover_correct_min30": h30.correct, "hoover_under_min30": h30.under,
+            "hoover_over_min30": h30.over, "hoover_missed_min30": h30.missed,
+            "roof_planes_min30": h30.n_truth,
+            "gof_splits": seg.params.get("splits"),
+            "gof_rejected": int(np.count_nonzero(seg.table["gof_p"] < seg.params["gof_alpha"]))
+            if "gof_p" in seg.table else None,
+            "outlier_test": _outlier_rate(cloud, seg),
             **_normal_stats(err, se, t2),
             "outliers_removed": int(np.count_nonzero(seg.fields["surface_outlier"])),
             "clutter": _clutter(cloud, seg, float(cloud.sigma))}
@@ -232,6 +263,14 @@ def main(argv=None):
           f"{seg['sigma']:.4f} m |")
     print(f"| roof planes correct (Hoover 0.8, planes >= 30 points) | "
           f"{seg['hoover_correct_min30']} ({seg['hoover_correct_rate_min30']:.1%}) |")
+    print(f"| under- / over-segmented / missed roof planes (>= 30 points) | "
+          f"{seg['hoover_under_min30']} / {seg['hoover_over_min30']} / "
+          f"{seg['hoover_missed_min30']} of {seg['roof_planes_min30']} |")
+    print(f"| goodness-of-fit: segments made by splits, still rejected | "
+          f"{seg['gof_splits']}, {seg['gof_rejected']} |")
+    ot = seg["outlier_test"]
+    print(f"| outlier test on true roof points (level 0.01) | {ot['removed']} of "
+          f"{ot['tested_true_roof_points']} ({ot['rate']}) |")
     print(f"| normals of correct planes within 0.5 deg | {seg['normals_within_0.5_deg']} "
           f"(median {seg['normal_error_median_deg']}, max {seg['normal_error_max_deg']} deg) |")
     print(f"| 95 % normal cones covering the truth | {seg['cone95_covered']} / "

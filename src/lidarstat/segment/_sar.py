@@ -429,6 +429,48 @@ def _kmeans(x, k, iters=20):
     return lab
 
 
+def _local_normals(xy, z, k=12):
+    """Upward unit normals (n, 3): principal axes of the k nearest points (3-D)."""
+    from scipy.spatial import cKDTree
+
+    xyz = np.c_[xy, z]
+    _, nb = cKDTree(xyz).query(xyz, k=min(k, z.size))
+    P = xyz[nb] - xyz[nb].mean(axis=1, keepdims=True)
+    nrm = np.linalg.eigh(np.einsum("nki,nkj->nij", P, P))[1][:, :, 0]
+    return nrm * np.where(nrm[:, 2:3] < 0, -1.0, 1.0)
+
+
+#: Tukey biweight constant (95 % efficiency at the normal) of :func:`_robust_core`.
+BIWEIGHT_C = 4.685
+
+
+def _robust_core(xy, z, basis, crit, iters=20):
+    """Points off the main surface of a segment: M-estimate (Tukey biweight, MAD scale)
+    started from the least-squares surface of the largest cluster of local normals
+    (3-means); returns the mask of points whose residual exceeds `crit` robust scales."""
+    A = basis(xy)
+    lab = _kmeans(_local_normals(xy, z), 3)
+    main = lab == np.bincount(lab).argmax()
+    if main.sum() <= A.shape[1]:
+        return np.zeros(z.size, dtype=bool)
+    coef = np.linalg.lstsq(A[main], z[main], rcond=None)[0]
+    for _ in range(iters):
+        e = z - A @ coef
+        scale = 1.4826 * float(np.median(np.abs(e)))
+        if not scale > 0:
+            break
+        u = e / (BIWEIGHT_C * scale)
+        w = np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
+        sw = np.sqrt(w)
+        new = np.linalg.lstsq(A * sw[:, None], z * sw, rcond=None)[0]
+        if np.allclose(new, coef, rtol=0, atol=1e-9):
+            break
+        coef = new
+    e = z - A @ coef
+    scale = 1.4826 * float(np.median(np.abs(e)))
+    return np.abs(e) > crit * scale
+
+
 def _two_surfaces(xy, z, basis, min_size, iters=30, k=12):
     """Split points into two surfaces of `basis`'s order.
 
@@ -442,11 +484,7 @@ def _two_surfaces(xy, z, basis, min_size, iters=30, k=12):
     n = z.size
     if n < 2 * min_size:
         return None
-    xyz = np.c_[xy, z]
-    _, nb = cKDTree(xyz).query(xyz, k=min(k, n))
-    P = xyz[nb] - xyz[nb].mean(axis=1, keepdims=True)
-    nrm = np.linalg.eigh(np.einsum("nki,nkj->nij", P, P))[1][:, :, 0]
-    nrm *= np.where(nrm[:, 2:3] < 0, -1.0, 1.0)
+    nrm = _local_normals(xy, z, k)
     nb2 = cKDTree(xy).query(xy, k=min(9, n))[1]
     three = _kmeans(nrm, 3)
     starts = [_kmeans(nrm, 2) == 1] + [three == j for j in range(3)]
@@ -491,7 +529,11 @@ def _split_misfits(points, labels, units, removed, *, sigma2, alpha, w_radius,
     :data:`SPLIT_GAIN` of its residual sum of squares; each part is refitted on its share
     of the raw cluster (:func:`refit_unit`), given the final outlier test again, and
     tested again (at most :data:`SPLIT_DEPTH` successive splits). Parts below `min_size`
-    are not made (the split is refused).
+    are not made (the split is refused). A part that is still rejected but cannot be
+    split (pieces of further faces smaller than `min_size`) loses its points off its
+    main surface (:func:`_robust_core`, the outlier test's critical value; recorded in
+    ``removed`` like the outlier test's) and is refitted and tested again; this counts
+    as one more step of `SPLIT_DEPTH`.
 
     Returns labels, units, removed (as :func:`_outlier_test`) and per segment the test
     statistic, its degrees of freedom, the p-value, the scale ratio ``s / sigma`` and the
@@ -500,6 +542,7 @@ def _split_misfits(points, labels, units, removed, *, sigma2, alpha, w_radius,
     from ._sar_refine import MAX_SEARCH
 
     n = labels.size
+    out_level = outlier_alpha if outlier_alpha is not None else 0.01
     removed = removed.astype(np.int64)  # key of the work item a point was removed from
     order = np.argsort(labels, kind="stable")
     starts = np.searchsorted(labels[order], np.arange(len(units) + 2))
@@ -522,6 +565,26 @@ def _split_misfits(points, labels, units, removed, *, sigma2, alpha, w_radius,
             parts = _two_surfaces(xy, z, unit.basis, min_size)
             if parts is not None and parts[1] > SPLIT_GAIN * rss:
                 parts = None
+        if parts is None and bool(test.reject) and depth > 0 and depth < SPLIT_DEPTH:
+            # a part of a split raw cluster that is still not one surface (pieces of
+            # further faces too small for a part of their own): its points off the main
+            # surface (robust fit, the outlier test's critical value) leave it
+            xy, z = _unit_heights(unit, points[idx])
+            off = _robust_core(xy, z, unit.basis, _st.norm.isf(out_level / 2.0))
+            if 0 < off.sum() <= idx.size // 2:
+                removed[idx[off]] = key
+                keep = idx[~off]
+                raw = unit.raw[np.isin(unit.raw, keep)]
+                try:
+                    sub = refit_unit(points, raw, keep[~np.isin(keep, raw)],
+                                     w_radius=w_radius, degree=unit.degree,
+                                     rho_hint=unit.fit.rho, fs=unit.fs)
+                    work.append((keep, dataclasses.replace(sub, n_s=int(raw.size),
+                                                           n_sa=unit.n_sa, m=unit.m),
+                                 depth + 1, key))
+                    continue
+                except (np.linalg.LinAlgError, InvalidParameterError, ValueError):
+                    removed[idx[off]] = 0
         if parts is None:
             done.append((idx, unit, depth, stats, key))
             continue
