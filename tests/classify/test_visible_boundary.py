@@ -185,3 +185,25 @@ def test_visible_option_errors(rng):
     res = classify_covariance(feats, points=pts)
     assert res.meta["boundary"] == "visible"
     assert {"jump_z", "jump_p"} <= set(res.to_fields())
+
+
+def test_grid_adjacency_with_unequal_steps():
+    """A scanner's azimuth and elevation steps need not be equal (the real pump scan:
+    1 : 3.4). Keeping every third column of the wall scan: the steps are estimated per
+    axis, interior nodes get their 8 grid neighbours, and the visible test still calls
+    no interior point and the points within 0.25 r_k of the border boundaries."""
+    sc = list(_scans())[1]
+    keep = sc.fields["col"] % 3 == 0
+    xyz = sc.xyz[keep]
+    adj, (s_az, s_el) = grid_adjacency(scan_angles(xyz, np.asarray(sc.scanner)))
+    assert abs(s_az / s_el - 3.0) < 0.05
+    bd = sc.fields["boundary_distance"][keep]
+    inner = bd > 0.3
+    assert np.mean((adj[inner] >= 0).sum(axis=1) == 8) > 0.99
+    res = covariance(xyz, sensor=sc.scanner, k=50, keep_neighbors=True)
+    nbh = res.features.neighborhoods
+    rk = nbh.distances.reshape(len(nbh), -1)[:, -1]
+    assert np.mean(res.point_class[bd > 1.5 * rk] == PointClass.BOUNDARY) < 0.01
+    near = bd < 0.25 * rk
+    assert near.sum() > 100
+    assert np.mean(res.point_class[near] == PointClass.BOUNDARY) > 0.9
