@@ -44,6 +44,7 @@ def test_knn_is_exact_and_sorted(rng):
     np.testing.assert_allclose(got, d, rtol=0, atol=1e-9)  # same k-th distances everywhere
     assert np.all(nb.indices.reshape(-1, k)[:, 0] == np.arange(len(pts))) or \
         np.all(got[:, 0] == 0)
+    assert nb.indices.dtype == np.int32  # kept rows: 4 bytes per neighbour, not 8
 
 
 def _no_ties(rng, n=4000):

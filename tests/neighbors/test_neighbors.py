@@ -98,3 +98,25 @@ def test_cell_index_counting_sort_equals_stable_argsort(rng, dim, n, cell):
     for got, ref in zip((idx.order, idx.sorted_points, idx.cell_keys, idx.cell_start),
                         _argsort_index(pts, cell, dim)):
         assert np.array_equal(got, ref)
+
+
+@pytest.mark.parametrize("high", [5, 1 << 22, 1 << 45])
+def test_radix_order_equals_stable_argsort(rng, high):
+    """Sparse grids sort their keys by LSD radix (1 to 5 passes here): the stable argsort."""
+    from lidarstat.neighbors._kernels import radix_order
+
+    keys = rng.integers(0, high, 20_000)
+    keys[:500] = keys[500:1000]  # equal keys keep their input order
+    order, skeys = radix_order(keys, max(high - 1, 1).bit_length())
+    ref = np.argsort(keys, kind="stable")
+    assert np.array_equal(order, ref)
+    assert np.array_equal(skeys, keys[ref])
+
+
+def test_neighborhoods_keep_int32_indices():
+    """int32 indices stay int32 (half the memory of kept kNN rows); other types -> int64."""
+    ptr = np.array([0, 2, 3])
+    nb32 = Neighborhoods(ptr, np.array([0, 1, 1], dtype=np.int32), np.zeros(3), 2)
+    assert nb32.indices.dtype == np.int32
+    nb16 = Neighborhoods(ptr, np.array([0, 1, 1], dtype=np.int16), np.zeros(3), 2)
+    assert nb16.indices.dtype == np.int64

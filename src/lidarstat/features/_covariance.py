@@ -222,7 +222,7 @@ def _knn_table(points, k, *, block_size, sort=True, sensor=None, progress=None, 
     n = index.n_points
     dtype = np.int32 if n < 2**31 - 1 else np.int64
     table = np.empty((n, k), dtype=dtype)
-    nbr_idx = np.empty(n * k if sort else 0, dtype=np.int64)
+    nbr_idx = np.empty(n * k if sort else 0, dtype=dtype)  # int32: 4 k bytes per point less
     nbr_dist = np.empty(n * k if sort else 0)
     raw = np.empty((n, _ck.NCOL))
     sens = np.zeros(3) if sensor is None else np.asarray(sensor, float) - index.origin
@@ -388,8 +388,7 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         var_sv = np.empty(n)
         _ck.table_variance(sv, table, mean_sv, var_sv)
         spread = np.empty((n, 4))
-        _ck.normal_spread_table(np.ascontiguousarray(raw[:, _ck.C_NX:_ck.C_NZ + 1]), table,
-                                spread)
+        _ck.normal_spread_table(raw[:, _ck.C_NX:_ck.C_NZ + 1], table, spread)
         scan = None
         if sensor is not None:
             scan = _scan_rows(index.sorted_points, np.arange(n),

@@ -22,8 +22,10 @@ class Neighborhoods:
     ----------
     indptr : (M + 1,) ndarray of int64
         Row pointers, ``indptr[0] == 0``, non-decreasing.
-    indices : (nnz,) ndarray of int64
-        Neighbour indices into the searched cloud of `n_points` points.
+    indices : (nnz,) ndarray of int64 or int32
+        Neighbour indices into the searched cloud of `n_points` points: int64, or int32
+        when the producer gave int32 (the kept kNN neighbourhoods of
+        :func:`lidarstat.features.covariance_features` on fewer than 2**31 points).
     distances : (nnz,) ndarray of float64
         Distance of each neighbour from its query point.
     n_points : int
@@ -50,7 +52,11 @@ class Neighborhoods:
 
     def __post_init__(self):
         indptr = np.ascontiguousarray(self.indptr, dtype=np.int64)
-        indices = np.ascontiguousarray(self.indices, dtype=np.int64)
+        indices = np.asarray(self.indices)
+        # int32 is kept as given (half the memory of large kNN neighbourhoods), any other
+        # type becomes int64
+        indices = np.ascontiguousarray(
+            indices, dtype=np.int32 if indices.dtype == np.int32 else np.int64)
         distances = np.ascontiguousarray(self.distances, dtype=np.float64)
         object.__setattr__(self, "indptr", indptr)
         object.__setattr__(self, "indices", indices)

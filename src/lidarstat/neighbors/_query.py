@@ -17,8 +17,8 @@ _MAX_CELLS_PER_AXIS = 1 << 20
 class CellIndex:
     """Uniform-grid (cell list) index for fixed-radius queries.
 
-    The points are sorted by cell once (O(N log N)); a query then visits the 27 (3-D) or
-    9 (2-D) cells around the query point. For a fixed radius this is the textbook optimal
+    The points are sorted by cell once (O(N): counting or radix sort); a query visits the
+    27 (3-D) or 9 (2-D) cells around the query point. For a fixed radius this is the textbook optimal
     structure and, on this project's benchmark, several times faster than KD-tree ball
     queries, which return Python lists. The sort order is also a spatially coherent order
     in which to process points (cache locality), exposed as :attr:`order`.
@@ -78,8 +78,8 @@ class CellIndex:
             np.cumsum(counts[occupied], out=cell_start[1:])
             self.cell_start = cell_start
         else:
-            self.order = np.argsort(keys, kind="stable").astype(np.int64)
-            skeys = keys[self.order]
+            # stable LSD radix sort of the keys: the stable argsort's order in O(N)
+            self.order, skeys = _kernels.radix_order(keys, max(total - 1, 1).bit_length())
             self.sorted_points = np.ascontiguousarray(points[self.order] - self.origin)
             boundaries = np.flatnonzero(np.diff(skeys)) + 1
             starts = np.concatenate(([0], boundaries, [skeys.size])).astype(np.int64)
