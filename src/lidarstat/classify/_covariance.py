@@ -223,6 +223,63 @@ def estimate_range_noise(evals, counts, ray_range, ray_cos, *, bins=8,
     return float(a), float(b)
 
 
+#: Largest number of points whose cylinder fit enters :func:`estimate_smooth_range_noise`
+#: (an even stride through the usable points beyond it): eight range-bin medians need a
+#: few thousand, and the fit costs about a tenth of the classification per point.
+SMOOTH_NOISE_POINTS = 8000
+
+
+def estimate_smooth_range_noise(points, features, *, bins=8, max_points=SMOOTH_NOISE_POINTS):
+    """Range-noise model ``sigma_r(r) = a + b r`` from the best smooth model of every
+    neighbourhood (the default estimate with a sensor).
+
+    :func:`estimate_range_noise` takes per-bin medians of the plane residual ``(n - 1)
+    lambda0 / cos^2(theta)``; curved surfaces only raise it, and where pipes and tanks
+    fill a range bin the median follows them (tls_plant: b = 2.9e-4 against the true
+    5e-5). Here the residual is that of the smooth model of the cylinder test (a circular
+    cylinder with its axis tilt fitted, of which the plane is the limit of infinite
+    radius): the weighted RSS with unit range noise, each neighbour weighted by ``1 /
+    max(|d . rho|, 0.1)^2`` (the share of the range noise across the surface), estimates
+    ``sigma_r^2 chi2(n - 5)`` on planes and cylinders alike. Per point it is divided by
+    the median of its chi-square; medians in eight range quantile bins and a least-squares
+    line through their square roots give ``a, b`` (b clipped at 0), as in
+    :func:`estimate_range_noise`. Edges still raise their RSS, but they are a minority in
+    every range bin, where curved surfaces were not. Points at grazing incidence (cos
+    theta < 0.2) are left out; at most `max_points` points (an even stride) are fitted.
+
+    Parameters
+    ----------
+    points : (N, 3) ndarray
+        The coordinates the features were computed on.
+    features : CovarianceResult
+        Computed with a sensor.
+    bins : int
+    max_points : int
+
+    Returns
+    -------
+    a, b : float
+    """
+    from ._cylinder import cylinder_test
+
+    n = np.asarray(features.fields["neighbors"], dtype=np.float64)
+    ok = (n >= 7) & np.isfinite(features.eigenvalues).all(axis=1) & (features.ray_cos >= 0.2)
+    query = np.flatnonzero(ok)
+    if query.size < 20:
+        raise InvalidParameterError("cannot estimate the range noise: too few usable points")
+    if query.size > max_points:
+        query = query[np.linspace(0, query.size - 1, max_points).astype(np.int64)]
+    indptr, idx = _neighbour_rows(points, features, query)
+    stat, dof, _ = cylinder_test(points, query, indptr, idx, _cylinder_axes(features, query),
+                                 1.0, sensor=features.sensor, refine_axis=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s2 = stat / _sp.chdtri(np.where(dof > 0, dof, np.nan), 0.5)
+    good = np.isfinite(s2)
+    if good.sum() < 20:
+        raise InvalidParameterError("cannot estimate the range noise: too few usable points")
+    return _range_line(s2[good], features.ray_range[query][good], 1.0, bins)
+
+
 def plane_test(evals, counts, sigma):
     """p-value of ``(n - 1) lambda0 / sigma^2 ~ chi2(n - 3)`` (upper tail)."""
     n = np.asarray(counts, dtype=np.float64)
@@ -314,6 +371,7 @@ JUMP_ALPHA = 0.001
 EDGE_BOUNDARY_ALPHA = 0.001
 
 NOISE = ("normal", "range")
+NOISE_ESTIMATE = ("smooth", "median")
 CURVED = ("cylinder", "variation")
 
 #: Default level of the cylinder (smooth-surface) test, which declares edges. It is
@@ -349,6 +407,30 @@ def _neighbour_rows(points, features, query):
     return indptr, idx
 
 
+def _feature_points(points, n, func):
+    """`points` as float64, checked to be the (n, 3) points of the features."""
+    points = np.asarray(points, dtype=np.float64)
+    if points.shape != (n, 3):
+        raise InvalidParameterError(
+            f"{func}: `points` must be the {n} points of the features, got shape "
+            f"{points.shape}")
+    return points
+
+
+def _cylinder_axes(features, query):
+    """Minimum-curvature direction ``Normal x PrincipalDir`` of the points `query` (the
+    largest eigenvector where it is undefined): the cylinder test's starting axis."""
+    f = features.fields
+    normal = features.normals[query]
+    pdir = np.stack([f["PrincipalDirX"][query], f["PrincipalDirY"][query],
+                     f["PrincipalDirZ"][query]], axis=1)
+    axis = np.cross(normal, pdir)
+    nrm = np.linalg.norm(axis, axis=1, keepdims=True)
+    bad = ~(nrm[:, 0] > 1e-12)
+    return np.where(bad[:, None], features.major[query],
+                    axis / np.where(bad[:, None], 1.0, nrm))
+
+
 def curved_surface_test(points, features, query, sigma, *, sensor=None):
     """p-values of the cylinder test (:mod:`._cylinder`) at the points `query`.
 
@@ -363,15 +445,9 @@ def curved_surface_test(points, features, query, sigma, *, sensor=None):
     """
     from ._cylinder import cylinder_test
 
-    f = features.fields
-    normal = features.normals
-    pdir = np.stack([f["PrincipalDirX"], f["PrincipalDirY"], f["PrincipalDirZ"]], axis=1)
-    axis = np.cross(normal, pdir)
-    nrm = np.linalg.norm(axis, axis=1, keepdims=True)
-    bad = ~(nrm[:, 0] > 1e-12)
-    axis = np.where(bad[:, None], features.major, axis / np.where(bad[:, None], 1.0, nrm))
     indptr, idx = _neighbour_rows(points, features, query)
-    stat, dof, radius = cylinder_test(points, query, indptr, idx, axis[query], sigma,
+    stat, dof, radius = cylinder_test(points, query, indptr, idx,
+                                      _cylinder_axes(features, query), sigma,
                                       sensor=sensor, refine_axis=True)
     with np.errstate(invalid="ignore"):
         p = _sp.chdtrc(np.where(dof > 0, dof, np.nan), stat)
@@ -382,7 +458,8 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
                         boundary_alpha=None, curvature_threshold=None,
                         variance_threshold=None, points=None, curved=None,
                         curved_alpha=None, boundary=None,
-                        edge_boundary_alpha="auto", jump_alpha=JUMP_ALPHA) -> CovarianceClasses:
+                        edge_boundary_alpha="auto", jump_alpha=JUMP_ALPHA,
+                        noise_estimate=None) -> CovarianceClasses:
     """Label every point surface, edge or boundary from its covariance features.
 
     Parameters
@@ -392,8 +469,8 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     sigma : float or (N,) array_like, optional
         Noise standard deviation (per point allowed): across the surface
         (``noise='normal'``) or along the ray (``'range'``). Default: estimated, by
-        :func:`estimate_plane_sigma` or, for ``'range'``, as the model ``a + b r`` of
-        :func:`estimate_range_noise`.
+        :func:`estimate_plane_sigma` or, for ``'range'``, as the model ``a + b r`` (see
+        `noise_estimate`).
     noise : {'normal', 'range'}, optional
         ``'range'`` (default when the features were computed with a sensor): the noise
         runs along the scanner's rays, so across a surface seen at incidence theta it is
@@ -436,6 +513,13 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         None: edges stay edges.
     jump_alpha : float
         Level of the range-continuity test of one grid edge (``'visible'``).
+    noise_estimate : {'smooth', 'median'}, optional
+        How the range noise is estimated when `sigma` is not given (``noise='range'``):
+        ``'smooth'`` (default when `points` are given) from the residuals of the best
+        smooth model (cylinder or plane) of every neighbourhood,
+        :func:`estimate_smooth_range_noise`; ``'median'`` from the plane residuals,
+        :func:`estimate_range_noise` (session 4's default, inflated where curved surfaces
+        fill a range bin).
 
     Returns
     -------
@@ -494,9 +578,23 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     meta = {"noise": noise, "boundary": boundary}
     if boundary != "centroid":
         meta["edge_boundary_alpha"] = edge_boundary_alpha
+    if noise_estimate is None:
+        noise_estimate = "smooth" if points is not None else "median"
+    if noise_estimate not in NOISE_ESTIMATE:
+        raise InvalidParameterError(
+            f"The 'noise_estimate' parameter of {func} must be one of 'smooth', 'median'. "
+            f"Got {noise_estimate!r} instead.")
     if estimated and noise == "range":
-        a, b = estimate_range_noise(evals, counts, features.ray_range, features.ray_cos)
+        if noise_estimate == "smooth":
+            if points is None:
+                raise InvalidParameterError(
+                    f"{func}: noise_estimate='smooth' needs the `points`")
+            points = _feature_points(points, n, func)
+            a, b = estimate_smooth_range_noise(points, features)
+        else:
+            a, b = estimate_range_noise(evals, counts, features.ray_range, features.ray_cos)
         meta["range_noise"] = (a, b)
+        meta["noise_estimate"] = noise_estimate
         sigma = a + b * features.ray_range
         if not np.all(sigma > 0):
             raise InvalidParameterError(
@@ -558,11 +656,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     if curved == "cylinder":
         if points is None:
             raise InvalidParameterError(f"{func}: curved='cylinder' needs the `points`")
-        points = np.asarray(points, dtype=np.float64)
-        if points.shape != (n, 3):
-            raise InvalidParameterError(
-                f"{func}: `points` must be the {n} points of the features, got shape "
-                f"{points.shape}")
+        points = _feature_points(points, n, func)
         variation_p = np.full(n, np.nan)
         curv_radius = np.full(n, np.nan)
         query = np.flatnonzero(valid & ~low)
@@ -640,7 +734,8 @@ class CovarianceClassification:
 def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None, alpha=0.05,
                boundary_alpha=None, curvature_threshold=None, variance_threshold=None,
                curved="cylinder", curved_alpha=None, eigen_mode="raw", keep_neighbors=False,
-               progress=None, boundary=None, edge_boundary_alpha="auto", jump_alpha=JUMP_ALPHA):
+               progress=None, boundary=None, edge_boundary_alpha="auto", jump_alpha=JUMP_ALPHA,
+               noise_estimate=None):
     """Covariance features and surface / edge / boundary classes of every point (seed 003).
 
     One call of :func:`lidarstat.features.covariance_features` and
@@ -674,5 +769,6 @@ def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None
                                   curved=curved, curved_alpha=curved_alpha,
                                   boundary=boundary,
                                   edge_boundary_alpha=edge_boundary_alpha,
-                                  jump_alpha=jump_alpha)
+                                  jump_alpha=jump_alpha,
+                                  noise_estimate=noise_estimate)
     return CovarianceClassification(features=feats, classes=classes)

@@ -38,7 +38,9 @@ from .._shared._jit import njit, njit_parallel
 _FLOOR = 0.1  # smallest |cos| of the ray against the radial direction (see module doc)
 _ITERS = 8
 _TILT_ITERS = 4  # from the converged circle the tilt is nearly linear
-_TILT_MAX = 25.0  # no refinement above this many times the degrees of freedom
+_AXIS_ROUNDS = 3  # turns of the axis by the fitted tilt, each followed by a new fit
+_TILT_DONE = 1e-3  # a tilt below this (radians) is not worth another round
+_TILT_GAIN = 0.5  # nor a round that left more than this share of the RSS
 
 
 @njit
@@ -177,6 +179,138 @@ def _tilt_refine(x, y, ta, dx, dy, sr, n, cx, cy, R, has_sensor, scale):
     return c, True
 
 
+@njit
+def _fit_about(pts, i, idx, s, n, a, sensor, has_sensor, sig_pt, x, y, ta, sr, dx, dy):
+    """Circle fit of the neighbours ``idx[s:s + n]`` of point i projected along the axis
+    `a`: fills the projected, centred and scaled coordinates (x, y), the axial offsets
+    ta, the noise sr and the projected rays (dx, dy); returns (q, line, fit) with q the
+    weighted RSS of the circle (or of a straight line, ``line`` True) and ``fit`` = (cx,
+    cy in scaled units, radius in metres, scale, axis point in local coordinates); scale
+    0 where every neighbour projects on one point."""
+    fit = np.full(7, np.nan)
+    e10, e11, e12, e20, e21, e22 = _basis(a)
+    mx = 0.0
+    my = 0.0
+    mt = 0.0
+    for t in range(n):
+        j = idx[s + t]
+        px, py, pz = pts[j, 0] - pts[i, 0], pts[j, 1] - pts[i, 1], pts[j, 2] - pts[i, 2]
+        x[t] = px * e10 + py * e11 + pz * e12
+        y[t] = px * e20 + py * e21 + pz * e22
+        ta[t] = px * a[0] + py * a[1] + pz * a[2]
+        mx += x[t]
+        my += y[t]
+        mt += ta[t]
+        sr[t] = sig_pt[j]
+        if has_sensor:
+            rx, ry, rz = pts[j, 0] - sensor[0], pts[j, 1] - sensor[1], pts[j, 2] - sensor[2]
+            rn = np.sqrt(rx * rx + ry * ry + rz * rz)
+            if rn > 0:
+                rx, ry, rz = rx / rn, ry / rn, rz / rn
+            dx[t] = rx * e10 + ry * e11 + rz * e12
+            dy[t] = rx * e20 + ry * e21 + rz * e22
+    mx /= n
+    my /= n
+    mt /= n
+    scale = 0.0
+    for t in range(n):
+        x[t] -= mx
+        y[t] -= my
+        ta[t] -= mt
+        scale = max(scale, abs(x[t]), abs(y[t]))
+    fit[3] = scale
+    if not scale > 0:
+        return np.nan, True, fit
+    for t in range(n):
+        x[t] /= scale
+        y[t] /= scale
+        ta[t] /= scale
+    # algebraic (Kasa) circle: x^2 + y^2 + D x + E y + F = 0
+    A = np.zeros((3, 3))
+    b = np.zeros(3)
+    for t in range(n):
+        z = x[t] * x[t] + y[t] * y[t]
+        v0, v1 = x[t], y[t]
+        A[0, 0] += v0 * v0
+        A[0, 1] += v0 * v1
+        A[0, 2] += v0
+        A[1, 1] += v1 * v1
+        A[1, 2] += v1
+        A[2, 2] += 1.0
+        b[0] -= z * v0
+        b[1] -= z * v1
+        b[2] -= z
+    A[1, 0], A[2, 0], A[2, 1] = A[0, 1], A[0, 2], A[1, 2]
+    sol, ok = _solve3(A, b)
+    cx, cy = -0.5 * sol[0], -0.5 * sol[1]
+    R2 = cx * cx + cy * cy - sol[2]
+    line = (not ok) or (not R2 > 0) or np.sqrt(max(R2, 0.0)) > 1e4
+    if not line:
+        R = np.sqrt(R2)
+        for _ in range(_ITERS):  # Gauss-Newton on (cx, cy, R), weighted
+            J = np.zeros((3, 3))
+            g = np.zeros(3)
+            for t in range(n):
+                dist, ux, uy, sg = _radial(x[t] - cx, y[t] - cy, dx[t], dy[t],
+                                           has_sensor, sr[t], scale)
+                w = 1.0 / (sg * sg)
+                res = dist - R
+                j0, j1, j2 = -ux, -uy, -1.0
+                J[0, 0] += w * j0 * j0
+                J[0, 1] += w * j0 * j1
+                J[0, 2] += w * j0 * j2
+                J[1, 1] += w * j1 * j1
+                J[1, 2] += w * j1 * j2
+                J[2, 2] += w * j2 * j2
+                g[0] -= w * j0 * res
+                g[1] -= w * j1 * res
+                g[2] -= w * j2 * res
+            J[1, 0], J[2, 0], J[2, 1] = J[0, 1], J[0, 2], J[1, 2]
+            step, ok2 = _solve3(J, g)
+            if not ok2:
+                break
+            cx += step[0]
+            cy += step[1]
+            R += step[2]
+            if not (R > 0 and R < 1e4):
+                line = True
+                break
+    if not line:
+        fit[0], fit[1], fit[2] = cx, cy, R * scale
+        ccx, ccy = cx * scale + mx, cy * scale + my
+        for d3 in range(3):
+            e1d = e10 if d3 == 0 else (e11 if d3 == 1 else e12)
+            e2d = e20 if d3 == 0 else (e21 if d3 == 1 else e22)
+            fit[4 + d3] = pts[i, d3] + ccx * e1d + ccy * e2d
+        return _circle_rss(x, y, ta, dx, dy, sr, n, cx, cy, R, 0.0, 0.0, has_sensor,
+                           scale), False, fit
+    # straight line in the projection: total least squares, 2 parameters
+    sxx = 0.0
+    sxy = 0.0
+    syy = 0.0
+    for t in range(n):
+        sxx += x[t] * x[t]
+        sxy += x[t] * y[t]
+        syy += y[t] * y[t]
+    tr = sxx + syy
+    det = sxx * syy - sxy * sxy
+    lmin = 0.5 * tr - np.sqrt(max(0.25 * tr * tr - det, 0.0))
+    # normal of the line: eigenvector of lmin
+    nx, ny = sxy, lmin - sxx
+    nn = np.sqrt(nx * nx + ny * ny)
+    if nn == 0:
+        nx, ny = (1.0, 0.0) if sxx <= syy else (0.0, 1.0)
+    else:
+        nx, ny = nx / nn, ny / nn
+    q = 0.0
+    for t in range(n):
+        rr = x[t] * nx + y[t] * ny
+        c = abs(dx[t] * nx + dy[t] * ny) if has_sensor else 1.0
+        sg = sr[t] * max(c, _FLOOR) / scale
+        q += rr * rr / (sg * sg)
+    return q, True, fit
+
+
 @njit_parallel
 def cylinder_rows(pts, query, indptr, idx, axes, sensor, has_sensor, sig_pt, stat, dof,
                   radius, centre, refine_axis):
@@ -202,154 +336,62 @@ def cylinder_rows(pts, query, indptr, idx, axes, sensor, has_sensor, sig_pt, sta
         centre[r, 2] = np.nan
         if n < 7:
             continue
-        a = axes[r]
-        e10, e11, e12, e20, e21, e22 = _basis(a)
         x = np.empty(n)
         y = np.empty(n)
         ta = np.empty(n)
         sr = np.empty(n)
         dx = np.zeros(n)
         dy = np.zeros(n)
-        mx = 0.0
-        my = 0.0
-        mt = 0.0
-        for t in range(n):
-            j = idx[s + t]
-            px, py, pz = pts[j, 0] - pts[i, 0], pts[j, 1] - pts[i, 1], pts[j, 2] - pts[i, 2]
-            x[t] = px * e10 + py * e11 + pz * e12
-            y[t] = px * e20 + py * e21 + pz * e22
-            ta[t] = px * a[0] + py * a[1] + pz * a[2]
-            mx += x[t]
-            my += y[t]
-            mt += ta[t]
-            sr[t] = sig_pt[j]
-            if has_sensor:
-                rx, ry, rz = pts[j, 0] - sensor[0], pts[j, 1] - sensor[1], pts[j, 2] - sensor[2]
-                rn = np.sqrt(rx * rx + ry * ry + rz * rz)
-                if rn > 0:
-                    rx, ry, rz = rx / rn, ry / rn, rz / rn
-                dx[t] = rx * e10 + ry * e11 + rz * e12
-                dy[t] = rx * e20 + ry * e21 + rz * e22
-        mx /= n
-        my /= n
-        mt /= n
-        scale = 0.0
-        for t in range(n):
-            x[t] -= mx
-            y[t] -= my
-            ta[t] -= mt
-            scale = max(scale, abs(x[t]), abs(y[t]))
-        if not scale > 0:
+        a = axes[r].copy()
+        q, line, fit = _fit_about(pts, i, idx, s, n, a, sensor, has_sensor, sig_pt,
+                                  x, y, ta, sr, dx, dy)
+        if fit[3] == 0.0:  # all neighbours on the axis
             continue
-        for t in range(n):
-            x[t] /= scale
-            y[t] /= scale
-            ta[t] /= scale
-        # algebraic (Kasa) circle: x^2 + y^2 + D x + E y + F = 0
-        A = np.zeros((3, 3))
-        b = np.zeros(3)
-        for t in range(n):
-            z = x[t] * x[t] + y[t] * y[t]
-            v0, v1 = x[t], y[t]
-            A[0, 0] += v0 * v0
-            A[0, 1] += v0 * v1
-            A[0, 2] += v0
-            A[1, 1] += v1 * v1
-            A[1, 2] += v1
-            A[2, 2] += 1.0
-            b[0] -= z * v0
-            b[1] -= z * v1
-            b[2] -= z
-        A[1, 0], A[2, 0], A[2, 1] = A[0, 1], A[0, 2], A[1, 2]
-        sol, ok = _solve3(A, b)
-        cx, cy = -0.5 * sol[0], -0.5 * sol[1]
-        R2 = cx * cx + cy * cy - sol[2]
-        line = (not ok) or (not R2 > 0) or np.sqrt(max(R2, 0.0)) > 1e4
-        w = np.empty(n)
-        res = np.empty(n)
         if not line:
-            R = np.sqrt(R2)
-            for _ in range(_ITERS):  # Gauss-Newton on (cx, cy, R), weighted
-                J = np.zeros((3, 3))
-                g = np.zeros(3)
-                for t in range(n):
-                    dist, ux, uy, sg = _radial(x[t] - cx, y[t] - cy, dx[t], dy[t],
-                                               has_sensor, sr[t], scale)
-                    w[t] = 1.0 / (sg * sg)
-                    res[t] = dist - R
-                    j0, j1, j2 = -ux, -uy, -1.0
-                    J[0, 0] += w[t] * j0 * j0
-                    J[0, 1] += w[t] * j0 * j1
-                    J[0, 2] += w[t] * j0 * j2
-                    J[1, 1] += w[t] * j1 * j1
-                    J[1, 2] += w[t] * j1 * j2
-                    J[2, 2] += w[t] * j2 * j2
-                    g[0] -= w[t] * j0 * res[t]
-                    g[1] -= w[t] * j1 * res[t]
-                    g[2] -= w[t] * j2 * res[t]
-                J[1, 0], J[2, 0], J[2, 1] = J[0, 1], J[0, 2], J[1, 2]
-                step, ok2 = _solve3(J, g)
-                if not ok2:
-                    break
-                cx += step[0]
-                cy += step[1]
-                R += step[2]
-                if not (R > 0 and R < 1e4):
-                    line = True
-                    break
-            if not line:
-                q = _circle_rss(x, y, ta, dx, dy, sr, n, cx, cy, R, 0.0, 0.0, has_sensor, scale)
-                if refine_axis:
-                    # refine with the axis tilt (2 more parameters, dof n - 5): the axis
-                    # comes from the neighbours' normals and is off by a degree or two,
-                    # which along a pipe moves the projected points by tilt x axial offset,
-                    # far above the noise. If the refinement fails, q (tilt 0) bounds the
-                    # 5-parameter minimum. The radius and centre stay the 3-parameter
-                    # fit's: with the tilt free a short patch trades tilt for radius (k = 20
-                    # on a 0.3 m pipe: radii 0.15-1.7 m); the minimum itself is well defined
-                    dof[r] = n - 5
-                    ok5 = False
-                    # refine only where it can matter: below the null mean q changes no
-                    # decision, and a tilt of a few degrees raises q by a factor of about
-                    # ten, not the hundreds of a crease (q stays an upper bound of the
-                    # 5-parameter minimum wherever the refinement is skipped)
-                    if n - 5 < q < _TILT_MAX * (n - 5):
-                        c5, ok5 = _tilt_refine(x, y, ta, dx, dy, sr, n, cx, cy, R,
-                                               has_sensor, scale)
-                    if ok5:
+            radius[r] = fit[2]
+            for d3 in range(3):
+                centre[r, d3] = fit[4 + d3]
+            if refine_axis:
+                # refine with the axis tilt (2 more parameters, dof n - 5): the axis
+                # comes from the neighbours' normals and is off by a degree or two (up
+                # to 7 on a thin pipe whose neighbourhood wraps it), which along a pipe
+                # moves the projected points by tilt x axial offset, far above the noise.
+                # The tilt's Gauss-Newton is first order in the tilt, so the axis is
+                # turned by the fitted tilt and the fit repeated about the new axis
+                # (_AXIS_ROUNDS times, the projection redone each time); every round's
+                # RSS is that of one axis and one circle, so their minimum bounds the
+                # 5-parameter minimum. The radius and centre stay the given axis's: with
+                # the tilt free a short patch trades tilt for radius (k = 20 on a 0.3 m
+                # pipe: radii 0.15-1.7 m); the minimum itself is well defined
+                dof[r] = n - 5
+                if q > n - 5:  # below the null mean q changes no decision
+                    for _ in range(_AXIS_ROUNDS):
+                        prev = q
+                        c5, ok5 = _tilt_refine(x, y, ta, dx, dy, sr, n, fit[0], fit[1],
+                                               fit[2] / fit[3], has_sensor, fit[3])
+                        if not ok5:
+                            break
                         q = min(q, _circle_rss(x, y, ta, dx, dy, sr, n, c5[0], c5[1], c5[2],
-                                               c5[3], c5[4], has_sensor, scale))
-                stat[r] = q
-                radius[r] = R * scale
-                ccx, ccy = cx * scale + mx, cy * scale + my
-                for d3 in range(3):
-                    e1d = e10 if d3 == 0 else (e11 if d3 == 1 else e12)
-                    e2d = e20 if d3 == 0 else (e21 if d3 == 1 else e22)
-                    centre[r, d3] = pts[i, d3] + ccx * e1d + ccy * e2d
-        if line:  # straight line in the projection: total least squares, 2 parameters
-            sxx = 0.0
-            sxy = 0.0
-            syy = 0.0
-            for t in range(n):
-                sxx += x[t] * x[t]
-                sxy += x[t] * y[t]
-                syy += y[t] * y[t]
-            tr = sxx + syy
-            det = sxx * syy - sxy * sxy
-            lmin = 0.5 * tr - np.sqrt(max(0.25 * tr * tr - det, 0.0))
-            # normal of the line: eigenvector of lmin
-            nx, ny = sxy, lmin - sxx
-            nn = np.sqrt(nx * nx + ny * ny)
-            if nn == 0:
-                nx, ny = (1.0, 0.0) if sxx <= syy else (0.0, 1.0)
-            else:
-                nx, ny = nx / nn, ny / nn
-            q = 0.0
-            for t in range(n):
-                rr = x[t] * nx + y[t] * ny
-                c = abs(dx[t] * nx + dy[t] * ny) if has_sensor else 1.0
-                sg = sr[t] * max(c, _FLOOR) / scale
-                q += rr * rr / (sg * sg)
+                                               c5[3], c5[4], has_sensor, fit[3]))
+                        tilt = np.sqrt(c5[3] * c5[3] + c5[4] * c5[4])
+                        # another round only while the tilt explains the misfit (a crease
+                        # keeps most of its RSS: it is no cylinder about any axis)
+                        if not (tilt > _TILT_DONE and tilt < 1.0) or q <= n - 5 \
+                                or q > _TILT_GAIN * prev:
+                            break
+                        e10, e11, e12, e20, e21, e22 = _basis(a)
+                        a[0] += c5[3] * e10 + c5[4] * e20
+                        a[1] += c5[3] * e11 + c5[4] * e21
+                        a[2] += c5[3] * e12 + c5[4] * e22
+                        na = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+                        a /= na
+                        q2, line2, fit = _fit_about(pts, i, idx, s, n, a, sensor, has_sensor,
+                                                    sig_pt, x, y, ta, sr, dx, dy)
+                        if line2:
+                            break
+                        q = min(q, q2)
+            stat[r] = q
+        else:
             stat[r] = q
             radius[r] = np.inf
 

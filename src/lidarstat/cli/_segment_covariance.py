@@ -33,7 +33,8 @@ def run(args, cloud):
         alpha=args.alpha, boundary_alpha=args.boundary_alpha,
         curvature_threshold=args.curvature_threshold,
         variance_threshold=args.variance_threshold, curved=args.curved,
-        curved_alpha=args.curved_alpha, min_size=args.min_size or 50,
+        curved_alpha=args.curved_alpha, noise_estimate=args.noise_estimate,
+        min_size=args.min_size or 50,
         grow_k=args.grow_k, seeds=args.seeds, min_angle=args.min_angle,
         reintegration=not args.no_reintegration,
         adaptive_scale=not args.no_adaptive_scale, refine=not args.no_refine)

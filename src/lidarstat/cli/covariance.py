@@ -26,6 +26,10 @@ def add_neighbourhood_arguments(s, *, k_default=50):
     s.add_argument("--curved-alpha", type=float, default=None,
                    help="level of the consistent-curvature test (rejected -> edge) "
                    "[0.001 cylinder, --alpha variation]")
+    s.add_argument("--noise-estimate", choices=("smooth", "median"), default=None,
+                   help="range-noise estimate with a sensor when --sigma is not given: "
+                   "residuals of the best smooth model (cylinder or plane, default) or "
+                   "medians of the plane residuals (session 4)")
 
 
 def cmd_covariance(args):
@@ -42,7 +46,8 @@ def cmd_covariance(args):
                      variance_threshold=args.variance_threshold, curved=args.curved,
                      curved_alpha=args.curved_alpha, eigen_mode=args.eigen_mode,
                      progress=progress(args.quiet), boundary=args.boundary,
-                     jump_alpha=args.jump_alpha)
+                     jump_alpha=args.jump_alpha,
+                     noise_estimate=args.noise_estimate)
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
     if not args.quiet:
