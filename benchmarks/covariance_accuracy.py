@@ -16,6 +16,7 @@ automatic (range noise estimated along the rays from the scanner position). Prin
   radius; ``band r_i`` - :func:`point_class_truth` zones of 0.7 (edge) / 0.5 (boundary)
   times the point's own neighbourhood radius; ``band median`` - the same with one
   radius, the median over the cloud (the figures of session 2);
+* the edge errors against the support truth by cause (:func:`edge_errors`);
 * Hoover et al. (1996) counts at T = 0.8 over faces of more than 200 points;
 * Hoover without the segment-level refinement (``refine=False``, session 3) and without
   the adaptive scale; the number of distinct scan rows on every face;
@@ -62,7 +63,30 @@ def class_scores(cloud, res):
     curved = np.char.endswith(names, "_side") & (sup == 1)
     if curved.any():
         out["curved surface labelled edge"] = round(float((pc[curved] == 2).mean()), 4)
+    out["edge errors by cause (support truth)"] = edge_errors(cloud, nbh, pc, sup, names)
     return out
+
+
+def edge_errors(cloud, nbh, pc, sup, names):
+    """Counts of the support truth's edge errors by cause: false edges that are truth
+    boundaries whose neighbourhood also straddles a crease ("corner": the truth lets the
+    boundary win), other truth boundaries, truth surface on curved ("_side") or planar
+    faces; missed edges labelled surface or boundary."""
+    n = len(pc)
+    rows = np.repeat(np.arange(n), np.diff(nbh.indptr))
+    other = np.bincount(rows, weights=cloud.face[nbh.indices] != cloud.face[rows], minlength=n)
+    side = np.char.endswith(names, "_side")
+    fp = (pc == 2) & (sup != 2)
+    fn = (sup == 2) & (pc != 2)
+    return {"false edges": int(fp.sum()),
+            "  truth boundary, crease in the neighbourhood (corner)":
+                int((fp & (sup == 3) & (other > 0)).sum()),
+            "  truth boundary, no crease": int((fp & (sup == 3) & (other == 0)).sum()),
+            "  truth surface, curved face": int((fp & (sup == 1) & side).sum()),
+            "  truth surface, planar face": int((fp & (sup == 1) & ~side).sum()),
+            "missed edges": int(fn.sum()),
+            "  labelled surface": int((fn & (pc == 1)).sum()),
+            "  labelled boundary": int((fn & (pc == 3)).sum())}
 
 
 def _face_plane(cloud, f):

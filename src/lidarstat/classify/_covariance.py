@@ -591,6 +591,11 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
                     f"{func}: noise_estimate='smooth' needs the `points`")
             points = _feature_points(points, n, func)
             a, b = estimate_smooth_range_noise(points, features)
+            # the segmentation's scale for whole-segment models (see segment_covariance)
+            am, bm = estimate_range_noise(evals, counts, features.ray_range, features.ray_cos)
+            meta["segment_range_noise"] = (am, bm)
+            meta["segment_sigma"] = np.maximum(am + bm * features.ray_range,
+                                               a + b * features.ray_range)
         else:
             a, b = estimate_range_noise(evals, counts, features.ray_range, features.ray_cos)
         meta["range_noise"] = (a, b)

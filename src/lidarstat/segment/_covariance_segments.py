@@ -460,6 +460,11 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
                             curved_alpha=curved_alpha, keep_neighbors=True,
                             noise_estimate=noise_estimate)
     feats, classes = result.features, result.classes
+    # the segment-level models (whole-segment planes and cylinders, their borders and
+    # lines) use the classification's segment scale when it has one: with the estimated
+    # range noise, session 4's plane-median line (noise plus the typical model error of a
+    # real scan's surfaces, never below the noise; docs/methods/covariance.md)
+    seg_sigma = classes.meta.get("segment_sigma", classes.sigma)
     nbh = feats.neighborhoods
     if nbh is None:
         raise InvalidParameterError(f"{func}: `result` must be computed with keep_neighbors=True")
@@ -478,7 +483,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
     if adaptive_scale and nbh.kind == "knn":
         from ._scales import planar_scales
 
-        kstar, kp, pn = planar_scales(pts, nbh, classes.sigma, alpha=classes.alpha,
+        kstar, kp, pn = planar_scales(pts, nbh, seg_sigma, alpha=classes.alpha,
                                       sensor=feats.sensor if classes.meta.get("noise") ==
                                       "range" else None)
         extra = {"scale_k": kstar.astype(np.uint8), "scale_plane_p": kp}
@@ -507,9 +512,9 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
                               mask=surface | boundary, merge=True, min_size=min_size)
     normals = feats.normals
     centroids = feats.centroid
-    across = classes.sigma
+    across = seg_sigma
     if classes.meta.get("noise") == "range":
-        across = np.maximum(classes.sigma * feats.ray_cos, 1e-12)
+        across = np.maximum(seg_sigma * feats.ray_cos, 1e-12)
     reint = np.zeros(pts.shape[0], dtype=np.uint8)
     if reintegration:
         cand = edge_like | (pc == PointClass.UNDETERMINED)
@@ -520,18 +525,18 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         from ._refine import refine_borders, strip_segments
 
         rsensor = feats.sensor if classes.meta.get("noise") == "range" else None
-        labels, moved, models = refine_borders(pts, labels, nbh, classes.sigma,
+        labels, moved, models = refine_borders(pts, labels, nbh, seg_sigma,
                                                sensor=rsensor)
         reint[moved] = 2
         if nbh.kind == "knn":
             before = labels
             free = ((labels == 0) & (pc != PointClass.UNDETERMINED)) | models.outliers()
-            labels = strip_segments(pts, labels, nbh, classes.sigma, sensor=rsensor,
+            labels = strip_segments(pts, labels, nbh, seg_sigma, sensor=rsensor,
                                     candidates=free, alpha=classes.alpha, min_size=min_size)
             new = labels > before.max()
             reint[new] = 3
             if new.any():  # the new planes take their border points too
-                labels, moved, _ = refine_borders(pts, labels, nbh, classes.sigma,
+                labels, moved, _ = refine_borders(pts, labels, nbh, seg_sigma,
                                                   sensor=rsensor, models=models.fit(labels))
                 reint[moved & ~new] = 2
         del models, moved  # per-point arrays: not kept beside the neighbourhoods
@@ -551,20 +556,20 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
     pt_axes[ci_] = np.cross(feats.normals[ci_], pdir)
     del pdir, ci_
     labels, cylinders = merge_cylinders(
-        pts, labels, feats.normals, classes.sigma, max_angle=min_angle / 4,
+        pts, labels, feats.normals, seg_sigma, max_angle=min_angle / 4,
         sensor=feats.sensor if classes.meta.get("noise") == "range" else None,
         point_axes=pt_axes)
     from ._cylinders import absorb_into_cylinders, refine_cylinder_table, segment_cylinders
 
     csensor = feats.sensor if classes.meta.get("noise") == "range" else None
-    cylinders = refine_cylinder_table(pts, labels, cylinders, classes.sigma, sensor=csensor)
-    labels, absorbed = absorb_into_cylinders(pts, labels, grow_nbh, cylinders, classes.sigma,
+    cylinders = refine_cylinder_table(pts, labels, cylinders, seg_sigma, sensor=csensor)
+    labels, absorbed = absorb_into_cylinders(pts, labels, grow_nbh, cylinders, seg_sigma,
                                              sensor=csensor)
     if absorbed:
         cylinders = refine_cylinder_table(
-            pts, labels, segment_cylinders(pts, labels, feats.normals, classes.sigma,
+            pts, labels, segment_cylinders(pts, labels, feats.normals, seg_sigma,
                                            sensor=csensor, point_axes=pt_axes),
-            classes.sigma, sensor=csensor)
+            seg_sigma, sensor=csensor)
     lines_out = None
     if lines:
         rk = nbh.distances.reshape(len(nbh), -1)[:, -1] if nbh.kind == "knn" else \
@@ -583,7 +588,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         # a point without a tested neighbourhood plane in its row, on a segment whose own
         # trimmed plane the noise model accepts (a fascia, a soffit: narrow faces where no
         # 50-neighbourhood is a plane), takes its segment's plane
-        pm = PlaneModels(pts, labels, classes.sigma, csensor)
+        pm = PlaneModels(pts, labels, seg_sigma, csensor)
         pm_planar, pm_normal, pm_centroid = pm.planar, pm.normal, pm.centroid
         del pm  # only the per-segment planes are needed from here
         seg_plane = (use == 0) & (labels > 0)
@@ -596,7 +601,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         n_loc[on_cyl], c_loc[on_cyl], use[on_cyl] = cn, cf, labels[on_cyl]
         x0, seg, pr = local_intersections(pts, use, n_loc, c_loc, nbh, min_angle=min_angle,
                                           max_distance=2.0 * float(np.median(rk)),
-                                          max_offset=3.0 * float(np.median(classes.sigma)),
+                                          max_offset=3.0 * float(np.median(seg_sigma)),
                                           return_pairs=True)
         # a cylinder against a plane: the crease is their intersection curve; move the
         # eq. 17 point of the tangent plane onto it
@@ -606,7 +611,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         ap3 = np.c_[cylinders["axis_point_x"], cylinders["axis_point_y"],
                     cylinders["axis_point_z"]]
         rad = np.asarray(cylinders["radius"])
-        tol = 3.0 * float(np.median(classes.sigma))
+        tol = 3.0 * float(np.median(seg_sigma))
         keep = np.ones(len(seg), dtype=bool)
         both = ci & pj
         if both.any():  # two cylinders: a crease only where they cross (not two pipes
@@ -631,11 +636,8 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         pair_curved = curved[seg[:, 0] - 1] | curved[seg[:, 1] - 1] if len(seg) else \
             np.zeros(0, bool)
         straight = fit_lines(x0[~pair_curved], seg[~pair_curved])
-        # a chord may leave the circle by 2 sigma (the accuracy asked of the lines); with
-        # 1 sigma the consistent noise estimate (2.5x smaller on tls_plant than the
-        # median's) cut the tank-ground crease into 6 pieces, 3.9 of its 6 seen metres
         bent = curved_lines(x0, seg, curved, max_gap=2.0 * float(np.median(rk)),
-                            tolerance=2.0 * float(np.median(classes.sigma)))
+                            tolerance=float(np.median(seg_sigma)))
         lines_out = Polylines(straight.vertices + bent.vertices,
                               {k: np.r_[straight.attributes[k], bent.attributes[k]]
                                for k in straight.attributes})
