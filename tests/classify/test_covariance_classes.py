@@ -1,14 +1,15 @@
 """Surface / edge / boundary classes: test sizes under true nulls, detection on known scenes."""
 
-import functools
-
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
 from lidarstat.classify import PointClass, classify_covariance, covariance
-from lidarstat.classify._covariance import (curved_surface_test, estimate_range_noise,
-                                            estimate_smooth_range_noise)
+from lidarstat.classify._covariance import (
+    curved_surface_test,
+    estimate_range_noise,
+    estimate_smooth_range_noise,
+)
 from lidarstat.errors import InvalidParameterError
 from lidarstat.features import covariance_features
 from lidarstat.synth import make_tls_building, make_tls_plant
@@ -141,7 +142,6 @@ def test_cylinder_test_size_under_true_nulls(rng, k):
         f"cylinder test rejects {rate:.3f} of {m} points of a plane"
 
 
-@functools.lru_cache(maxsize=2)
 def _support_f1(make, step):
     from lidarstat.synth import neighborhood_class_truth
 

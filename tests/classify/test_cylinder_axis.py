@@ -11,6 +11,17 @@ def _binomial_half(alpha, n):
     return 3.3 * np.sqrt(alpha * (1 - alpha) / n)  # two-sided 99.9 %
 
 
+def _tilted_rows(nbh, t, q, degrees):
+    """CSR rows of the points `q` of a vertical pipe and their true axis (z) tilted by
+    `degrees` toward each point's normal (the error of an axis from PCA normals)."""
+    rows = [nbh.indices[nbh.indptr[i]:nbh.indptr[i + 1]] for i in q]
+    indptr = np.r_[0, np.cumsum([len(x) for x in rows])]
+    normal = np.c_[np.cos(t[q]), np.sin(t[q]), np.zeros(q.size)]
+    tilt = np.radians(degrees)
+    axes = np.c_[np.zeros((q.size, 2)), np.ones(q.size)] * np.cos(tilt) + normal * np.sin(tilt)
+    return rows, indptr, np.concatenate(rows), axes
+
+
 def test_refined_axis_keeps_the_size_when_the_given_axis_is_off(rng):
     """A noisy pipe (radius 0.3 m, sigma 2 mm), k = 50, non-overlapping neighbourhoods,
     each tested with its true axis tilted by 2 degrees toward the point's normal (the
@@ -32,12 +43,7 @@ def test_refined_axis_keeps_the_size_when_the_given_axis_is_off(rng):
     cand = rng.permutation(np.flatnonzero(ok))
     _, first = np.unique(ci[cand] * 1000 + cj[cand], return_index=True)
     q = np.sort(cand[first])
-    rows = [nbh.indices[nbh.indptr[i]:nbh.indptr[i + 1]] for i in q]
-    indptr = np.r_[0, np.cumsum([len(x) for x in rows])]
-    idx = np.concatenate(rows)
-    normal = np.c_[np.cos(t[q]), np.sin(t[q]), np.zeros(q.size)]
-    tilt = np.radians(2.0)
-    axes = np.c_[np.zeros((q.size, 2)), np.ones(q.size)] * np.cos(tilt) + normal * np.sin(tilt)
+    rows, indptr, idx, axes = _tilted_rows(nbh, t, q, 2.0)
     true_axes = np.tile([0.0, 0.0, 1.0], (q.size, 1))
     rates = {}
     for name, ax, refine in (("given", axes, False), ("refined", axes, True),
@@ -74,12 +80,7 @@ def test_refined_axis_keeps_the_size_on_a_thin_pipe_with_a_large_tilt(rng):
     cand = rng.permutation(np.flatnonzero((cj % 2 == 0) & (h > 1) & (h < length - 1)))
     _, first = np.unique(cj[cand], return_index=True)
     q = np.sort(cand[first])
-    rows = [nbh.indices[nbh.indptr[i]:nbh.indptr[i + 1]] for i in q]
-    indptr = np.r_[0, np.cumsum([len(x) for x in rows])]
-    idx = np.concatenate(rows)
-    normal = np.c_[np.cos(t[q]), np.sin(t[q]), np.zeros(q.size)]
-    tilt = np.radians(7.0)
-    axes = np.c_[np.zeros((q.size, 2)), np.ones(q.size)] * np.cos(tilt) + normal * np.sin(tilt)
+    _, indptr, idx, axes = _tilted_rows(nbh, t, q, 7.0)
     given, gdof, _ = cylinder_test(pts, q, indptr, idx, axes, sigma)
     stat, dof, _ = cylinder_test(pts, q, indptr, idx, axes, sigma, refine_axis=True)
     rate = float(np.mean(chdtrc(dof, stat) < alpha))

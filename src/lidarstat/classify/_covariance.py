@@ -45,7 +45,7 @@ from enum import IntEnum
 import numpy as np
 from scipy import special as _sp
 
-from .._shared.validation import check_scalar
+from .._shared.validation import check_option, check_scalar
 from ..errors import InvalidParameterError
 
 #: Per-point output fields of the classification, name -> (dtype, description).
@@ -580,10 +580,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         meta["edge_boundary_alpha"] = edge_boundary_alpha
     if noise_estimate is None:
         noise_estimate = "smooth" if points is not None else "median"
-    if noise_estimate not in NOISE_ESTIMATE:
-        raise InvalidParameterError(
-            f"The 'noise_estimate' parameter of {func} must be one of 'smooth', 'median'. "
-            f"Got {noise_estimate!r} instead.")
+    check_option(noise_estimate, "noise_estimate", NOISE_ESTIMATE, func=func)
     if estimated and noise == "range":
         if noise_estimate == "smooth":
             if points is None:
