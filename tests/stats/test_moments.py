@@ -37,24 +37,6 @@ def test_standard_moments_match_scipy(rng):
     assert ku == pytest.approx(ss.kurtosis(x, fisher=False), rel=1e-10)
 
 
-def test_sequential_is_not_quadratic():
-    """Eight times the values must cost far less than 64 times the time (best of 3)."""
-    import time
-
-    x = np.random.default_rng(0).normal(size=1_000_000)
-    sequential_moments(x[:100])
-
-    def best(v):
-        ts = []
-        for _ in range(3):
-            t = time.perf_counter()
-            sequential_moments(v)
-            ts.append(time.perf_counter() - t)
-        return min(ts)
-
-    assert best(x) < 24.0 * best(x[:125_000])
-
-
 @pytest.mark.parametrize("bad", [[], [1.0, np.nan, 2.0, 3.0]])
 def test_bad_values(bad):
     with pytest.raises(InvalidPointsError):
