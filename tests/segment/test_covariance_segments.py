@@ -240,27 +240,3 @@ def test_refine_borders_moves_a_misassigned_row(rng):
     # noise) that happened to lie beyond 3 sigma of A's plane
     other = np.flatnonzero(moved & ~np.isin(np.arange(len(p)), row))
     assert other.size <= 5 and (np.abs(p[other, 0]) < 0.004).all()
-
-
-def test_merge_coplanar_keeps_a_flat_piece_off_a_curved_segment(rng):
-    """A half-pipe (radius 0.5 m) and a flat strip tangent to its crown touch: the plane
-    of the curved segment has an RMS of about 0.1 m, so the union-plane test alone merges
-    the strip into it. With the segments' planarity (the trimmed plane's noise test) a
-    planar and a curved segment are not merged by the coplanar step (pieces of one
-    cylinder are merged by the cylinder step, which tests the cylinder)."""
-    from lidarstat.neighbors import knn_neighbors
-    from lidarstat.segment._covariance_segments import merge_coplanar
-
-    t = rng.uniform(0.1, np.pi - 0.1, 6000)
-    x = rng.uniform(0, 4, 6000)
-    pipe = np.c_[x, 0.5 * np.cos(t), 0.5 * np.sin(t)]
-    strip = np.c_[rng.uniform(4.0, 4.6, 600), rng.uniform(-0.15, 0.15, 600), np.full(600, 0.5)]
-    pts = np.r_[pipe, strip] + rng.normal(0, 0.002, (6600, 3))
-    labels = np.r_[np.ones(6000, np.int32), np.full(600, 2, np.int32)]
-    nbh = knn_neighbors(pts, 20)
-    merged = merge_coplanar(pts, labels, nbh)
-    assert np.unique(merged).tolist() == [1]
-    kept = merge_coplanar(pts, labels, nbh, planar=np.array([False, True]))
-    assert np.unique(kept).size == 2
-    assert np.array_equal(merge_coplanar(pts, labels, nbh, planar=np.array([False, False])),
-                          merged)

@@ -291,7 +291,7 @@ def _union_plane_rms(points, labels, a, b):
 
 
 def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=None,
-                   centroids=None, tolerance=1.5, planar=None):
+                   centroids=None, tolerance=1.5):
     """Merge touching segments that are one surface (split by a window, a pipe in front, ...).
 
     Two segments that share neighbour pairs merge when their plane normals differ by less
@@ -302,12 +302,8 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
     plane tolerance): a smooth continuation. Either way the plane fitted to the union
     must have an orthogonal RMS at most `tolerance` times the larger RMS of the two
     (two parallel planes a recess apart are not one surface; pieces of one cylinder are
-    merged by :func:`lidarstat.segment._cylinders.merge_cylinders`). With `planar` (per
-    segment, index id - 1: its trimmed plane passes the noise model), a planar segment
-    and a curved one are never merged here: against a curved segment's plane RMS (a pipe's
-    is tens of millimetres) the union test accepts any small flat piece beside it (a
-    flange face), and a piece of the same cylinder is left to ``merge_cylinders``, which
-    tests the cylinder. Ids are renumbered by size.
+    merged by :func:`lidarstat.segment._cylinders.merge_cylinders`). Ids are renumbered
+    by size.
     """
     from ._grow import adjacency, relabel
 
@@ -323,10 +319,6 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
     da = np.abs(np.einsum("ij,ij->i", c[b] - c[a], n[a]))
     db = np.abs(np.einsum("ij,ij->i", c[a] - c[b], n[b]))
     ok = (cos >= np.cos(np.radians(max_angle))) & (da <= tol) & (db <= tol)
-    mixed = None
-    if planar is not None:
-        planar = np.asarray(planar, dtype=bool)
-        mixed = planar[a] != planar[b]
     if normals is not None:
         si, di = _ek.label_pairs(nbh, labels)  # 0 < labels[si] < labels[di]
         key = labels[si].astype(np.int64) * (int(labels.max()) + 1) + labels[di]
@@ -346,8 +338,6 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
         smooth[found] = (med[pos[found]] >= np.cos(np.radians(max_angle))) & \
             (moff[pos[found]] <= tol[found])
         ok |= smooth
-    if mixed is not None:
-        ok &= ~mixed
     if ok.any():
         # one plane must fit the union about as well as each part: two parallel planes
         # a recess apart (a window's back and its wall) are not one surface
@@ -552,13 +542,8 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         del models, moved  # per-point arrays: not kept beside the neighbourhoods
         if nbh.kind == "knn":
             del free, before, new
-    from ._refine import PlaneModels
-
     labels = merge_coplanar(pts, labels, grow_nbh, max_angle=min_angle / 4,
-                            normals=feats.normals, centroids=feats.centroid,
-                            planar=PlaneModels(pts, labels, seg_sigma,
-                                               feats.sensor if classes.meta.get("noise") ==
-                                               "range" else None).planar)
+                            normals=feats.normals, centroids=feats.centroid)
     from ._cylinders import merge_cylinders
 
     # per-point axes (minimum-curvature directions) of the curved surface points only
@@ -598,6 +583,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         n_loc, c_loc = normals[ref], centroids[ref]
         from ._intersect import (cylinder_tangent_planes, snap_between_cylinders,
                                  snap_to_cylinder)
+        from ._refine import PlaneModels
 
         # a point without a tested neighbourhood plane in its row, on a segment whose own
         # trimmed plane the noise model accepts (a fascia, a soffit: narrow faces where no
