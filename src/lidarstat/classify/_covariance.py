@@ -34,7 +34,9 @@ Three tests, each written beside the label as a p-value (see docs/methods/covari
    scan; a surface point with a depth jump at it is a boundary too) and on the points
    that failed the surface tests (0.01 visible, 0.001 scan: a neighbourhood cut by the
    end of the visible surface is a boundary even where it also bends or reaches a
-   crease, as on the occluded side of a pipe).
+   crease, as on the occluded side of a pipe); with the visible test an edge candidate at
+   a depth jump between two surfaces the grid resolves (``jump_resolved_p``) is a
+   boundary too.
 """
 
 from __future__ import annotations
@@ -57,6 +59,7 @@ FIELDS = {
     "boundary_p": ("float64", "p-value of the boundary test"),
     "jump_z": ("float64", "largest range-continuity z of the grid edges"),
     "jump_p": ("float64", "p-value: a depth jump at the point"),
+    "jump_resolved_p": ("float64", "p-value: a jump between two resolved surfaces"),
 }
 
 
@@ -632,10 +635,11 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         sb = features.scan_boundary
         # the complete disc's radius rho (the reach shrunk by the density gradient g)
         vis = visible_boundary(pts, features.sensor, features.normals, features.major, along,
-                               sb[:, 2] * sb[:, 3], jump_alpha=jump_alpha)
+                               sb[:, 2] * sb[:, 3], jump_alpha=jump_alpha, linear_alpha=alpha)
         t2 = vis["t2"]
         boundary_p = hotelling_p(t2, vis["m"])
-        extra = {"jump_z": vis["jump_z"], "jump_p": vis["jump_p"]}
+        extra = {"jump_z": vis["jump_z"], "jump_p": vis["jump_p"],
+                 "jump_resolved_p": vis["jump_resolved_p"]}
         meta["jump_alpha"] = jump_alpha
         meta["grid_step"] = vis["step"]
     else:
@@ -687,6 +691,12 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
             one_sided |= surface & (extra["jump_p"] < jump_alpha)
         if boundary != "centroid" and edge_boundary_alpha is not None:
             one_sided |= valid & ~surface & (boundary_p < edge_boundary_alpha)
+            if boundary == "visible":
+                # an edge candidate at a depth jump between two resolved surfaces (both
+                # sides linear over three grid nodes) is where its visible surface ends;
+                # a jump onto a face narrower than the grid is not resolved and stays
+                # with the disc test
+                one_sided |= valid & ~surface & (extra["jump_resolved_p"] < jump_alpha)
     pc = np.zeros(n, dtype=np.uint8)
     pc[valid] = PointClass.EDGE
     pc[surface] = PointClass.SURFACE

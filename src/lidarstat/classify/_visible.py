@@ -33,6 +33,18 @@ a crease cannot be told from a jump). Per point, ``jump_z`` is the largest z of 
 edges and ``jump_p`` the Bonferroni p-value over its m edges, ``min(1, m min p)``: "a depth
 jump at this point".
 
+**Resolved jumps.** A face narrower than two grid steps (a soffit or a window jamb seen at
+grazing incidence) breaks the "one crease between a and b" null and looks like a jump; so
+does a true depth jump, and one grid line cannot tell them apart (a jump *is* a face of
+zero width seen along the ray). What a jump between two surfaces the grid *resolves* has
+and a narrow face has not: on either side the grid line continues over two more nodes on
+one plane. Per edge, both triples (a, a', a'') and (b, b', b'') are tested for linearity
+in s (the second difference ``s_a - 2 s_a' + s_a''`` against its sd
+``sqrt(sig_a^2 + 4 sig_a'^2 + sig_a''^2)``, two-sided, accepted at ``linear_alpha``); the
+edges where both are accepted and the continuity test rejects are *resolved jumps*, and
+``jump_resolved_p`` is the Bonferroni p-value over the point's edges of the continuity
+test restricted to them (1 where there is none).
+
 **The visible disc.** The ``'scan'`` test (:mod:`lidarstat.features._scan_kernels`) takes the
 complete disc from the kNN table, whose 3-D ball loses grid nodes across a crease (the other
 face bends away: holes, false boundaries at the foot of a wall) and gains nodes across a small
@@ -229,6 +241,45 @@ def edge_jumps(dirs, s, sig, adj, z_out, p_out):
 
 
 @njit
+def _linear_z(dirs, s, sig, adj, a, ex, ey, ez, tol2):
+    """|second difference| / sd of s over a and the two nodes continuing the grid line from
+    `a` in the direction (ex, ey, ez): 0 on a plane; NaN when the line does not continue."""
+    b = _continuation(dirs, adj, a, dirs[a, 0] + ex, dirs[a, 1] + ey, dirs[a, 2] + ez, tol2)
+    if b < 0:
+        return np.nan
+    c = _continuation(dirs, adj, b, dirs[b, 0] + ex, dirs[b, 1] + ey, dirs[b, 2] + ez, tol2)
+    if c < 0:
+        return np.nan
+    e = s[a] - 2.0 * s[b] + s[c]
+    return abs(e) / math.sqrt(sig[a] * sig[a] + 4.0 * sig[b] * sig[b] + sig[c] * sig[c])
+
+
+@njit_parallel
+def edge_resolved(dirs, s, sig, adj, zc, out):
+    """Is each grid edge (a, b) between two *resolved* surfaces (module doc)?
+
+    ``out[a, k]`` is True when the grid line continues for two more nodes beyond a and
+    beyond b and both triples are linear in s (|second difference| / sd < `zc`, the plane
+    accepted): a jump there separates two surfaces the grid resolves, not a face
+    narrower than the grid.
+    """
+    n = adj.shape[0]
+    for a in prange(n):
+        for k in range(adj.shape[1]):
+            b = adj[a, k]
+            out[a, k] = False
+            if b < 0:
+                continue
+            ex = dirs[b, 0] - dirs[a, 0]
+            ey = dirs[b, 1] - dirs[a, 1]
+            ez = dirs[b, 2] - dirs[a, 2]
+            tol2 = 0.25 * (ex * ex + ey * ey + ez * ez)
+            za = _linear_z(dirs, s, sig, adj, a, -ex, -ey, -ez, tol2)
+            zb = _linear_z(dirs, s, sig, adj, b, ex, ey, ez, tol2)
+            out[a, k] = za < zc and zb < zc
+
+
+@njit
 def _frame(pts, angles, sensor, normal, major, i):
     """Coefficients of the linearised scan map of point i (see _scan_kernels)."""
     px = pts[i, 0] - sensor[0]
@@ -352,7 +403,8 @@ def visible_disc(pts, angles, adj, cut, normals, major, sensor, radius, nchunk, 
             out[i, 0] = m * (m - 1) * (cu * cu * yy - 2.0 * cu * cv * xy + cv * cv * xx) / det
 
 
-def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_alpha):
+def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_alpha,
+                     linear_alpha=0.05):
     """The ``'visible'`` boundary statistic and the range-continuity fields of every point.
 
     Parameters
@@ -367,10 +419,14 @@ def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_
         Disc radius (the neighbourhood's reach).
     jump_alpha : float
         Level of the continuity test of a grid edge; failed edges are not crossed.
+    linear_alpha : float
+        Level of the linearity test of the three nodes on either side of a grid edge
+        (:func:`edge_resolved`; accepted on both sides = two resolved surfaces).
 
     Returns
     -------
-    dict with ``t2``, ``m`` (visible disc), ``jump_z``, ``jump_p`` (per point), ``step``
+    dict with ``t2``, ``m`` (visible disc), ``jump_z``, ``jump_p``, ``jump_resolved_p``
+    (per point), ``step``
     (azimuth and elevation steps), ``edge_z``, ``edge_p`` and ``adjacency`` (per grid edge).
     """
     from ..features._scan_kernels import scan_angles
@@ -390,6 +446,11 @@ def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_
     pe = np.empty(adj.shape, dtype=np.float64)
     edge_jumps(dirs, s, np.ascontiguousarray(sig), adj, z, pe)
     cut = np.ascontiguousarray(pe < jump_alpha)
+    from scipy.special import ndtri
+
+    resolved = np.empty(adj.shape, dtype=np.bool_)
+    edge_resolved(dirs, s, np.ascontiguousarray(sig), adj, float(ndtri(1.0 - linear_alpha / 2.0)),
+                  resolved)
     out = np.empty((pts.shape[0], 2))
     import numba
 
@@ -405,5 +466,10 @@ def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_
     # Bonferroni over the point's grid edges (valid under any dependence between them)
     jp[has] = np.minimum(1.0, n_edges[has] * np.min(np.where(adj[has] >= 0, pe[has], np.inf),
                                                     axis=1))
-    return {"t2": out[:, 0], "m": out[:, 1], "jump_z": jz, "jump_p": jp, "step": step,
+    # the same, over the edges between two resolved surfaces only
+    pr = np.where(resolved, pe, np.inf)
+    jr = np.full(len(pts), np.nan)
+    jr[has] = np.minimum(1.0, n_edges[has] * np.min(np.where(adj[has] >= 0, pr[has], np.inf),
+                                                    axis=1))
+    return {"t2": out[:, 0], "m": out[:, 1], "jump_z": jz, "jump_p": jp, "jump_resolved_p": jr, "step": step,
             "edge_z": z, "edge_p": pe, "adjacency": adj}
