@@ -166,6 +166,16 @@ def _continuation(dirs, adj, a, tx, ty, tz, tol2):
     return best
 
 
+@njit
+def _grid_step(dirs, a, b):
+    """The direction step from a to b and the squared tolerance (half of it) within which
+    a node continues the grid line."""
+    ex = dirs[b, 0] - dirs[a, 0]
+    ey = dirs[b, 1] - dirs[a, 1]
+    ez = dirs[b, 2] - dirs[a, 2]
+    return ex, ey, ez, 0.25 * (ex * ex + ey * ey + ez * ez)
+
+
 #: Gauss-Legendre nodes and weights on [-1, 1] (the same-sign tail integral below).
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(48)
 
@@ -208,10 +218,7 @@ def edge_jumps(dirs, s, sig, adj, z_out, p_out):
             p_out[a, k] = np.nan
             if b < 0:
                 continue
-            ex = dirs[b, 0] - dirs[a, 0]
-            ey = dirs[b, 1] - dirs[a, 1]
-            ez = dirs[b, 2] - dirs[a, 2]
-            tol2 = 0.25 * (ex * ex + ey * ey + ez * ez)
+            ex, ey, ez, tol2 = _grid_step(dirs, a, b)
             ap = _continuation(dirs, adj, a, dirs[a, 0] - ex, dirs[a, 1] - ey, dirs[a, 2] - ez,
                                tol2)
             bp = _continuation(dirs, adj, b, dirs[b, 0] + ex, dirs[b, 1] + ey, dirs[b, 2] + ez,
@@ -270,10 +277,7 @@ def edge_resolved(dirs, s, sig, adj, zc, out):
             out[a, k] = False
             if b < 0:
                 continue
-            ex = dirs[b, 0] - dirs[a, 0]
-            ey = dirs[b, 1] - dirs[a, 1]
-            ez = dirs[b, 2] - dirs[a, 2]
-            tol2 = 0.25 * (ex * ex + ey * ey + ez * ez)
+            ex, ey, ez, tol2 = _grid_step(dirs, a, b)
             za = _linear_z(dirs, s, sig, adj, a, -ex, -ey, -ez, tol2)
             zb = _linear_z(dirs, s, sig, adj, b, ex, ey, ez, tol2)
             out[a, k] = za < zc and zb < zc
