@@ -251,7 +251,16 @@ def test_refinement_models_a_wall_in_its_own_plane(rng):
     assert np.mean(seg.labels[is_wall] == k + 1) > 0.9
     assert np.mean(is_wall[seg.labels == k + 1]) > 0.97
     assert np.isnan(seg.table["c_10"][k])  # coefficients of z(E, N) do not exist
-    for a, b in zip(seg.lines.attributes["segment_a"], seg.lines.attributes["segment_b"]):
-        assert k + 1 not in (a, b)
+    # the wall meets the ground along x = 4, z = 0: its lines with the ground units
+    # (3-D projection onto both implicit surfaces) lie there, at a right angle
+    at = seg.lines.attributes
+    walls = [i for i, (a, b) in enumerate(zip(at["segment_a"], at["segment_b"]))
+             if k + 1 in (a, b)]
+    assert walls
+    for i in walls:
+        v = seg.lines.vertices[i]
+        assert np.all(np.abs(v[:, 0] - 4.0) < 0.01) and np.all(np.abs(v[:, 2]) < 0.01), v
+        assert abs(at["angle_deg"][i] - 90.0) < 1.0
+        assert np.ptp(v[:, 1]) > 4.0  # along most of the 8 m wall
     # the ground units remain height fields with vertical normals
     assert np.all(np.abs(np.asarray(seg.table["normal_z"])[frame == 0]) > 0.9999)

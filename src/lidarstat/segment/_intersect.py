@@ -2,7 +2,10 @@
 segmentation of the surface units").
 
 For two adjacent units with surfaces ``z = f_a(E, N)`` and ``z = f_b(E, N)`` the break
-line is the curve ``g = f_a - f_b = 0`` in plan, lifted to ``z = f_a``. It is placed from
+line is the curve ``g = f_a - f_b = 0`` in plan, lifted to ``z = f_a``. When one unit is
+a wall modelled over its own plane, both surfaces are written implicitly, ``F(x) = 0``,
+and the touching points are projected onto ``F_a = F_b = 0`` in 3-D by Gauss-Newton
+steps. It is placed from
 the data only through its extent: the points of either unit that touch the other are
 moved onto ``g = 0`` by Newton steps along the gradient of g, and the line runs between the
 extreme projections (straight for two planes, a polyline through the projections for
@@ -28,6 +31,68 @@ def _project(ua, ub, xy, iters=8):
         p = p - step[:, None] * grad
     g = np.abs(ua.height(p) - ub.height(p))
     return p, g
+
+
+def _implicit(unit, x):
+    """``F(x) = 0`` on a unit's surface and the 3-D gradient of F at points `x` (k, 3):
+    ``f(E, N) - z`` for a height field, ``h(u, v) - w`` in a wall's own frame."""
+    if getattr(unit, "frame", None) is None:
+        g = unit.basis.gradient(unit.surface, x[:, :2])
+        return unit.height(x[:, :2]) - x[:, 2], np.c_[g, -np.ones(len(x))]
+    origin, rot = unit.frame[0], unit.frame[1:]
+    local = (x - origin) @ rot.T
+    g = unit.basis.gradient(unit.surface, local[:, :2])
+    f = unit.basis.evaluate(unit.surface, local[:, :2]) - local[:, 2]
+    return f, np.c_[g, -np.ones(len(x))] @ rot
+
+
+def _project3(ua, ub, x, iters=10):
+    """Gauss-Newton projection of 3-D points onto the curve ``F_a = F_b = 0`` (minimum-
+    norm steps ``J'(JJ')^-1 F``); returns the points, the largest ``|F|`` there and the
+    unit gradients at them."""
+    p = x.copy()
+    for _ in range(iters):
+        fa, ga = _implicit(ua, p)
+        fb, gb = _implicit(ub, p)
+        J = np.stack([ga, gb], axis=1)  # (k, 2, 3)
+        JJ = J @ np.swapaxes(J, 1, 2)
+        ok = np.abs(np.linalg.det(JJ)) > 1e-12
+        JJ[~ok] = np.eye(2)
+        lam = np.linalg.solve(JJ, np.c_[fa, fb][..., None])
+        p = p - np.where(ok[:, None], (np.swapaxes(J, 1, 2) @ lam)[..., 0], 0.0)
+    fa, ga = _implicit(ua, p)
+    fb, gb = _implicit(ub, p)
+    ga /= np.linalg.norm(ga, axis=1, keepdims=True)
+    gb /= np.linalg.norm(gb, axis=1, keepdims=True)
+    return p, np.maximum(np.abs(fa), np.abs(fb)), ga, gb
+
+
+def _line3(ua, ub, points, touch, max_shift, min_angle, spacing):
+    """The intersection line of two units when one is modelled in its own frame (a wall):
+    the same rules as for height fields, in 3-D. Returns (line, angle, n_support,
+    rms_gap) or None."""
+    x = points[touch]
+    p, gap, ga, gb = _project3(ua, ub, x)
+    near = (np.linalg.norm(p - x, axis=1) <= max_shift) & (gap < 1e-3 * max_shift)
+    if near.sum() < 2:
+        return None
+    p = p[near]
+    cosang = float(np.median(np.abs(np.sum(ga[near] * gb[near], axis=1))))
+    angle = float(np.degrees(np.arccos(min(cosang, 1.0))))
+    if angle < min_angle:
+        return None
+    mid = p.mean(axis=0)
+    _, _, vt = np.linalg.svd(p - mid, full_matrices=False)
+    t = (p - mid) @ vt[0]
+    if ua.degree == 1 and ub.degree == 1:
+        line = _project3(ua, ub, mid + np.outer([t.min(), t.max()], vt[0]))[0]
+    else:
+        o = np.argsort(t)
+        t, p = t[o], p[o]
+        bins = np.floor((t - t[0]) / spacing).astype(np.int64)
+        _, first = np.unique(bins, return_index=True)
+        line = p[np.unique(np.r_[first, t.size - 1])]
+    return line, angle, int(near.sum()), float(np.sqrt(np.mean(gap[near] ** 2)))
 
 
 def _normal(unit, xy):
@@ -79,10 +144,20 @@ def intersection_lines(points, labels, units, contact_points, contact_segments, 
                         "rms_gap": []}
     for a, b in pairs:
         ua, ub = units[a - 1], units[b - 1]
-        if getattr(ua, "frame", None) is not None or getattr(ub, "frame", None) is not None:
-            continue  # a unit in its own frame (a wall) is not a height field z(E, N)
         touch = np.unique(contact_points[key == a * base + b])
         if touch.size < 2:
+            continue
+        if getattr(ua, "frame", None) is not None or getattr(ub, "frame", None) is not None:
+            # a unit in its own frame (a wall) is not a height field z(E, N): 3-D
+            found = _line3(ua, ub, points, touch, max_shift, min_angle, spacing)
+            if found is None:
+                continue
+            line, angle, support, rms = found
+            if len(line) < 2 or np.allclose(line[0], line[-1]):
+                continue
+            verts.append(line)
+            for k, v in zip(attrs, (a, b, angle, support, rms)):
+                attrs[k].append(v)
             continue
         xy = points[touch, :2]
         p, gap = _project(ua, ub, xy)
