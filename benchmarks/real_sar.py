@@ -123,7 +123,15 @@ def main(argv=None):
              "sigma_local": round(seg.params["sigma_local"], 4),
              "sigma_units": round(seg.params["sigma_units"], 4),
              "sigma_passes": seg.params["sigma_passes"],
-             "in_segments": round(float(np.mean(seg.labels > 0)), 3)}
+             "in_segments": round(float(np.mean(seg.labels > 0)), 3),
+             # goodness of fit: segments made by splits, segments still rejected, and
+             # the median residual scale against the noise
+             "gof_splits": seg.params.get("splits"),
+             "gof_rejected": int(np.count_nonzero(seg.table["gof_p"] <
+                                                  seg.params["gof_alpha"])),
+             "scale_ratio_median": round(float(np.nanmedian(seg.table["scale_ratio"])), 3)
+             if seg.n_segments else None,
+             "outliers_removed": int(np.count_nonzero(seg.fields["surface_outlier"]))}
         if cls is not None:
             b = cls[keep] == 6
             r["building_points_in_segments"] = round(float(np.mean(seg.labels[b] > 0)), 3)

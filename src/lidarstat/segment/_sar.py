@@ -359,6 +359,11 @@ def _outlier_test(points, labels, units, alpha):
 SPLIT_GAIN = 0.5
 #: Most successive splits of one segment (a segment of three faces needs two).
 SPLIT_DEPTH = 3
+#: Largest segment that is split (larger ones are tested only): leaked raw clusters are
+#: roof faces of a few hundred points, whereas terrain pieces between buildings (not
+#: planes, always rejected) would be split down to SPLIT_DEPTH at the cost of many ML
+#: refits of large units (doubled the run time on an AHN3 tile).
+SPLIT_MAX = 5000
 #: Points on which the correlation of a segment's residuals is estimated (nearest the
 #: medoid); segments larger than MAX_SEARCH are neither tested nor split.
 NOISE_RHO_MAX = 150
@@ -556,7 +561,7 @@ def _split_misfits(points, labels, units, removed, *, sigma2, alpha, w_radius,
     """Per-segment goodness-of-fit test and the split of the segments it rejects.
 
     Every segment (up to MAX_SEARCH points) is tested by :func:`_scale_test`. A rejected
-    segment is split in two by :func:`_two_surfaces` when the split leaves at most
+    segment (up to :data:`SPLIT_MAX` points) is split in two by :func:`_two_surfaces` when the split leaves at most
     :data:`SPLIT_GAIN` of its residual sum of squares; each part is refitted on its share
     of the raw cluster (:func:`refit_unit`), given the final outlier test again, and
     tested again (at most :data:`SPLIT_DEPTH` successive splits). Parts below `min_size`
@@ -591,12 +596,13 @@ def _split_misfits(points, labels, units, removed, *, sigma2, alpha, w_radius,
         stats = (float(test.statistic), float(test.df), float(test.pvalue),
                  float(np.sqrt(rss / (idx.size - r) / sigma2)))
         parts = None
-        if bool(test.reject) and depth < SPLIT_DEPTH:
+        if bool(test.reject) and depth < SPLIT_DEPTH and idx.size <= SPLIT_MAX:
             xy, z = _unit_heights(unit, points[idx])
             parts = _two_surfaces(xy, z, unit.basis, min_size)
             if parts is not None and parts[1] > SPLIT_GAIN * rss:
                 parts = None
-        if parts is None and bool(test.reject) and depth > 0 and depth < SPLIT_DEPTH:
+        if parts is None and bool(test.reject) and 0 < depth < SPLIT_DEPTH \
+                and idx.size <= SPLIT_MAX:
             # a part of a split raw cluster that is still not one surface (pieces of
             # further faces too small for a part of their own): its points off the main
             # surface (robust fit, the outlier test's critical value) leave it
