@@ -168,6 +168,7 @@ def bench_segment(cloud, bandwidth=None):
             "hoover_over_min30": h30.over, "hoover_missed_min30": h30.missed,
             "roof_planes_min30": h30.n_truth,
             "gof_splits": seg.params.get("splits"),
+            "gof_seconds": seg.params.get("gof_seconds"),
             "gof_rejected": int(np.count_nonzero(seg.table["gof_p"] < seg.params["gof_alpha"]))
             if "gof_p" in seg.table else None,
             "outlier_test": _outlier_rate(cloud, seg),
@@ -266,8 +267,8 @@ def main(argv=None):
     print(f"| under- / over-segmented / missed roof planes (>= 30 points) | "
           f"{seg['hoover_under_min30']} / {seg['hoover_over_min30']} / "
           f"{seg['hoover_missed_min30']} of {seg['roof_planes_min30']} |")
-    print(f"| goodness-of-fit: segments made by splits, still rejected | "
-          f"{seg['gof_splits']}, {seg['gof_rejected']} |")
+    print(f"| goodness-of-fit: segments made by splits, still rejected (test + splits: s) | "
+          f"{seg['gof_splits']}, {seg['gof_rejected']} ({seg['gof_seconds']} s) |")
     ot = seg["outlier_test"]
     print(f"| outlier test on true roof points (level 0.01) | {ot['removed']} of "
           f"{ot['tested_true_roof_points']} ({ot['rate']}) |")
