@@ -4,24 +4,30 @@ The vectorised form of these selections (``src, dst = nbh.edges()`` and boolean 
 them) allocates several arrays of one entry per neighbour pair: at 2 million points and
 k = 50 that is 100 million pairs and gigabytes per step. These kernels walk the CSR rows
 once to count and once to fill, so only the selected pairs are stored. Each returns
-exactly what the mask expression it replaces returns (same pairs, in CSR order).
+exactly what the mask expression it replaces returns (same pairs, in CSR order). Rows are
+independent: the kernels run in parallel over chunks of rows (a count-then-fill kernel
+counts per chunk, then each chunk fills from its prefix-sum offset, so the order is CSR
+order whatever the threads do).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numba import prange
 
-from .._shared._jit import njit
+from .._shared._jit import njit, njit_parallel
+
+_ROWS = 4096  # rows per parallel chunk
 
 
-@njit
+@njit_parallel
 def prefix_ok(indptr, indices, rows, good, out):
     """``out[e]``: no neighbour before or at entry e of its row is a non-`good` point.
 
     The row's own point never counts as a non-`good` one (``dst == src``). This is
     ``cumsum(~good[dst] & (dst != src))`` restarted per row, equal to 0.
     """
-    for r in range(indptr.size - 1):
+    for r in prange(indptr.size - 1):
         p = rows[r]
         bad = False
         for e in range(indptr[r], indptr[r + 1]):
@@ -40,54 +46,74 @@ def _label_pair(la, lb, mode):
     return la != lb  # both labelled, different
 
 
-@njit
-def label_pair_edges(indptr, indices, rows, labels, mode, fill, src, dst):
+@njit_parallel
+def label_pair_edges(indptr, indices, rows, labels, mode, fill, offs, src, dst):
     """Edges whose ends have labels ``0 < la < lb`` (mode 0) or ``la != lb``, both > 0.
 
-    Returns their number; with `fill` also writes them, in CSR order, to `src`, `dst`
-    (call once to count, allocate, once to fill).
+    Count-then-fill over chunks of `_ROWS` rows (see :func:`_two_pass`): returns the
+    number of edges per chunk; with `fill` also writes them, in CSR order, to `src`,
+    `dst` from ``offs[chunk]``.
     """
-    c = 0
-    for r in range(indptr.size - 1):
-        p = rows[r]
-        la = labels[p]
-        if la <= 0:
-            continue
-        for e in range(indptr[r], indptr[r + 1]):
-            q = indices[e]
-            if _label_pair(la, labels[q], mode):
-                if fill:
-                    src[c] = p
-                    dst[c] = q
-                c += 1
-    return c
+    m = indptr.size - 1
+    nch = (m + _ROWS - 1) // _ROWS
+    counts = np.zeros(nch, dtype=np.int64)
+    for ch in prange(nch):
+        c0 = offs[ch] if fill else 0
+        c = c0
+        for r in range(ch * _ROWS, min(m, (ch + 1) * _ROWS)):
+            p = rows[r]
+            la = labels[p]
+            if la <= 0:
+                continue
+            for e in range(indptr[r], indptr[r + 1]):
+                q = indices[e]
+                if _label_pair(la, labels[q], mode):
+                    if fill:
+                        src[c] = p
+                        dst[c] = q
+                    c += 1
+        counts[ch] = c - c0
+    return counts
 
 
-@njit
-def reintegration_edges(indptr, indices, rows, candidates, labels, fill, src, dst):
-    """Edges from an unlabelled candidate point to a labelled one (count, then fill)."""
-    c = 0
-    for r in range(indptr.size - 1):
-        p = rows[r]
-        if not candidates[p] or labels[p] != 0:
-            continue
-        for e in range(indptr[r], indptr[r + 1]):
-            q = indices[e]
-            if labels[q] > 0:
-                if fill:
-                    src[c] = p
-                    dst[c] = q
-                c += 1
-    return c
+@njit_parallel
+def reintegration_edges(indptr, indices, rows, candidates, labels, fill, offs, src, dst):
+    """Edges from an unlabelled candidate point to a labelled one (count, then fill, as
+    :func:`label_pair_edges`)."""
+    m = indptr.size - 1
+    nch = (m + _ROWS - 1) // _ROWS
+    counts = np.zeros(nch, dtype=np.int64)
+    for ch in prange(nch):
+        c0 = offs[ch] if fill else 0
+        c = c0
+        for r in range(ch * _ROWS, min(m, (ch + 1) * _ROWS)):
+            p = rows[r]
+            if not candidates[p] or labels[p] != 0:
+                continue
+            for e in range(indptr[r], indptr[r + 1]):
+                q = indices[e]
+                if labels[q] > 0:
+                    if fill:
+                        src[c] = p
+                        dst[c] = q
+                    c += 1
+        counts[ch] = c - c0
+    return counts
 
 
 def _two_pass(kernel, *args):
-    """Run a count-then-fill edge kernel: the selected ``(src, dst)`` as int64 arrays."""
+    """Run a count-then-fill edge kernel: the selected ``(src, dst)`` as int64 arrays.
+
+    The first call counts the edges of every chunk of rows, the second writes each
+    chunk's from the prefix sum of the counts: the pairs come in CSR order.
+    """
     none = np.empty(0, dtype=np.int64)
-    m = kernel(*args, False, none, none)
-    src = np.empty(m, dtype=np.int64)
-    dst = np.empty(m, dtype=np.int64)
-    kernel(*args, True, src, dst)
+    counts = kernel(*args, False, none, none, none)
+    offs = np.zeros(counts.size + 1, dtype=np.int64)
+    np.cumsum(counts, out=offs[1:])
+    src = np.empty(offs[-1], dtype=np.int64)
+    dst = np.empty(offs[-1], dtype=np.int64)
+    kernel(*args, True, offs, src, dst)
     return src, dst
 
 
@@ -120,16 +146,16 @@ def label_pairs(nbh, labels, *, different_only=False):
                      np.ascontiguousarray(labels), 1 if different_only else 0)
 
 
-@njit
+@njit_parallel
 def prefix_lengths(indptr, lengths, out):
     """``out[e]``: entry e lies within the first ``lengths[r]`` entries of its row r."""
-    for r in range(indptr.size - 1):
+    for r in prange(indptr.size - 1):
         s = indptr[r]
         for e in range(s, indptr[r + 1]):
             out[e] = e - s < lengths[r]
 
 
-@njit
+@njit_parallel
 def adaptive_edges(indptr, indices, rows, joinable, surface, kstar, pn, grow_k, cos_min, out):
     """Edges of the scale-adaptive region growing, one pass over the CSR rows.
 
@@ -144,7 +170,7 @@ def adaptive_edges(indptr, indices, rows, joinable, surface, kstar, pn, grow_k, 
       (``kstar[q] == 0``) or the two prefix normals agree: ``|pn[p] . pn[q]| >= cos_min``
       (summed as NumPy's einsum does, so equal to it bit for bit here).
     """
-    for r in range(indptr.size - 1):
+    for r in prange(indptr.size - 1):
         p = rows[r]
         s = indptr[r]
         bad = False
