@@ -18,6 +18,14 @@ Usage::
 
     python benchmarks/bench_covariance.py                 # 2M points, 3 repeats, JSON + table
     python benchmarks/bench_covariance.py --quick         # 100k points, 1 repeat, no JSON
+    git archive fbdb767 src | tar -x -C /tmp/s4           # an earlier version's sources, then
+    python benchmarks/bench_covariance.py --skip-peers --baseline /tmp/s4/src
+                                                          # both versions in one run, alternating
+
+With ``--baseline SRC`` the lidarstat runs (features, classification, segmentation) are
+repeated with the package found in SRC (its own Numba cache), alternating with the
+current code repeat by repeat, so machine drift hits both alike: the rows ``<mode>@base``
+and the ratios current / baseline say what the code changed.
 
 See benchmarks/README.md.
 """
@@ -164,7 +172,11 @@ def run_child(mode, data, env, **kw):
 
 
 def run_repeats(mode, repeats, data, env, **kw):
-    runs = [run_child(mode, data, env, **kw) for _ in range(repeats)]
+    return _summary([run_child(mode, data, env, **kw) for _ in range(repeats)])
+
+
+def _summary(runs):
+    """Median run of `runs` (its fields), the median seconds, every run's, the peak RSS."""
     secs = [r["seconds"] for r in runs]
     best = dict(runs[int(np.argsort(secs)[len(secs) // 2])])
     best.update(seconds=float(np.median(secs)), all_seconds=secs,
@@ -230,6 +242,8 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="100k points, 1 repeat, no JSON")
     ap.add_argument("--out", default=str(HERE / "results_covariance.json"))
     ap.add_argument("--skip-peers", action="store_true")
+    ap.add_argument("--baseline", default=None,
+                    help="a source tree (the src/ of another version) to time alternately")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--child-out", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--data", default=None, help=argparse.SUPPRESS)
@@ -257,10 +271,29 @@ def main(argv=None):
                "points": int(xyz.shape[0]), "k": K, "radius_for_k": radius,
                "radius_median_neighbors": med, "measurements": {}}
     m = results["measurements"]
+    base_env = None
+    if args.baseline:
+        base_env = dict(env, NUMBA_CACHE_DIR=str(tmp / "numba_base"),
+                        PYTHONPATH=str(Path(args.baseline).resolve()) + os.pathsep
+                        + os.environ.get("PYTHONPATH", ""))
+        results["baseline"] = str(args.baseline)
     for mode in ("lidarstat", "classify", "segment"):
         run_child(mode, data, env)  # warm the Numba cache (compiles once)
-        m[mode] = run_repeats(mode, args.repeats, data, env)
-        print(f"{mode}: {m[mode]['seconds']:.2f} s", flush=True)
+        if base_env is None:
+            m[mode] = run_repeats(mode, args.repeats, data, env)
+            print(f"{mode}: {m[mode]['seconds']:.2f} s", flush=True)
+            continue
+        run_child(mode, data, base_env)
+        cur, old = [], []
+        for _ in range(args.repeats):  # alternate: drift of the machine hits both
+            cur.append(run_child(mode, data, env))
+            old.append(run_child(mode, data, base_env))
+        m[mode], m[mode + "@base"] = _summary(cur), _summary(old)
+        ratio = m[mode]["seconds"] / m[mode + "@base"]["seconds"]
+        results.setdefault("ratio_to_baseline", {})[mode] = ratio
+        print(f"{mode}: {m[mode]['seconds']:.2f} s, baseline {m[mode + '@base']['seconds']:.2f}"
+              f" s (ratio {ratio:.3f}; peak {m[mode]['peak_rss_mb']:.0f} / "
+              f"{m[mode + '@base']['peak_rss_mb']:.0f} MB)", flush=True)
     pieces = run_child("pieces", data, env)
     results["lidarstat_pieces"] = pieces["pieces"]
     print("lidarstat pieces: " + ", ".join(f"{k} {v:.2f} s" for k, v in pieces["pieces"].items()),
