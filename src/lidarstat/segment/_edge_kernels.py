@@ -37,18 +37,37 @@ def prefix_ok(indptr, indices, rows, good, out):
             out[e] = not bad
 
 
+#: modes of :func:`pair_edges`
+LABELS_ASCENDING = 0  # 0 < labels[p] < labels[q]
+LABELS_DIFFERENT = 1  # labels[p] != labels[q], both > 0
+REINTEGRATION = 2  # p an unlabelled candidate, q labelled
+
+
 @njit
-def _label_pair(la, lb, mode):
-    if la <= 0 or lb <= 0:
+def _row_ok(mode, lp, candidate):
+    """Whether the row of a point labelled `lp` can hold a selected edge."""
+    if mode == REINTEGRATION:
+        return candidate and lp == 0
+    return lp > 0
+
+
+@njit
+def _pair_ok(mode, lp, lq):
+    """Whether the edge from a point labelled `lp` to one labelled `lq` is selected (the
+    row passed :func:`_row_ok`)."""
+    if mode == REINTEGRATION:
+        return lq > 0
+    if lq <= 0:
         return False
-    if mode == 0:  # 0 < la < lb
-        return la < lb
-    return la != lb  # both labelled, different
+    if mode == LABELS_ASCENDING:
+        return lp < lq
+    return lp != lq
 
 
 @njit_parallel
-def label_pair_edges(indptr, indices, rows, labels, mode, fill, offs, src, dst):
-    """Edges whose ends have labels ``0 < la < lb`` (mode 0) or ``la != lb``, both > 0.
+def pair_edges(indptr, indices, rows, labels, candidates, mode, fill, offs, src, dst):
+    """Edges (p, q) selected by `mode` (:func:`_pair_ok`; `candidates` only for
+    ``REINTEGRATION``).
 
     Count-then-fill over chunks of `_ROWS` rows (see :func:`_two_pass`): returns the
     number of edges per chunk; with `fill` also writes them, in CSR order, to `src`,
@@ -62,37 +81,12 @@ def label_pair_edges(indptr, indices, rows, labels, mode, fill, offs, src, dst):
         c = c0
         for r in range(ch * _ROWS, min(m, (ch + 1) * _ROWS)):
             p = rows[r]
-            la = labels[p]
-            if la <= 0:
+            lp = labels[p]
+            if not _row_ok(mode, lp, mode == REINTEGRATION and candidates[p]):
                 continue
             for e in range(indptr[r], indptr[r + 1]):
                 q = indices[e]
-                if _label_pair(la, labels[q], mode):
-                    if fill:
-                        src[c] = p
-                        dst[c] = q
-                    c += 1
-        counts[ch] = c - c0
-    return counts
-
-
-@njit_parallel
-def reintegration_edges(indptr, indices, rows, candidates, labels, fill, offs, src, dst):
-    """Edges from an unlabelled candidate point to a labelled one (count, then fill, as
-    :func:`label_pair_edges`)."""
-    m = indptr.size - 1
-    nch = (m + _ROWS - 1) // _ROWS
-    counts = np.zeros(nch, dtype=np.int64)
-    for ch in prange(nch):
-        c0 = offs[ch] if fill else 0
-        c = c0
-        for r in range(ch * _ROWS, min(m, (ch + 1) * _ROWS)):
-            p = rows[r]
-            if not candidates[p] or labels[p] != 0:
-                continue
-            for e in range(indptr[r], indptr[r + 1]):
-                q = indices[e]
-                if labels[q] > 0:
+                if _pair_ok(mode, lp, labels[q]):
                     if fill:
                         src[c] = p
                         dst[c] = q
@@ -119,9 +113,9 @@ def _two_pass(kernel, *args):
 
 def reintegration_pairs(nbh, candidates, labels):
     """``(src, dst)`` of the edges from an unlabelled `candidates` point to a labelled one."""
-    return _two_pass(reintegration_edges, nbh.indptr, nbh.indices, nbh.query_indices(),
-                     np.ascontiguousarray(candidates, dtype=np.bool_),
-                     np.ascontiguousarray(labels))
+    return _two_pass(pair_edges, nbh.indptr, nbh.indices, nbh.query_indices(),
+                     np.ascontiguousarray(labels),
+                     np.ascontiguousarray(candidates, dtype=np.bool_), REINTEGRATION)
 
 
 @njit
@@ -142,8 +136,9 @@ def label_pairs(nbh, labels, *, different_only=False):
     Default: ``0 < labels[src] < labels[dst]`` (each touching pair of points once per CSR
     direction it appears in); `different_only`: ``labels[src] != labels[dst]``, both > 0.
     """
-    return _two_pass(label_pair_edges, nbh.indptr, nbh.indices, nbh.query_indices(),
-                     np.ascontiguousarray(labels), 1 if different_only else 0)
+    return _two_pass(pair_edges, nbh.indptr, nbh.indices, nbh.query_indices(),
+                     np.ascontiguousarray(labels), np.zeros(0, dtype=np.bool_),
+                     LABELS_DIFFERENT if different_only else LABELS_ASCENDING)
 
 
 @njit_parallel
