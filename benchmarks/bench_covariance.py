@@ -18,7 +18,7 @@ Usage::
 
     python benchmarks/bench_covariance.py                 # 2M points, 3 repeats, JSON + table
     python benchmarks/bench_covariance.py --quick         # 100k points, 1 repeat, no JSON
-    git archive fbdb767 src | tar -x -C /tmp/s4           # an earlier version's sources, then
+    mkdir -p /tmp/s4 && git archive fbdb767 src | tar -x -C /tmp/s4   # an earlier version
     python benchmarks/bench_covariance.py --skip-peers --baseline /tmp/s4/src
                                                           # both versions in one run, alternating
 
