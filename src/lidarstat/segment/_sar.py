@@ -467,14 +467,12 @@ def _kmeans(x, k, iters=20):
 
 
 def _local_normals(xy, z, k=12):
-    """Upward unit normals (n, 3): principal axes of the k nearest points (3-D)."""
-    from scipy.spatial import cKDTree
+    """Upward unit normals (n, 3) of the k nearest points (3-D): the covariance
+    features' normals (:func:`lidarstat.features.covariance_features`, oriented up)."""
+    from ..features import covariance_features
 
-    xyz = np.c_[xy, z]
-    _, nb = cKDTree(xyz).query(xyz, k=min(k, z.size))
-    P = xyz[nb] - xyz[nb].mean(axis=1, keepdims=True)
-    nrm = np.linalg.eigh(np.einsum("nki,nkj->nij", P, P))[1][:, :, 0]
-    return nrm * np.where(nrm[:, 2:3] < 0, -1.0, 1.0)
+    f = covariance_features(np.c_[xy, z], k=min(k, z.size)).fields
+    return np.c_[f["NormalX"], f["NormalY"], f["NormalZ"]]
 
 
 #: Tukey biweight constant (95 % efficiency at the normal) of :func:`_robust_core`.
