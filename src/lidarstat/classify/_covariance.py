@@ -60,6 +60,9 @@ FIELDS = {
     "jump_z": ("float64", "largest range-continuity z of the grid edges"),
     "jump_p": ("float64", "p-value: a depth jump at the point"),
     "jump_resolved_p": ("float64", "p-value: a jump between two resolved surfaces"),
+    "border_distance": ("float64", "distance to the estimated end of the visible surface"),
+    "border_kind": ("uint8", "nearest border: 1 scan window, 2 no return, 3 depth jump"),
+    "border_p": ("float64", "continuity-test p-value of the nearest border (0: observed)"),
 }
 
 
@@ -353,7 +356,7 @@ BOUNDARY_ALPHA = 0.001
 #: false boundaries and finds borders farther inside the neighbourhood.
 SCAN_BOUNDARY_ALPHA = 0.01
 
-BOUNDARY = ("visible", "scan", "centroid")
+BOUNDARY = ("grid", "visible", "scan", "centroid")
 
 #: Default levels of the ``'visible'`` boundary test (the visible disc on the scan grid,
 #: :mod:`._visible`) on surface points and on edge candidates. On a grid the F null is
@@ -366,6 +369,11 @@ VISIBLE_EDGE_BOUNDARY_ALPHA = 0.01
 #: Level of the range-continuity test of one grid edge (a depth jump cuts the visible
 #: disc there).
 JUMP_ALPHA = 0.001
+
+#: The ``'grid'`` boundary test: a point is a boundary when the estimated end of its visible
+#: surface is closer than this share of its neighbourhood's reach (about a fifth of the
+#: neighbourhood's disc is then missing; docs/methods/covariance.md).
+BORDER_BAND = 0.5
 
 #: Default level of the ``'scan'`` boundary test on the points that failed the surface
 #: tests (edge candidates): a neighbourhood cut by the end of the visible surface is a
@@ -462,7 +470,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
                         variance_threshold=None, points=None, curved=None,
                         curved_alpha=None, boundary=None,
                         edge_boundary_alpha="auto", jump_alpha=JUMP_ALPHA,
-                        noise_estimate=None) -> CovarianceClasses:
+                        noise_estimate=None, border_band=BORDER_BAND) -> CovarianceClasses:
     """Label every point surface, edge or boundary from its covariance features.
 
     Parameters
@@ -501,7 +509,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     curved_alpha : float, optional
         Level of test 2 (rejected -> edge). Default: 0.001 (``CURVED_ALPHA``) for the
         cylinder test, `alpha` for the variation test.
-    boundary : {'visible', 'scan', 'centroid'}, optional
+    boundary : {'visible', 'grid', 'scan', 'centroid'}, optional
         Test 3. ``'visible'`` (default when the features were computed with a sensor and
         `points` are given): the Hotelling test of the point's *visible disc*, the grid
         directions within its complete disc reached from it over grid edges without a
@@ -509,13 +517,23 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         over edge); writes ``jump_z`` / ``jump_p`` (range continuity at the point).
         ``'scan'`` (the default with a sensor and no `points`): the same test on the
         complete disc of the kNN table; ``'centroid'``: the paper's eq. 6-8 (with the
-        factor n) in the tangent plane, on surface points.
+        factor n) in the tangent plane, on surface points. ``'grid'`` (opt-in): the
+        distance to the estimated end of the visible surface on the scan grid (a missing
+        return, the scan window, or a depth jump rejected by the continuity test between
+        two surfaces resolved on both sides; :func:`lidarstat.classify._visible.grid_boundary`);
+        a point closer than `border_band` times its neighbourhood's reach is a boundary,
+        whatever its surface tests say; writes ``border_distance``, ``border_kind``,
+        ``border_p`` besides the visible test's fields.
     edge_boundary_alpha : float, None or 'auto'
         With the scan or visible test: level at which a point that failed the surface
         tests (an edge candidate) becomes a boundary ('auto': 0.001 scan, 0.01 visible);
         None: edges stay edges.
     jump_alpha : float
         Level of the range-continuity test of one grid edge (``'visible'``).
+    border_band : float
+        ``'grid'`` test: the share of the neighbourhood's reach within which the end of
+        the visible surface makes a boundary (0.5: about a fifth of the neighbourhood's
+        disc is then missing).
     noise_estimate : {'smooth', 'median'}, optional
         How the range noise is estimated when `sigma` is not given (``noise='range'``):
         ``'smooth'`` (default when `points` are given) from the residuals of the best
@@ -540,16 +558,18 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
                     "visible" if points is not None else "scan")
     if boundary not in BOUNDARY:
         raise InvalidParameterError(
-            f"The 'boundary' parameter of {func} must be one of 'visible', 'scan', "
+            f"The 'boundary' parameter of {func} must be one of 'grid', 'visible', 'scan', "
             f"'centroid'. Got {boundary!r} instead.")
-    if boundary in ("scan", "visible") and not scan_feats:
+    if boundary in ("scan", "visible", "grid") and not scan_feats:
         raise InvalidParameterError(f"{func}: boundary={boundary!r} needs features computed "
                                     "with a sensor")
-    if boundary == "visible" and points is None:
-        raise InvalidParameterError(f"{func}: boundary='visible' needs the `points`")
+    if boundary in ("visible", "grid") and points is None:
+        raise InvalidParameterError(f"{func}: boundary={boundary!r} needs the `points`")
+    border_band = check_scalar(border_band, "border_band", func=func, low=0.0,
+                               closed="neither")
     if boundary_alpha is None:
         boundary_alpha = {"scan": SCAN_BOUNDARY_ALPHA, "visible": VISIBLE_BOUNDARY_ALPHA,
-                          "centroid": BOUNDARY_ALPHA}[boundary]
+                          "grid": VISIBLE_BOUNDARY_ALPHA, "centroid": BOUNDARY_ALPHA}[boundary]
     boundary_alpha = check_scalar(boundary_alpha, "boundary_alpha", func=func, low=0.0, high=1.0)
     jump_alpha = check_scalar(jump_alpha, "jump_alpha", func=func, low=0.0, high=1.0,
                               closed="neither")
@@ -623,8 +643,8 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     extra = {}
     if boundary == "scan":
         t2, boundary_p = scan_boundary_test(features.scan_boundary)
-    elif boundary == "visible":
-        from ._visible import visible_boundary
+    elif boundary in ("visible", "grid"):
+        from ._visible import grid_boundary, visible_boundary
 
         pts = np.asarray(points, dtype=np.float64)
         if pts.shape != (n, 3):
@@ -642,6 +662,10 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
                  "jump_resolved_p": vis["jump_resolved_p"]}
         meta["jump_alpha"] = jump_alpha
         meta["grid_step"] = vis["step"]
+        if boundary == "grid":
+            extra.update(grid_boundary(pts, features.sensor, features.normals, along, vis=vis,
+                                       jump_alpha=jump_alpha, smooth_alpha=alpha))
+            meta["border_band"] = border_band
     else:
         t2, boundary_p = boundary_test(features.offset_uv, evals, counts)
     if curvature_threshold is None:
@@ -682,14 +706,21 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         consistent = f["CurvatureVariance"] <= variance_threshold
     surface = valid & (low | consistent)
     with np.errstate(invalid="ignore"):
-        one_sided = surface & (boundary_p < boundary_alpha)
+        if boundary == "grid":
+            # the end of the visible surface within border_band of the neighbourhood's
+            # reach: a missing return, the scan window or a tested depth jump between two
+            # resolved surfaces (boundary wins over edge, as in the truth)
+            one_sided = valid & (extra["border_distance"]
+                                 < border_band * features.scan_boundary[:, 3])
+        else:
+            one_sided = surface & (boundary_p < boundary_alpha)
         if boundary == "visible":
             # a surface point beside a depth jump is where its visible surface ends: the
             # union of the two tests has level <= boundary_alpha + jump_alpha there (edge
             # candidates are left to the disc test: a face narrower than two grid steps,
             # a soffit or a window jamb, looks like a jump to the continuity test)
             one_sided |= surface & (extra["jump_p"] < jump_alpha)
-        if boundary != "centroid" and edge_boundary_alpha is not None:
+        if boundary in ("scan", "visible") and edge_boundary_alpha is not None:
             one_sided |= valid & ~surface & (boundary_p < edge_boundary_alpha)
             if boundary == "visible":
                 # an edge candidate at a depth jump between two resolved surfaces (both
@@ -747,7 +778,7 @@ def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None
                boundary_alpha=None, curvature_threshold=None, variance_threshold=None,
                curved="cylinder", curved_alpha=None, eigen_mode="raw", keep_neighbors=False,
                progress=None, boundary=None, edge_boundary_alpha="auto", jump_alpha=JUMP_ALPHA,
-               noise_estimate=None):
+               noise_estimate=None, border_band=BORDER_BAND):
     """Covariance features and surface / edge / boundary classes of every point (seed 003).
 
     One call of :func:`lidarstat.features.covariance_features` and
@@ -781,6 +812,7 @@ def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None
                                   curved=curved, curved_alpha=curved_alpha,
                                   boundary=boundary,
                                   edge_boundary_alpha=edge_boundary_alpha,
+                                  border_band=border_band,
                                   jump_alpha=jump_alpha,
                                   noise_estimate=noise_estimate)
     return CovarianceClassification(features=feats, classes=classes)

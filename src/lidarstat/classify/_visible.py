@@ -477,3 +477,251 @@ def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_
                                                     axis=1))
     return {"t2": out[:, 0], "m": out[:, 1], "jump_z": jz, "jump_p": jp, "jump_resolved_p": jr, "step": step,
             "edge_z": z, "edge_p": pe, "adjacency": adj}
+
+
+# ---------------------------------------------------------------------------------------
+# The 'grid' boundary test: the distance to the end of the visible surface (session 6)
+# ---------------------------------------------------------------------------------------
+
+#: The eight unit offsets of a grid node's neighbours, in (azimuth, elevation) steps.
+_DIRS8 = np.array([(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)],
+                  dtype=np.float64)
+#: Border kinds (``border_kind``): no border reached, the scan window, a missing return,
+#: a depth jump found by the continuity test.
+BORDER_NONE, BORDER_WINDOW, BORDER_MISSING, BORDER_JUMP = 0, 1, 2, 3
+
+
+@njit
+def _cubic_z(dirs, s, sig, adj, a, ex, ey, ez, tol2):
+    """|third difference| / sd of s over a and the three nodes continuing the grid line
+    from `a` in the direction (ex, ey, ez): 0 on a surface of constant curvature along the
+    line (to first order); NaN when the line does not continue."""
+    b = _continuation(dirs, adj, a, dirs[a, 0] + ex, dirs[a, 1] + ey, dirs[a, 2] + ez, tol2)
+    if b < 0:
+        return np.nan
+    c = _continuation(dirs, adj, b, dirs[b, 0] + ex, dirs[b, 1] + ey, dirs[b, 2] + ez, tol2)
+    if c < 0:
+        return np.nan
+    d = _continuation(dirs, adj, c, dirs[c, 0] + ex, dirs[c, 1] + ey, dirs[c, 2] + ez, tol2)
+    if d < 0:
+        return np.nan
+    e = s[a] - 3.0 * s[b] + 3.0 * s[c] - s[d]
+    return abs(e) / math.sqrt(sig[a] * sig[a] + 9.0 * sig[b] * sig[b] + 9.0 * sig[c] * sig[c]
+                              + sig[d] * sig[d])
+
+
+@njit
+def _smooth_side(dirs, s, sig, adj, a, ex, ey, ez, tol2, zc):
+    """The grid line from `a` continues on one smooth surface: linear in s over three
+    nodes, or of constant curvature over four (a pipe toward its silhouette)."""
+    if _linear_z(dirs, s, sig, adj, a, ex, ey, ez, tol2) < zc:
+        return True
+    return _cubic_z(dirs, s, sig, adj, a, ex, ey, ez, tol2) < zc
+
+
+@njit_parallel
+def border_edges(dirs, s, sig, adj, cut, zc, out):
+    """Which continuity-test rejections end a visible surface (the ``'grid'`` test).
+
+    ``out[a, k]`` is True where the edge (a, adj[a, k]) failed the continuity test
+    (``cut``), the grid line continues on one smooth surface on *both* sides of it
+    (:func:`_smooth_side` at `zc`: a face narrower than the grid - a soffit row, a jamb
+    seen at grazing incidence - is not resolved and is not a border), and no grid node is
+    a continuous neighbour of both a and b (the jump is not bypassed: a diagonal edge that
+    skips one row of a narrow face is cut, while the two edges over that row are not).
+    """
+    n = adj.shape[0]
+    m = adj.shape[1]
+    for a in prange(n):
+        for k in range(m):
+            out[a, k] = False
+            b = adj[a, k]
+            if b < 0 or not cut[a, k]:
+                continue
+            bypass = False
+            for i in range(m):
+                x = adj[a, i]
+                if x < 0 or cut[a, i]:
+                    continue
+                for j in range(m):
+                    if adj[b, j] == x and not cut[b, j]:
+                        bypass = True
+                        break
+                if bypass:
+                    break
+            if bypass:
+                continue
+            ex, ey, ez, tol2 = _grid_step(dirs, a, b)
+            out[a, k] = (_smooth_side(dirs, s, sig, adj, a, -ex, -ey, -ez, tol2, zc)
+                         and _smooth_side(dirs, s, sig, adj, b, ex, ey, ez, tol2, zc))
+
+
+def grid_coordinates(angles):
+    """Scan-grid coordinates (azimuth, elevation) in radians, the azimuth cut at its
+    largest gap (as :func:`grid_adjacency`), and the azimuth of the cut."""
+    az = np.asarray(angles[:, 0], dtype=np.float64)
+    a = np.sort(az)
+    gaps = np.diff(np.r_[a, a[0] + 2.0 * np.pi])
+    g = int(np.argmax(gaps))
+    cut = float(a[g] + 0.5 * gaps[g])
+    return np.c_[np.mod(az - cut, 2.0 * np.pi), angles[:, 1]], cut
+
+
+def grid_border_points(points, sensor, normals, angles, adj, steps, edges):
+    """Estimated border points of the visible surfaces on a scan grid (``'grid'`` test).
+
+    For every node and each of its eight grid directions: where the direction leaves the
+    scanned window, the node itself is the border (nothing was observed beyond it); where
+    no node answers in that direction (no return) or the edge there is a border edge
+    (`edges`, from :func:`border_edges`), the surface ends somewhere between the node's
+    ray and the next ray, and the estimate is the mid ray's intersection with the node's
+    tangent plane (unbiased for a border uniformly placed between the rays; the node
+    itself when the intersection is behind the sensor or farther than ten grid steps).
+
+    Parameters
+    ----------
+    points : (N, 3) ndarray
+        Coordinates (any origin shared with `sensor`).
+    sensor : (3,) ndarray
+    normals : (N, 3) ndarray
+    angles : (N, 2) ndarray
+        Azimuth and elevation of every point seen from the sensor.
+    adj : (N, SLOTS) ndarray
+        Grid neighbours (:func:`grid_adjacency`).
+    steps : (float, float)
+        Azimuth and elevation steps (radians).
+    edges : (N, SLOTS) bool ndarray
+        Border edges.
+
+    Returns
+    -------
+    border : (B, 3) ndarray
+        Border points.
+    node : (B,) int64 ndarray
+        The node each border point belongs to.
+    kind : (B,) uint8 ndarray
+        ``BORDER_WINDOW``, ``BORDER_MISSING`` or ``BORDER_JUMP``.
+    slot : (B,) int64 ndarray
+        The adjacency slot of the border edge (-1 for the window and missing returns).
+    """
+    n = points.shape[0]
+    s_az, s_el = steps
+    if n == 0 or not (s_az > 0 and s_el > 0):
+        return (np.empty((0, 3)), np.empty(0, np.int64), np.empty(0, np.uint8),
+                np.empty(0, np.int64))
+    xy, az_cut = grid_coordinates(angles)
+    g = np.c_[xy[:, 0] / s_az, xy[:, 1] / s_el]
+    # which of the eight directions each slot's neighbour answers (within 0.6 steps)
+    nb = np.maximum(adj, 0)
+    off = g[nb] - g[:, None, :]
+    dist = np.linalg.norm(off[:, :, None, :] - _DIRS8[None, None], axis=-1)
+    best = np.argmin(dist, axis=2)
+    ok = (adj >= 0) & (np.take_along_axis(dist, best[..., None], 2)[..., 0] < 0.6)
+    rows = np.broadcast_to(np.arange(n)[:, None], adj.shape)
+    covered = np.zeros((n, 8), dtype=bool)
+    covered[rows[ok], best[ok]] = True
+    jump = np.zeros((n, 8), dtype=bool)
+    jslot = np.full((n, 8), -1, dtype=np.int64)
+    sel = ok & edges
+    jump[rows[sel], best[sel]] = True
+    jslot[rows[sel], best[sel]] = np.broadcast_to(np.arange(adj.shape[1]), adj.shape)[sel]
+    lo = g.min(axis=0) - 0.5
+    hi = g.max(axis=0) + 0.5
+    # nodes by their rounded grid position (an isolated missing return, a dropout with a
+    # node two steps on, is not the end of the surface)
+    cell = np.rint(g - lo).astype(np.int64)
+    width = int(cell[:, 1].max()) + 3
+    keys = np.sort(cell[:, 0] * width + cell[:, 1])
+    rng = np.linalg.norm(points - sensor, axis=1)
+    far = 10.0 * rng * max(s_az, s_el)
+    out_p, out_n, out_k, out_s = [], [], [], []
+    for d in range(8):
+        nxt = g + _DIRS8[d]
+        outside = ((nxt < lo) | (nxt > hi)).any(axis=1)
+        win = ~covered[:, d] & outside
+        miss = ~covered[:, d] & ~outside
+        two = cell + 2 * _DIRS8[d].astype(np.int64)
+        k2 = two[:, 0] * width + two[:, 1]
+        pos = np.minimum(np.searchsorted(keys, k2), keys.size - 1)
+        miss &= ~((keys[pos] == k2) & (two[:, 1] >= 0) & (two[:, 1] < width))
+        node = np.flatnonzero(win)
+        out_p.append(points[node])
+        out_n.append(node)
+        out_k.append(np.full(node.size, BORDER_WINDOW, np.uint8))
+        out_s.append(np.full(node.size, -1, np.int64))
+        node = np.flatnonzero(miss | jump[:, d])
+        mg = g[node] + 0.5 * _DIRS8[d]
+        az = mg[:, 0] * s_az + az_cut
+        el = mg[:, 1] * s_el
+        ray = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)]
+        pa = points[node]
+        nrm = normals[node]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.einsum("ij,ij->i", pa - sensor, nrm) / np.einsum("ij,ij->i", ray, nrm)
+        q = sensor + t[:, None] * ray
+        bad = ~(np.isfinite(t) & (t > 0)) | ~(np.linalg.norm(q - pa, axis=1) <= far[node])
+        q[bad] = pa[bad]
+        out_p.append(q)
+        out_n.append(node)
+        out_k.append(np.where(jump[node, d], BORDER_JUMP, BORDER_MISSING).astype(np.uint8))
+        out_s.append(np.where(jump[node, d], jslot[node, d], -1))
+    return (np.concatenate(out_p), np.concatenate(out_n), np.concatenate(out_k),
+            np.concatenate(out_s))
+
+
+def grid_boundary(points, sensor, normals, ray_sigma, *, vis, jump_alpha, smooth_alpha=0.05):
+    """Distance from every point to the nearest estimated end of the visible surface.
+
+    Parameters
+    ----------
+    points : (N, 3) ndarray
+    sensor : (3,) ndarray
+    normals : (N, 3) ndarray
+    ray_sigma : float or (N,) ndarray
+        Range noise std along the rays.
+    vis : dict
+        The output of :func:`visible_boundary` (grid adjacency, steps, edge p-values).
+    jump_alpha : float
+        Level of the continuity test of one grid edge.
+    smooth_alpha : float
+        Level of the smoothness tests on either side of a rejected edge.
+
+    Returns
+    -------
+    dict with ``border_distance`` (m; inf where no border exists), ``border_kind``
+    (uint8: ``BORDER_WINDOW``, ``BORDER_MISSING``, ``BORDER_JUMP``; 0 without a border)
+    and ``border_p`` (the continuity test's p-value of the nearest border's grid edge; 0
+    for the window and missing returns, which are observed, not tested; NaN without a
+    border).
+    """
+    from scipy.spatial import cKDTree
+    from scipy.special import ndtri
+
+    from ..features._scan_kernels import scan_angles
+
+    origin = np.asarray(points[0], dtype=np.float64)
+    pts = np.ascontiguousarray(points - origin)
+    sens = np.asarray(sensor, dtype=np.float64) - origin
+    ray = pts - sens
+    rng = np.linalg.norm(ray, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dirs = np.ascontiguousarray(ray / rng[:, None])
+        sig = np.broadcast_to(np.asarray(ray_sigma, dtype=np.float64), rng.shape) / rng ** 2
+    adj = vis["adjacency"]
+    pe = vis["edge_p"]
+    cut = np.ascontiguousarray((adj >= 0) & (pe < jump_alpha))
+    edges = np.empty(adj.shape, dtype=np.bool_)
+    nrm = np.ascontiguousarray(normals, dtype=np.float64)
+    border_edges(dirs, np.ascontiguousarray(1.0 / rng), np.ascontiguousarray(sig), adj, cut,
+                 float(ndtri(1.0 - smooth_alpha / 2.0)), edges)
+    bp, node, kind, slot = grid_border_points(pts, sens, nrm,
+                                              scan_angles(pts, sens), adj, vis["step"], edges)
+    n = pts.shape[0]
+    dist = np.full(n, np.inf)
+    bkind = np.zeros(n, dtype=np.uint8)
+    bpv = np.full(n, np.nan)
+    if bp.shape[0]:
+        dist, j = cKDTree(bp).query(pts, workers=-1)
+        bkind = kind[j]
+        bpv = np.where(kind[j] == BORDER_JUMP, pe[node[j], np.maximum(slot[j], 0)], 0.0)
+    return {"border_distance": dist, "border_kind": bkind, "border_p": bpv}

@@ -46,7 +46,7 @@ def cmd_covariance(args):
                      variance_threshold=args.variance_threshold, curved=args.curved,
                      curved_alpha=args.curved_alpha, eigen_mode=args.eigen_mode,
                      progress=progress(args.quiet), boundary=args.boundary,
-                     jump_alpha=args.jump_alpha,
+                     jump_alpha=args.jump_alpha, border_band=args.border_band,
                      noise_estimate=args.noise_estimate)
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
@@ -62,6 +62,7 @@ def cmd_covariance(args):
                 "sigma_estimated": c.sigma_estimated, "alpha": c.alpha,
                 "boundary_alpha": c.boundary_alpha, "boundary": c.meta.get("boundary"),
                 "jump_alpha": c.meta.get("jump_alpha"),
+                "border_band": c.meta.get("border_band"),
                 "curved": c.meta.get("curved"),
                 "curved_alpha": c.meta.get("curved_alpha"), "point_class": c.counts()}
         write_summary_json(args.summary_json, meta)
@@ -86,11 +87,18 @@ def register(sub):
     s.add_argument("--alpha", type=float, default=0.05,
                    help="level of the plane and consistent-curvature tests [0.05]")
     add_neighbourhood_arguments(s)
-    s.add_argument("--boundary", choices=("visible", "scan", "centroid"), default=None,
-                   help="boundary test: the visible disc on the scan grid, cut at depth jumps "
-                   "(default with a sensor; on every point), the complete disc of the kNN "
-                   "in scan coordinates, or the paper's centroid test (eq. 6-8, on surface "
-                   "points; the default without a sensor)")
+    s.add_argument("--boundary", choices=("grid", "visible", "scan", "centroid"), default=None,
+                   help="boundary test: 'grid' (opt-in, session 6): the end of the "
+                   "visible surface on the scan grid (no return, scan window, or a tested "
+                   "depth jump between two resolved surfaces) within --border-band of the "
+                   "neighbourhood's reach; 'visible' (default with a sensor): the Hotelling test of "
+                   "the visible disc, cut at depth jumps; 'scan': the complete disc of the kNN in scan "
+                   "coordinates; 'centroid': the paper's test (eq. 6-8, on surface points; "
+                   "the default without a sensor)")
+    s.add_argument("--border-band", type=float, default=0.5,
+                   help="'grid' test: a point is a boundary when the estimated end of its "
+                   "visible surface is closer than this share of its neighbourhood's reach "
+                   "[0.5]")
     s.add_argument("--jump-alpha", type=float, default=0.001,
                    help="level of the range-continuity test of a scan-grid edge (a depth "
                    "jump cuts the visible disc there) [0.001]")
