@@ -120,3 +120,14 @@ def test_neighborhoods_keep_int32_indices():
     assert nb32.indices.dtype == np.int32
     nb16 = Neighborhoods(ptr, np.array([0, 1, 1], dtype=np.int16), np.zeros(3), 2)
     assert nb16.indices.dtype == np.int64
+
+
+def test_row_order_is_a_checked_permutation():
+    ptr = np.array([0, 1, 2, 3])
+    nb = Neighborhoods(ptr, np.array([1, 2, 0]), np.zeros(3), 3, row_order=[2, 0, 1])
+    assert nb.visit_order().tolist() == [2, 0, 1] and nb.row_order.dtype == np.int64
+    assert Neighborhoods(ptr, np.array([1, 2, 0]), np.zeros(3), 3).visit_order().tolist() == \
+        [0, 1, 2]
+    for bad in ([0, 0, 1], [0, 1], [0, 1, 3]):
+        with pytest.raises(InvalidParameterError, match="row_order"):
+            Neighborhoods(ptr, np.array([1, 2, 0]), np.zeros(3), 3, row_order=bad)

@@ -1,5 +1,7 @@
 """The Numba edge selections of the covariance segmentation equal the NumPy masks they replace."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy import special
@@ -11,10 +13,12 @@ from lidarstat.segment._grow import adjacency
 from lidarstat.segment._scales import SCALES, planar_scales, prefix_edges
 
 
-@pytest.fixture(params=["knn", "radius"])
+@pytest.fixture(params=["knn", "radius", "visited"])
 def graph(request, rng):
     pts = np.c_[rng.uniform(0, 4, (1500, 2)), rng.normal(0, 0.01, 1500)]
-    nbh = knn_neighbors(pts, 20) if request.param == "knn" else radius_neighbors(pts, 0.25)
+    nbh = knn_neighbors(pts, 20) if request.param != "radius" else radius_neighbors(pts, 0.25)
+    if request.param == "visited":  # rows visited in another order: the same selections
+        nbh = dataclasses.replace(nbh, row_order=rng.permutation(len(pts)))
     labels = rng.integers(0, 6, len(pts)).astype(np.int32)
     return pts, nbh, labels
 
@@ -71,10 +75,11 @@ def test_adaptive_edges_and_clean_points(rng):
     agree = (kstar[src] == 0) | (kstar[dst] == 0) | (cos >= cmin)
     ref = (surface_prefix_edges(nbh, joinable) & first & surface[src] & agree) | \
         (prefix_edges(nbh, kstar) & smooth)
-    out = np.empty(nbh.nnz, dtype=bool)
-    ek.adaptive_edges(nbh.indptr, nbh.indices, nbh.query_indices(), joinable, surface, kstar,
-                      pn, 12, cmin, out)
-    assert np.array_equal(out, ref)
+    for visit in (np.arange(n), rng.permutation(n)):  # any visiting order: the same mask
+        out = np.empty(nbh.nnz, dtype=bool)
+        ek.adaptive_edges(visit, nbh.indptr, nbh.indices, nbh.query_indices(), joinable,
+                          surface, kstar, pn, 12, cmin, out)
+        assert np.array_equal(out, ref)
     labels = rng.integers(0, 4, n)
     idx = nbh.indices.reshape(n, 20)
     ok = joinable[idx] & (labels[idx] == labels[:, None])
@@ -109,3 +114,7 @@ def test_planar_scales_is_the_largest_accepted_prefix(rng):
     ok = kstar > 0
     assert np.all((p[ok] > 0.05) & (p[ok] <= 1)) and np.isnan(p[~ok]).all()
     assert np.allclose(np.linalg.norm(normal[ok], axis=1), 1.0)
+    # rows visited in another order (the kNN grid order in the segmentation): bit-identical
+    shuffled = dataclasses.replace(nbh, row_order=rng.permutation(n))
+    for a, b in zip((kstar, p, normal), planar_scales(pts, shuffled, sigma, alpha=0.05)):
+        assert np.array_equal(a, b, equal_nan=True)

@@ -235,8 +235,9 @@ def _knn_table(points, k, *, block_size, sort=True, sensor=None, progress=None, 
             progress(int(s1), 2 * n)
     nbh = None
     if sort:
+        # rows visited in the grid order by the row-wise kernels that read them
         nbh = Neighborhoods(np.arange(n + 1, dtype=np.int64) * k, nbr_idx, nbr_dist, n,
-                            kind="knn", k=k)
+                            kind="knn", k=k, row_order=index.order)
     return index, table, nbh, raw
 
 
@@ -383,14 +384,13 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
                                              sort=keep_neighbors, sensor=sensor,
                                              progress=progress)
         origin = index.origin
-        sv = _surface_variation(raw)
         mean_sv = np.empty(n)
         var_sv = np.empty(n)
-        _ck.table_variance(sv, table, mean_sv, var_sv)
         spread = np.empty((n, 4))
-        # a compact copy of the normals: the strided view into `raw` is slower (measured)
-        _ck.normal_spread_table(np.ascontiguousarray(raw[:, _ck.C_NX:_ck.C_NZ + 1]), table,
-                                spread)
+        # eq. 5 variance and normal spread in one pass over the table, from a compact
+        # copy of the normals (the strided view into `raw` is slower: measured)
+        _ck.table_second_pass(raw, table, np.empty(n), np.empty((n, 3)), mean_sv, var_sv,
+                              spread)
         scan = None
         if sensor is not None:
             scan = _scan_rows(index.sorted_points, np.arange(n),

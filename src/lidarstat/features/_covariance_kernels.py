@@ -474,6 +474,46 @@ def neighbourhood_variance(values, indptr, idx, mean_out, var_out):
 
 
 @njit_parallel
+def table_second_pass(raw, nbr, sv, normals, mean_out, var_out, spread):
+    """The second pass over a dense (M, k) neighbour table of sorted positions, in one.
+
+    First every row's surface variation ``sv`` (eq. 4, from the eigenvalue columns of the
+    kernel output `raw`) and a compact copy of its normal (`normals`, (M, 3)), then per
+    row :func:`table_variance` of `sv` and :func:`_normal_spread_one` of the normals into
+    `spread` (M, 4). The same operations as the three separate passes (bit-identical),
+    with one read of the table and no NumPy temporaries.
+    """
+    m = nbr.shape[0]
+    k = nbr.shape[1]
+    for r in prange(m):
+        sv[r] = raw[r, C_L0] / (raw[r, C_L0] + raw[r, C_L1] + raw[r, C_L2])
+        normals[r, 0] = raw[r, C_NX]
+        normals[r, 1] = raw[r, C_NY]
+        normals[r, 2] = raw[r, C_NZ]
+    for r in prange(m):
+        n = 0
+        acc = 0.0
+        for t in range(k):
+            v = sv[nbr[r, t]]
+            if v == v:
+                acc += v
+                n += 1
+        if n == 0:
+            mean_out[r] = np.nan
+            var_out[r] = np.nan
+        else:
+            mu = acc / n
+            acc = 0.0
+            for t in range(k):
+                v = sv[nbr[r, t]]
+                if v == v:
+                    acc += (v - mu) * (v - mu)
+            mean_out[r] = mu
+            var_out[r] = acc / n
+        _normal_spread_one(r, normals, nbr[r], 0, k, spread[r])
+
+
+@njit_parallel
 def table_variance(values, nbr, mean_out, var_out):
     """:func:`neighbourhood_variance` over a dense (M, k) neighbour table."""
     m = nbr.shape[0]

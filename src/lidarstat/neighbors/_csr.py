@@ -39,6 +39,11 @@ class Neighborhoods:
     query : (M,) ndarray of int64 or None
         Indices (into the searched cloud) of the query points, or None when the query
         points are the cloud itself in order.
+    row_order : (M,) ndarray of int64 or None
+        A permutation of the rows that walks them in a spatially coherent order (the
+        kNN search gives its grid order), or None (row order). Kernels whose rows are
+        independent visit the rows in this order so that the neighbours of consecutive
+        rows share cache lines (:meth:`visit_order`); their results never depend on it.
     """
 
     indptr: np.ndarray
@@ -49,6 +54,7 @@ class Neighborhoods:
     radius: float | None = None
     k: int | None = None
     query: np.ndarray | None = field(default=None)
+    row_order: np.ndarray | None = field(default=None)
 
     def __post_init__(self):
         indptr = np.ascontiguousarray(self.indptr, dtype=np.int64)
@@ -78,6 +84,14 @@ class Neighborhoods:
             )
         if self.query is not None and self.query.size != indptr.size - 1:
             raise InvalidParameterError("Neighborhoods: `query` must have one entry per row")
+        if self.row_order is not None:
+            order = np.ascontiguousarray(self.row_order, dtype=np.int64)
+            object.__setattr__(self, "row_order", order)
+            m = indptr.size - 1
+            if order.shape != (m,) or (m and (order.min() < 0 or order.max() >= m
+                                              or np.bincount(order, minlength=m).max() > 1)):
+                raise InvalidParameterError(
+                    "Neighborhoods: `row_order` must be a permutation of the rows")
 
     def __len__(self) -> int:
         return self.indptr.size - 1
@@ -109,6 +123,22 @@ class Neighborhoods:
         """
         src = np.repeat(self.query_indices(), self.counts)
         return src, self.indices
+
+    def visit_order(self) -> np.ndarray:
+        """The rows in the order row-independent kernels should visit them (int64).
+
+        :attr:`row_order` when the producer gave one, else ``0..M-1``.
+
+        Examples
+        --------
+        >>> nb = Neighborhoods(np.array([0, 1, 2]), np.array([1, 0]), np.zeros(2), 2,
+        ...                    row_order=[1, 0])
+        >>> nb.visit_order().tolist()
+        [1, 0]
+        """
+        if self.row_order is None:
+            return np.arange(len(self), dtype=np.int64)
+        return self.row_order
 
     def query_indices(self) -> np.ndarray:
         """Indices of the query points in the searched cloud."""

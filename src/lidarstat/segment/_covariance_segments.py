@@ -55,10 +55,11 @@ def truncate_rows(nbh: Neighborhoods, m: int) -> Neighborhoods:
     if nbh.kind != "knn" or k is None or m >= k:
         return nbh
     n = len(nbh)
-    idx = nbh.indices.reshape(n, k)[:, :m].ravel()
-    d = nbh.distances.reshape(n, k)[:, :m].ravel()
+    idx = np.empty(n * m, dtype=nbh.indices.dtype)
+    d = np.empty(n * m)
+    _ek.first_columns(nbh.indices, nbh.distances, k, m, idx, d)
     return Neighborhoods(np.arange(n + 1, dtype=np.int64) * m, idx, d, nbh.n_points,
-                         kind="knn", k=m, query=nbh.query)
+                         kind="knn", k=m, query=nbh.query, row_order=nbh.row_order)
 
 
 def segment_planes(points, labels):
@@ -497,8 +498,8 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         # lines, always coplanar, so a small prefix can pass the test across the crease.
         # (one Numba pass over the rows: no per-edge arrays besides the mask)
         edge_ok = np.empty(nbh.nnz, dtype=bool)
-        _ek.adaptive_edges(nbh.indptr, nbh.indices, nbh.query_indices(), surface | boundary,
-                           surface | boundary, np.ascontiguousarray(kstar),
+        _ek.adaptive_edges(nbh.visit_order(), nbh.indptr, nbh.indices, nbh.query_indices(),
+                           surface | boundary, surface | boundary, np.ascontiguousarray(kstar),
                            np.ascontiguousarray(pn),
                            int(grow_k), float(np.cos(np.radians(min_angle / 2))), edge_ok)
         labels = grow_regions(nbh, edge_ok, order=order, can_grow=surface | boundary | (kstar > 0),

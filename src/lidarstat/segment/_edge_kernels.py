@@ -7,7 +7,12 @@ once to count and once to fill, so only the selected pairs are stored. Each retu
 exactly what the mask expression it replaces returns (same pairs, in CSR order). Rows are
 independent: the kernels run in parallel over chunks of rows (a count-then-fill kernel
 counts per chunk, then each chunk fills from its prefix-sum offset, so the order is CSR
-order whatever the threads do).
+order whatever the threads do). :func:`adaptive_edges`, whose gathers (the prefix
+normals: 24 bytes a point) do not fit in the cache, visits the rows in the order
+``visit`` (:meth:`lidarstat.neighbors.Neighborhoods.visit_order`: the kNN search's grid
+order), so consecutive rows gather nearby points from cache; the kernels that gather
+only labels or flags read the rows in CSR order (measured faster: the label array stays
+in the cache and the rows stream).
 """
 
 from __future__ import annotations
@@ -151,7 +156,8 @@ def prefix_lengths(indptr, lengths, out):
 
 
 @njit_parallel
-def adaptive_edges(indptr, indices, rows, joinable, surface, kstar, pn, grow_k, cos_min, out):
+def adaptive_edges(visit, indptr, indices, rows, joinable, surface, kstar, pn, grow_k,
+                   cos_min, out):
     """Edges of the scale-adaptive region growing, one pass over the CSR rows.
 
     ``out[e]`` for the entry e (position t in row r of point p, neighbour q) is
@@ -164,8 +170,11 @@ def adaptive_edges(indptr, indices, rows, joinable, surface, kstar, pn, grow_k, 
     * the largest planar prefix of the row: ``t < kstar[r]`` and q has no planar prefix
       (``kstar[q] == 0``) or the two prefix normals agree: ``|pn[p] . pn[q]| >= cos_min``
       (summed as NumPy's einsum does, so equal to it bit for bit here).
+
+    Rows are visited in the order `visit` (a permutation of the rows).
     """
-    for r in prange(indptr.size - 1):
+    for rr in prange(visit.size):
+        r = visit[rr]
         p = rows[r]
         s = indptr[r]
         bad = False
@@ -184,3 +193,13 @@ def adaptive_edges(indptr, indices, rows, joinable, surface, kstar, pn, grow_k, 
             if not ok and t < kp:
                 ok = kstar[q] == 0 or agree
             out[e] = ok
+
+
+@njit_parallel
+def first_columns(indices, distances, k, m, out_idx, out_dist):
+    """The first `m` of every `k` entries of fixed-length rows (a copy in two threads)."""
+    n = indices.size // k
+    for r in prange(n):
+        for t in range(m):
+            out_idx[r * m + t] = indices[r * k + t]
+            out_dist[r * m + t] = distances[r * k + t]

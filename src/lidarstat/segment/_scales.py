@@ -36,8 +36,9 @@ SCALES = (8, 12, 16, 20, 30, 40, 50)
 
 
 @njit_parallel
-def _prefix_planes(pts, indptr, idx, sizes, crit, sig, sensor, has_sensor, kstar, stat,
-                   normal):
+def _prefix_planes(visit, pts, indptr, idx, sizes, crit, sig, sensor, has_sensor, kstar,
+                   stat, normal):
+    """Rows visited in the order `visit` (a permutation; each row is independent)."""
     n = indptr.size - 1
     ns = sizes.size
     nch = (n + _CHUNK - 1) // _CHUNK
@@ -46,7 +47,8 @@ def _prefix_planes(pts, indptr, idx, sizes, crit, sig, sensor, has_sensor, kstar
         ev = np.empty(3)
         evec = np.empty((3, 3))
         mom = np.empty((ns, 9))
-        for i in range(ch * _CHUNK, min(n, (ch + 1) * _CHUNK)):
+        for ii in range(ch * _CHUNK, min(n, (ch + 1) * _CHUNK)):
+            i = visit[ii]
             s = indptr[i]
             cnt = indptr[i + 1] - s
             kstar[i] = 0
@@ -170,7 +172,7 @@ def planar_scales(points, nbh, sigma, *, sensor=None, alpha=0.05, scales=SCALES)
     kstar = np.empty(n, dtype=np.int32)
     stat = np.empty(n)
     normal = np.empty((n, 3))
-    _prefix_planes(local, np.ascontiguousarray(nbh.indptr, dtype=np.int64),
+    _prefix_planes(nbh.visit_order(), local, np.ascontiguousarray(nbh.indptr, dtype=np.int64),
                    np.ascontiguousarray(nbh.indices), sizes, crit, sig, sens,
                    sensor is not None, kstar, stat, normal)
     with np.errstate(invalid="ignore"):
