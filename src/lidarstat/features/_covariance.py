@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._shared import _memory as _mem
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import CellIndex, Neighborhoods
@@ -221,10 +222,11 @@ def _knn_table(points, k, *, block_size, sort=True, sensor=None, progress=None, 
     index = CellIndex(points, cell)
     n = index.n_points
     dtype = np.int32 if n < 2**31 - 1 else np.int64
-    table = np.empty((n, k), dtype=dtype)
-    nbr_idx = np.empty(n * k if sort else 0, dtype=dtype)  # int32: 4 k bytes per point less
-    nbr_dist = np.empty(n * k if sort else 0)
-    raw = np.empty((n, _ck.NCOL))
+    # written once by the kernel, then streamed: ordinary pages (_memory's module doc)
+    table = _mem.empty((n, k), dtype=dtype)
+    nbr_idx = _mem.empty(n * k if sort else 0, dtype=dtype)  # int32: 4 k bytes per point less
+    nbr_dist = _mem.empty(n * k if sort else 0)
+    raw = _mem.empty((n, _ck.NCOL))
     sens = np.zeros(3) if sensor is None else np.asarray(sensor, float) - index.origin
     for c0, c1 in index.cell_blocks(block_size):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
@@ -466,12 +468,12 @@ def _assemble(raw, mean_sv, var_sv, spread, origin, order, *, k, radius, eigen_m
     else:
         source = np.empty_like(order)
         source[order] = np.arange(n)
-    block = np.empty((len(_ck.FIELD_ROWS), n))
-    centroid = np.empty((n, 3))
-    major = np.empty((n, 3))
-    offset_uv = np.empty((n, 2))
-    mean_out = np.empty(n)
-    counts = np.empty(n, dtype=np.int32)
+    block = _mem.empty((len(_ck.FIELD_ROWS), n))
+    centroid = _mem.empty((n, 3))
+    major = _mem.empty((n, 3))
+    offset_uv = _mem.empty((n, 2))
+    mean_out = _mem.empty(n)
+    counts = _mem.empty(n, dtype=np.int32)
     mode = {"raw": _ck.MODE_RAW, "sqrt": _ck.MODE_SQRT, "normalized": _ck.MODE_NORMALIZED}
     with np.errstate(invalid="ignore", divide="ignore"):
         _ck.assemble(raw, mean_sv, var_sv, np.ascontiguousarray(spread), source,

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._shared import _memory as _mem
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import Neighborhoods
@@ -55,8 +56,8 @@ def truncate_rows(nbh: Neighborhoods, m: int) -> Neighborhoods:
     if nbh.kind != "knn" or k is None or m >= k:
         return nbh
     n = len(nbh)
-    idx = np.empty(n * m, dtype=nbh.indices.dtype)
-    d = np.empty(n * m)
+    idx = _mem.empty(n * m, dtype=nbh.indices.dtype)
+    d = _mem.empty(n * m)
     _ek.first_columns(nbh.indices, nbh.distances, k, m, idx, d)
     return Neighborhoods(np.arange(n + 1, dtype=np.int64) * m, idx, d, nbh.n_points,
                          kind="knn", k=m, query=nbh.query, row_order=nbh.row_order)
@@ -497,7 +498,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         # scan whose rows run along a crease, two rows (one per face) are two parallel
         # lines, always coplanar, so a small prefix can pass the test across the crease.
         # (one Numba pass over the rows: no per-edge arrays besides the mask)
-        edge_ok = np.empty(nbh.nnz, dtype=bool)
+        edge_ok = _mem.empty(nbh.nnz, dtype=bool)
         _ek.adaptive_edges(nbh.visit_order(), nbh.indptr, nbh.indices, nbh.query_indices(),
                            surface | boundary, surface | boundary, np.ascontiguousarray(kstar),
                            np.ascontiguousarray(pn),
