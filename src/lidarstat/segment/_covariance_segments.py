@@ -512,7 +512,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         edge_ok = surface_prefix_edges(grow_nbh, surface | boundary)
         labels = grow_regions(grow_nbh, edge_ok, order=order, can_grow=surface,
                               mask=surface | boundary, merge=True, min_size=min_size)
-    normals = feats.normals
+    normals = feats.normals  # one (N, 3) stack for every step below (read only)
     centroids = feats.centroid
     across = seg_sigma
     if classes.meta.get("noise") == "range":
@@ -545,7 +545,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         if nbh.kind == "knn":
             del free, before, new
     labels = merge_coplanar(pts, labels, grow_nbh, max_angle=min_angle / 4,
-                            normals=feats.normals, centroids=feats.centroid)
+                            normals=normals, centroids=feats.centroid)
     from ._cylinders import merge_cylinders
 
     # per-point axes (minimum-curvature directions) of the curved surface points only
@@ -555,10 +555,10 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
     ci_ = np.flatnonzero(curved_pts)
     pdir = np.stack([feats["PrincipalDirX"][ci_], feats["PrincipalDirY"][ci_],
                      feats["PrincipalDirZ"][ci_]], axis=1)
-    pt_axes[ci_] = np.cross(feats.normals[ci_], pdir)
+    pt_axes[ci_] = np.cross(normals[ci_], pdir)
     del pdir, ci_
     labels, cylinders = merge_cylinders(
-        pts, labels, feats.normals, seg_sigma, max_angle=min_angle / 4,
+        pts, labels, normals, seg_sigma, max_angle=min_angle / 4,
         sensor=feats.sensor if classes.meta.get("noise") == "range" else None,
         point_axes=pt_axes)
     from ._cylinders import absorb_into_cylinders, refine_cylinder_table, segment_cylinders
@@ -569,7 +569,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
                                              sensor=csensor)
     if absorbed:
         cylinders = refine_cylinder_table(
-            pts, labels, segment_cylinders(pts, labels, feats.normals, seg_sigma,
+            pts, labels, segment_cylinders(pts, labels, normals, seg_sigma,
                                            sensor=csensor, point_axes=pt_axes),
             seg_sigma, sensor=csensor)
     lines_out = None
