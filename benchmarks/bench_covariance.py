@@ -67,6 +67,7 @@ def child_pieces(args, pts):
     cell size (thinned KD-tree), the grid index (counting sort), the fused kNN +
     covariance + eigen kernel, the second pass over the kNN table (eq. 5 variance, normal
     spread), the output arrays in input order."""
+    from lidarstat._shared import _memory as _mem
     from lidarstat.features import _covariance as C
     from lidarstat.features import _covariance_kernels as ck
     from lidarstat.neighbors import CellIndex
@@ -81,8 +82,8 @@ def child_pieces(args, pts):
     index = CellIndex(pts, cell)
     out["grid_index"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    table = np.empty((n, k), dtype=np.int32)
-    raw = np.empty((n, ck.NCOL))
+    table = _mem.empty((n, k), dtype=np.int32)  # as _knn_table allocates them
+    raw = _mem.empty((n, ck.NCOL))
     for c0, c1 in index.cell_blocks(262144):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
         ck.knn_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
@@ -91,10 +92,8 @@ def child_pieces(args, pts):
                      raw[s0:s1])
     out["knn_covariance_eigen"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    sv = C._surface_variation(raw)
     mean_sv, var_sv, spread = np.empty(n), np.empty(n), np.empty((n, 4))
-    ck.table_variance(sv, table, mean_sv, var_sv)
-    ck.normal_spread_table(np.ascontiguousarray(raw[:, ck.C_NX:ck.C_NZ + 1]), table, spread)
+    ck.table_second_pass(raw, table, np.empty(n), np.empty((n, 3)), mean_sv, var_sv, spread)
     out["second_pass"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     C._assemble(raw, mean_sv, var_sv, spread, index.origin, index.order, k=k, radius=None,

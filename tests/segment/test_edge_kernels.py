@@ -40,6 +40,12 @@ def test_prefix_and_label_selections(graph, rng):
     keep = (la > 0) & (lb > 0) & (la != lb)
     i, j = ek.label_pairs(nbh, labels, different_only=True)
     assert np.array_equal(i, src[keep]) and np.array_equal(j, dst[keep])
+    for wide in (labels.astype(np.int64), labels.astype(np.uint64)):  # gathered as int32
+        i, j = ek.label_pairs(nbh, wide, different_only=True)
+        assert np.array_equal(i, src[keep]) and np.array_equal(j, dst[keep])
+    big = labels.astype(np.int64) * 2**33  # too wide for int32: kept as given
+    i, j = ek.label_pairs(nbh, big, different_only=True)
+    assert np.array_equal(i, src[keep]) and np.array_equal(j, dst[keep])
     cand = rng.random(len(pts)) < 0.3
     use = cand[src] & (labels[dst] > 0) & (labels[src] == 0)
     s, t = ek.reintegration_pairs(nbh, cand, labels)
