@@ -18,8 +18,8 @@ Usage::
 
     python benchmarks/bench_covariance.py                 # 2M points, 3 repeats, JSON + table
     python benchmarks/bench_covariance.py --quick         # 100k points, 1 repeat, no JSON
-    mkdir -p /tmp/s4 && git archive fbdb767 src | tar -x -C /tmp/s4   # an earlier version
-    python benchmarks/bench_covariance.py --skip-peers --baseline /tmp/s4/src
+    mkdir -p /tmp/s5 && git archive 8ddf3ad src | tar -x -C /tmp/s5   # an earlier version
+    python benchmarks/bench_covariance.py --skip-peers --baseline /tmp/s5/src
                                                           # both versions in one run, alternating
 
 With ``--baseline SRC`` the lidarstat runs (features, classification, segmentation) are
@@ -88,7 +88,9 @@ def child_pieces(args, pts):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
         ck.knn_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
                      index.dims, float(index.cell), k, tau0, False, table[s0:s1],
-                     index.order, np.empty(0, np.int64), np.empty(0), np.zeros(3), False,
+                     # the library's argument types (an int64 empty array here compiled
+                     # a second specialisation inside the timing: 13.5 s in session 5)
+                     index.order, np.empty(0, np.int32), np.empty(0), np.zeros(3), False,
                      raw[s0:s1])
     out["knn_covariance_eigen"] = time.perf_counter() - t0
     t0 = time.perf_counter()

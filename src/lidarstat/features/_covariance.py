@@ -386,13 +386,13 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
                                              sort=keep_neighbors, sensor=sensor,
                                              progress=progress)
         origin = index.origin
-        mean_sv = np.empty(n)
-        var_sv = np.empty(n)
-        spread = np.empty((n, 4))
+        mean_sv = _mem.empty(n)
+        var_sv = _mem.empty(n)
+        spread = _mem.empty((n, 4))
         # eq. 5 variance and normal spread in one pass over the table, from a compact
         # copy of the normals (the strided view into `raw` is slower: measured)
-        _ck.table_second_pass(raw, table, np.empty(n), np.empty((n, 3)), mean_sv, var_sv,
-                              spread)
+        _ck.table_second_pass(raw, table, _mem.empty(n), _mem.empty((n, 3)), mean_sv,
+                              var_sv, spread)
         scan = None
         if sensor is not None:
             scan = _scan_rows(index.sorted_points, np.arange(n),
