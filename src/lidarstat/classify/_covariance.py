@@ -442,7 +442,7 @@ def _cylinder_axes(features, query):
                     axis / np.where(bad[:, None], 1.0, nrm))
 
 
-def curved_surface_test(points, features, query, sigma, *, sensor=None):
+def curved_surface_test(points, features, query, sigma, *, sensor=None, return_model=False):
     """p-values of the cylinder test (:mod:`._cylinder`) at the points `query`.
 
     `sigma` (scalar or per point) is along the rays with a `sensor`, else across the
@@ -453,15 +453,21 @@ def curved_surface_test(points, features, query, sigma, *, sensor=None):
     p, radius : (M,) ndarray
         Upper-tail chi-square p-value of the weighted circle-fit residuals and the fitted
         radius of curvature (inf: planar across the axis).
+    centre, axis : (M, 3) ndarray
+        A point of the fitted cylinder's axis (NaN where planar) and its unit axis (the
+        starting axis, to which the radius and centre belong); with `return_model` only.
     """
     from ._cylinder import cylinder_test
 
     indptr, idx = _neighbour_rows(points, features, query)
-    stat, dof, radius = cylinder_test(points, query, indptr, idx,
-                                      _cylinder_axes(features, query), sigma,
-                                      sensor=sensor, refine_axis=True)
+    axes = _cylinder_axes(features, query)
+    stat, dof, radius, centre = cylinder_test(points, query, indptr, idx, axes, sigma,
+                                              sensor=sensor, refine_axis=True,
+                                              return_centre=True)
     with np.errstate(invalid="ignore"):
         p = _sp.chdtrc(np.where(dof > 0, dof, np.nan), stat)
+    if return_model:
+        return p, radius, centre, axes
     return p, radius
 
 
@@ -663,8 +669,6 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         meta["jump_alpha"] = jump_alpha
         meta["grid_step"] = vis["step"]
         if boundary == "grid":
-            extra.update(grid_boundary(pts, features.sensor, features.normals, along, vis=vis,
-                                       jump_alpha=jump_alpha, smooth_alpha=alpha))
             meta["border_band"] = border_band
     else:
         t2, boundary_p = boundary_test(features.offset_uv, evals, counts)
@@ -689,11 +693,14 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         points = _feature_points(points, n, func)
         variation_p = np.full(n, np.nan)
         curv_radius = np.full(n, np.nan)
+        cyl_centre = np.full((n, 3), np.nan)
+        cyl_axis = np.full((n, 3), np.nan)
         query = np.flatnonzero(valid & ~low)
         if query.size:
-            variation_p[query], curv_radius[query] = curved_surface_test(
-                points, features, query, sigma,
-                sensor=features.sensor if noise == "range" else None)
+            variation_p[query], curv_radius[query], cyl_centre[query], cyl_axis[query] = \
+                curved_surface_test(points, features, query, sigma,
+                                    sensor=features.sensor if noise == "range" else None,
+                                    return_model=True)
         meta["curvature_radius"] = curv_radius
         variation_p[valid & low] = 1.0  # not tested: the plane is accepted
     else:
@@ -705,6 +712,17 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     else:
         consistent = f["CurvatureVariance"] <= variance_threshold
     surface = valid & (low | consistent)
+    if boundary == "grid":
+        cylinders = None
+        if curved == "cylinder":
+            # the border of a node on a consistently curved surface is placed on its
+            # fitted cylinder (the silhouette of a pipe), not on its tangent plane
+            on = valid & ~low & consistent
+            cylinders = (np.where(on[:, None], cyl_centre, np.nan), cyl_axis,
+                         np.where(on, curv_radius, np.nan))
+        extra.update(grid_boundary(pts, features.sensor, features.normals, along, vis=vis,
+                                   jump_alpha=jump_alpha, smooth_alpha=alpha,
+                                   cylinders=cylinders))
     with np.errstate(invalid="ignore"):
         if boundary == "grid":
             # the end of the visible surface within border_band of the neighbourhood's

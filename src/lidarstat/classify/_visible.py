@@ -567,7 +567,81 @@ def grid_coordinates(angles):
     return np.c_[np.mod(az - cut, 2.0 * np.pi), angles[:, 1]], cut
 
 
-def grid_border_points(points, sensor, normals, angles, adj, steps, edges):
+def _grid_rays(gpos, steps, az_cut):
+    """Unit ray directions at (fractional) grid positions `gpos` (in steps)."""
+    az = gpos[:, 0] * steps[0] + az_cut
+    el = gpos[:, 1] * steps[1]
+    return np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)]
+
+
+def _ray_cylinder(sensor, ray, centre, axis, radius):
+    """Coefficients of ``A t^2 + 2 B t + C = 0``, the ray ``sensor + t ray`` meeting the
+    cylinder (point `centre` on the axis, unit `axis`, `radius`); it meets the
+    cylinder where ``B^2 - A C >= 0``."""
+    w = sensor - centre
+    wp = w - np.einsum("ij,ij->i", w, axis)[:, None] * axis
+    rp = ray - np.einsum("ij,ij->i", ray, axis)[:, None] * axis
+    return (np.einsum("ij,ij->i", rp, rp), np.einsum("ij,ij->i", wp, rp),
+            np.einsum("ij,ij->i", wp, wp) - radius * radius)
+
+
+#: Bisection steps locating the silhouette ray between a node's ray and the next one.
+_SILHOUETTE_BISECT = 30
+
+
+def cylinder_border(sensor, nodes, gpos, direction, steps, az_cut, centre, axis, radius,
+                    occluded):
+    """Where the visible surface of a node on a circular cylinder ends between its ray
+    (grid position ``gpos``) and the next ray (``gpos + direction``).
+
+    The rays between the two, ``u`` in [0, 1] along the grid line, meet the cylinder
+    while the discriminant ``B^2 - A C`` of :func:`_ray_cylinder` is non-negative. Where
+    the next ray still meets it (or where the surface is cut by a nearer surface in front,
+    `occluded`, up to the silhouette) the end is uniform between the rays and the
+    estimate is the near intersection with the cylinder of the mid ray (of the rays that
+    meet it); else the surface ends at its silhouette, the ray ``u*`` tangent to the
+    cylinder (bisection on the discriminant), at the tangent point ``t = -B / A``.
+
+    Returns the border points and where the model applies (finite cylinder, the node on
+    it within a quarter of the radius, the sensor outside it).
+    """
+    m = nodes.shape[0]
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(radius) & np.isfinite(centre).all(axis=1) & np.isfinite(axis).all(axis=1)
+    c = np.where(ok[:, None], centre, 0.0)
+    a = np.where(ok[:, None], axis, (1.0, 0.0, 0.0))
+    r = np.where(ok, radius, 1.0)
+    rel = nodes - c
+    dist = np.linalg.norm(rel - np.einsum("ij,ij->i", rel, a)[:, None] * a, axis=1)
+    ok &= np.abs(dist - r) < 0.25 * r
+
+    def disc(u):
+        A, B, C = _ray_cylinder(sensor, _grid_rays(gpos + u[:, None] * direction, steps,
+                                                   az_cut), c, a, r)
+        return B * B - A * C
+
+    A0, B0, C0 = _ray_cylinder(sensor, _grid_rays(gpos, steps, az_cut), c, a, r)
+    ok &= C0 > 0
+    inside = disc(np.ones(m)) >= 0
+    lo, hi = np.zeros(m), np.ones(m)
+    for _ in range(_SILHOUETTE_BISECT):
+        mid = 0.5 * (lo + hi)
+        hit = disc(mid) >= 0
+        lo = np.where(hit, mid, lo)
+        hi = np.where(hit, hi, mid)
+    ustar = np.where(inside, 1.0, lo)
+    mid_ray = inside | occluded
+    u = np.where(mid_ray, 0.5 * ustar, ustar)
+    ray = _grid_rays(gpos + u[:, None] * direction, steps, az_cut)
+    A, B, C = _ray_cylinder(sensor, ray, c, a, r)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(mid_ray, (-B - np.sqrt(np.maximum(B * B - A * C, 0.0))) / A, -B / A)
+    ok &= np.isfinite(t) & (t > 0)
+    return sensor + np.where(ok, t, 0.0)[:, None] * ray, ok
+
+
+def grid_border_points(points, sensor, normals, angles, adj, steps, edges, *,
+                       cylinders=None):
     """Estimated border points of the visible surfaces on a scan grid (``'grid'`` test).
 
     For every node and each of its eight grid directions: where the direction leaves the
@@ -650,10 +724,7 @@ def grid_border_points(points, sensor, normals, angles, adj, steps, edges):
         out_k.append(np.full(node.size, BORDER_WINDOW, np.uint8))
         out_s.append(np.full(node.size, -1, np.int64))
         node = np.flatnonzero(miss | jump[:, d])
-        mg = g[node] + 0.5 * _DIRS8[d]
-        az = mg[:, 0] * s_az + az_cut
-        el = mg[:, 1] * s_el
-        ray = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)]
+        ray = _grid_rays(g[node] + 0.5 * _DIRS8[d], steps, az_cut)
         pa = points[node]
         nrm = normals[node]
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -661,6 +732,14 @@ def grid_border_points(points, sensor, normals, angles, adj, steps, edges):
         q = sensor + t[:, None] * ray
         bad = ~(np.isfinite(t) & (t > 0)) | ~(np.linalg.norm(q - pa, axis=1) <= far[node])
         q[bad] = pa[bad]
+        if cylinders is not None:
+            # nodes on a consistently curved surface: the border on their circular cylinder
+            js = adj[node, np.maximum(jslot[node, d], 0)]
+            occluded = jump[node, d] & (rng[js] < rng[node])
+            qc, ok = cylinder_border(sensor, pa, g[node], _DIRS8[d], steps, az_cut,
+                                     *(c[node] for c in cylinders), occluded)
+            ok &= np.linalg.norm(qc - pa, axis=1) <= far[node]
+            q[ok] = qc[ok]
         out_p.append(q)
         out_n.append(node)
         out_k.append(np.where(jump[node, d], BORDER_JUMP, BORDER_MISSING).astype(np.uint8))
@@ -669,7 +748,8 @@ def grid_border_points(points, sensor, normals, angles, adj, steps, edges):
             np.concatenate(out_s))
 
 
-def grid_boundary(points, sensor, normals, ray_sigma, *, vis, jump_alpha, smooth_alpha=0.05):
+def grid_boundary(points, sensor, normals, ray_sigma, *, vis, jump_alpha, smooth_alpha=0.05,
+                  cylinders=None):
     """Distance from every point to the nearest estimated end of the visible surface.
 
     Parameters
@@ -685,6 +765,11 @@ def grid_boundary(points, sensor, normals, ray_sigma, *, vis, jump_alpha, smooth
         Level of the continuity test of one grid edge.
     smooth_alpha : float
         Level of the smoothness tests on either side of a rejected edge.
+    cylinders : tuple of (N, 3), (N, 3), (N,) ndarrays, optional
+        Per point a circular cylinder (a point of its axis, the unit axis, the radius;
+        NaN where the point is not on a consistently curved surface): the border of such
+        a node is placed on its cylinder (:func:`cylinder_border`), else on its tangent
+        plane.
 
     Returns
     -------
@@ -714,8 +799,12 @@ def grid_boundary(points, sensor, normals, ray_sigma, *, vis, jump_alpha, smooth
     nrm = np.ascontiguousarray(normals, dtype=np.float64)
     border_edges(dirs, np.ascontiguousarray(1.0 / rng), np.ascontiguousarray(sig), adj, cut,
                  float(ndtri(1.0 - smooth_alpha / 2.0)), edges)
-    bp, node, kind, slot = grid_border_points(pts, sens, nrm,
-                                              scan_angles(pts, sens), adj, vis["step"], edges)
+    if cylinders is not None:
+        cylinders = (np.asarray(cylinders[0], dtype=np.float64) - origin,
+                     np.asarray(cylinders[1], dtype=np.float64),
+                     np.asarray(cylinders[2], dtype=np.float64))
+    bp, node, kind, slot = grid_border_points(pts, sens, nrm, scan_angles(pts, sens), adj,
+                                              vis["step"], edges, cylinders=cylinders)
     n = pts.shape[0]
     dist = np.full(n, np.inf)
     bkind = np.zeros(n, dtype=np.uint8)
