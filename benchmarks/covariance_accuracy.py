@@ -213,11 +213,7 @@ def grid_errors(cloud, res, grid, sup):
     between them received no grid sample although the truth's bisection between the two
     rays finds it visible, so the truth sees two creases and the grid a jump) and
     misplaced ones (a true border node, its border estimated too near)."""
-    from scipy.spatial import cKDTree
-    from scipy.special import ndtri
-
     from lidarstat.classify import _visible as V
-    from lidarstat.features._scan_kernels import scan_angles
 
     f = res.features
     a, b = grid.meta["range_noise"]
@@ -225,18 +221,10 @@ def grid_errors(cloud, res, grid, sup):
     sb = f.scan_boundary
     vis = V.visible_boundary(cloud.xyz, cloud.scanner, f.normals, f.major, along,
                              sb[:, 2] * sb[:, 3], jump_alpha=grid.meta["jump_alpha"])
-    pts = cloud.xyz - cloud.xyz[0]
-    sens = np.asarray(cloud.scanner) - cloud.xyz[0]
-    r = np.linalg.norm(pts - sens, axis=1)
-    adj = vis["adjacency"]
-    edges = np.empty(adj.shape, dtype=bool)
-    V.border_edges(np.ascontiguousarray((pts - sens) / r[:, None]), 1.0 / r,
-                   np.ascontiguousarray(along / r ** 2), adj,
-                   np.ascontiguousarray((adj >= 0) & (vis["edge_p"] < grid.meta["jump_alpha"])),
-                   float(ndtri(0.975)), edges)
-    bp, node, kind, _ = V.grid_border_points(pts, sens, f.normals, scan_angles(pts, sens),
-                                             adj, vis["step"], edges)
-    j = cKDTree(bp).query(pts)[1]
+    gb = V.grid_boundary(cloud.xyz, cloud.scanner, f.normals, along, vis=vis,
+                         jump_alpha=grid.meta["jump_alpha"], return_borders=True)
+    _, node, kind, _ = gb["borders"]
+    j = gb["nearest"]
     false_node = cloud.fields["boundary"][node[j]] == 0
     pc = grid.point_class
     fp = (pc == 3) & (sup != 3)

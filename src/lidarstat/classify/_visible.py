@@ -70,6 +70,7 @@ import numpy as np
 from numba import prange
 
 from .._shared._jit import njit, njit_parallel
+from ..features._quadric_kernels import _eigh3
 
 #: Grid neighbours kept per point (8-neighbourhood of a regular angular grid).
 SLOTS = 8
@@ -556,6 +557,165 @@ def border_edges(dirs, s, sig, adj, cut, zc, out):
                          and _smooth_side(dirs, s, sig, adj, b, ex, ey, ez, tol2, zc))
 
 
+#: Grid hops of the near surface's plane fit behind a jump (the jamb rule).
+JAMB_HOPS = 3
+#: A perpendicular connecting face whose image would span at most this many grid steps
+#: can lie between two rays without a sample (the jamb rule: 1 = whenever it could).
+JAMB_REACH = 1.0
+
+
+@njit
+def _grid_plane(pts, adj, cut, node, stamp, hops, tol, buf, mark):
+    """Normal of the plane through the grid nodes within `hops` grid edges of `node` that
+    are reached without crossing a cut edge, refitted once without the nodes farther than
+    `tol` from the first plane; (0, 0, 0) with fewer than 6 nodes. ``mark`` holds the
+    visit `stamp` (unique per call)."""
+    buf[0] = node
+    mark[node] = stamp
+    head = 0
+    tail = 1
+    level_end = 1
+    level = 0
+    while head < tail and level < hops:
+        while head < level_end:
+            a = buf[head]
+            head += 1
+            for k in range(adj.shape[1]):
+                b = adj[a, k]
+                if b < 0 or cut[a, k] or mark[b] == stamp or tail >= buf.size:
+                    continue
+                mark[b] = stamp
+                buf[tail] = b
+                tail += 1
+        level_end = tail
+        level += 1
+    cov = np.empty((3, 3))
+    evals = np.empty(3)
+    evecs = np.empty((3, 3))
+    nx = 0.0
+    ny = 0.0
+    nz = 0.0
+    cx = 0.0
+    cy = 0.0
+    cz = 0.0
+    for rnd in range(2):
+        m = 0
+        sx = 0.0
+        sy = 0.0
+        sz = 0.0
+        for t in range(tail):
+            j = buf[t]
+            if rnd == 1 and abs((pts[j, 0] - cx) * nx + (pts[j, 1] - cy) * ny
+                                + (pts[j, 2] - cz) * nz) > tol:
+                continue
+            sx += pts[j, 0]
+            sy += pts[j, 1]
+            sz += pts[j, 2]
+            m += 1
+        if m < 6:
+            return 0.0, 0.0, 0.0
+        cx = sx / m
+        cy = sy / m
+        cz = sz / m
+        for u in range(3):
+            for v in range(3):
+                cov[u, v] = 0.0
+        for t in range(tail):
+            j = buf[t]
+            dx = pts[j, 0] - cx
+            dy = pts[j, 1] - cy
+            dz = pts[j, 2] - cz
+            if rnd == 1 and abs(dx * nx + dy * ny + dz * nz) > tol:
+                continue
+            cov[0, 0] += dx * dx
+            cov[0, 1] += dx * dy
+            cov[0, 2] += dx * dz
+            cov[1, 1] += dy * dy
+            cov[1, 2] += dy * dz
+            cov[2, 2] += dz * dz
+        cov[1, 0] = cov[0, 1]
+        cov[2, 0] = cov[0, 2]
+        cov[2, 1] = cov[1, 2]
+        _eigh3(cov, evals, evecs)
+        nx = evecs[0, 0]
+        ny = evecs[1, 0]
+        nz = evecs[2, 0]
+    return nx, ny, nz
+
+
+@njit_parallel
+def visible_jambs(pts, sensor, dirs, adj, cut, edges, sig_r, hops, reach, nchunk, out):
+    """The jamb rule: which border edges a visible face narrower than the grid explains.
+
+    For a border edge (a, b) let N be the nearer node and F the farther. The near surface's
+    plane is fitted to the grid nodes within `hops` uncut grid edges of N (normal n toward
+    the sensor; the kNN normal beside a recess is tilted by the recess back). A face
+    perpendicular to it that runs from N's edge back to F's depth (a jamb, a sill, a
+    lintel) ends at ``q = N - depth n``. It faces the scanner when q's image lies from N
+    toward F (``proj > 0``, in grid steps along N -> F) and fits between the two rays
+    without a sample when ``proj <= reach``: then the step is two creases around a visible
+    face the grid did not sample, not a border, and ``out[a, k]`` is True.
+    `sig_r` is the range noise per point (the refit's tolerance is three of it).
+    """
+    n = adj.shape[0]
+    for c in prange(nchunk):
+        mark = np.full(n, -1, dtype=np.int64)
+        buf = np.empty((2 * hops + 1) * (2 * hops + 1) + 8, dtype=np.int64)
+        for a in range(c, n, nchunk):
+            for k in range(adj.shape[1]):
+                out[a, k] = False
+                b = adj[a, k]
+                if b < 0 or not edges[a, k]:
+                    continue
+                ra = math.sqrt((pts[a, 0] - sensor[0]) ** 2 + (pts[a, 1] - sensor[1]) ** 2
+                               + (pts[a, 2] - sensor[2]) ** 2)
+                rb = math.sqrt((pts[b, 0] - sensor[0]) ** 2 + (pts[b, 1] - sensor[1]) ** 2
+                               + (pts[b, 2] - sensor[2]) ** 2)
+                near = a if ra <= rb else b
+                far = b if ra <= rb else a
+                nx, ny, nz = _grid_plane(pts, adj, cut, near, a * adj.shape[1] + k, hops,
+                                         3.0 * sig_r[near], buf, mark)
+                if nx == 0.0 and ny == 0.0 and nz == 0.0:
+                    continue
+                if (nx * (sensor[0] - pts[near, 0]) + ny * (sensor[1] - pts[near, 1])
+                        + nz * (sensor[2] - pts[near, 2])) < 0:
+                    nx, ny, nz = -nx, -ny, -nz
+                depth = -((pts[far, 0] - pts[near, 0]) * nx + (pts[far, 1] - pts[near, 1]) * ny
+                          + (pts[far, 2] - pts[near, 2]) * nz)
+                if not depth > 0:
+                    continue
+                qx = pts[near, 0] - depth * nx - sensor[0]
+                qy = pts[near, 1] - depth * ny - sensor[1]
+                qz = pts[near, 2] - depth * nz - sensor[2]
+                qn = math.sqrt(qx * qx + qy * qy + qz * qz)
+                # the image direction across the step: the mean offset of N's grid
+                # neighbours beyond it (perpendicular to the step's image for a straight
+                # step, whichever grid edge crosses it)
+                ex = 0.0
+                ey = 0.0
+                ez = 0.0
+                mc = 0
+                for i in range(adj.shape[1]):
+                    x = adj[near, i]
+                    if x < 0 or not cut[near, i]:
+                        continue
+                    ex += dirs[x, 0] - dirs[near, 0]
+                    ey += dirs[x, 1] - dirs[near, 1]
+                    ez += dirs[x, 2] - dirs[near, 2]
+                    mc += 1
+                if mc == 0:
+                    continue
+                ex /= mc
+                ey /= mc
+                ez /= mc
+                ee = ex * ex + ey * ey + ez * ez
+                if not (qn > 0 and ee > 0):
+                    continue
+                proj = ((qx / qn - dirs[near, 0]) * ex + (qy / qn - dirs[near, 1]) * ey
+                        + (qz / qn - dirs[near, 2]) * ez) / ee
+                out[a, k] = 0.0 < proj <= reach
+
+
 def grid_coordinates(angles):
     """Scan-grid coordinates (azimuth, elevation) in radians, the azimuth cut at its
     largest gap (as :func:`grid_adjacency`), and the azimuth of the cut."""
@@ -749,7 +909,7 @@ def grid_border_points(points, sensor, normals, angles, adj, steps, edges, *,
 
 
 def grid_boundary(points, sensor, normals, ray_sigma, *, vis, jump_alpha, smooth_alpha=0.05,
-                  cylinders=None):
+                  cylinders=None, jamb_reach=None, return_borders=False):
     """Distance from every point to the nearest estimated end of the visible surface.
 
     Parameters
@@ -777,7 +937,9 @@ def grid_boundary(points, sensor, normals, ray_sigma, *, vis, jump_alpha, smooth
     (uint8: ``BORDER_WINDOW``, ``BORDER_MISSING``, ``BORDER_JUMP``; 0 without a border)
     and ``border_p`` (the continuity test's p-value of the nearest border's grid edge; 0
     for the window and missing returns, which are observed, not tested; NaN without a
-    border).
+    border). With `return_borders`, also ``borders``: the border points, their nodes,
+    kinds and adjacency slots (:func:`grid_border_points`), and ``nearest``: the index of
+    each point's nearest border point.
     """
     from scipy.spatial import cKDTree
     from scipy.special import ndtri
@@ -799,6 +961,17 @@ def grid_boundary(points, sensor, normals, ray_sigma, *, vis, jump_alpha, smooth
     nrm = np.ascontiguousarray(normals, dtype=np.float64)
     border_edges(dirs, np.ascontiguousarray(1.0 / rng), np.ascontiguousarray(sig), adj, cut,
                  float(ndtri(1.0 - smooth_alpha / 2.0)), edges)
+    if jamb_reach is None:
+        jamb_reach = JAMB_REACH
+    if jamb_reach > 0:
+        import numba
+
+        jamb = np.empty(adj.shape, dtype=np.bool_)
+        visible_jambs(pts, sens, dirs, adj, cut, edges,
+                      np.ascontiguousarray(np.broadcast_to(np.asarray(ray_sigma, np.float64),
+                                                           rng.shape)),
+                      JAMB_HOPS, float(jamb_reach), 4 * numba.get_num_threads(), jamb)
+        edges &= ~jamb
     if cylinders is not None:
         cylinders = (np.asarray(cylinders[0], dtype=np.float64) - origin,
                      np.asarray(cylinders[1], dtype=np.float64),
@@ -813,4 +986,8 @@ def grid_boundary(points, sensor, normals, ray_sigma, *, vis, jump_alpha, smooth
         dist, j = cKDTree(bp).query(pts, workers=-1)
         bkind = kind[j]
         bpv = np.where(kind[j] == BORDER_JUMP, pe[node[j], np.maximum(slot[j], 0)], 0.0)
-    return {"border_distance": dist, "border_kind": bkind, "border_p": bpv}
+    out = {"border_distance": dist, "border_kind": bkind, "border_p": bpv}
+    if return_borders:
+        out["borders"] = (bp, node, kind, slot)
+        out["nearest"] = j if bp.shape[0] else np.full(n, -1, dtype=np.int64)
+    return out
