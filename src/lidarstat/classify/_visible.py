@@ -487,9 +487,118 @@ def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_
 #: The eight unit offsets of a grid node's neighbours, in (azimuth, elevation) steps.
 _DIRS8 = np.array([(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)],
                   dtype=np.float64)
+#: The slot of the opposite direction.
+_OPPOSITE = np.array([1, 0, 3, 2, 7, 6, 5, 4])
 #: Border kinds (``border_kind``): no border reached, the scan window, a missing return,
 #: a depth jump found by the continuity test.
 BORDER_NONE, BORDER_WINDOW, BORDER_MISSING, BORDER_JUMP = 0, 1, 2, 3
+#: Half-width (grid steps, per axis) of the cell around ``node + direction`` in which a node
+#: answers that grid direction (:func:`direction_coverage`).
+COVER_STEPS = 0.75
+
+
+def _ring_residual(g, s, v, ans, a, c):
+    """Residual of ``s[c]`` from the plane ``s`` ~ grid position fitted at `a` to its
+    answering nodes ``ans[a]`` (least squares, through ``s[a]``), and its variance (`v`:
+    the variances of s). 0 and inf where the answers do not span the plane."""
+    nb = ans[a]
+    m = nb >= 0
+    nbc = np.where(m, nb, 0)
+    x = np.where(m[..., None], g[nbc] - g[a, None, :], 0.0)
+    xtx = np.einsum("pki,pkj->pij", x, x)
+    det = xtx[:, 0, 0] * xtx[:, 1, 1] - xtx[:, 0, 1] ** 2
+    good = det > 1e-6
+    det = np.where(good, det, 1.0)
+    inv = np.stack([np.stack([xtx[:, 1, 1], -xtx[:, 0, 1]], -1),
+                    np.stack([-xtx[:, 0, 1], xtx[:, 0, 0]], -1)], 1) / det[:, None, None]
+    w = np.einsum("pki,pij,pj->pk", x, inv, g[c] - g[a])      # pred = s_a + w . (s_nb - s_a)
+    w = np.where(m, w, 0.0)
+    sw = w.sum(axis=1)
+    e = s[c] - (1.0 - sw) * s[a] - (w * s[nbc]).sum(axis=1)
+    var = v[c] + (1.0 - sw) ** 2 * v[a] + (w * w * v[nbc]).sum(axis=1)
+    return np.where(good, e, 0.0), np.where(good, var, np.inf)
+
+
+def direction_coverage(g, s=None, sig=None, zc=np.inf):
+    """Which of the eight grid directions of every node a node answers, and which of the
+    unanswered ones are isolated dropouts.
+
+    A real scanner's grid is not a lattice: the pump scan's columns (one azimuth each) are
+    regular in elevation but each with its own elevation phase, so the nodes of the next
+    column sit anywhere between the diagonal and the horizontal direction. Direction ``d``
+    (a unit offset in (azimuth, elevation) steps) is *answered* when a node lies in the
+    cell ``|g' - (g + d)| <= COVER_STEPS`` (per axis, Chebyshev): the cells of neighbouring
+    directions overlap by half a step, so a node of the next column at any phase answers
+    the horizontal direction and one of the diagonals and, with its column neighbour, the
+    other. An unanswered direction is an isolated *dropout* (a missing return on a
+    surface that goes on, not a border) when a node c answers ``2 d`` and the inverse range
+    `s` is continuous across the gap: s[c] is predicted from the plane (in grid position)
+    fitted at the node to the nodes answering it, s[node] from the plane at c, and the gap
+    is a jump when both residuals exceed `zc` standard deviations (`sig`: the noise std of
+    `s`) in the same sense (s[c] beyond both extrapolations; on a smoothly curved surface
+    the two bracket it, as in the continuity test of a grid edge). Without `s` (or where
+    the answers do not span a plane) the node beyond the gap alone makes a dropout.
+
+    Parameters
+    ----------
+    g : (N, 2) ndarray
+        Grid positions (azimuth and elevation divided by their steps).
+    s, sig : (N,) ndarray, optional
+        Inverse range and its noise std.
+    zc : float
+        Critical |z| of the continuity test across a gap.
+
+    Returns
+    -------
+    covered, dropout : (N, 8) bool ndarrays
+
+    Examples
+    --------
+    >>> az, el = np.meshgrid(np.arange(6.0), np.arange(5.0), indexing="ij")
+    >>> g = np.c_[az.ravel(), el.ravel() + 0.5 * (az.ravel() % 2)]  # columns offset 0.5
+    >>> covered, _ = direction_coverage(g)
+    >>> bool(covered[2 * 5 + 2].all())     # an inner node: all eight answered
+    True
+    >>> g = np.delete(np.c_[az.ravel(), el.ravel()], 3 * 5 + 2, axis=0)  # one dropout
+    >>> covered, dropout = direction_coverage(g)
+    >>> (~covered[2 * 5 + 2]).nonzero()[0], bool(dropout[2 * 5 + 2, 0])
+    (array([0]), True)
+    """
+    from scipy.spatial import cKDTree
+
+    n = g.shape[0]
+    covered = np.zeros((n, 8), dtype=bool)
+    dropout = np.zeros((n, 8), dtype=bool)
+    if n == 0:
+        return covered, dropout
+    tree = cKDTree(g)
+
+    def answer(at):
+        _, j = tree.query(at, k=1, p=np.inf, distance_upper_bound=COVER_STEPS, workers=-1)
+        return np.where(j < n, j, -1)
+
+    ans = np.stack([answer(g + _DIRS8[d]) for d in range(8)], axis=1)
+    covered[:] = ans >= 0
+    for d in range(8):
+        a = np.flatnonzero(~covered[:, d])
+        if a.size == 0:
+            continue
+        dv = _DIRS8[d]
+        c = answer(g[a] + 2.0 * dv)
+        has = c >= 0
+        a, c = a[has], c[has]
+        ok = np.ones(a.size, dtype=bool)
+        if s is not None:
+            v = np.asarray(sig, dtype=np.float64) ** 2
+            e1, v1 = _ring_residual(g, s, v, ans, a, c)
+            e2, v2 = _ring_residual(g, s, v, ans, c, a)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                z1 = e1 / np.sqrt(v1)
+                z2 = -e2 / np.sqrt(v2)
+            # a jump: the range across the gap is off both sides' planes in the same sense
+            ok = ~((np.sign(z1) == np.sign(z2)) & (np.minimum(np.abs(z1), np.abs(z2)) >= zc))
+        dropout[a[ok], d] = True
+    return covered, dropout
 
 
 @njit
@@ -801,12 +910,13 @@ def cylinder_border(sensor, nodes, gpos, direction, steps, az_cut, centre, axis,
 
 
 def grid_border_points(points, sensor, normals, angles, adj, steps, edges, *,
-                       cylinders=None):
+                       cylinders=None, ray_sigma=None, gap_alpha=0.001):
     """Estimated border points of the visible surfaces on a scan grid (``'grid'`` test).
 
     For every node and each of its eight grid directions: where the direction leaves the
     scanned window, the node itself is the border (nothing was observed beyond it); where
-    no node answers in that direction (no return) or the edge there is a border edge
+    no node answers in that direction (:func:`direction_coverage`: no return, and not an
+    isolated dropout on a surface that goes on) or the edge there is a border edge
     (`edges`, from :func:`border_edges`), the surface ends somewhere between the node's
     ray and the next ray, and the estimate is the mid ray's intersection with the node's
     tangent plane (unbiased for a border uniformly placed between the rays; the node
@@ -826,6 +936,12 @@ def grid_border_points(points, sensor, normals, angles, adj, steps, edges, *,
         Azimuth and elevation steps (radians).
     edges : (N, SLOTS) bool ndarray
         Border edges.
+    ray_sigma : float or (N,) ndarray, optional
+        Range noise std along the rays; with it a single missing node is a dropout only
+        where the range is continuous across it (test at `gap_alpha`, two-sided), without
+        it wherever a node answers two steps on.
+    gap_alpha : float
+        Level of that continuity test.
 
     Returns
     -------
@@ -845,15 +961,22 @@ def grid_border_points(points, sensor, normals, angles, adj, steps, edges, *,
                 np.empty(0, np.int64))
     xy, az_cut = grid_coordinates(angles)
     g = np.c_[xy[:, 0] / s_az, xy[:, 1] / s_el]
-    # which of the eight directions each slot's neighbour answers (within 0.6 steps)
+    rng = np.linalg.norm(points - sensor, axis=1)
+    if ray_sigma is None:
+        covered, dropout = direction_coverage(g)
+    else:
+        from scipy.special import ndtri
+
+        sig = np.broadcast_to(np.asarray(ray_sigma, dtype=np.float64), rng.shape) / rng ** 2
+        covered, dropout = direction_coverage(g, 1.0 / rng, sig,
+                                              float(ndtri(1.0 - gap_alpha / 2.0)))
+    # the direction of each slot's border edge (its neighbour's offset rounded, 0.6 steps)
     nb = np.maximum(adj, 0)
     off = g[nb] - g[:, None, :]
     dist = np.linalg.norm(off[:, :, None, :] - _DIRS8[None, None], axis=-1)
     best = np.argmin(dist, axis=2)
     ok = (adj >= 0) & (np.take_along_axis(dist, best[..., None], 2)[..., 0] < 0.6)
     rows = np.broadcast_to(np.arange(n)[:, None], adj.shape)
-    covered = np.zeros((n, 8), dtype=bool)
-    covered[rows[ok], best[ok]] = True
     jump = np.zeros((n, 8), dtype=bool)
     jslot = np.full((n, 8), -1, dtype=np.int64)
     sel = ok & edges
@@ -861,23 +984,13 @@ def grid_border_points(points, sensor, normals, angles, adj, steps, edges, *,
     jslot[rows[sel], best[sel]] = np.broadcast_to(np.arange(adj.shape[1]), adj.shape)[sel]
     lo = g.min(axis=0) - 0.5
     hi = g.max(axis=0) + 0.5
-    # nodes by their rounded grid position (an isolated missing return, a dropout with a
-    # node two steps on, is not the end of the surface)
-    cell = np.rint(g - lo).astype(np.int64)
-    width = int(cell[:, 1].max()) + 3
-    keys = np.sort(cell[:, 0] * width + cell[:, 1])
-    rng = np.linalg.norm(points - sensor, axis=1)
     far = 10.0 * rng * max(s_az, s_el)
     out_p, out_n, out_k, out_s = [], [], [], []
     for d in range(8):
         nxt = g + _DIRS8[d]
         outside = ((nxt < lo) | (nxt > hi)).any(axis=1)
         win = ~covered[:, d] & outside
-        miss = ~covered[:, d] & ~outside
-        two = cell + 2 * _DIRS8[d].astype(np.int64)
-        k2 = two[:, 0] * width + two[:, 1]
-        pos = np.minimum(np.searchsorted(keys, k2), keys.size - 1)
-        miss &= ~((keys[pos] == k2) & (two[:, 1] >= 0) & (two[:, 1] < width))
+        miss = ~covered[:, d] & ~outside & ~dropout[:, d]
         node = np.flatnonzero(win)
         out_p.append(points[node])
         out_n.append(node)
@@ -977,7 +1090,8 @@ def grid_boundary(points, sensor, normals, ray_sigma, *, vis, jump_alpha, smooth
                      np.asarray(cylinders[1], dtype=np.float64),
                      np.asarray(cylinders[2], dtype=np.float64))
     bp, node, kind, slot = grid_border_points(pts, sens, nrm, scan_angles(pts, sens), adj,
-                                              vis["step"], edges, cylinders=cylinders)
+                                              vis["step"], edges, cylinders=cylinders,
+                                              ray_sigma=ray_sigma, gap_alpha=jump_alpha)
     n = pts.shape[0]
     dist = np.full(n, np.inf)
     bkind = np.zeros(n, dtype=np.uint8)
