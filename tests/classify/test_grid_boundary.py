@@ -232,3 +232,38 @@ def test_grid_test_on_a_jittered_grid_with_dropouts():
     near = win < 0.4 * rk
     assert near.sum() > 300
     assert np.mean(bnd[near]) > 0.97, np.mean(bnd[near])
+
+
+def test_dropouts_need_a_continuous_range():
+    """An isolated missing node on a smooth surface (a plane, and a strongly curved one:
+    s quadratic in the grid position) is a dropout, not a border: the rate of 'jump' among
+    the directions facing a dropout is within the binomial bound of the level (the test is
+    conservative); across a depth step of 20 noise sd a single missing node is a border
+    on every such direction."""
+    from scipy.special import ndtri
+
+    from lidarstat.classify._visible import direction_coverage
+
+    rng = np.random.default_rng(11)
+    x, y = np.meshgrid(np.arange(90.0), np.arange(90.0), indexing="ij")
+    x, y = x.ravel(), y.ravel()
+    hole = (x % 3 == 1) & (y % 3 == 1) & (x > 0) & (x < 89) & (y > 0) & (y < 89)
+    g = np.c_[x, y][~hole]
+    sig = np.full(g.shape[0], 1e-4)
+    alpha = 0.01
+    zc = float(ndtri(1 - alpha / 2))
+    for s in (0.2 + 1e-3 * g[:, 0] - 5e-4 * g[:, 1],
+              0.2 + 2e-4 * (g[:, 0] - 45) ** 2 + 1e-4 * g[:, 0] * g[:, 1]):
+        s = s + rng.normal(0.0, 1e-4, s.shape)
+        covered, dropout = direction_coverage(g, s, sig, zc)
+        facing = ~covered & ((g > 1) & (g < 88)).all(axis=1)[:, None]
+        assert facing.sum() > 5000
+        rate = 1.0 - np.mean(dropout[facing])
+        assert rate <= alpha + 3.3 * np.sqrt(alpha * (1 - alpha) / facing.sum()), rate
+    s = 0.2 + 1e-3 * g[:, 0] + 2e-3 * (g[:, 0] > 46) + rng.normal(0.0, 1e-4, g.shape[0])
+    covered, dropout = direction_coverage(g, s, sig, zc)
+    across = ~covered[:, 0] & (g[:, 0] == 45) & (g[:, 1] > 1) & (g[:, 1] < 88)
+    assert across.sum() >= 25
+    assert not dropout[across, 0].any()
+    covered, dropout = direction_coverage(g)  # without the range: presence only
+    assert dropout[across, 0].all()

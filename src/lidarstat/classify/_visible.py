@@ -499,12 +499,15 @@ COVER_STEPS = 0.75
 
 def _ring_residual(g, s, v, ans, a, c):
     """Residual of ``s[c]`` from the plane ``s`` ~ grid position fitted at `a` to its
-    answering nodes ``ans[a]`` (least squares, through ``s[a]``), and its variance (`v`:
-    the variances of s). 0 and inf where the answers do not span the plane."""
+    answering nodes ``ans[a]`` that do not lie toward `c` (less than half a step along
+    a -> c: the plane is not fitted across the gap; least squares through ``s[a]``), and
+    its variance (`v`: the variances of s). 0 and inf where they do not span the plane."""
     nb = ans[a]
-    m = nb >= 0
-    nbc = np.where(m, nb, 0)
-    x = np.where(m[..., None], g[nbc] - g[a, None, :], 0.0)
+    nbc = np.maximum(nb, 0)
+    x = g[nbc] - g[a, None, :]
+    u = g[c] - g[a]
+    m = (nb >= 0) & (np.einsum("pki,pi->pk", x, u) < 0.25 * np.einsum("pi,pi->p", u, u)[:, None])
+    x = np.where(m[..., None], x, 0.0)
     xtx = np.einsum("pki,pkj->pij", x, x)
     det = xtx[:, 0, 0] * xtx[:, 1, 1] - xtx[:, 0, 1] ** 2
     good = det > 1e-6
