@@ -221,8 +221,17 @@ def grid_errors(cloud, res, grid, sup):
     sb = f.scan_boundary
     vis = V.visible_boundary(cloud.xyz, cloud.scanner, f.normals, f.major, along,
                              sb[:, 2] * sb[:, 3], jump_alpha=grid.meta["jump_alpha"])
+    cyl = None
+    if "curvature_centre" in grid.meta:  # borders of curved-surface nodes on their cylinder
+        from lidarstat.classify._covariance import grid_cylinders
+
+        with np.errstate(invalid="ignore"):
+            on = ((grid.fields["plane_p"] < grid.alpha)
+                  & (grid.fields["variation_p"] >= grid.meta["curved_alpha"]))
+        cyl = grid_cylinders(grid.meta, on)
     gb = V.grid_boundary(cloud.xyz, cloud.scanner, f.normals, along, vis=vis,
-                         jump_alpha=grid.meta["jump_alpha"], return_borders=True)
+                         jump_alpha=grid.meta["jump_alpha"], cylinders=cyl,
+                         return_borders=True)
     _, node, kind, _ = gb["borders"]
     j = gb["nearest"]
     false_node = cloud.fields["boundary"][node[j]] == 0

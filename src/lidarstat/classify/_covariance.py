@@ -471,6 +471,14 @@ def curved_surface_test(points, features, query, sigma, *, sensor=None, return_m
     return p, radius
 
 
+def grid_cylinders(meta, on):
+    """The per-point cylinders of the ``'grid'`` test's border placement: the cylinder
+    test's fits (``meta`` of :class:`CovarianceClasses`) where `on` (consistently curved
+    surface points), NaN elsewhere."""
+    return (np.where(on[:, None], meta["curvature_centre"], np.nan), meta["curvature_axis"],
+            np.where(on, meta["curvature_radius"], np.nan))
+
+
 def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
                         boundary_alpha=None, curvature_threshold=None,
                         variance_threshold=None, points=None, curved=None,
@@ -702,6 +710,10 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
                                     sensor=features.sensor if noise == "range" else None,
                                     return_model=True)
         meta["curvature_radius"] = curv_radius
+        # the fitted cylinders (a point of the axis, the unit axis), with the radius the
+        # model on which the 'grid' test places the borders of curved-surface nodes
+        meta["curvature_centre"] = cyl_centre
+        meta["curvature_axis"] = cyl_axis
         variation_p[valid & low] = 1.0  # not tested: the plane is accepted
     else:
         ratio = variation_ratio(features.mean_variation, f["CurvatureVariance"])
@@ -717,9 +729,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         if curved == "cylinder":
             # the border of a node on a consistently curved surface is placed on its
             # fitted cylinder (the silhouette of a pipe), not on its tangent plane
-            on = valid & ~low & consistent
-            cylinders = (np.where(on[:, None], cyl_centre, np.nan), cyl_axis,
-                         np.where(on, curv_radius, np.nan))
+            cylinders = grid_cylinders(meta, valid & ~low & consistent)
         extra.update(grid_boundary(pts, features.sensor, features.normals, along, vis=vis,
                                    jump_alpha=jump_alpha, smooth_alpha=alpha,
                                    cylinders=cylinders))

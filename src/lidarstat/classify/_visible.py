@@ -857,8 +857,10 @@ def _ray_cylinder(sensor, ray, centre, axis, radius):
             np.einsum("ij,ij->i", wp, wp) - radius * radius)
 
 
-#: Bisection steps locating the silhouette ray between a node's ray and the next one.
+#: Bisection steps locating the silhouette ray within its grid step.
 _SILHOUETTE_BISECT = 30
+#: Grid steps on either side of a node within which its cylinder's silhouette is sought.
+_SILHOUETTE_REACH = 2
 
 
 def cylinder_border(sensor, nodes, gpos, direction, steps, az_cut, centre, axis, radius,
@@ -866,20 +868,25 @@ def cylinder_border(sensor, nodes, gpos, direction, steps, az_cut, centre, axis,
     """Where the visible surface of a node on a circular cylinder ends between its ray
     (grid position ``gpos``) and the next ray (``gpos + direction``).
 
-    The rays between the two, ``u`` in [0, 1] along the grid line, meet the cylinder
-    while the discriminant ``B^2 - A C`` of :func:`_ray_cylinder` is non-negative. Where
-    the next ray still meets it (or where the surface is cut by a nearer surface in front,
-    `occluded`, up to the silhouette) the end is uniform between the rays and the
-    estimate is the near intersection with the cylinder of the mid ray (of the rays that
-    meet it); else the surface ends at its silhouette, the ray ``u*`` tangent to the
-    cylinder (bisection on the discriminant), at the tangent point ``t = -B / A``.
+    The rays ``u`` along the grid line (``u = 0`` the node's ray, ``u = 1`` the next)
+    meet the cylinder while the discriminant ``B^2 - A C`` of :func:`_ray_cylinder` is
+    non-negative. Where the surface is cut by a nearer surface in front (`occluded`),
+    the end is the occluder's shadow, uniform between the node's ray and the next ray (or
+    the silhouette, if nearer), and the estimate is the near intersection with the
+    cylinder of the mid ray. Else the surface ends at its silhouette: the ray ``u*``
+    where the discriminant vanishes (bisection), at the tangent point ``t = -B / A``.
+    ``u*`` is searched within ``_SILHOUETTE_REACH`` grid steps on either side of the
+    node: it moves by about a step for a radius error of ``range x step``, while the 3-D
+    tangent point moves only by about the radius error. Without a silhouette there (the
+    end of a pipe), the mid ray's intersection.
 
     Returns the border points and where the model applies (finite cylinder, the node on
     it within a quarter of the radius, the sensor outside it).
     """
     m = nodes.shape[0]
     with np.errstate(invalid="ignore"):
-        ok = np.isfinite(radius) & np.isfinite(centre).all(axis=1) & np.isfinite(axis).all(axis=1)
+        ok = (np.isfinite(radius) & np.isfinite(centre).all(axis=1)
+              & np.isfinite(axis).all(axis=1))
     c = np.where(ok[:, None], centre, 0.0)
     a = np.where(ok[:, None], axis, (1.0, 0.0, 0.0))
     r = np.where(ok, radius, 1.0)
@@ -892,18 +899,32 @@ def cylinder_border(sensor, nodes, gpos, direction, steps, az_cut, centre, axis,
                                                    az_cut), c, a, r)
         return B * B - A * C
 
-    A0, B0, C0 = _ray_cylinder(sensor, _grid_rays(gpos, steps, az_cut), c, a, r)
-    ok &= C0 > 0
-    inside = disc(np.ones(m)) >= 0
-    lo, hi = np.zeros(m), np.ones(m)
+    ok &= _ray_cylinder(sensor, _grid_rays(gpos, steps, az_cut), c, a, r)[2] > 0
+    # bracket the silhouette: the last ray meeting the cylinder before the first that
+    # does not, on the integer rays -REACH .. 1 + REACH
+    ks = np.arange(-_SILHOUETTE_REACH, _SILHOUETTE_REACH + 2, dtype=np.float64)
+    hit = np.stack([disc(np.full(m, k)) >= 0 for k in ks], axis=1)
+    z = _SILHOUETTE_REACH  # column of u = 0
+    fwd = hit[:, z:]  # u = 0, 1, ...
+    # forward from the node's ray when it meets the cylinder, else backward
+    first_miss = np.where((~fwd).any(axis=1), np.argmax(~fwd, axis=1), -1)
+    bwd = hit[:, z - 1::-1]  # u = -1, -2, ...
+    first_hit = np.where(bwd.any(axis=1), np.argmax(bwd, axis=1), -1)
+    on0 = hit[:, z]
+    lo = np.where(on0, first_miss - 1.0, -first_hit - 1.0)
+    sil = np.where(on0, first_miss > 0, first_hit >= 0)
+    lo = np.where(sil, lo, 0.0)
+    hi = lo + 1.0
     for _ in range(_SILHOUETTE_BISECT):
         mid = 0.5 * (lo + hi)
-        hit = disc(mid) >= 0
-        lo = np.where(hit, mid, lo)
-        hi = np.where(hit, hi, mid)
-    ustar = np.where(inside, 1.0, lo)
-    mid_ray = inside | occluded
-    u = np.where(mid_ray, 0.5 * ustar, ustar)
+        h = disc(mid) >= 0
+        lo = np.where(h, mid, lo)
+        hi = np.where(h, hi, mid)
+    # the mid ray (on the cylinder) for an occlusion, or where no silhouette is near
+    mid_ray = occluded | ~sil
+    ok &= sil | on0
+    u_end = np.where(sil, np.clip(lo, 0.0, 1.0), 1.0)
+    u = np.where(mid_ray, 0.5 * u_end, lo)
     ray = _grid_rays(gpos + u[:, None] * direction, steps, az_cut)
     A, B, C = _ray_cylinder(sensor, ray, c, a, r)
     with np.errstate(invalid="ignore", divide="ignore"):
