@@ -307,9 +307,12 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
     merged by :func:`lidarstat.segment._cylinders.merge_cylinders`). Ids are renumbered
     by size.
     """
-    from ._grow import adjacency, relabel
+    from ._grow import adjacency_of_pairs, relabel
 
-    pairs, _ = adjacency(nbh, labels)
+    # the touching pairs of points once: both directions for the segment adjacency, the
+    # ascending ones (0 < labels[si] < labels[di], in CSR order) for the local test below
+    src, dst = _ek.label_pairs(nbh, labels, different_only=True)
+    pairs, _ = adjacency_of_pairs(labels, src, dst)
     if not len(pairs):
         return labels
     t = segment_planes(points, labels)
@@ -322,7 +325,9 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
     db = np.abs(np.einsum("ij,ij->i", c[a] - c[b], n[b]))
     ok = (cos >= np.cos(np.radians(max_angle))) & (da <= tol) & (db <= tol)
     if normals is not None:
-        si, di = _ek.label_pairs(nbh, labels)  # 0 < labels[si] < labels[di]
+        asc = labels[src] < labels[dst]
+        si, di = src[asc], dst[asc]  # = _ek.label_pairs(nbh, labels)
+        del asc, src, dst
         key = labels[si].astype(np.int64) * (int(labels.max()) + 1) + labels[di]
         c_local = np.abs(np.einsum("ij,ij->i", normals[si], normals[di]))
         off = np.abs(np.einsum("ij,ij->i", points[di] - centroids[si], normals[si]))

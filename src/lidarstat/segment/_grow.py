@@ -207,6 +207,13 @@ def adjacency(nbh: Neighborhoods, labels, *, min_edges: int = 1):
     from ._edge_kernels import label_pairs
 
     src, dst = label_pairs(nbh, labels, different_only=True)  # labelled, different segments
+    return adjacency_of_pairs(labels, src, dst, min_edges=min_edges)
+
+
+def adjacency_of_pairs(labels, src, dst, *, min_edges: int = 1):
+    """:func:`adjacency` from the pairs ``label_pairs(nbh, labels, different_only=True)``
+    (for a caller that needs those pairs too)."""
+    labels = np.asarray(labels)
     a = labels[src].astype(np.int64)
     b = labels[dst].astype(np.int64)
     lo = np.minimum(a, b)
