@@ -479,9 +479,10 @@ def table_second_pass(raw, nbr, sv, normals, mean_out, var_out, spread):
 
     First every row's surface variation ``sv`` (eq. 4, from the eigenvalue columns of the
     kernel output `raw`) and a compact copy of its normal (`normals`, (M, 3)), then per
-    row :func:`table_variance` of `sv` and :func:`_normal_spread_one` of the normals into
-    `spread` (M, 4). The same operations as the three separate passes (bit-identical),
-    with one read of the table and no NumPy temporaries.
+    row the mean and population variance of `sv` over its neighbours (eq. 5, NaN
+    ignored; as :func:`neighbourhood_variance`) and :func:`_normal_spread_one` of the
+    normals into `spread` (M, 4). The same operations as the three separate passes it
+    replaced (bit-identical), with one read of the table and no NumPy temporaries.
     """
     m = nbr.shape[0]
     k = nbr.shape[1]
@@ -511,33 +512,6 @@ def table_second_pass(raw, nbr, sv, normals, mean_out, var_out, spread):
             mean_out[r] = mu
             var_out[r] = acc / n
         _normal_spread_one(r, normals, nbr[r], 0, k, spread[r])
-
-
-@njit_parallel
-def table_variance(values, nbr, mean_out, var_out):
-    """:func:`neighbourhood_variance` over a dense (M, k) neighbour table."""
-    m = nbr.shape[0]
-    k = nbr.shape[1]
-    for r in prange(m):
-        n = 0
-        acc = 0.0
-        for t in range(k):
-            v = values[nbr[r, t]]
-            if v == v:
-                acc += v
-                n += 1
-        if n == 0:
-            mean_out[r] = np.nan
-            var_out[r] = np.nan
-            continue
-        mu = acc / n
-        acc = 0.0
-        for t in range(k):
-            v = values[nbr[r, t]]
-            if v == v:
-                acc += (v - mu) * (v - mu)
-        mean_out[r] = mu
-        var_out[r] = acc / n
 
 
 # ------------------------------------------------------------------ principal directions
@@ -629,15 +603,6 @@ def normal_spread_rows_offset(normals, row0, indptr, idx, out):
     m = indptr.size - 1
     for r in prange(m):
         _normal_spread_one(row0 + r, normals, idx, indptr[r], indptr[r + 1], out[r])
-
-
-@njit_parallel
-def normal_spread_table(normals, nbr, out):
-    """:func:`_normal_spread_one` over a dense (N, k) neighbour table."""
-    m = nbr.shape[0]
-    k = nbr.shape[1]
-    for r in prange(m):
-        _normal_spread_one(r, normals, nbr[r], 0, k, out[r])
 
 
 # ------------------------------------------------------------------ output assembly
