@@ -8,8 +8,8 @@ noise 0.002 + 5e-5 r, seed 0; ``--quick``: step 0.004). Parameters: k = 50, ever
 automatic (range noise estimated along the rays from the scanner position). Printed:
 
 * edge and boundary precision / recall / F1 against three truths (boundary test: the
-  default ``'visible'`` one; the session-4 ``'scan'`` test against the support truth
-  beside it) (docs/methods/
+  default ``'grid'`` one, with its boundary errors by cause; session 5's ``'visible'``
+  and session 4's ``'scan'`` tests against the support truth beside it) (docs/methods/
   covariance.md argues which is sound): ``support`` - a point is an edge when its own
   k-neighbourhood holds a point of another face (:func:`neighborhood_class_truth`),
   a boundary when the end of the visible surface is within 0.5 of its own neighbourhood
@@ -187,14 +187,15 @@ def tls(name, step):
 
     old = classify_covariance(res.features, points=cloud.xyz, boundary="scan")
     sup = neighborhood_class_truth(cloud, res.features.neighborhoods)
-    grid = classify_covariance(res.features, points=cloud.xyz, boundary="grid")
+    vis = classify_covariance(res.features, points=cloud.xyz, boundary="visible")
     out = {"points": len(cloud), "seconds": round(dt, 1), "classes": class_scores(cloud, res),
+           "boundary errors by cause (grid test, the default)": grid_errors(
+               cloud, res, res.classes, sup),
            "boundary, scan test (session 4), support truth": prf(old.point_class == 3,
                                                                  sup == 3),
-           "grid test (session 6, opt-in), support truth": {
-               "edge": prf(grid.point_class == 2, sup == 2),
-               "boundary": prf(grid.point_class == 3, sup == 3),
-               "boundary errors by cause": grid_errors(cloud, res, grid, sup)},
+           "visible test (session 5's default), support truth": {
+               "edge": prf(vis.point_class == 2, sup == 2),
+               "boundary": prf(vis.point_class == 3, sup == 3)},
            "hoover": h.as_dict(), "not correct": missed,
            "hoover without refinement (session 3)": h1.as_dict(),
            "hoover without adaptive scale": h0.as_dict(),

@@ -106,7 +106,7 @@ def test_silhouettes_of_pipes_are_boundaries_not_edges():
     from lidarstat.synth import make_tls_plant
 
     sc = make_tls_plant(step=0.004, rng=0)
-    res = covariance(sc.xyz, sensor=sc.scanner, k=50, keep_neighbors=True)
+    res = covariance(sc.xyz, sensor=sc.scanner, k=50, keep_neighbors=True, boundary="visible")
     truth = neighborhood_class_truth(sc, res.features.neighborhoods)
     old = classify_covariance(res.features, points=sc.xyz, boundary="centroid")
     pc, pc0 = res.point_class, old.point_class
@@ -117,7 +117,8 @@ def test_silhouettes_of_pipes_are_boundaries_not_edges():
         return np.count_nonzero((p == 2) & (truth == 2)) / max(np.count_nonzero(p == 2), 1)
 
     assert prec(pc) > prec(pc0) + 0.04
-    keep = classify_covariance(res.features, points=sc.xyz, edge_boundary_alpha=None)
+    keep = classify_covariance(res.features, points=sc.xyz, edge_boundary_alpha=None,
+                               boundary="visible")
     assert np.array_equal(keep.point_class == PointClass.EDGE, pc0 == PointClass.EDGE)
 
 

@@ -134,7 +134,7 @@ def test_continuity_test_power_at_an_occlusion_and_visible_boundaries():
     jump = (adj >= 0) & (pil[nb] != pil[:, None])
     assert jump.sum() > 100
     assert np.mean(p[jump] < 0.001) > 0.97
-    res = covariance(sc.xyz, sensor=sc.scanner, k=50, keep_neighbors=True)
+    res = covariance(sc.xyz, sensor=sc.scanner, k=50, keep_neighbors=True, boundary="visible")
     assert res.classes.meta["boundary"] == "visible"
     at = jump.any(axis=1)
     assert np.mean(res["jump_p"][at] < 0.001) > 0.97
@@ -182,7 +182,7 @@ def test_visible_test_is_conservative_on_a_scan_grid_and_finds_the_borders():
     alpha = 0.05
     for sc in _scans():
         res = covariance(sc.xyz, sensor=sc.scanner, k=50, keep_neighbors=True,
-                         boundary_alpha=alpha)
+                         boundary_alpha=alpha, boundary="visible")
         nbh = res.features.neighborhoods
         rk = nbh.distances.reshape(len(nbh), -1)[:, -1]
         bd = sc.fields["boundary_distance"]
@@ -209,7 +209,7 @@ def test_boundary_f1_on_the_synthetic_scans(scene, floor, gain, edge_floor):
 
     make = {"tls_building": make_tls_building, "tls_plant": make_tls_plant}[scene]
     sc = make(step=0.004, rng=0)
-    res = covariance(sc.xyz, sensor=sc.scanner, k=50, keep_neighbors=True)
+    res = covariance(sc.xyz, sensor=sc.scanner, k=50, keep_neighbors=True, boundary="visible")
     truth = neighborhood_class_truth(sc, res.features.neighborhoods) == PointClass.BOUNDARY
     new = _f1(res.point_class == PointClass.BOUNDARY, truth)
     old = classify_covariance(res.features, points=sc.xyz, boundary="scan")
@@ -233,6 +233,8 @@ def test_visible_option_errors(rng):
     with pytest.raises(InvalidParameterError, match="jump_alpha"):
         classify_covariance(feats, points=pts, jump_alpha=0.0)
     res = classify_covariance(feats, points=pts)
+    assert res.meta["boundary"] == "grid"
+    res = classify_covariance(feats, points=pts, boundary="visible")
     assert res.meta["boundary"] == "visible"
     assert {"jump_z", "jump_p", "jump_resolved_p"} <= set(res.to_fields())
 

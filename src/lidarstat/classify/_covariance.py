@@ -27,8 +27,15 @@ Three tests, each written beside the label as a p-value (see docs/methods/covari
    ``boundary='scan'``: the same Hotelling test on the *complete disc* of the
    neighbourhood in linearised scan coordinates (:mod:`lidarstat.features._scan_kernels`),
    where an interior point of any scan pattern is the centre of a centrally symmetric set
-   of grid nodes. With a sensor the default is ``boundary='visible'``
-   (:mod:`._visible`): that disc gathered on the scan grid, over grid edges that pass a
+   of grid nodes. With a sensor and the points the default is ``boundary='grid'``
+   (session 6, :func:`._visible.grid_boundary`): not a symptom of the border but its
+   distance - border points are estimated on the scan grid (no return, the scan window,
+   a depth jump the continuity test rejects between two resolved surfaces, unless a
+   recess face the grid did not sample explains it; on a pipe at its silhouette) and a
+   point closer than ``border_band`` (0.5) of its neighbourhood's reach is a boundary,
+   boundary winning over edge; written as ``border_distance`` / ``border_kind`` /
+   ``border_p``. ``boundary='visible'`` (session 5's default, :mod:`._visible`): the
+   complete disc gathered on the scan grid, over grid edges that pass a
    range-continuity test (a crease keeps the range continuous, an occlusion does not),
    written as ``jump_z`` / ``jump_p``. Both run on surface points (0.05 visible, 0.01
    scan; a surface point with a depth jump at it is a boundary too) and on the points
@@ -524,14 +531,15 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         Level of test 2 (rejected -> edge). Default: 0.001 (``CURVED_ALPHA``) for the
         cylinder test, `alpha` for the variation test.
     boundary : {'visible', 'grid', 'scan', 'centroid'}, optional
-        Test 3. ``'visible'`` (default when the features were computed with a sensor and
-        `points` are given): the Hotelling test of the point's *visible disc*, the grid
+        Test 3. ``'grid'`` (default when the features were computed with a sensor and
+        `points` are given; see below). ``'visible'``: the Hotelling test of the point's
+        *visible disc*, the grid
         directions within its complete disc reached from it over grid edges without a
         depth jump (:mod:`lidarstat.classify._visible`), on every point (boundary wins
         over edge); writes ``jump_z`` / ``jump_p`` (range continuity at the point).
         ``'scan'`` (the default with a sensor and no `points`): the same test on the
         complete disc of the kNN table; ``'centroid'``: the paper's eq. 6-8 (with the
-        factor n) in the tangent plane, on surface points. ``'grid'`` (opt-in): the
+        factor n) in the tangent plane, on surface points. ``'grid'``: the
         distance to the estimated end of the visible surface on the scan grid (a missing
         return, the scan window, or a depth jump rejected by the continuity test between
         two surfaces resolved on both sides; :func:`lidarstat.classify._visible.grid_boundary`);
@@ -569,7 +577,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     scan_feats = getattr(features, "scan_boundary", None) is not None
     if boundary is None:
         boundary = ("centroid" if not scan_feats else
-                    "visible" if points is not None else "scan")
+                    "grid" if points is not None else "scan")
     if boundary not in BOUNDARY:
         raise InvalidParameterError(
             f"The 'boundary' parameter of {func} must be one of 'grid', 'visible', 'scan', "

@@ -88,10 +88,10 @@ def register(sub):
                    help="level of the plane and consistent-curvature tests [0.05]")
     add_neighbourhood_arguments(s)
     s.add_argument("--boundary", choices=("grid", "visible", "scan", "centroid"), default=None,
-                   help="boundary test: 'grid' (opt-in, session 6): the end of the "
+                   help="boundary test: 'grid' (default with a sensor): the end of the "
                    "visible surface on the scan grid (no return, scan window, or a tested "
                    "depth jump between two resolved surfaces) within --border-band of the "
-                   "neighbourhood's reach; 'visible' (default with a sensor): the Hotelling test of "
+                   "neighbourhood's reach; 'visible' (session 5's default): the Hotelling test of "
                    "the visible disc, cut at depth jumps; 'scan': the complete disc of the kNN in scan "
                    "coordinates; 'centroid': the paper's test (eq. 6-8, on surface points; "
                    "the default without a sensor)")
