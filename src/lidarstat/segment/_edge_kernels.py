@@ -6,8 +6,8 @@ k = 50 that is 100 million pairs and gigabytes per step. These kernels walk the 
 once to count and once to fill, so only the selected pairs are stored. Each returns
 exactly what the mask expression it replaces returns (same pairs, in CSR order). Rows are
 independent: the kernels run in parallel over chunks of rows (a count-then-fill kernel
-counts per chunk, then each chunk fills from its prefix-sum offset, so the order is CSR
-order whatever the threads do). :func:`adaptive_edges`, whose gathers (the prefix
+counts per row, then each row that holds a selected edge fills from its prefix-sum
+offset, so the order is CSR order whatever the threads do). :func:`adaptive_edges`, whose gathers (the prefix
 normals: 24 bytes a point) do not fit in the cache, visits the rows in the order
 ``visit`` (:meth:`lidarstat.neighbors.Neighborhoods.visit_order`: the kNN search's grid
 order), so consecutive rows gather nearby points from cache; the kernels that gather
@@ -75,20 +75,22 @@ def pair_edges(indptr, indices, rows, labels, candidates, mode, fill, offs, src,
     ``REINTEGRATION``).
 
     Count-then-fill over chunks of `_ROWS` rows (see :func:`_two_pass`): returns the
-    number of edges per chunk; with `fill` also writes them, in CSR order, to `src`,
-    `dst` from ``offs[chunk]``.
+    number of edges of every row; with `fill` writes them, in CSR order, to `src`, `dst`
+    from ``offs[row]``, skipping the rows without any (most rows: the second pass only
+    reads the rows that hold a selected edge).
     """
     m = indptr.size - 1
     nch = (m + _ROWS - 1) // _ROWS
-    counts = np.zeros(nch, dtype=np.int64)
+    counts = np.zeros(0 if fill else m, dtype=np.int32)
     for ch in prange(nch):
-        c0 = offs[ch] if fill else 0
-        c = c0
         for r in range(ch * _ROWS, min(m, (ch + 1) * _ROWS)):
+            if fill and offs[r + 1] == offs[r]:
+                continue
             p = rows[r]
             lp = labels[p]
             if not _row_ok(mode, lp, mode == REINTEGRATION and candidates[p]):
                 continue
+            c = offs[r] if fill else 0
             for e in range(indptr[r], indptr[r + 1]):
                 q = indices[e]
                 if _pair_ok(mode, lp, labels[q]):
@@ -96,20 +98,22 @@ def pair_edges(indptr, indices, rows, labels, candidates, mode, fill, offs, src,
                         src[c] = p
                         dst[c] = q
                     c += 1
-        counts[ch] = c - c0
+            if not fill:
+                counts[r] = c
     return counts
 
 
 def _two_pass(kernel, *args):
     """Run a count-then-fill edge kernel: the selected ``(src, dst)`` as int64 arrays.
 
-    The first call counts the edges of every chunk of rows, the second writes each
-    chunk's from the prefix sum of the counts: the pairs come in CSR order.
+    The first call counts the edges of every row, the second writes each row's from the
+    prefix sum of the counts: the pairs come in CSR order.
     """
     none = np.empty(0, dtype=np.int64)
     counts = kernel(*args, False, none, none, none)
     offs = np.zeros(counts.size + 1, dtype=np.int64)
     np.cumsum(counts, out=offs[1:])
+    del counts
     src = np.empty(offs[-1], dtype=np.int64)
     dst = np.empty(offs[-1], dtype=np.int64)
     kernel(*args, True, offs, src, dst)
