@@ -864,7 +864,7 @@ _SILHOUETTE_REACH = 2
 
 
 def cylinder_border(sensor, nodes, gpos, direction, steps, az_cut, centre, axis, radius,
-                    occluded):
+                    occluded, *, return_silhouette=False):
     """Where the visible surface of a node on a circular cylinder ends between its ray
     (grid position ``gpos``) and the next ray (``gpos + direction``).
 
@@ -881,7 +881,8 @@ def cylinder_border(sensor, nodes, gpos, direction, steps, az_cut, centre, axis,
     end of a pipe), the mid ray's intersection.
 
     Returns the border points and where the model applies (finite cylinder, the node on
-    it within a quarter of the radius, the sensor outside it).
+    it within a quarter of the radius, the sensor outside it); with `return_silhouette`
+    also where the point is a silhouette's tangent point.
     """
     m = nodes.shape[0]
     with np.errstate(invalid="ignore"):
@@ -930,7 +931,47 @@ def cylinder_border(sensor, nodes, gpos, direction, steps, az_cut, centre, axis,
     with np.errstate(invalid="ignore", divide="ignore"):
         t = np.where(mid_ray, (-B - np.sqrt(np.maximum(B * B - A * C, 0.0))) / A, -B / A)
     ok &= np.isfinite(t) & (t > 0)
-    return sensor + np.where(ok, t, 0.0)[:, None] * ray, ok
+    q = sensor + np.where(ok, t, 0.0)[:, None] * ray
+    if return_silhouette:
+        return q, ok, ok & ~mid_ray
+    return q, ok
+
+
+def shadow_border(sensor, nodes, normals, occluders, gpos_b, direction, steps, az_cut,
+                  occ_cyl, node_cyl):
+    """The end of a node's visible surface in the shadow of a nearer *curved* surface.
+
+    `occluders` (coordinates of each node's grid neighbour in `direction`, nearer to the
+    sensor, at grid position `gpos_b`) lie on the circular cylinders `occ_cyl` (centre,
+    axis, radius per row). Their silhouette toward the node (:func:`cylinder_border`
+    from the occluder back along ``-direction``) is the ray that grazes the occluder, and
+    the shadow on the node's surface begins on that ray. The estimate is the ray's near
+    intersection with the node's cylinder `node_cyl` (rows NaN: none) or else with the
+    node's tangent plane (`normals`). Returns the points and where they apply: the
+    occluder's silhouette is found and its ray lies between the node's ray and the
+    occluder's (else the midpoint rule stands).
+    """
+    m = nodes.shape[0]
+    qb, okb, sil = cylinder_border(sensor, occluders, gpos_b, -direction, steps, az_cut,
+                                   *occ_cyl, np.zeros(m, dtype=bool), return_silhouette=True)
+    ok = okb & sil
+
+    def unit(v):
+        return v / np.linalg.norm(v, axis=1)[:, None]
+
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rs, ra, rb = unit(qb - sensor), unit(nodes - sensor), unit(occluders - sensor)
+        u = np.einsum("ij,ij->i", rs - ra, rb - ra) / np.einsum("ij,ij->i", rb - ra, rb - ra)
+        ok &= (u >= 0) & (u <= 1)
+        c, ax, r = node_cyl
+        on = np.isfinite(r) & np.isfinite(c).all(axis=1)
+        A, B, C = _ray_cylinder(sensor, rs, np.where(on[:, None], c, 0.0),
+                                np.where(on[:, None], ax, 0.0), np.where(on, r, 0.0))
+        t = np.where(on, (-B - np.sqrt(B * B - A * C)) / A,
+                     np.einsum("ij,ij->i", nodes - sensor, normals)
+                     / np.einsum("ij,ij->i", rs, normals))
+    ok &= np.isfinite(t) & (t > 0)
+    return sensor + np.where(ok, t, 0.0)[:, None] * rs, ok
 
 
 def grid_border_points(points, sensor, normals, angles, adj, steps, edges, *,
@@ -1037,6 +1078,15 @@ def grid_border_points(points, sensor, normals, angles, adj, steps, edges, *,
                                      *(c[node] for c in cylinders), occluded)
             ok &= np.linalg.norm(qc - pa, axis=1) <= far[node]
             q[ok] = qc[ok]
+            # the shadow of a nearer curved surface begins on its silhouette ray
+            oi = np.flatnonzero(occluded)
+            b = js[oi]
+            qs, oks = shadow_border(sensor, pa[oi], normals[node[oi]], points[b], g[b],
+                                    _DIRS8[d], steps, az_cut, tuple(c[b] for c in cylinders),
+                                    tuple(np.where(ok[oi, None] if c.ndim == 2 else ok[oi],
+                                                   c[node[oi]], np.nan) for c in cylinders))
+            oks &= np.linalg.norm(qs - pa[oi], axis=1) <= far[node[oi]]
+            q[oi[oks]] = qs[oks]
         out_p.append(q)
         out_n.append(node)
         out_k.append(np.where(jump[node, d], BORDER_JUMP, BORDER_MISSING).astype(np.uint8))
