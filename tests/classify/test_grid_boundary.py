@@ -2,17 +2,15 @@
 
 import numpy as np
 import pytest
-
-from lidarstat.classify import PointClass, covariance
-from lidarstat.classify._visible import (BORDER_JUMP, BORDER_MISSING, BORDER_WINDOW,
-                                        border_edges)
-from lidarstat.errors import InvalidParameterError
-from lidarstat.synth import neighborhood_class_truth, scan_spherical
-from lidarstat.synth._csg import Box, FaceRegistry, union
-
 from test_covariance_classes import _f1
 from test_scan_boundary import _scans
-from test_visible_boundary import _edges, _pillar_scan
+from test_visible_boundary import _edges, _ledge_scan, _pillar_scan
+
+from lidarstat.classify import PointClass, covariance
+from lidarstat.classify._visible import BORDER_JUMP, BORDER_MISSING, BORDER_WINDOW, border_edges
+from lidarstat.errors import InvalidParameterError
+from lidarstat.synth import neighborhood_class_truth, scan_spherical
+from lidarstat.synth._csg import Box, FaceRegistry
 
 
 def _border_edges(sc, adj, p, jump_alpha=0.001):
@@ -70,12 +68,7 @@ def test_border_edges_at_an_occlusion_but_not_at_a_face_narrower_than_the_grid()
     assert jump.sum() > 500
     assert np.mean(be[jump]) > 0.8, np.mean(be[jump])
     assert not be[(adj >= 0) & ~jump & (p >= 0.001)].any()
-    reg = FaceRegistry()
-    wall = Box(reg, "wall", (14.0, 0.0, 3.0), np.eye(3), (0.2, 8.0, 3.0))
-    ledge = Box(reg, "ledge", (13.75, 0.0, 2.5), np.eye(3), (0.3, 3.0, 0.01))
-    sc = scan_spherical(union(wall, ledge), scanner=(0.0, 0.0, 1.5), azimuth=(-0.3, 0.3),
-                        elevation=(-0.05, 0.25), step=0.004, range_sigma=(0.002, 5e-5),
-                        rng=3)
+    sc = _ledge_scan()
     adj, _, p = _edges(sc)
     be = _border_edges(sc, adj, p)
     nb = np.where(adj >= 0, adj, 0)
@@ -109,11 +102,7 @@ def test_grid_option_errors(rng):
     from lidarstat.features import covariance_features
 
     pts = np.c_[rng.uniform(0, 5, (800, 2)), rng.normal(0, 0.002, 800)]
-    with pytest.raises(InvalidParameterError, match="needs features computed with a sensor"):
-        classify_covariance(covariance_features(pts, k=10), points=pts, boundary="grid")
     feats = covariance_features(pts, k=10, sensor=(2.0, 2.0, 3.0))
-    with pytest.raises(InvalidParameterError, match="needs the `points`"):
-        classify_covariance(feats, boundary="grid")
     with pytest.raises(InvalidParameterError, match="border_band"):
         classify_covariance(feats, points=pts, boundary="grid", border_band=0.0)
     res = classify_covariance(feats, points=pts, boundary="grid")

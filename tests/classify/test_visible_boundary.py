@@ -2,18 +2,23 @@
 
 import numpy as np
 import pytest
+from test_covariance_classes import _binomial_ok, _f1
+from test_scan_boundary import _scans
 
 from lidarstat.classify import PointClass, classify_covariance, covariance
-from lidarstat.classify._visible import (_GL_W, _GL_X, edge_jumps, edge_resolved, grid_adjacency,
-                                        same_sign_p)
+from lidarstat.classify._visible import (
+    _GL_W,
+    _GL_X,
+    edge_jumps,
+    edge_resolved,
+    grid_adjacency,
+    same_sign_p,
+)
 from lidarstat.errors import InvalidParameterError
 from lidarstat.features import covariance_features
 from lidarstat.features._scan_kernels import scan_angles
 from lidarstat.synth import neighborhood_class_truth, scan_spherical
 from lidarstat.synth._csg import Box, FaceRegistry, union
-
-from test_covariance_classes import _binomial_ok, _f1
-from test_scan_boundary import _scans
 
 
 def _edges(sc):
@@ -121,6 +126,17 @@ def _pillar_scan():
                           range_sigma=(0.002, 5e-5), rng=2)
 
 
+def _ledge_scan():
+    """A wall with a ledge whose 2 cm front face is narrower than a grid step (5 cm at
+    13 m)."""
+    reg = FaceRegistry()
+    wall = Box(reg, "wall", (14.0, 0.0, 3.0), np.eye(3), (0.2, 8.0, 3.0))
+    ledge = Box(reg, "ledge", (13.75, 0.0, 2.5), np.eye(3), (0.3, 3.0, 0.01))
+    return scan_spherical(union(wall, ledge), scanner=(0.0, 0.0, 1.5), azimuth=(-0.3, 0.3),
+                          elevation=(-0.05, 0.25), step=0.004, range_sigma=(0.002, 5e-5),
+                          rng=3)
+
+
 def test_continuity_test_power_at_an_occlusion_and_visible_boundaries():
     """Grid edges between the pillar and the wall behind it (depth jump 1.5-2 m) are
     rejected at 0.001 (measured 98.7 %: the others are not tested, their grid line not
@@ -160,12 +176,7 @@ def test_resolved_jumps_at_an_occlusion_but_not_at_a_face_narrower_than_the_grid
     jump = (adj >= 0) & (pil[nb] != pil[:, None]) & (p < 0.001)
     assert jump.sum() > 500
     assert np.mean(res[jump]) > 0.85
-    reg = FaceRegistry()
-    wall = Box(reg, "wall", (14.0, 0.0, 3.0), np.eye(3), (0.2, 8.0, 3.0))
-    ledge = Box(reg, "ledge", (13.75, 0.0, 2.5), np.eye(3), (0.3, 3.0, 0.01))
-    sc = scan_spherical(union(wall, ledge), scanner=(0.0, 0.0, 1.5), azimuth=(-0.3, 0.3),
-                        elevation=(-0.05, 0.25), step=0.004, range_sigma=(0.002, 5e-5),
-                        rng=3)
+    sc = _ledge_scan()
     adj, _, p = _edges(sc)
     res = _resolved(sc, adj)
     nb = np.where(adj >= 0, adj, 0)
@@ -222,13 +233,19 @@ def test_boundary_f1_on_the_synthetic_scans(scene, floor, gain, edge_floor):
     assert edge >= edge_floor, edge
 
 
-def test_visible_option_errors(rng):
+@pytest.mark.parametrize("boundary", ["visible", "grid"])
+def test_grid_tests_need_a_sensor_and_the_points(rng, boundary):
     pts = np.c_[rng.uniform(0, 5, (800, 2)), rng.normal(0, 0.002, 800)]
     with pytest.raises(InvalidParameterError, match="needs features computed with a sensor"):
-        classify_covariance(covariance_features(pts, k=10), points=pts, boundary="visible")
+        classify_covariance(covariance_features(pts, k=10), points=pts, boundary=boundary)
     feats = covariance_features(pts, k=10, sensor=(2.0, 2.0, 3.0))
     with pytest.raises(InvalidParameterError, match="needs the `points`"):
-        classify_covariance(feats, boundary="visible")
+        classify_covariance(feats, boundary=boundary)
+
+
+def test_visible_option_errors(rng):
+    pts = np.c_[rng.uniform(0, 5, (800, 2)), rng.normal(0, 0.002, 800)]
+    feats = covariance_features(pts, k=10, sensor=(2.0, 2.0, 3.0))
     assert classify_covariance(feats).meta["boundary"] == "scan"
     with pytest.raises(InvalidParameterError, match="jump_alpha"):
         classify_covariance(feats, points=pts, jump_alpha=0.0)

@@ -249,13 +249,20 @@ def edge_jumps(dirs, s, sig, adj, z_out, p_out):
 
 
 @njit
+def _step_on(dirs, adj, a, ex, ey, ez, tol2):
+    """The node continuing the grid line one step from `a` in the direction (ex, ey, ez);
+    -1 when there is none or `a` is -1."""
+    if a < 0:
+        return -1
+    return _continuation(dirs, adj, a, dirs[a, 0] + ex, dirs[a, 1] + ey, dirs[a, 2] + ez, tol2)
+
+
+@njit
 def _linear_z(dirs, s, sig, adj, a, ex, ey, ez, tol2):
     """|second difference| / sd of s over a and the two nodes continuing the grid line from
     `a` in the direction (ex, ey, ez): 0 on a plane; NaN when the line does not continue."""
-    b = _continuation(dirs, adj, a, dirs[a, 0] + ex, dirs[a, 1] + ey, dirs[a, 2] + ez, tol2)
-    if b < 0:
-        return np.nan
-    c = _continuation(dirs, adj, b, dirs[b, 0] + ex, dirs[b, 1] + ey, dirs[b, 2] + ez, tol2)
+    b = _step_on(dirs, adj, a, ex, ey, ez, tol2)
+    c = _step_on(dirs, adj, b, ex, ey, ez, tol2)
     if c < 0:
         return np.nan
     e = s[a] - 2.0 * s[b] + s[c]
@@ -408,6 +415,21 @@ def visible_disc(pts, angles, adj, cut, normals, major, sensor, radius, nchunk, 
             out[i, 0] = m * (m - 1) * (cu * cu * yy - 2.0 * cu * cv * xy + cv * cv * xx) / det
 
 
+def _rays(points, sensor, ray_sigma):
+    """The scan's rays in coordinates centred on the first point: the origin, the
+    points and the sensor there, every point's range, unit ray direction and the noise
+    std of its inverse range (``sigma_r / R^2``)."""
+    origin = np.asarray(points[0], dtype=np.float64)
+    pts = np.ascontiguousarray(points - origin)
+    sens = np.asarray(sensor, dtype=np.float64) - origin
+    ray = pts - sens
+    rng = np.linalg.norm(ray, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dirs = np.ascontiguousarray(ray / rng[:, None])
+        sig = np.broadcast_to(np.asarray(ray_sigma, dtype=np.float64), rng.shape) / rng ** 2
+    return origin, pts, sens, rng, dirs, sig
+
+
 def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_alpha,
                      linear_alpha=0.05):
     """The ``'visible'`` boundary statistic and the range-continuity fields of every point.
@@ -436,15 +458,9 @@ def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_
     """
     from ..features._scan_kernels import scan_angles
 
-    origin = np.asarray(points[0], dtype=np.float64)
-    pts = np.ascontiguousarray(points - origin)
-    sens = np.asarray(sensor, dtype=np.float64) - origin
-    ray = pts - sens
-    rng = np.linalg.norm(ray, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        dirs = np.ascontiguousarray(ray / rng[:, None])
+    _, pts, sens, rng, dirs, sig = _rays(points, sensor, ray_sigma)
+    with np.errstate(divide="ignore"):
         s = 1.0 / rng
-        sig = np.broadcast_to(np.asarray(ray_sigma, dtype=np.float64), rng.shape) / rng ** 2
     angles = scan_angles(pts, sens)
     adj, step = grid_adjacency(angles)
     z = np.empty(adj.shape, dtype=np.float64)
@@ -609,13 +625,9 @@ def _cubic_z(dirs, s, sig, adj, a, ex, ey, ez, tol2):
     """|third difference| / sd of s over a and the three nodes continuing the grid line
     from `a` in the direction (ex, ey, ez): 0 on a surface of constant curvature along the
     line (to first order); NaN when the line does not continue."""
-    b = _continuation(dirs, adj, a, dirs[a, 0] + ex, dirs[a, 1] + ey, dirs[a, 2] + ez, tol2)
-    if b < 0:
-        return np.nan
-    c = _continuation(dirs, adj, b, dirs[b, 0] + ex, dirs[b, 1] + ey, dirs[b, 2] + ez, tol2)
-    if c < 0:
-        return np.nan
-    d = _continuation(dirs, adj, c, dirs[c, 0] + ex, dirs[c, 1] + ey, dirs[c, 2] + ez, tol2)
+    b = _step_on(dirs, adj, a, ex, ey, ez, tol2)
+    c = _step_on(dirs, adj, b, ex, ey, ez, tol2)
+    d = _step_on(dirs, adj, c, ex, ey, ez, tol2)
     if d < 0:
         return np.nan
     e = s[a] - 3.0 * s[b] + 3.0 * s[c] - s[d]
@@ -1133,14 +1145,7 @@ def grid_boundary(points, sensor, normals, ray_sigma, *, vis, jump_alpha, smooth
 
     from ..features._scan_kernels import scan_angles
 
-    origin = np.asarray(points[0], dtype=np.float64)
-    pts = np.ascontiguousarray(points - origin)
-    sens = np.asarray(sensor, dtype=np.float64) - origin
-    ray = pts - sens
-    rng = np.linalg.norm(ray, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        dirs = np.ascontiguousarray(ray / rng[:, None])
-        sig = np.broadcast_to(np.asarray(ray_sigma, dtype=np.float64), rng.shape) / rng ** 2
+    origin, pts, sens, rng, dirs, sig = _rays(points, sensor, ray_sigma)
     adj = vis["adjacency"]
     pe = vis["edge_p"]
     cut = np.ascontiguousarray((adj >= 0) & (pe < jump_alpha))
