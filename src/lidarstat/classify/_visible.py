@@ -598,6 +598,7 @@ def direction_coverage(g, s=None, sig=None, zc=np.inf):
 
     ans = np.stack([answer(g + _DIRS8[d]) for d in range(8)], axis=1)
     covered[:] = ans >= 0
+    v = None if s is None else np.asarray(sig, dtype=np.float64) ** 2
     for d in range(8):
         a = np.flatnonzero(~covered[:, d])
         if a.size == 0:
@@ -608,7 +609,6 @@ def direction_coverage(g, s=None, sig=None, zc=np.inf):
         a, c = a[has], c[has]
         ok = np.ones(a.size, dtype=bool)
         if s is not None:
-            v = np.asarray(sig, dtype=np.float64) ** 2
             e1, v1 = _ring_residual(g, s, v, ans, a, c)
             e2, v2 = _ring_residual(g, s, v, ans, c, a)
             with np.errstate(invalid="ignore", divide="ignore"):
@@ -768,7 +768,7 @@ def _grid_plane(pts, adj, cut, node, stamp, hops, tol, buf, mark):
 
 
 @njit_parallel
-def visible_jambs(pts, sensor, dirs, adj, cut, edges, sig_r, hops, reach, nchunk, out):
+def visible_jambs(pts, sensor, dirs, rng, adj, cut, edges, sig_r, hops, reach, nchunk, out):
     """The jamb rule: which border edges a visible face narrower than the grid explains.
 
     For a border edge (a, b) let N be the nearer node and F the farther. The near surface's
@@ -779,7 +779,8 @@ def visible_jambs(pts, sensor, dirs, adj, cut, edges, sig_r, hops, reach, nchunk
     toward F (``proj > 0``, in grid steps along N -> F) and fits between the two rays
     without a sample when ``proj <= reach``: then the step is two creases around a visible
     face the grid did not sample, not a border, and ``out[a, k]`` is True.
-    `sig_r` is the range noise per point (the refit's tolerance is three of it).
+    `rng` is every node's range (the nearer node of an edge is N); `sig_r` the range noise
+    per point (the refit's tolerance is three of it).
     """
     n = adj.shape[0]
     for c in prange(nchunk):
@@ -791,12 +792,8 @@ def visible_jambs(pts, sensor, dirs, adj, cut, edges, sig_r, hops, reach, nchunk
                 b = adj[a, k]
                 if b < 0 or not edges[a, k]:
                     continue
-                ra = math.sqrt((pts[a, 0] - sensor[0]) ** 2 + (pts[a, 1] - sensor[1]) ** 2
-                               + (pts[a, 2] - sensor[2]) ** 2)
-                rb = math.sqrt((pts[b, 0] - sensor[0]) ** 2 + (pts[b, 1] - sensor[1]) ** 2
-                               + (pts[b, 2] - sensor[2]) ** 2)
-                near = a if ra <= rb else b
-                far = b if ra <= rb else a
+                near = a if rng[a] <= rng[b] else b
+                far = b if rng[a] <= rng[b] else a
                 nx, ny, nz = _grid_plane(pts, adj, cut, near, a * adj.shape[1] + k, hops,
                                          3.0 * sig_r[near], buf, mark)
                 if nx == 0.0 and ny == 0.0 and nz == 0.0:
@@ -1159,7 +1156,7 @@ def grid_boundary(points, sensor, normals, ray_sigma, *, vis, jump_alpha, smooth
         import numba
 
         jamb = np.empty(adj.shape, dtype=np.bool_)
-        visible_jambs(pts, sens, dirs, adj, cut, edges,
+        visible_jambs(pts, sens, dirs, rng, adj, cut, edges,
                       np.ascontiguousarray(np.broadcast_to(np.asarray(ray_sigma, np.float64),
                                                            rng.shape)),
                       JAMB_HOPS, float(jamb_reach), 4 * numba.get_num_threads(), jamb)
