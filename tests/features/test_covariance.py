@@ -101,13 +101,23 @@ def test_knn_with_many_exact_duplicates(rng):
 
 
 @pytest.mark.parametrize("mode", ["raw", "sqrt", "normalized"])
-def test_fields_equal_eigen_features_exactly(rng, mode):
-    """The fused output kernel computes eigen_features' formulas with the same rounding."""
+def test_fields_equal_eigen_features(rng, mode):
+    """The fused output kernel computes eigen_features' formulas.
+
+    The two paths evaluate the same expressions in the same order, but transcendental calls
+    (``cbrt``, ``log``) come from Numba's libm in one and NumPy's in the other, which may
+    differ in the last bit on some CPUs: the comparison allows 4 ulps.
+    """
     pts = _cloud(rng, 1500)
     res = covariance_features(pts, k=20, eigen_mode=mode)
     ref = eigen_features(res.eigenvalues, res.normals, res.major, mode=mode)
     for name, v in ref.items():
-        assert np.array_equal(res[name], v, equal_nan=True), name
+        got = np.asarray(res[name], dtype=np.float64)
+        want = np.asarray(v, dtype=np.float64)
+        assert np.array_equal(np.isnan(got), np.isnan(want)), name
+        ok = ~np.isnan(want)
+        ulp = np.spacing(np.maximum(np.abs(got[ok]), np.abs(want[ok])))
+        assert np.all(np.abs(got[ok] - want[ok]) <= 4 * ulp), name
 
 
 def test_features_match_brute_force(rng):
