@@ -176,13 +176,13 @@ def check_outputs(inputs: Iterable, outputs: Sequence[Output]) -> list[Path | No
                 if (ident is not None and ident == in_ident) or res == in_res:
                     raise InvalidParameterError(f"{out.label()}{where}: {what}; choose "
                                                 "another path")
+        _check_place(out, path)
         _check_suffix(out)
         for _, ident, res, where in targets:
             for other, o_ident, o_res in seen:
                 if (ident is not None and ident == o_ident) or res == o_res:
                     raise InvalidParameterError(f"{out.label()}{where}: is also the "
                                                 f"{other.option} file; choose another path")
-        _check_place(out, path)
         seen.extend((out, ident, res) for _, ident, res, _ in targets)
         result.append(path)
     return result
