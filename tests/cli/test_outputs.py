@@ -231,3 +231,17 @@ def test_sigterm_unwinds_exit_143(monkeypatch, capsys, tmp_path):
     assert code == 143 and err.strip() == "lidarstat: terminated (SIGTERM)"
     assert list(tmp_path.iterdir()) == []
     assert signal.getsignal(signal.SIGTERM) == before
+
+
+def test_failure_after_the_main_output_leaves_none(valid, tmp_path, capsys, monkeypatch):
+    from lidarstat.cli import covariance as covariance_cli
+
+    def disk_full(path, meta):
+        raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(covariance_cli, "write_summary_json", disk_full)
+    out = tmp_path / "o.las"
+    code, _, err = _run(["covariance", valid, out, "--k", "10", "-q", "--summary-json",
+                         tmp_path / "s.json"], capsys)
+    assert code == 2 and "s.json" in err and "No space left" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["valid.las"]

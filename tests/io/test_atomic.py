@@ -1,5 +1,6 @@
 """Atomic output: every writer works through an unnamed temporary and leaves nothing else."""
 
+import contextlib
 import errno
 import os
 
@@ -104,3 +105,24 @@ def test_unnamed_file_leaves_no_name(tmp_path):
         assert fh.read() == b"scratch"
         assert list(tmp_path.iterdir()) == []
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("fails", [False, True])
+def test_output_group_all_or_nothing(tmp_path, mode, fails):
+    from lidarstat._shared._atomic import output_group
+
+    (tmp_path / "b.txt").write_text("old")
+    with pytest.raises(RuntimeError) if fails else contextlib.nullcontext():
+        with output_group():
+            write(tmp_path / "a.laz", _cloud())
+            with atomic_path(tmp_path / "b.txt") as tmp:
+                tmp.write_text("new")
+            shown = sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith("."))
+            assert shown == ["b.txt"]  # (the named fallback's hidden temporaries aside)
+            if fails:
+                raise RuntimeError("the last step fails")
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == (["b.txt"] if fails else ["a.laz", "b.txt"])
+    assert (tmp_path / "b.txt").read_text() == ("old" if fails else "new")
+    if not fails:
+        assert len(read(tmp_path / "a.laz")) == 500

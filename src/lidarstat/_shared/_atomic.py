@@ -11,13 +11,14 @@ temporary beside the target is used instead and removed on any exit that unwinds
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import errno
 import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path", "unnamed_file"]
+__all__ = ["atomic_path", "output_group", "unnamed_file"]
 
 
 def _umask() -> int:
@@ -52,7 +53,7 @@ def _proc_path(fd: int) -> str:
     return f"/proc/{os.getpid()}/fd/{fd}"
 
 
-def _linkat(fd: int, dst: Path) -> None:
+def _linkat(fd: int, dst: Path, shown: Path | None = None) -> None:
     """``linkat(2)`` of the unnamed file `fd` to `dst`, following the /proc magic link.
 
     ``os.link`` calls ``link(2)``, which would link the /proc entry itself (EXDEV); the
@@ -68,7 +69,7 @@ def _linkat(fd: int, dst: Path) -> None:
         import ctypes
 
         code = ctypes.get_errno()
-        raise OSError(code, os.strerror(code), str(dst))
+        raise OSError(code, os.strerror(code), str(shown or dst))
 
 
 _LIBC = None
@@ -93,7 +94,7 @@ def _link_into_place(fd: int, path: Path) -> None:
     while True:  # a fresh hidden name, then an atomic rename over the target
         tmp = _hidden_name(path)
         try:
-            _linkat(fd, tmp)
+            _linkat(fd, tmp, path)
             break
         except FileExistsError:
             continue
@@ -141,7 +142,8 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterat
     truncating or appending, but it has no suffix, so they must be told the format
     explicitly (laspy ``do_compress``, matplotlib ``format``, NumPy through a file object).
     If the block raises, or the process dies, `path` is left as it was and no temporary
-    remains. Errors naming the temporary are re-raised naming `path`.
+    remains. Errors naming the temporary are re-raised naming `path`. Inside an
+    :func:`output_group` the file appears when the group ends.
 
     Parameters
     ----------
@@ -163,14 +165,84 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterat
         yield from _named(path, directory, path.suffix if suffix is None else suffix)
         return
     tmp = _proc_path(fd)
+    pending = _PENDING.get()
     try:
         try:
             yield Path(tmp)
-            _link_into_place(fd, path)
+            if pending is not None:
+                pending.append(_Pending(path, fd=fd))
+                fd = None  # the group links and closes it
+            else:
+                _link_into_place(fd, path)
         except OSError as exc:
             _reraise(exc, tmp, path)
     finally:
-        os.close(fd)
+        if fd is not None:
+            os.close(fd)
+
+
+class _Pending:
+    """A complete temporary waiting for the end of its :func:`output_group`."""
+
+    def __init__(self, path: Path, *, fd: int | None = None, tmp: Path | None = None):
+        self.path, self.fd, self.tmp = path, fd, tmp
+
+    def commit(self) -> None:
+        try:
+            if self.fd is not None:
+                _link_into_place(self.fd, self.path)
+            else:
+                os.chmod(self.tmp, 0o666 & ~_umask())
+                _replace(self.tmp, self.path)
+                self.tmp = None
+        except OSError as exc:
+            _reraise(exc, str(self.tmp), self.path)
+
+    def discard(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
+        if self.tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(self.tmp)
+            self.tmp = None
+
+
+_PENDING: contextvars.ContextVar[list | None] = contextvars.ContextVar(
+    "lidarstat_pending_outputs", default=None)
+
+
+@contextlib.contextmanager
+def output_group(defer: bool = True) -> Iterator[None]:
+    """Outputs written in the block appear together when it ends, or none of them.
+
+    Every :func:`atomic_path` inside the block keeps its complete temporary until the
+    block ends without an exception; then all are put in place, in the order written.
+    On an exception (SIGTERM and Ctrl-C included) none appears, so a command that fails
+    half-way leaves no part of its results.
+
+    Parameters
+    ----------
+    defer : bool
+        False: outputs written in the block appear at once (for a step that reads back
+        what it wrote inside an enclosing group).
+    """
+    pending: list[_Pending] | None = [] if defer else None
+    token = _PENDING.set(pending)
+    try:
+        yield
+    except BaseException:
+        _PENDING.reset(token)
+        for item in pending or ():
+            item.discard()
+        raise
+    _PENDING.reset(token)
+    try:
+        for item in pending or ():
+            item.commit()
+    finally:
+        for item in pending or ():
+            item.discard()
 
 
 def _named(path: Path, directory: Path, suffix: str) -> Iterator[Path]:
@@ -182,9 +254,13 @@ def _named(path: Path, directory: Path, suffix: str) -> Iterator[Path]:
         raise OSError(exc.errno, exc.strerror, str(path)) from None
     os.close(fd)
     tmp_path = Path(tmp)
+    pending = _PENDING.get()
     try:
         try:
             yield tmp_path
+            if pending is not None:
+                pending.append(_Pending(path, tmp=tmp_path))
+                return
             # mkstemp creates 0600; give the result the permissions a plain open() would
             os.chmod(tmp_path, 0o666 & ~_umask())
             os.replace(tmp_path, path)

@@ -15,6 +15,7 @@ from importlib import import_module
 from pathlib import Path
 
 from .. import __version__
+from .._shared._atomic import output_group
 from .._shared._outputs import Output, check_outputs
 from ..errors import LidarstatError
 
@@ -140,10 +141,13 @@ def _curvature_tiled(args, out, radius, opts):
         sigma = estimate_sigma(first.xyz, r_max, frame=args.frame, sensor=args.sensor,
                                min_neighbors=args.min_neighbors)
         estimated = True
-    process_file(lambda p: curvature(p, radius=radius, sigma=sigma, **opts), args.input, out,
-                 size=args.tile, halo=r_max, scheduler=args.scheduler, workers=args.workers,
-                 points_per_chunk=args.chunk_points, progress=progress(args.quiet))
-    # The summary streams back three small fields (7 bytes a point) from the output.
+    # The summary streams back three small fields (7 bytes a point) from the output, so
+    # the output appears at once, not with the command's other outputs.
+    with output_group(defer=False):
+        process_file(lambda p: curvature(p, radius=radius, sigma=sigma, **opts), args.input,
+                     out, size=args.tile, halo=r_max, scheduler=args.scheduler,
+                     workers=args.workers, points_per_chunk=args.chunk_points,
+                     progress=progress(args.quiet))
     names = ("status", "surface_type", "neighbors")
     parts = [[c.attributes[k] for k in names] for c in iter_chunks(out, args.chunk_points)]
     fields = {k: np.concatenate([p[j] for p in parts]) for j, k in enumerate(names)}
@@ -319,7 +323,8 @@ def main(argv=None) -> int:
             verbose = args.verbose
             logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,
                                 format="%(levelname)s %(name)s: %(message)s")
-            return args.func(args)
+            with output_group():  # all of a command's outputs appear, or none
+                return args.func(args)
     except Terminated:
         _fail("terminated (SIGTERM)")
         return 143
