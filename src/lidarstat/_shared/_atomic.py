@@ -2,7 +2,8 @@
 
 On Linux the data goes to an unnamed ``O_TMPFILE`` file in the target's folder: it has no
 name until it is complete, so the kernel frees it whatever way the process ends (SIGKILL
-included). When complete it is linked into the folder and renamed onto the target.
+included). When complete it is linked into place: directly when the target is absent,
+else under a hidden name renamed onto the target at once (the only moment a name exists).
 Where ``O_TMPFILE`` is unsupported (other systems, some file systems) a hidden named
 temporary beside the target is used instead and removed on any exit that unwinds
 (exceptions, SIGTERM and Ctrl-C through :func:`lidarstat.cli.main`).
@@ -75,6 +76,9 @@ def _linkat(fd: int, dst: Path, shown: Path | None = None) -> None:
 _LIBC = None
 _AT_FDCWD = -100
 _AT_SYMLINK_FOLLOW = 0x400
+#: linkat errors that mean "not here" (no /proc, a file system or sandbox refusing it)
+_LINK_REFUSED = (errno.EXDEV, errno.EPERM, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL,
+                 errno.ENOENT)
 
 
 def _hidden_name(path: Path) -> Path:
@@ -88,8 +92,10 @@ def _link_into_place(fd: int, path: Path) -> None:
         return
     except FileExistsError:
         pass
-    except OSError:  # linking refused here: copy the data into a named temporary
-        _copy_into_place(fd, path)
+    except OSError as exc:
+        if exc.errno not in _LINK_REFUSED:
+            raise
+        _copy_into_place(fd, path)  # linking refused here: copy into a named temporary
         return
     while True:  # a fresh hidden name, then an atomic rename over the target
         tmp = _hidden_name(path)
@@ -113,7 +119,10 @@ def _replace(tmp: Path, path: Path) -> None:
 def _copy_into_place(fd: int, path: Path) -> None:
     """Copy the unnamed file's data to a new hidden file and rename that onto `path`."""
     tmp = _hidden_name(path)
-    out = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    try:
+        out = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
     try:
         with open(fd, "rb", closefd=False) as src, open(out, "wb") as dst:
             src.seek(0)
