@@ -69,8 +69,9 @@ def _start(cmd, tmpdir: Path):
     env = {**os.environ, "PYTHONPATH": SRC, "TMPDIR": str(tmpdir)}
     # SIGINT at its default in the child, whatever the test runner ignores
     return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, preexec_fn=lambda: signal.signal(signal.SIGINT,
-                                                                        signal.SIG_DFL))
+                            text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT,  # noqa: PLW1509
+                                                             signal.SIG_DFL))
 
 
 def _signal_all(runs: dict) -> None:

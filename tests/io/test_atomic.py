@@ -74,10 +74,9 @@ def test_side_writers(tmp_path, mode):
 def test_failure_keeps_the_old_file_and_leaves_nothing(tmp_path, mode):
     path = tmp_path / "o.txt"
     path.write_text("old")
-    with pytest.raises(RuntimeError):
-        with atomic_path(path) as tmp:
-            tmp.write_text("half")
-            raise RuntimeError("boom")
+    with pytest.raises(RuntimeError), atomic_path(path) as tmp:
+        tmp.write_text("half")
+        raise RuntimeError("boom")
     assert path.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["o.txt"]
 
@@ -92,9 +91,8 @@ def test_errors_name_the_users_path(tmp_path, mode):
     def fail_inside(tmp):
         raise FileNotFoundError(errno.ENOENT, "gone", str(tmp))
 
-    with pytest.raises(FileNotFoundError) as info:
-        with atomic_path(tmp_path / "x.json") as tmp:
-            fail_inside(tmp)
+    with pytest.raises(FileNotFoundError) as info, atomic_path(tmp_path / "x.json") as tmp:
+        fail_inside(tmp)
     assert info.value.filename == str(tmp_path / "x.json")
 
 
@@ -112,15 +110,14 @@ def test_output_group_all_or_nothing(tmp_path, mode, fails):
     from lidarstat._shared._atomic import output_group
 
     (tmp_path / "b.txt").write_text("old")
-    with pytest.raises(RuntimeError) if fails else contextlib.nullcontext():
-        with output_group():
-            write(tmp_path / "a.laz", _cloud())
-            with atomic_path(tmp_path / "b.txt") as tmp:
-                tmp.write_text("new")
-            shown = sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith("."))
-            assert shown == ["b.txt"]  # (the named fallback's hidden temporaries aside)
-            if fails:
-                raise RuntimeError("the last step fails")
+    with pytest.raises(RuntimeError) if fails else contextlib.nullcontext(), output_group():
+        write(tmp_path / "a.laz", _cloud())
+        with atomic_path(tmp_path / "b.txt") as tmp:
+            tmp.write_text("new")
+        shown = sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith("."))
+        assert shown == ["b.txt"]  # (the named fallback's hidden temporaries aside)
+        if fails:
+            raise RuntimeError("the last step fails")
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == (["b.txt"] if fails else ["a.laz", "b.txt"])
     assert (tmp_path / "b.txt").read_text() == ("old" if fails else "new")

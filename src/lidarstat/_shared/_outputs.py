@@ -24,7 +24,7 @@ from pathlib import Path
 
 from ..errors import InvalidParameterError, UnknownFormatError
 
-__all__ = ["Output", "check_outputs", "POINT_CLOUD_SUFFIXES", "LINE_SUFFIXES"]
+__all__ = ["LINE_SUFFIXES", "POINT_CLOUD_SUFFIXES", "Output", "check_outputs"]
 
 #: Suffixes a point-cloud output may have (``.e57`` is read only).
 POINT_CLOUD_SUFFIXES = (".las", ".laz", ".ply", ".csv", ".txt", ".npz")

@@ -338,7 +338,7 @@ def main(argv=None) -> int:
     except MemoryError as exc:
         _fail(f"error: out of memory{f' ({exc})' if str(exc) else ''}")
         return 2
-    except Exception as exc:  # a bug: one line, the traceback with -v
+    except Exception as exc:  # noqa: BLE001 -- a bug: one line, the traceback with -v
         if verbose:
             traceback.print_exc()
         msg = str(exc).splitlines()[0] if str(exc) else ""

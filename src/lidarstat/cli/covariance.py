@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import time
 
-from ._app import (SENSOR_HELP, Output, check_plan, progress, resolve_sensor,
-                   write_summary_json)
+from ._app import SENSOR_HELP, Output, check_plan, progress, resolve_sensor, write_summary_json
 
 
 def add_neighbourhood_arguments(s, *, k_default=50):
