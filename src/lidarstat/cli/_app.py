@@ -3,15 +3,21 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
+import signal
 import sys
+import threading
 import time
+import traceback
 from importlib import import_module
 from pathlib import Path
 
 from .. import __version__
-from ..errors import LidarstatError, UnknownFormatError
+from .._shared._atomic import output_group
+from .._shared._outputs import Output, check_outputs
+from ..errors import LidarstatError
 
 logger = logging.getLogger("lidarstat")
 
@@ -21,23 +27,18 @@ COMMAND_MODULES: tuple[str, ...] = ("segment", "covariance", "ridges", "moments"
 
 
 def check_output(path: str, src: str | None = None) -> Path:
-    """Validate an output path before any work: known suffix, existing folder, not ``src``."""
-    from ..io import SUPPORTED_SUFFIXES
+    """Check one point-cloud output before any work (:func:`check_plan` with one output)."""
+    return check_plan([src], Output("output", path))[0]
 
-    p = Path(path)
-    if p.suffix.lower() not in SUPPORTED_SUFFIXES:
-        raise UnknownFormatError(
-            f"{p}: unknown point-cloud format '{p.suffix}'; supported: "
-            + ", ".join(SUPPORTED_SUFFIXES)
-        )
-    if p.suffix.lower() == ".e57":
-        raise UnknownFormatError(f"{p}: E57 is read only; write .las, .laz, .ply, .csv, .txt "
-                                 "or .npz")
-    if not p.parent.is_dir() and str(p.parent):
-        raise LidarstatError(f"{p}: output directory {p.parent} does not exist")
-    if src is not None and p.resolve() == Path(src).resolve():
-        raise LidarstatError(f"{p}: refusing to overwrite the input file")
-    return p
+
+def check_plan(inputs, *outputs: Output) -> list[Path | None]:
+    """Check a command's whole output plan before any work; the output paths in order.
+
+    Refuses (naming the option and the path as typed) an output that is an input, two
+    outputs that are one file, a missing or read-only folder or a suffix the output does
+    not accept: see :mod:`lidarstat._shared._outputs`.
+    """
+    return check_outputs(inputs, outputs)
 
 
 def resolve_sensor(sensor, path, quiet=False):
@@ -98,7 +99,8 @@ def cmd_curvature(args):
     from ..features import curvature
     from ..io import read, write
 
-    out = check_output(args.output, args.input)
+    out, _ = check_plan([args.input], Output("output", args.output),
+                        Output("--summary-json", args.summary_json, "json"))
     radius = args.radius if len(args.radius) > 1 else args.radius[0]
     opts = dict(alpha=args.alpha, test=args.test, frame=args.frame, sensor=args.sensor,
                 noise=args.noise, min_neighbors=args.min_neighbors,
@@ -139,10 +141,13 @@ def _curvature_tiled(args, out, radius, opts):
         sigma = estimate_sigma(first.xyz, r_max, frame=args.frame, sensor=args.sensor,
                                min_neighbors=args.min_neighbors)
         estimated = True
-    process_file(lambda p: curvature(p, radius=radius, sigma=sigma, **opts), args.input, out,
-                 size=args.tile, halo=r_max, scheduler=args.scheduler, workers=args.workers,
-                 points_per_chunk=args.chunk_points, progress=progress(args.quiet))
-    # The summary streams back three small fields (7 bytes a point) from the output.
+    # The summary streams back three small fields (7 bytes a point) from the output, so
+    # the output appears at once, not with the command's other outputs.
+    with output_group(defer=False):
+        process_file(lambda p: curvature(p, radius=radius, sigma=sigma, **opts), args.input,
+                     out, size=args.tile, halo=r_max, scheduler=args.scheduler,
+                     workers=args.workers, points_per_chunk=args.chunk_points,
+                     progress=progress(args.quiet))
     names = ("status", "surface_type", "neighbors")
     parts = [[c.attributes[k] for k in names] for c in iter_chunks(out, args.chunk_points)]
     fields = {k: np.concatenate([p[j] for p in parts]) for j, k in enumerate(names)}
@@ -182,8 +187,9 @@ def cmd_synth(args):
 
 
 def cmd_demo(args):
-    from ..report._demo import run_demo
+    from ..report._demo import DEMO_FILES, run_demo
 
+    check_plan([], Output("outdir", args.outdir, "folder", members=DEMO_FILES))
     run_demo(Path(args.outdir), sigma=args.sigma, radius=args.radius, seed=args.seed)
     return 0
 
@@ -272,15 +278,69 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv=None) -> int:
-    """Entry point of the ``lidarstat`` console script; returns the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that the run unwinds like an exception.
+
+    A BaseException, like KeyboardInterrupt: ``except Exception`` in library code does not
+    swallow it, and every ``finally`` (temporary files) runs.
+    """
+
+
+def _on_sigterm(signum, frame):
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # a second SIGTERM ends the process
+    raise Terminated()
+
+
+@contextlib.contextmanager
+def _sigterm_unwinds():
+    """Within the block, SIGTERM raises :class:`Terminated` (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
-        return args.func(args)
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _fail(text: str) -> None:
+    print(f"lidarstat: {text}", file=sys.stderr, flush=True)
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``lidarstat`` console script; returns the exit status.
+
+    0 success; 1 an internal error (one line; ``-v`` adds the traceback); 2 a usage or
+    data error (one line naming the file or option); 130 Ctrl-C; 143 SIGTERM. Temporary
+    files are removed on every one of these exits.
+    """
+    verbose = False
+    try:
+        with _sigterm_unwinds():
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            verbose = args.verbose
+            logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,
+                                format="%(levelname)s %(name)s: %(message)s")
+            with output_group():  # all of a command's outputs appear, or none
+                return args.func(args)
+    except Terminated:
+        _fail("terminated (SIGTERM)")
+        return 143
+    except KeyboardInterrupt:
+        _fail("interrupted")
+        return 130
     except (LidarstatError, OSError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f"lidarstat: error: {msg}", file=sys.stderr)
+        _fail(f"error: {msg}")
         return 2
+    except MemoryError as exc:
+        _fail(f"error: out of memory{f' ({exc})' if str(exc) else ''}")
+        return 2
+    except Exception as exc:  # noqa: BLE001 -- a bug: one line, the traceback with -v
+        if verbose:
+            traceback.print_exc()
+        msg = str(exc).splitlines()[0] if str(exc) else ""
+        _fail(f"internal error: {type(exc).__name__}: {msg} (run with -v for the traceback)")
+        return 1

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from ._app import SENSOR_HELP, check_output, progress, resolve_sensor, write_summary_json
+from ._app import SENSOR_HELP, Output, check_plan, progress, resolve_sensor, write_summary_json
 
 
 def add_neighbourhood_arguments(s, *, k_default=50):
@@ -36,7 +36,8 @@ def cmd_covariance(args):
     from ..classify import covariance
     from ..io import read, write
 
-    out = check_output(args.output, args.input)
+    out, _ = check_plan([args.input], Output("output", args.output),
+                        Output("--summary-json", args.summary_json, "json"))
     cloud = read(args.input)
     t0 = time.perf_counter()
     sensor = resolve_sensor(args.sensor, args.input, args.quiet)

@@ -15,7 +15,9 @@ def _run(args):
     from ..classify import class_scores, filter_errors
     from ..errors import InvalidParameterError
     from ..io import read
+    from ._app import Output, check_plan
 
+    check_plan([args.result, args.reference], Output("--json", args.json, "json"))
     res = read(args.result)
     ref = read(args.reference)
     if len(res) != len(ref):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from ._app import check_output, write_summary_json
+from ._app import Output, check_plan, write_summary_json
 
 
 def _run(args):
@@ -13,7 +13,14 @@ def _run(args):
     from ..io import linear_units, read, write
     from ..report._moments import write_moments_report
 
-    out = check_output(args.output, args.input)
+    out = Path(args.output)
+    folder = None
+    if not args.no_report:
+        folder = Path(args.report) if args.report else out.with_name(out.stem + "_report")
+    check_plan([args.input], Output("output", out),
+               Output("--report", folder, "folder", default=not args.report,
+                      members=("report.json", "index.html")),
+               Output("--summary-json", args.summary_json, "json"))
     cloud = read(args.input)
     if len(cloud) == 0:
         from ..errors import InvalidPointsError
@@ -37,8 +44,7 @@ def _run(args):
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
     report = None
-    if not args.no_report:
-        folder = Path(args.report) if args.report else out.with_name(out.stem + "_report")
+    if folder is not None:
         report = write_moments_report(folder, res, input_path=args.input, output_path=out,
                                       seconds=elapsed)
     if not args.quiet:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from ._app import check_output, progress, write_summary_json
+from ._app import Output, check_plan, progress, write_summary_json
 
 
 def _lines_path(args, out: Path) -> Path:
@@ -17,14 +17,11 @@ def cmd_ridges(args):
     from ..io import read, write
     from ..segment import ridges
 
-    out = check_output(args.output, args.input)
+    out = Path(args.output)
     lines_path = _lines_path(args, out)
-    if lines_path.suffix.lower() not in (".geojson", ".json", ".csv", ".las", ".laz", ".ply",
-                                         ".npz", ".txt"):
-        from ..errors import UnknownFormatError
-
-        raise UnknownFormatError(f"{lines_path}: unknown format for the ridge lines "
-                                 "(use .geojson, .csv or .las/.laz)")
+    check_plan([args.input], Output("output", out),
+               Output("--lines", lines_path, "lines", default=not args.lines),
+               Output("--summary-json", args.summary_json, "json"))
     cloud = read(args.input)
     t0 = time.perf_counter()
     res = ridges(cloud.xyz, radius=args.radius, k=args.k, sigma=args.sigma, alpha=args.alpha,

@@ -15,7 +15,7 @@ import time
 from importlib import import_module
 from pathlib import Path
 
-from ._app import SENSOR_HELP, check_output, resolve_sensor, write_summary_json
+from ._app import SENSOR_HELP, Output, check_plan, resolve_sensor, write_summary_json
 
 #: method name -> module path (``add_arguments``, ``run``). Add a method by adding it here.
 SEGMENT_METHODS: dict[str, str] = {
@@ -34,9 +34,15 @@ def cmd_segment(args):
     """Run the chosen method, write OUT (with ``segment_id``), the table and the lines."""
     from ..io import read, write
 
-    out = check_output(args.output, args.input)
+    out = Path(args.output)
     table = Path(args.table) if args.table else _default_path(out, ".segments.csv")
     lines = Path(args.lines) if args.lines else _default_path(out, ".lines.geojson")
+    diagnostics = getattr(args, "diagnostics", None)
+    check_plan([args.input], Output("output", out),
+               Output("--table", table, "table", default=not args.table),
+               Output("--lines", lines, "lines", default=not args.lines),
+               Output("--summary-json", args.summary_json, "json"),
+               Output("--diagnostics", diagnostics, "folder"))
     cloud = read(args.input)
     args.sensor = resolve_sensor(args.sensor, args.input, args.quiet)
     method = import_module(SEGMENT_METHODS[args.method])

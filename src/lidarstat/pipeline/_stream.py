@@ -4,28 +4,34 @@ Memory holds one input chunk, or the tiles being processed, at a time; it does n
 with the file. The steps:
 
 1. stream the file once for its planimetric bounds;
-2. stream it again, appending each point (index, x, y, z) to the scratch file of every
-   tile whose core or halo contains it;
+2. stream it again, appending each point (index, x, y, z) of every tile whose core or
+   halo contains it to a scratch file, as one run of records per tile and input chunk;
 3. run the method on each tile (one after the other, in threads, or as Dask tasks) and
-   append its core points' results, with their point numbers, to one scratch file per
-   output chunk and field (the points of a tile are spread over the whole file, so
-   results written into file-sized arrays would touch every page of them for every
-   tile: memory would grow with the file);
+   append its core points' results, with their point numbers, to a second scratch file,
+   one run per output chunk and field (the points of a tile are spread over the whole
+   file, so results written into file-sized arrays would touch every page of them for
+   every tile: memory would grow with the file);
 4. stream the input a third time, writing every original field plus the results chunk by
-   chunk to a temporary output renamed when complete; each chunk's results are read back
-   from its own scratch files.
+   chunk to a temporary output linked into place when complete; each chunk's results are
+   read back from its own runs.
+
+The scratch files have no name (:func:`lidarstat._shared._atomic.unnamed_file`): the
+kernel frees them however the process ends, SIGKILL included. In memory there is only
+an index of the runs, ``(offset, count)`` per tile and input chunk, and per output chunk
+and field.
 """
 
 from __future__ import annotations
 
 import os
-import tempfile
+from collections import defaultdict
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
+from .._shared._atomic import unnamed_file
 from .._shared.validation import check_option, check_scalar
 from ..errors import InvalidPointsError
 from ..io import iter_chunks, rewrite
@@ -51,9 +57,50 @@ def _bounds(src, points_per_chunk):
     return lo, hi, n
 
 
-def _bucket(src, grid, workdir, points_per_chunk):
-    """Append every point to its tiles' scratch files; return the tile numbers used."""
-    used = set()
+class _Scratch:
+    """Runs of records appended to one unnamed file, indexed by key in memory.
+
+    Appends come from one thread; reads (``os.pread``) may come from several.
+    """
+
+    def __init__(self, directory):
+        self._fh = unnamed_file(directory)
+        self._fd = self._fh.fileno()
+        self._end = 0
+        self.runs: dict = defaultdict(list)  # key -> [(offset, count), ...]
+
+    def append(self, key, rec: np.ndarray) -> None:
+        """Append the records `rec` to the runs of `key`."""
+        view = memoryview(np.ascontiguousarray(rec)).cast("B")
+        start = self._end
+        while view:
+            n = os.pwrite(self._fd, view, self._end)
+            view = view[n:]
+            self._end += n
+        self.runs[key].append((start, len(rec)))
+
+    def read(self, key, dtype: np.dtype) -> np.ndarray:
+        """Every record of `key`, in the order appended (empty when none)."""
+        parts = [np.frombuffer(self._pread(off, cnt * dtype.itemsize), dtype=dtype)
+                 for off, cnt in self.runs.get(key, ())]
+        return np.concatenate(parts) if parts else np.empty(0, dtype)
+
+    def _pread(self, offset: int, size: int) -> bytes:
+        parts = []
+        while size > 0:
+            block = os.pread(self._fd, size, offset)
+            if not block:
+                raise EOFError("scratch file shorter than its index")
+            parts.append(block)
+            offset, size = offset + len(block), size - len(block)
+        return b"".join(parts) if len(parts) != 1 else parts[0]
+
+    def close(self) -> None:
+        self._fh.close()
+
+
+def _bucket(src, grid, scratch, points_per_chunk):
+    """Append every point to its tiles' runs in `scratch`; return the tile numbers used."""
     start = 0
     for chunk in iter_chunks(src, points_per_chunk):
         pid, key, core = grid.memberships(chunk.xyz[:, :2], first_index=start)
@@ -66,11 +113,9 @@ def _bucket(src, grid, workdir, points_per_chunk):
             rec["i"] = pid[s:e]
             rec["x"], rec["y"], rec["z"] = chunk.xyz[rows].T
             rec["core"] = core[s:e]
-            with open(workdir / f"tile_{int(key[s])}.bin", "ab") as fh:
-                rec.tofile(fh)
-            used.add(int(key[s]))
+            scratch.append(int(key[s]), rec)
         start += len(chunk)
-    return sorted(used)
+    return sorted(scratch.runs)
 
 
 def process_file(func: Callable, src, dst, *, size: float, halo: float,
@@ -100,8 +145,8 @@ def process_file(func: Callable, src, dst, *, size: float, halo: float,
     points_per_chunk : int
         Points per streamed chunk of the input.
     workdir : path-like, optional
-        Folder for the scratch files (tile buckets, result arrays); default a temporary
-        folder beside `dst`, removed at the end.
+        Folder (file system) of the two unnamed scratch files (tile buckets, results);
+        default `dst`'s folder. Nothing named is created there.
     progress : callable, optional
         ``progress(done_points, total_points)``.
 
@@ -117,81 +162,89 @@ def process_file(func: Callable, src, dst, *, size: float, halo: float,
     lo, hi, n = _bounds(src, points_per_chunk)
     grid = TileGrid.covering(lo, hi, size, halo)
     parent = Path(workdir) if workdir is not None else dst.parent
-    with tempfile.TemporaryDirectory(prefix=".lidarstat-tiles-", dir=parent) as tmp:
-        tmp = Path(tmp)
-        keys = _bucket(src, grid, tmp, points_per_chunk)
-        # name -> (number, dtype, trailing shape) of every result field, first come
-        registry: dict[str, tuple] = {}
-        done = 0
-
-        def compute(key):
-            rec = np.fromfile(tmp / f"tile_{key}.bin", dtype=_REC)
-            core = rec["core"].astype(bool)
-            if not core.any():
-                return rec["i"][:0], {}
-            xyz = np.c_[rec["x"], rec["y"], rec["z"]]
-            fields = _fields_of(func(xyz), len(rec), grid.key_of(key))
-            return rec["i"][core], {name: arr[core] for name, arr in fields.items()}
-
-        def put(rows, fields):
-            """Append the results of `rows` to the scratch file of their chunk and field."""
-            nonlocal done
-            chunk = rows // points_per_chunk
-            order = np.argsort(chunk, kind="stable")
-            chunk = chunk[order]
-            cuts = np.flatnonzero(np.r_[True, chunk[1:] != chunk[:-1], True]) \
-                if rows.size else np.zeros(1, dtype=np.int64)
-            for name, arr in fields.items():
-                if name not in registry:
-                    registry[name] = (len(registry), arr.dtype, arr.shape[1:])
-                j, dtype, shape = registry[name]
-                rec = np.empty(rows.size, [("row", "<i8"), ("v", dtype, shape)])
-                rec["row"] = rows[order]
-                rec["v"] = arr[order]
-                for s, e in zip(cuts[:-1], cuts[1:]):
-                    with open(tmp / f"result_{int(chunk[s])}_{j}.bin", "ab") as fh:
-                        rec[s:e].tofile(fh)
-            done += rows.size
-            if progress is not None:
-                progress(done, n)
-
-        # Tiles go in batches, so that finished results never pile up in memory.
-        nworkers = workers or os.cpu_count() or 1
-        batch = 1 if scheduler == "sync" else 2 * nworkers
-        pool = ThreadPoolExecutor(max_workers=nworkers) if scheduler == "threads" else None
-        try:
-            for b in range(0, len(keys), batch):
-                part = keys[b:b + batch]
-                if scheduler == "sync":
-                    out = [compute(k) for k in part]
-                elif scheduler == "threads":
-                    out = list(pool.map(compute, part))
-                else:
-                    import dask
-
-                    out = dask.compute(*[dask.delayed(compute)(k) for k in part])
-                for rows, fields in out:
-                    put(rows, fields)
-        finally:
-            if pool is not None:
-                pool.shutdown()
-
-        def fields_of(start, chunk):
-            """The results of points ``start .. start + len(chunk)`` (zeros where none)."""
-            m = len(chunk)
-            out = {}
-            for name, (j, dtype, shape) in registry.items():
-                arr = np.zeros((m,) + shape, dtype=dtype)
-                rec_type = np.dtype([("row", "<i8"), ("v", dtype, shape)])
-                for c in range(start // points_per_chunk,
-                               (start + max(m, 1) - 1) // points_per_chunk + 1):
-                    path = tmp / f"result_{c}_{j}.bin"
-                    if path.exists():
-                        rec = np.fromfile(path, dtype=rec_type)
-                        inside = (rec["row"] >= start) & (rec["row"] < start + m)
-                        arr[rec["row"][inside] - start] = rec["v"][inside]
-                out[name] = arr
-            return out
-
-        rewrite(src, dst, fields_of, points_per_chunk=points_per_chunk)
+    buckets = _Scratch(parent)
+    results = _Scratch(parent)
+    try:
+        _run_tiles(func, src, dst, grid, n, buckets, results, scheduler=scheduler,
+                   workers=workers, points_per_chunk=points_per_chunk, progress=progress)
+    finally:
+        buckets.close()
+        results.close()
     return dst
+
+
+def _run_tiles(func, src, dst, grid, n, buckets, results, *, scheduler, workers,
+               points_per_chunk, progress):
+    """Steps 2-4 of :func:`process_file`, with its scratch files `buckets` and `results`."""
+    keys = _bucket(src, grid, buckets, points_per_chunk)
+    # name -> (number, dtype, trailing shape) of every result field, first come
+    registry: dict[str, tuple] = {}
+    done = 0
+
+    def compute(key):
+        rec = buckets.read(key, _REC)
+        core = rec["core"].astype(bool)
+        if not core.any():
+            return rec["i"][:0], {}
+        xyz = np.c_[rec["x"], rec["y"], rec["z"]]
+        fields = _fields_of(func(xyz), len(rec), grid.key_of(key))
+        return rec["i"][core], {name: arr[core] for name, arr in fields.items()}
+
+    def put(rows, fields):
+        """Append the results of `rows` to the runs of their chunk and field."""
+        nonlocal done
+        chunk = rows // points_per_chunk
+        order = np.argsort(chunk, kind="stable")
+        chunk = chunk[order]
+        cuts = np.flatnonzero(np.r_[True, chunk[1:] != chunk[:-1], True]) \
+            if rows.size else np.zeros(1, dtype=np.int64)
+        for name, arr in fields.items():
+            if name not in registry:
+                registry[name] = (len(registry), arr.dtype, arr.shape[1:])
+            j, dtype, shape = registry[name]
+            rec = np.empty(rows.size, [("row", "<i8"), ("v", dtype, shape)])
+            rec["row"] = rows[order]
+            rec["v"] = arr[order]
+            for s, e in zip(cuts[:-1], cuts[1:]):
+                results.append((int(chunk[s]), j), rec[s:e])
+        done += rows.size
+        if progress is not None:
+            progress(done, n)
+
+    # Tiles go in batches, so that finished results never pile up in memory.
+    nworkers = workers or os.cpu_count() or 1
+    batch = 1 if scheduler == "sync" else 2 * nworkers
+    pool = ThreadPoolExecutor(max_workers=nworkers) if scheduler == "threads" else None
+    try:
+        for b in range(0, len(keys), batch):
+            part = keys[b:b + batch]
+            if scheduler == "sync":
+                out = [compute(k) for k in part]
+            elif scheduler == "threads":
+                out = list(pool.map(compute, part))
+            else:
+                import dask
+
+                out = dask.compute(*[dask.delayed(compute)(k) for k in part])
+            for rows, fields in out:
+                put(rows, fields)
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+
+    def fields_of(start, chunk):
+        """The results of points ``start .. start + len(chunk)`` (zeros where none)."""
+        m = len(chunk)
+        out = {}
+        for name, (j, dtype, shape) in registry.items():
+            arr = np.zeros((m,) + shape, dtype=dtype)
+            rec_type = np.dtype([("row", "<i8"), ("v", dtype, shape)])
+            for c in range(start // points_per_chunk,
+                           (start + max(m, 1) - 1) // points_per_chunk + 1):
+                rec = results.read((c, j), rec_type)
+                inside = (rec["row"] >= start) & (rec["row"] < start + m)
+                arr[rec["row"][inside] - start] = rec["v"][inside]
+            out[name] = arr
+        return out
+
+    rewrite(src, dst, fields_of, points_per_chunk=points_per_chunk)

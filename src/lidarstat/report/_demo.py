@@ -6,6 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
+#: Files :func:`run_demo` writes into its folder.
+DEMO_FILES = ("agpart_curvature.las", "K.png", "H.png", "chi2.png", "surface_type.png",
+              "surface_type_truth.png")
+
 
 def face_radius_table(scene, result):
     """Recovered cylinder radius 1/(2|median H|) per curved face of a CSG scene.
