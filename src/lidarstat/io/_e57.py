@@ -55,21 +55,35 @@ def scan_positions(path) -> np.ndarray:
         e57.close()
 
 
-def read_file(path: Path, fmt: str = "e57") -> PointCloud:
+#: Bytes per point while reading: float64 x/y/z, the attribute buffers and the copies.
+_BYTES_PER_POINT = 112
+
+
+def read_file(path: Path, fmt: str = "e57", max_bytes=None) -> PointCloud:
     """Read every scan of an E57 file, poses applied, as one :class:`PointCloud`."""
+    from ._las import short_cause
+    from ._las_checks import check_ceiling
+
     e57 = _open(path)
     try:
+        try:
+            total = sum(int(e57.get_header(i).point_count) for i in range(e57.scan_count))
+        except Exception as exc:
+            raise PointCloudReadError(
+                f"{path}: unreadable E57 file ({short_cause(exc)})") from exc
+        check_ceiling(path, f"{total} E57 points", total * _BYTES_PER_POINT, max_bytes)
         xyz, attrs = [], {}
         for i in range(e57.scan_count):
             try:
                 data = e57.read_scan(i, intensity=True, colors=True, row_column=True,
                                      ignore_missing_fields=True)
             except Exception as exc:
-                from ._las import short_cause
-
                 raise PointCloudReadError(
                     f"{path}: cannot read scan {i} of the E57 file ({short_cause(exc)})"
                 ) from exc
+            if not all(k in data for k in ("cartesianX", "cartesianY", "cartesianZ")):
+                raise PointCloudReadError(f"{path}: scan {i} of the E57 file has no "
+                                          "cartesianX/Y/Z coordinates")
             xyz.append(np.column_stack([data.pop("cartesianX"), data.pop("cartesianY"),
                                         data.pop("cartesianZ")]))
             for key, name in _RENAME.items():

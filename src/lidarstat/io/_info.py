@@ -13,9 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import PointCloudReadError
+from ..errors import LidarstatError, PointCloudReadError
 from ._cloud import _format_of, read
 
+_CHUNK = 2_000_000
 _EPSG_RE = re.compile(r'(?:AUTHORITY|ID)\[\s*"EPSG"\s*,\s*"?(\d+)"?\s*\]', re.IGNORECASE)
 
 
@@ -79,23 +80,25 @@ def _describe_las(path: Path, fmt: str) -> dict:
     import laspy
     from laspy.vlrs.known import LasZipVlr
 
-    from ._las import _BACKEND, crs_of, short_cause
+    from ._las import _BACKEND, _checked, _unreadable, crs_of, read_chunks
 
+    _checked(path, fmt, _CHUNK, None, allow_empty=True)
     ranges = _Ranges()
     try:
         with laspy.open(path, laz_backend=_BACKEND) as reader:
             h = reader.header
-            for points in reader.chunk_iterator(2_000_000):
+            crs, epsg = _crs_summary(crs_of(h))
+            for points in read_chunks(reader, path, fmt, _CHUNK):
                 for name in h.point_format.dimension_names:
                     if name not in ("X", "Y", "Z"):
                         ranges.add(name, points[name])
+    except LidarstatError:
+        raise
     except Exception as exc:
-        raise PointCloudReadError(
-            f"{path}: unreadable {fmt.upper()} file ({short_cause(exc)})") from exc
+        raise _unreadable(path, fmt, exc) from exc
     count = int(h.point_count)
     lo = [float(v) for v in h.mins] if count else None
     hi = [float(v) for v in h.maxs] if count else None
-    crs, epsg = _crs_summary(crs_of(h))
     return {
         "las_version": f"{h.version.major}.{h.version.minor}",
         "point_format": int(h.point_format.id),
