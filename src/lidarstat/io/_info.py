@@ -80,7 +80,7 @@ def _describe_las(path: Path, fmt: str) -> dict:
     import laspy
     from laspy.vlrs.known import LasZipVlr
 
-    from ._las import _BACKEND, _checked, _unreadable, crs_of, read_chunks
+    from ._las import _BACKEND, NOT_FOREIGN, _checked, _unreadable, crs_of, read_chunks
 
     _checked(path, fmt, _CHUNK, None, allow_empty=True)
     ranges = _Ranges()
@@ -92,9 +92,9 @@ def _describe_las(path: Path, fmt: str) -> dict:
                 for name in h.point_format.dimension_names:
                     if name not in ("X", "Y", "Z"):
                         ranges.add(name, points[name])
-    except LidarstatError:
+    except (LidarstatError, *NOT_FOREIGN):
         raise
-    except Exception as exc:
+    except BaseException as exc:  # lazrs panics are BaseExceptions
         raise _unreadable(path, fmt, exc) from exc
     count = int(h.point_count)
     lo = [float(v) for v in h.mins] if count else None

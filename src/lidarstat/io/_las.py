@@ -34,6 +34,11 @@ _EB_TYPES = {"b": "u1", "u1": "u1", "u2": "u2", "u4": "u4", "u8": "u8", "i1": "i
              "i2": "i2", "i4": "i4", "i8": "i8", "f2": "f4", "f4": "f4", "f8": "f8"}
 
 
+#: Exceptions a reader lets through; every other one (including the PanicException lazrs
+#: raises, a BaseException) becomes a PointCloudReadError naming the file.
+NOT_FOREIGN = (KeyboardInterrupt, SystemExit, GeneratorExit)
+
+
 def short_cause(exc: BaseException, limit: int = 120) -> str:
     """One-line, length-limited description of an exception."""
     text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
@@ -87,7 +92,9 @@ def _cloud_from_points(points, header, path: Path, fmt: str, crs) -> PointCloud:
         for name in header.point_format.dimension_names:
             if name not in ("X", "Y", "Z"):
                 attrs[name] = np.array(points[name])
-    except Exception as exc:  # e.g. extra-bytes VLR describing fields the records lack
+    except NOT_FOREIGN:
+        raise
+    except BaseException as exc:  # e.g. extra-bytes VLR describing fields the records lack
         raise _unreadable(path, fmt, exc) from exc
     return PointCloud(xyz, attrs, crs=crs, source_path=path, source_format=fmt,
                       las_header=header)
@@ -123,7 +130,9 @@ def read_file(path: Path, fmt: str, max_bytes=None) -> PointCloud:
         n_header = las.header.point_count
         header = _strip_laszip(las.header)
         crs = crs_of(header)
-    except Exception as exc:  # laspy/lazrs raise anything from ZeroDivisionError to MemoryError
+    except NOT_FOREIGN:
+        raise
+    except BaseException as exc:  # ZeroDivisionError, MemoryError, lazrs panics ...
         raise _unreadable(path, fmt, exc) from exc
     if len(points) != n_header:
         raise PointCloudReadError(f"{path}: unreadable {fmt.upper()} file (header announces "
@@ -141,13 +150,17 @@ def iter_file(path: Path, fmt: str, points_per_chunk: int, max_bytes=None
     _checked(path, fmt, points_per_chunk, max_bytes)
     try:
         reader = laspy.open(path, laz_backend=_BACKEND)
-    except Exception as exc:
+    except NOT_FOREIGN:
+        raise
+    except BaseException as exc:
         raise _unreadable(path, fmt, exc) from exc
     with reader:
         try:
             header = _strip_laszip(reader.header)
             crs = crs_of(header)
-        except Exception as exc:
+        except NOT_FOREIGN:
+            raise
+        except BaseException as exc:
             raise _unreadable(path, fmt, exc) from exc
         for points in read_chunks(reader, path, fmt, points_per_chunk):
             yield _cloud_from_points(points, header, path, fmt, crs)
@@ -160,7 +173,9 @@ def read_chunks(reader, path: Path, fmt: str, points_per_chunk: int):
         want = min(points_per_chunk, total - done)
         try:
             points = reader.read_points(want)
-        except Exception as exc:
+        except NOT_FOREIGN:
+            raise
+        except BaseException as exc:
             raise _unreadable(path, fmt, exc) from exc
         if len(points) != want:
             raise PointCloudReadError(

@@ -298,7 +298,9 @@ def _check_variable_chunks(f: _Fields, layout: LasLayout, laszip: bytes, table: 
     try:
         f.fh.seek(layout.offset_to_point_data)
         entries = lazrs.read_chunk_table(f.fh, lazrs.LazVlr(laszip))
-    except Exception as exc:
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except BaseException as exc:  # lazrs panics are BaseExceptions
         raise f.fail("file", f"unreadable chunk table ({type(exc).__name__})") from exc
     points = sum(int(n) for n, _ in entries)
     nbytes = sum(int(b) for _, b in entries)

@@ -1,0 +1,371 @@
+"""Seeded mutation fuzzing of the readers: seed files, mutants, a sandboxed worker.
+
+Used by ``tests/io/test_fuzz_readers.py`` (a few hundred mutants per run) and by
+``benchmarks/fuzz_readers.py`` (long runs). The readers run in worker subprocesses with an
+address-space limit and a per-file alarm, so an abort, a hang or an allocation beyond the
+limit ends the worker, not the caller; the file being read when a worker died is known
+from its ``start`` line, and a new worker takes the remaining files.
+
+Outcomes per mutant: ``ok`` (read, the stream and the description agree), ``refused`` (a
+:class:`~lidarstat.errors.PointCloudReadError` or :class:`~lidarstat.errors.InvalidPointsError`
+whose one-line message names the file) and the failures ``crash`` (killed by a signal or
+non-zero exit: abort, segfault, out of memory), ``hang`` (per-file alarm), ``foreign``
+(any other exception type), ``message`` (allowed type, but several lines or no file name)
+and ``mismatch`` (``read`` and ``iter_chunks`` disagree).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import struct
+import subprocess
+import sys
+import zipfile
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+FAILURES = ("crash", "hang", "foreign", "message", "mismatch")
+_N_POINTS = 300
+
+
+# --------------------------------------------------------------------------- seeds
+def make_seeds(folder: Path, rng: np.random.Generator) -> list[Path]:
+    """Small valid files in every format, UTM-sized coordinates."""
+    import laspy
+    from laspy.vlrs.vlrlist import VLRList
+
+    folder.mkdir(parents=True, exist_ok=True)
+    n = _N_POINTS
+    xyz = np.column_stack([431000 + rng.uniform(0, 50, n), 5_400_000 + rng.uniform(0, 50, n),
+                           rng.uniform(-5, 40, n)])
+    seeds = []
+    for name, version, pf, extra, evlr in (("v12", "1.2", 3, False, False),
+                                           ("v14", "1.4", 6, True, True),
+                                           ("v14b", "1.4", 7, True, True),
+                                           ("v10", "1.2", 1, False, False)):
+        header = laspy.LasHeader(version=version, point_format=pf)
+        header.scales = np.array([0.001, 0.001, 0.001])
+        header.offsets = np.array([431000.0, 5_400_000.0, 0.0])
+        header.vlrs.append(laspy.VLR(user_id="fuzz", record_id=1, description="seed",
+                                     record_data=b"seed-vlr" * 3))
+        if extra:
+            header.add_extra_dims([laspy.ExtraBytesParams("H", "f8"),
+                                   laspy.ExtraBytesParams("flag", "u1")])
+        if evlr:
+            header.evlrs = VLRList([laspy.VLR(user_id="fuzz", record_id=2,
+                                              description="e", record_data=b"evlr" * 5)])
+        las = laspy.LasData(header)
+        las.x, las.y, las.z = xyz.T
+        las.intensity = rng.integers(0, 65535, n)
+        las.classification = rng.integers(0, 10, n)
+        if extra:
+            las.H = rng.normal(size=n)
+            las.flag = rng.integers(0, 255, n)
+        for suffix in (".las", ".laz"):
+            if name in ("v10", "v14b") and suffix == ".las":
+                continue
+            path = folder / f"{name}{suffix}"
+            las.write(path)
+            seeds.append(path)
+    import plyfile
+
+    arr = np.empty(n, dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "u2")])
+    arr["x"], arr["y"], arr["z"] = xyz.T
+    arr["intensity"] = rng.integers(0, 65535, n)
+    for text, name in ((False, "bin.ply"), (True, "asc.ply")):
+        plyfile.PlyData([plyfile.PlyElement.describe(arr[:60] if text else arr, "vertex")],
+                        text=text).write(str(folder / name))
+        seeds.append(folder / name)
+    lines = ["x,y,z,intensity"] + [f"{a},{b},{c},{i}" for (a, b, c), i in
+                                   zip(xyz[:80].tolist(), arr["intensity"][:80].tolist())]
+    (folder / "pts.csv").write_text("\n".join(lines) + "\n")
+    (folder / "pts.txt").write_text("\n".join(ln.replace(",", " ") for ln in lines[1:40]) + "\n")
+    np.savez(folder / "pts.npz", xyz=xyz, intensity=arr["intensity"])
+    seeds += [folder / "pts.csv", folder / "pts.txt", folder / "pts.npz"]
+    return seeds
+
+
+# --------------------------------------------------------------------------- mutants
+def _las_fields(data: bytes) -> list[tuple[int, str]]:
+    """(offset, struct code) of the LAS/LAZ header fields worth overwriting."""
+    fields = [(94, "H"), (96, "I"), (100, "I"), (104, "B"), (105, "H"), (107, "I"),
+              (131, "d"), (139, "d"), (147, "d"), (155, "d"), (163, "d"), (171, "d")]
+    if len(data) < 227:
+        return fields
+    minor, header_size, offset, n_vlrs = data[25], *struct.unpack_from("<HII", data, 94)
+    if minor >= 4:
+        fields += [(235, "Q"), (243, "I"), (247, "Q")]
+    pos = header_size
+    for _ in range(min(n_vlrs, 8)):  # record lengths of the VLRs
+        if pos + 54 > min(offset, len(data)):
+            break
+        fields.append((pos + 20, "H"))
+        user = data[pos + 2:pos + 18].rstrip(b"\0")
+        if user == b"laszip encoded":  # chunk size and item sizes
+            fields += [(pos + 54 + 12, "I"), (pos + 54 + 32, "H")]
+            fields += [(pos + 54 + 34 + 6 * i + 2, "H") for i in range(3)]
+        pos += 54 + struct.unpack_from("<H", data, pos + 20)[0]
+    if data[104] & 0x80 and offset + 8 <= len(data):
+        fields.append((offset, "q"))
+        table = struct.unpack_from("<q", data, offset)[0]
+        if 0 < table <= len(data) - 8:
+            fields += [(table, "I"), (table + 4, "I")]
+    return fields
+
+
+def _interesting(code: str, old, rng: np.random.Generator):
+    if code == "d":
+        return rng.choice([0.0, -0.0, math.nan, math.inf, -math.inf, 1e306, 1e-306, 1e15,
+                           -1.0, old * 1e6, old * -1, 5e-324])
+    bits = struct.calcsize("<" + code) * 8
+    signed = code in "bhiq"
+    lo, hi = (-(2 ** (bits - 1)), 2 ** (bits - 1) - 1) if signed else (0, 2 ** bits - 1)
+    pick = rng.choice([lo, hi, hi // 2 + 1, 0, 1, old + 1, old - 1, old * 2, old // 2,
+                       old * 1000, int(rng.integers(0, 2 ** min(bits, 62)))])
+    return int(min(max(int(pick), lo), hi))
+
+
+def _generic(data: bytes, rng: np.random.Generator) -> bytes:
+    b = bytearray(data)
+    kind = rng.integers(0, 5)
+    if kind == 0 and len(b):  # flip a few bytes, biased towards the header
+        for _ in range(rng.integers(1, 9)):
+            i = int(rng.integers(0, min(len(b), 512) if rng.random() < 0.7 else len(b)))
+            b[i] = int(rng.integers(0, 256))
+    elif kind == 1:  # truncate
+        b = b[: int(rng.integers(0, len(b) + 1))]
+    elif kind == 2:  # append junk
+        b += bytes(rng.integers(0, 256, int(rng.integers(1, 64)), dtype=np.uint8))
+    elif kind == 3 and len(b) > 8:  # zero a range
+        i = int(rng.integers(0, len(b) - 1))
+        m = min(int(rng.integers(1, 65)), len(b) - i)
+        b[i: i + m] = bytes(m)
+    else:  # duplicate or drop a range
+        i, j = sorted(int(v) for v in rng.integers(0, len(b) + 1, 2))
+        b = b[:j] + b[i:] if rng.random() < 0.5 else b[:i] + b[j:]
+    return bytes(b)
+
+
+def _mutate_las(data: bytes, rng) -> bytes:
+    if rng.random() < 0.35:
+        return _generic(data, rng)
+    b = bytearray(data)
+    fields = _las_fields(data)
+    for _ in range(1 if rng.random() < 0.8 else 2):
+        off, code = fields[int(rng.integers(0, len(fields)))]
+        if off + struct.calcsize("<" + code) > len(b):
+            continue
+        old = struct.unpack_from("<" + code, b, off)[0]
+        struct.pack_into("<" + code, b, off, _interesting(code, old, rng))
+    return bytes(b)
+
+
+_PLY_SWAPS = [(b"element vertex ", lambda m, r: str(int(m) * int(r.choice([0, 2, 1000, 10**12])))),
+              (b"property double x", "property list uchar double x"),
+              (b"property double y", "property char y"),
+              (b"property ushort intensity", "property list int int intensity"),
+              (b"format binary_little_endian", "format ascii"),
+              (b"format ascii", "format binary_big_endian"),
+              (b"end_header", "end_headr")]
+
+
+def _mutate_ply(data: bytes, rng) -> bytes:
+    if rng.random() < 0.5:
+        return _generic(data, rng)
+    key, repl = _PLY_SWAPS[int(rng.integers(0, len(_PLY_SWAPS)))]
+    i = data.find(key)
+    if i < 0:
+        return _generic(data, rng)
+    if callable(repl):
+        j = data.index(b"\n", i)
+        return data[: i + len(key)] + repl(data[i + len(key): j], rng).encode() + data[j:]
+    return data[:i] + repl.encode() + data[i + len(key):]
+
+
+_TOKENS = ["nan", "inf", "-inf", "1.5e308", "-1.5e308", "1e999", "abc", "", "1,2", "0x10",
+           "1e15", "9" * 400, "\x00", "\ufeff", "'1'"]
+
+
+def _mutate_text(data: bytes, rng) -> bytes:
+    if rng.random() < 0.3:
+        return _generic(data, rng)
+    lines = data.decode("utf-8", "replace").split("\n")
+    sep = "," if "," in lines[0] else " "
+    for _ in range(int(rng.integers(1, 4))):
+        i = int(rng.integers(0, max(len(lines) - 1, 1)))
+        cells = lines[i].split(sep)
+        kind = rng.integers(0, 3)
+        if kind == 0 and cells:
+            cells[int(rng.integers(0, len(cells)))] = str(rng.choice(_TOKENS))
+        elif kind == 1:
+            cells = cells[: int(rng.integers(0, len(cells) + 1))]
+        else:
+            cells.append(str(rng.choice(_TOKENS)))
+        lines[i] = sep.join(cells)
+    return "\n".join(lines).encode("utf-8", "surrogatepass")
+
+
+def _mutate_npz(path: Path, data: bytes, rng) -> bytes:
+    kind = rng.integers(0, 3)
+    if kind == 0:
+        return _generic(data, rng)
+    n = _N_POINTS
+    xyz = np.column_stack([431000 + np.arange(n) * 0.1, np.full(n, 5.4e6), np.zeros(n)])
+    choices = [lambda: {"xyz": xyz.astype(str)}, lambda: {"xyz": xyz[:, :2]},
+               lambda: {"xyz": xyz[None]}, lambda: {"xyz": np.array(1.0)},
+               lambda: {"x": xyz[:, 0], "y": xyz[:5, 1], "z": xyz[:, 2]},
+               lambda: {"x": xyz[:, 0].astype(str), "y": xyz[:, 1], "z": xyz[:, 2]},
+               lambda: {"xyz": np.where(np.arange(n)[:, None] % 7 == 0, 1.5e308, xyz)},
+               lambda: {"xyz": np.where(np.arange(n)[:, None] % 5 == 0, np.nan, xyz)},
+               lambda: {"xyz": xyz, "intensity": np.arange(n + 1)},
+               lambda: {"xyz": np.empty((0, 3))}, lambda: {"other": xyz},
+               lambda: {"xyz": xyz.astype(complex)},
+               lambda: {"xyz": np.array([[object(), 1, 2]] * 3, dtype=object)}]
+    if kind == 1:
+        import io
+
+        buf = io.BytesIO()
+        np.savez(buf, allow_pickle=True, **choices[int(rng.integers(0, len(choices)))]())
+        return buf.getvalue()
+    # kind 2: overwrite the shape in a stored .npy header, keeping its length
+    b = bytearray(data)
+    i = b.find(b"'shape': (")
+    if i < 0:
+        return _generic(data, rng)
+    j = b.index(b")", i)
+    shape = str(rng.choice(["(10000000000000, 3", "(300, 3, 9", "(3000, 3", "(-1, 3", "(",
+                            "(300,", "(9999999999999999999999, 3"])).encode()
+    new = b"'shape': " + shape
+    pad = (j - i) - len(new)
+    if pad < 0:
+        return _generic(data, rng)
+    b[i:j] = new + b" " * pad  # padding before ')' keeps the header parseable or not
+    return bytes(b)
+
+
+def make_mutants(seeds: list[Path], folder: Path, count: int, seed: int) -> list[Path]:
+    """`count` mutants of the seeds (round robin), reproducible from `seed`."""
+    rng = np.random.default_rng(seed)
+    folder.mkdir(parents=True, exist_ok=True)
+    blobs = {p: p.read_bytes() for p in seeds}
+    out = []
+    for k in range(count):
+        src = seeds[k % len(seeds)]
+        data, suffix = blobs[src], src.suffix
+        if suffix in (".las", ".laz"):
+            new = _mutate_las(data, rng)
+        elif suffix == ".ply":
+            new = _mutate_ply(data, rng)
+        elif suffix == ".npz":
+            new = _mutate_npz(src, data, rng)
+        else:
+            new = _mutate_text(data, rng)
+        path = folder / f"m{k:05d}_{src.stem}{suffix}"
+        path.write_bytes(new)
+        out.append(path)
+    return out
+
+
+# --------------------------------------------------------------------------- worker
+def _one(path: str) -> dict:
+    import lidarstat.io as lio
+    from lidarstat.errors import InvalidPointsError, PointCloudReadError
+
+    def attempt(fn):
+        try:
+            return "ok", fn()
+        except (PointCloudReadError, InvalidPointsError) as exc:
+            msg = str(exc)
+            good = "\n" not in msg and Path(path).name in msg
+            return ("refused" if good else "message"), f"{type(exc).__name__}: {msg}"
+        except Exception as exc:  # noqa: BLE001 - a foreign exception is the finding
+            return "foreign", f"{type(exc).__name__}: {str(exc)[:200]}"
+
+    r_out, whole = attempt(lambda: lio.read(path))
+    s_out, chunks = attempt(lambda: list(lio.iter_chunks(path, 128)))
+    outcome = r_out if r_out not in ("ok", "refused") else s_out
+    detail = whole if r_out != "ok" else chunks if s_out != "ok" else ""
+    if r_out in ("ok", "refused") and s_out in ("ok", "refused"):
+        if (r_out == "ok") != (s_out == "ok"):
+            outcome, detail = "mismatch", f"read {r_out}, iter_chunks {s_out}: " \
+                                          f"{whole if r_out != 'ok' else chunks}"
+        elif r_out == "ok" and not np.array_equal(np.vstack([c.xyz for c in chunks]), whole.xyz):
+            outcome, detail = "mismatch", "iter_chunks and read give different points"
+        else:
+            outcome = r_out
+    if outcome in ("ok", "refused") and Path(path).suffix.lower() in (".las", ".laz"):
+        d_out, d_detail = attempt(lambda: lio.describe(path))
+        if d_out not in ("ok", "refused"):
+            outcome, detail = d_out, f"describe: {d_detail}"
+    return {"outcome": outcome, "detail": detail if isinstance(detail, str) else ""}
+
+
+def worker(limit_bytes: int, alarm_s: int) -> None:
+    """Read the files named on stdin (one JSON list), report one JSON line per file."""
+    import resource
+    import signal
+
+    resource.setrlimit(resource.RLIMIT_AS, (limit_bytes, limit_bytes))
+    signal.signal(signal.SIGALRM, signal.SIG_DFL)  # a hang in native code still ends
+    files = json.loads(sys.stdin.read())
+    for i, path in enumerate(files):
+        print(json.dumps({"start": i}), flush=True)
+        signal.alarm(alarm_s)
+        result = _one(path)
+        signal.alarm(0)
+        print(json.dumps({"done": i, **result}), flush=True)
+
+
+def run_batch(files: list[Path], *, limit_bytes: int = 2 << 30, alarm_s: int = 20,
+              ceiling: int = 256 << 20, src: str | None = None) -> dict[str, dict]:
+    """Read `files` in sandboxed workers; ``{file: {"outcome", "detail"}}``.
+
+    `src` is the folder holding the ``lidarstat`` package the workers import (default: the
+    one this process imported); `ceiling` their ``LIDARSTAT_MAX_READ_BYTES``.
+    """
+    if src is None:
+        import lidarstat
+
+        src = str(Path(lidarstat.__file__).resolve().parents[1])
+    env = dict(os.environ, LIDARSTAT_MAX_READ_BYTES=str(ceiling), PYTHONWARNINGS="ignore",
+               NUMBA_DISABLE_JIT=os.environ.get("NUMBA_DISABLE_JIT", "0"))
+    env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "")
+    results: dict[str, dict] = {}
+    todo = [str(f) for f in files]
+    code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); "
+            f"import fuzz_support; fuzz_support.worker({limit_bytes}, {alarm_s})")
+    while todo:
+        proc = subprocess.run([sys.executable, "-c", code], input=json.dumps(todo), env=env,
+                              capture_output=True, text=True,
+                              timeout=alarm_s * (len(todo) + 5))
+        current = None
+        for line in proc.stdout.splitlines():
+            msg = json.loads(line)
+            if "start" in msg:
+                current = msg["start"]
+            else:
+                results[todo[msg["done"]]] = {"outcome": msg["outcome"], "detail": msg["detail"]}
+                current = None
+        if proc.returncode == 0 and current is None:
+            break
+        if current is None:  # died between files (should not happen): blame nobody, stop
+            raise RuntimeError(f"fuzz worker exited {proc.returncode}: {proc.stderr[-500:]}")
+        rc = proc.returncode
+        kind = "hang" if rc == -14 else "crash"
+        tail = proc.stderr.strip().splitlines()[-1:] or [""]
+        results[todo[current]] = {"outcome": kind, "detail": f"exit {rc}: {tail[0][:200]}"}
+        todo = todo[current + 1:]
+    return results
+
+
+def summarize(results: dict[str, dict]) -> Counter:
+    """Count of each outcome."""
+    return Counter(r["outcome"] for r in results.values())
+
+
+if __name__ == "__main__":  # pragma: no cover - a worker is started with -c
+    raise SystemExit("use run_batch()")
