@@ -34,8 +34,9 @@ def _detect(header: str) -> str | None:
     return None
 
 
-#: Peak bytes of memory per byte of text while parsing (strings, lists, then float64).
-TEXT_MEMORY_FACTOR = 8
+#: Peak bytes of memory per byte of text while parsing (strings, lists, then float64):
+#: measured 9 for a CSV of UTM coordinates and an integer column.
+TEXT_MEMORY_FACTOR = 10
 
 
 def read_file(path: Path, fmt: str, max_bytes=None) -> PointCloud:
