@@ -74,6 +74,7 @@ def _u(data, offset, fmt):
     (139, "d", math.nan, r"y scale nan must be finite"),
     (147, "d", 1e306, r"z scale 1e\+306 must be finite"),
     (155, "d", math.inf, r"x offset inf is not finite"),
+    (163, "d", -1e300, r"y offset -1e\+300 puts every coordinate beyond 1e\+15 in magnitude"),
     (243, "I", 2**32 - 1, r"number_of_evlrs 4294967295 needs at least"),
     (235, "Q", 2**60, r"start_of_first_evlr 1152921504606846976 lies outside"),
 ])

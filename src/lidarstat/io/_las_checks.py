@@ -17,6 +17,7 @@ import os
 import struct
 from pathlib import Path
 
+from .._shared.validation import MAX_COORDINATE
 from ..errors import InvalidParameterError, MalformedFileError
 
 #: Environment variable holding the default read ceiling, in bytes.
@@ -175,7 +176,7 @@ def _check(f: _Fields) -> LasLayout:
         raise f.fail("header", f"offset_to_point_data {offset} lies inside the header "
                                f"(header_size {header_size})")
     pf = pf_raw & 0x3F
-    compressed = bool(pf_raw & 0xC0)
+    compressed = bool(pf_raw & 0x80) and not pf_raw & 0x40  # laspy's (and LASzip's) rule
     if pf not in _POINT_SIZE:
         raise f.fail("header", f"point_format {pf} is not a LAS point format (0-10)")
     if rec_len < _POINT_SIZE[pf]:
@@ -189,8 +190,9 @@ def _check(f: _Fields) -> LasLayout:
                                    f"{MAX_SCALE:g} in magnitude")
         if not math.isfinite(o):
             raise f.fail("header", f"{axis} offset {o!r} is not finite")
-        if not math.isfinite(abs(o) + abs(s) * 2.0**31):
-            raise f.fail("header", f"{axis} offset {o!r} and scale {s!r} overflow float64")
+        if abs(o) - abs(s) * 2.0**31 > MAX_COORDINATE:
+            raise f.fail("header", f"{axis} offset {o!r} puts every coordinate beyond "
+                                   f"{MAX_COORDINATE:.0e} in magnitude")
     count = legacy
     evlr_start = n_evlrs = 0
     if minor >= 4:
