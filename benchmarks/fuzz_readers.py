@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "io"))
 sys.path.insert(0, str(ROOT / "src"))
 
-import fuzz_support as fs  # noqa: E402
+import fuzz_support as fs
 
 
 def _real_seeds(folder: Path, limit: int = 6) -> list[Path]:

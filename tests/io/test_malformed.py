@@ -11,6 +11,7 @@ import zipfile
 import laspy
 import numpy as np
 import pytest
+from fuzz_support import variable_chunk_laz
 from laspy.vlrs.vlrlist import VLRList
 
 import lidarstat.io as lio
@@ -63,8 +64,8 @@ def _u(data, offset, fmt):
 
 # ------------------------------------------------------------------- LAS header fields
 @pytest.mark.parametrize(("offset", "fmt", "value", "expected"), [
-    (96, "I", 99_999_999, r"offset_to_point_data 99999999 lies beyond the end of the file "
-                          r"\(\d+ bytes\)"),
+    (96, "I", 99_999_999, (r"offset_to_point_data 99999999 lies beyond the end of the file "
+                           r"\(\d+ bytes\)")),
     (100, "I", 2**31, r"number_of_vlrs 2147483648 needs at least"),
     (94, "H", 100, r"header_size 100 is smaller than the 375 bytes of a LAS 1.4 header"),
     (104, "B", 37, r"point_format 37 is not a LAS point format"),
@@ -112,11 +113,11 @@ def test_laz_chunk_table_pointer_and_count(tmp_path):
     data = good.read_bytes()
     start = _u(data, 96, "I")
     table = _u(data, start, "q")
-    cases = [(start, "q", 2**40, r"chunk table offset 1099511627776 lies outside the file's "
-                                 r"point data"),
+    cases = [(start, "q", 2**40, (r"chunk table offset 1099511627776 lies outside the file's "
+                                  r"point data")),
              (start, "q", 3, r"chunk table offset 3 lies outside"),
-             (table + 4, "I", 2**32 - 1, r"chunk table announces 4294967295 chunks for \d+ "
-                                         r"bytes of compressed points"),
+             (table + 4, "I", 2**32 - 1, (r"chunk table announces 4294967295 chunks for \d+ "
+                                          r"bytes of compressed points")),
              (table + 4, "I", 0, r"chunk table announces 0 chunks")]
     for i, (offset, fmt, value, expected) in enumerate(cases):
         bad = _patch(good, tmp_path / f"scan{i}.laz", offset, fmt, value)
@@ -125,6 +126,17 @@ def test_laz_chunk_table_pointer_and_count(tmp_path):
                                + expected) as exc:
                 call(bad)
             _one_line(exc, bad)
+
+
+def test_laz_variable_size_chunks(tmp_path):
+    xyz = UTM + np.random.default_rng(4).uniform(0, 100, (N, 3)).round(3)
+    good = variable_chunk_laz(tmp_path / "var.laz", xyz)
+    np.testing.assert_allclose(lio.read(good).xyz, xyz, atol=5e-4, rtol=0)
+    assert sum(len(c) for c in lio.iter_chunks(good, 64)) == N
+    bad = _patch(good, tmp_path / "count.laz", 107, "I", N + 1)
+    with pytest.raises(MalformedFileError, match=rf"count\.laz: malformed LAZ file: chunk table "
+                                                 rf"holds {N} points, the header {N + 1}"):
+        lio.read(bad)
 
 
 def test_laz_point_count_beyond_chunks(tmp_path):
@@ -226,8 +238,8 @@ def test_npz_strings_objects_and_shapes(tmp_path):
     cases = {"str": ({"xyz": np.array([["1", "2", "x"]] * 4)}, r"coordinates hold <U1 values"),
              "obj": ({"xyz": np.array([[object(), 1, 2]], dtype=object)},
                      r"array 'xyz' holds Python objects, which need pickle; refused"),
-             "shape": ({"xyz": np.zeros((4, 2))}, r"array 'xyz' has shape \(4, 2\); "
-                                                  r"expected \(N, 3\)"),
+             "shape": ({"xyz": np.zeros((4, 2))},
+                       r"array 'xyz' has shape \(4, 2\); expected \(N, 3\)"),
              "cols": ({"x": np.zeros(4), "y": np.zeros(3), "z": np.zeros(4)},
                       r"arrays x, y, z must be 1-D of equal length")}
     for name, (arrays, expected) in cases.items():
