@@ -128,6 +128,16 @@ def test_laz_chunk_table_pointer_and_count(tmp_path):
             _one_line(exc, bad)
 
 
+def test_laz_layer_sizes_beyond_their_chunk(tmp_path):
+    good = _las(tmp_path / "good.laz", pf=7)  # layered chunks: 9 point layers + RGB
+    start = _u(good.read_bytes(), 96, "I")
+    bad = _patch(good, tmp_path / "layer.laz", start + 8 + 36 + 4, "I", 3_000_000_000)
+    with pytest.raises(MalformedFileError, match=r"layer\.laz: malformed LAZ file: chunk 0 "
+                                                 r"announces \d+ bytes of layers, but the chunk "
+                                                 r"table gives it \d+ bytes"):
+        lio.read(bad)
+
+
 def test_laz_variable_size_chunks(tmp_path):
     xyz = UTM + np.random.default_rng(4).uniform(0, 100, (N, 3)).round(3)
     good = variable_chunk_laz(tmp_path / "var.laz", xyz)

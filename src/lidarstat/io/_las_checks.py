@@ -31,6 +31,10 @@ _VLR_HEADER, _EVLR_HEADER = 54, 60
 _LASZIP = (b"laszip encoded", 22204)
 _LASZIP_FIXED = 34  # bytes of the LasZip VLR before its item list
 _CHUNK_TABLE_HEADER = 8  # u32 version, u32 number of chunks
+_VARIABLE = 0xFFFFFFFF  # chunk_size of LAZ files with variable-size chunks
+_LAYERED = 3  # LasZip compressor of point formats 6-10
+_BYTE14 = 14  # extra bytes, one layer per byte
+_LAYERS = {10: 9, 11: 1, 12: 2, 13: 1}  # layers of POINT14, RGB14, RGBNIR14, WAVEPACKET14
 # Bytes one point costs in memory while read: laspy's packed record and its copy, the
 # unpacked attribute arrays (about one more record) and the float64 coordinates; measured
 # 95-101 bytes a point for 38-41-byte records (tracemalloc peak of a whole read).
@@ -286,16 +290,22 @@ def _check_laz(f: _Fields, layout: LasLayout, laszip: bytes | None, points_end: 
     if n_chunks > room or (n_chunks == 0 and layout.point_count):
         raise f.fail("file", f"chunk table announces {n_chunks} chunks for {room} bytes of "
                              "compressed points")
-    if chunk_size != 0xFFFFFFFF and n_chunks * chunk_size < layout.point_count:
+    if chunk_size != _VARIABLE and n_chunks * chunk_size < layout.point_count:
         raise f.fail("header", f"point count {layout.point_count} exceeds {n_chunks} chunks "
                                f"of {chunk_size} points")
-    if chunk_size == 0xFFFFFFFF:
-        _check_variable_chunks(f, layout, laszip, table, first)
+    entries = _chunk_table(f, layout, laszip)
+    if chunk_size == _VARIABLE and sum(n for n, _ in entries) != layout.point_count:
+        raise f.fail("file", f"chunk table holds {sum(n for n, _ in entries)} points, the "
+                             f"header {layout.point_count}")
+    if sum(b for _, b in entries) > room:
+        raise f.fail("file", f"chunk table lists {sum(b for _, b in entries)} bytes of "
+                             f"chunks; the file holds {room}")
+    if compressor == _LAYERED:
+        _check_layers(f, layout, items, entries, first)
 
 
-def _check_variable_chunks(f: _Fields, layout: LasLayout, laszip: bytes, table: int,
-                           first: int) -> None:
-    """Decode a variable-size chunk table (bounded above) and compare it with the header."""
+def _chunk_table(f: _Fields, layout: LasLayout, laszip: bytes) -> list[tuple[int, int]]:
+    """(points, bytes) of every chunk, decoded by lazrs once its size is known to be bounded."""
     import lazrs
 
     try:
@@ -305,11 +315,24 @@ def _check_variable_chunks(f: _Fields, layout: LasLayout, laszip: bytes, table: 
         raise
     except BaseException as exc:  # lazrs panics are BaseExceptions
         raise f.fail("file", f"unreadable chunk table ({type(exc).__name__})") from exc
-    points = sum(int(n) for n, _ in entries)
-    nbytes = sum(int(b) for _, b in entries)
-    if points != layout.point_count:
-        raise f.fail("file", f"chunk table holds {points} points, the header "
-                             f"{layout.point_count}")
-    if nbytes > table - first:
-        raise f.fail("file", f"chunk table lists {nbytes} bytes of chunks; the file holds "
-                             f"{table - first}")
+    return [(int(n), int(b)) for n, b in entries]
+
+
+def _check_layers(f: _Fields, layout: LasLayout, items, entries, first: int) -> None:
+    """Layered chunks (point formats 6-10): the layer sizes must fit in their chunk.
+
+    Such a chunk starts with its first point raw, the number of points (u32) and one u32
+    size per layer (lazrs allocates each layer at its announced size).
+    """
+    n_layers = sum(_LAYERS.get(kind, size if kind == _BYTE14 else 0)
+                   for kind, size, _ in items)
+    pos = first
+    for i, (_, nbytes) in enumerate(entries):
+        head = layout.record_length + 4 + 4 * n_layers
+        if nbytes >= head:
+            sizes = f.read(pos + layout.record_length + 4, f"{n_layers}I", "file",
+                           f"layer sizes of chunk {i}")
+            if layout.record_length + 4 + 4 * n_layers + sum(sizes) > nbytes:
+                raise f.fail("file", f"chunk {i} announces {sum(sizes)} bytes of layers, "
+                                     f"but the chunk table gives it {nbytes} bytes")
+        pos += nbytes
