@@ -3,8 +3,9 @@
 laspy trusts the header: a point count, a VLR count or a LAZ chunk table that does not match
 the file makes it hang, allocate tens of gigabytes or (through lazrs) abort the interpreter.
 :func:`check_las` reads the public header block (LAS 1.0-1.4), walks the VLR and EVLR headers
-and, for LAZ, the chunk table pointer and the chunk table header, and compares every offset,
-count and length with the size of the file. Everything it reads is bounded by the file size.
+and, for LAZ, the chunk table pointer, the chunk table (decoded only once its count is known
+to fit the file) and the layer sizes at the start of each layered chunk (point formats
+6-10), and compares every offset, count and length with the size of the file or chunk.
 :func:`read_ceiling` is the most one read may allocate (``max_bytes``, else the environment
 variable ``LIDARSTAT_MAX_READ_BYTES``, else half of the physical memory).
 """
