@@ -83,7 +83,7 @@ def test_las_header_fields_are_checked(tmp_path, offset, fmt, value, expected):
     good = _las(tmp_path / "good.las", evlr=True)
     bad = _patch(good, tmp_path / "scan.las", offset, fmt, value)
     for call in (lio.read, lio.describe, lambda p: list(lio.iter_chunks(p, 100))):
-        with pytest.raises(MalformedFileError, match=r"scan\.las: malformed LAS (header|file): "
+        with pytest.raises(MalformedFileError, match=r"scan\.las: unreadable LAS file \(malformed (header|VLR|EVLR): "
                            + expected) as exc:
             call(bad)
         _one_line(exc, bad)
@@ -113,16 +113,17 @@ def test_laz_chunk_table_pointer_and_count(tmp_path):
     data = good.read_bytes()
     start = _u(data, 96, "I")
     table = _u(data, start, "q")
-    cases = [(start, "q", 2**40, (r"chunk table offset 1099511627776 lies outside the file's "
-                                  r"point data")),
-             (start, "q", 3, r"chunk table offset 3 lies outside"),
-             (table + 4, "I", 2**32 - 1, (r"chunk table announces 4294967295 chunks for \d+ "
-                                          r"bytes of compressed points")),
-             (table + 4, "I", 0, r"chunk table announces 0 chunks")]
+    cases = [(start, "q", 2**40, (r"its offset 1099511627776 lies outside the file's point "
+                                  r"data")),
+             (start, "q", 3, r"its offset 3 lies outside"),
+             (table + 4, "I", 2**32 - 1, (r"4294967295 chunks announced for \d+ bytes of "
+                                          r"compressed points")),
+             (table + 4, "I", 0, r"0 chunks announced")]
     for i, (offset, fmt, value, expected) in enumerate(cases):
         bad = _patch(good, tmp_path / f"scan{i}.laz", offset, fmt, value)
         for call in (lio.read, lio.describe, lambda p: list(lio.iter_chunks(p, 100))):
-            with pytest.raises(MalformedFileError, match=rf"scan{i}\.laz: malformed LAZ file: "
+            with pytest.raises(MalformedFileError, match=rf"scan{i}\.laz: unreadable LAZ file \(malformed "
+                                                          r"chunk table: "
                                + expected) as exc:
                 call(bad)
             _one_line(exc, bad)
@@ -132,7 +133,8 @@ def test_laz_layer_sizes_beyond_their_chunk(tmp_path):
     good = _las(tmp_path / "good.laz", pf=7)  # layered chunks: 9 point layers + RGB
     start = _u(good.read_bytes(), 96, "I")
     bad = _patch(good, tmp_path / "layer.laz", start + 8 + 36 + 4, "I", 3_000_000_000)
-    with pytest.raises(MalformedFileError, match=r"layer\.laz: malformed LAZ file: chunk 0 "
+    with pytest.raises(MalformedFileError, match=r"layer\.laz: unreadable LAZ file \(malformed "
+                                                 r"chunk: chunk 0 "
                                                  r"announces \d+ bytes of layers, but the chunk "
                                                  r"table gives it \d+ bytes"):
         lio.read(bad)
@@ -144,15 +146,17 @@ def test_laz_variable_size_chunks(tmp_path):
     np.testing.assert_allclose(lio.read(good).xyz, xyz, atol=5e-4, rtol=0)
     assert sum(len(c) for c in lio.iter_chunks(good, 64)) == N
     bad = _patch(good, tmp_path / "count.laz", 107, "I", N + 1)
-    with pytest.raises(MalformedFileError, match=rf"count\.laz: malformed LAZ file: chunk table "
-                                                 rf"holds {N} points, the header {N + 1}"):
+    with pytest.raises(MalformedFileError, match=rf"count\.laz: unreadable LAZ file \(malformed "
+                                                 rf"chunk table: its chunks hold {N} points, "
+                                                 rf"the header {N + 1}"):
         lio.read(bad)
 
 
 def test_laz_point_count_beyond_chunks(tmp_path):
     good = _las(tmp_path / "good.laz")
     bad = _patch(good, tmp_path / "count.laz", 247, "Q", 10**12)
-    with pytest.raises(MalformedFileError, match=r"count\.laz: malformed LAZ header: point "
+    with pytest.raises(MalformedFileError, match=r"count\.laz: unreadable LAZ file \(malformed header: "
+                                                 r"point "
                                                  r"count 1000000000000 exceeds 1 chunks"):
         list(lio.iter_chunks(bad))
 
@@ -166,7 +170,8 @@ def test_streaming_reader_refuses_what_read_refuses(tmp_path):
     good = _las(tmp_path / "good.las", version="1.2", pf=3)
     short = _patch(good, tmp_path / "short.las", 107, "I", N + 1)
     for call in (lio.read, lambda p: list(lio.iter_chunks(p, 100))):
-        with pytest.raises(MalformedFileError, match=r"short\.las: malformed LAS header: point "
+        with pytest.raises(MalformedFileError, match=r"short\.las: unreadable LAS file \(malformed "
+                                                     r"header: point "
                                                      rf"count {N + 1} x point_record_length 34"):
             call(short)
 
@@ -184,7 +189,7 @@ def test_cli_info_refuses_bad_scales(tmp_path, capsys, offset, value, shown):
     code = main(["info", str(bad)])
     err = capsys.readouterr().err.strip()
     assert code != 0 and len(err.splitlines()) == 1
-    assert "scan.las: malformed LAS header: " + shown in err
+    assert "scan.las: unreadable LAS file (malformed header: " + shown in err
 
 
 # ------------------------------------------------------------------- read ceiling
@@ -271,7 +276,8 @@ def test_npz_header_announcing_more_than_stored(tmp_path):
     hacked = tmp_path / "hacked.npz"
     with zipfile.ZipFile(hacked, "w") as zf:
         zf.writestr("xyz.npy", data)
-    with pytest.raises(MalformedFileError, match=r"hacked\.npz: malformed NPZ file: array 'xyz' "
+    with pytest.raises(MalformedFileError, match=r"hacked\.npz: unreadable NPZ file \(malformed "
+                                                 r"array header: 'xyz' "
                                                  r"announces shape \(9999999, 3\)"):
         lio.read(hacked)
 
@@ -283,14 +289,16 @@ def test_ply_counts_types_and_garbage(tmp_path):
     data = good.read_bytes()
     (tmp_path / "count.ply").write_bytes(data.replace(b"element vertex 50",
                                                       b"element vertex 5000000000"))
-    with pytest.raises(MalformedFileError, match=r"count\.ply: malformed PLY header: element "
+    with pytest.raises(MalformedFileError, match=r"count\.ply: unreadable PLY file \(malformed "
+                                                 r"header: element "
                                                  r"'vertex' announces 5000000000 rows of at "
                                                  r"least 24 bytes, but 1200 bytes follow"):
         lio.read(tmp_path / "count.ply")
     (tmp_path / "list.ply").write_text(
         "ply\nformat ascii 1.0\nelement vertex 2\nproperty list uchar float x\n"
         "property float y\nproperty float z\nend_header\n2 1 2 3 4\n1 5 6 7\n")
-    with pytest.raises(MalformedFileError, match=r"list\.ply: malformed PLY header: coordinate "
+    with pytest.raises(MalformedFileError, match=r"list\.ply: unreadable PLY file \(malformed "
+                                                 r"header: coordinate "
                                                  r"property 'x' is a list"):
         lio.read(tmp_path / "list.ply")
     (tmp_path / "junk.ply").write_text(

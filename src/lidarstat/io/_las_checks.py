@@ -118,7 +118,8 @@ class _Fields:
         self.path, self.kind, self.fh, self.size = path, kind, fh, size
 
     def fail(self, what: str, msg: str) -> MalformedFileError:
-        return MalformedFileError(f"{self.path}: malformed {self.kind} {what}: {msg}")
+        return MalformedFileError(f"{self.path}: unreadable {self.kind} file (malformed "
+                                  f"{what}: {msg})")
 
     def read(self, offset: int, fmt: str, what: str, field: str):
         n = struct.calcsize("<" + fmt)
@@ -264,7 +265,7 @@ def _user(raw: bytes) -> str:
 
 def _check_laz(f: _Fields, layout: LasLayout, laszip: bytes | None, points_end: int) -> None:
     if laszip is None:
-        raise f.fail("file", "compressed point format but no LasZip VLR")
+        raise f.fail("VLRs", "a compressed point format needs a LasZip VLR; there is none")
     if len(laszip) < _LASZIP_FIXED:
         raise f.fail("VLR", f"LasZip VLR has {len(laszip)} bytes, fewer than {_LASZIP_FIXED}")
     compressor, chunk_size = struct.unpack_from("<H10xI", laszip, 0)
@@ -279,28 +280,28 @@ def _check_laz(f: _Fields, layout: LasLayout, laszip: bytes | None, points_end: 
     if compressor == 0 or layout.point_count == 0:
         return
     data = layout.offset_to_point_data
-    (table,) = f.read(data, "q", "file", "chunk table offset")
+    (table,) = f.read(data, "q", "chunk table", "the offset")
     if table == -1:  # written to a stream: the offset is the last 8 bytes of the file
-        (table,) = f.read(f.size - 8, "q", "file", "chunk table offset at the end")
+        (table,) = f.read(f.size - 8, "q", "chunk table", "the offset at the end")
     first = data + 8
     if not first <= table <= f.size - _CHUNK_TABLE_HEADER:
-        raise f.fail("file", f"chunk table offset {table} lies outside the file's point "
-                             f"data ({first}..{f.size - _CHUNK_TABLE_HEADER})")
-    _, n_chunks = f.read(table, "II", "file", "chunk table header")
+        raise f.fail("chunk table", f"its offset {table} lies outside the file's point data "
+                                    f"({first}..{f.size - _CHUNK_TABLE_HEADER})")
+    _, n_chunks = f.read(table, "II", "chunk table", "the header")
     room = table - first  # every chunk holds at least one byte of compressed points
     if n_chunks > room or (n_chunks == 0 and layout.point_count):
-        raise f.fail("file", f"chunk table announces {n_chunks} chunks for {room} bytes of "
-                             "compressed points")
+        raise f.fail("chunk table", f"{n_chunks} chunks announced for {room} bytes of "
+                                    "compressed points")
     if chunk_size != _VARIABLE and n_chunks * chunk_size < layout.point_count:
         raise f.fail("header", f"point count {layout.point_count} exceeds {n_chunks} chunks "
                                f"of {chunk_size} points")
     entries = _chunk_table(f, layout, laszip)
     if chunk_size == _VARIABLE and sum(n for n, _ in entries) != layout.point_count:
-        raise f.fail("file", f"chunk table holds {sum(n for n, _ in entries)} points, the "
-                             f"header {layout.point_count}")
+        raise f.fail("chunk table", f"its chunks hold {sum(n for n, _ in entries)} points, "
+                                    f"the header {layout.point_count}")
     if sum(b for _, b in entries) > room:
-        raise f.fail("file", f"chunk table lists {sum(b for _, b in entries)} bytes of "
-                             f"chunks; the file holds {room}")
+        raise f.fail("chunk table", f"its chunks total {sum(b for _, b in entries)} bytes; "
+                                    f"the file holds {room}")
     if compressor == _LAYERED:
         _check_layers(f, layout, items, entries, first)
 
@@ -315,7 +316,7 @@ def _chunk_table(f: _Fields, layout: LasLayout, laszip: bytes) -> list[tuple[int
     except (KeyboardInterrupt, SystemExit):
         raise
     except BaseException as exc:  # lazrs panics are BaseExceptions
-        raise f.fail("file", f"unreadable chunk table ({type(exc).__name__})") from exc
+        raise f.fail("chunk table", f"lazrs cannot decode it ({type(exc).__name__})") from exc
     return [(int(n), int(b)) for n, b in entries]
 
 
@@ -331,9 +332,9 @@ def _check_layers(f: _Fields, layout: LasLayout, items, entries, first: int) -> 
     for i, (_, nbytes) in enumerate(entries):
         head = layout.record_length + 4 + 4 * n_layers
         if nbytes >= head:
-            sizes = f.read(pos + layout.record_length + 4, f"{n_layers}I", "file",
+            sizes = f.read(pos + layout.record_length + 4, f"{n_layers}I", "chunk",
                            f"layer sizes of chunk {i}")
             if layout.record_length + 4 + 4 * n_layers + sum(sizes) > nbytes:
-                raise f.fail("file", f"chunk {i} announces {sum(sizes)} bytes of layers, "
-                                     f"but the chunk table gives it {nbytes} bytes")
+                raise f.fail("chunk", f"chunk {i} announces {sum(sizes)} bytes of layers, "
+                                      f"but the chunk table gives it {nbytes} bytes")
         pos += nbytes

@@ -49,9 +49,9 @@ def check_members(path: Path, max_bytes=None) -> None:
                                              "Python objects, which need pickle; refused")
                 if nbytes > info.file_size:
                     raise MalformedFileError(
-                        f"{path}: malformed NPZ file: array {info.filename[:-4]!r} announces "
-                        f"shape {shape} ({nbytes} bytes), but its member holds "
-                        f"{info.file_size} bytes")
+                        f"{path}: unreadable NPZ file (malformed array header: "
+                        f"{info.filename[:-4]!r} announces shape {shape} ({nbytes} bytes), but "
+                        f"its member holds {info.file_size} bytes)")
                 total += nbytes
     except MalformedFileError:
         raise

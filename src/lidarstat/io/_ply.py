@@ -82,8 +82,8 @@ def check_header(path: Path, max_bytes=None) -> None:
         need_mem += count * (max(row_bytes, 8 * n_props) + 24)
         if need_file > room:
             raise MalformedFileError(
-                f"{path}: malformed PLY header: element {name!r} announces {count} rows of "
-                f"at least {per_row} bytes, but {room} bytes follow the header")
+                f"{path}: unreadable PLY file (malformed header: element {name!r} announces {count} rows of "
+                f"at least {per_row} bytes, but {room} bytes follow the header)")
     check_ceiling(path, f"{sum(e[1] for e in elements)} PLY rows", need_mem, max_bytes)
 
 
@@ -107,8 +107,8 @@ def read_file(path: Path, fmt: str = "ply", max_bytes=None) -> PointCloud:
             f"{', '.join(names)}")
     bad = [lower[c] for c in "xyz" if data.dtype[lower[c]].kind not in "iuf"]
     if bad:
-        raise MalformedFileError(f"{path}: malformed PLY header: coordinate property "
-                                 f"{bad[0]!r} is a list, not a number")
+        raise MalformedFileError(f"{path}: unreadable PLY file (malformed header: coordinate "
+                                 f"property {bad[0]!r} is a list, not a number)")
     xyz = np.column_stack([np.asarray(data[lower[c]], dtype=np.float64) for c in "xyz"])
     coords = {lower[c] for c in "xyz"}
     attrs = {}
