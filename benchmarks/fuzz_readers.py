@@ -12,6 +12,7 @@ Usage::
     python benchmarks/fuzz_readers.py --count 2000 --seed 15
     python benchmarks/fuzz_readers.py --count 20000 --seed 7 --real --out /tmp/fuzz.json
     python benchmarks/fuzz_readers.py --count 2000 --src /tmp/old/src   # an earlier version
+    python benchmarks/fuzz_readers.py --ceiling-mib 0 --limit-gib 4     # default ceiling
 """
 
 from __future__ import annotations
@@ -53,6 +54,11 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2, help="parallel worker processes")
     ap.add_argument("--batch", type=int, default=250, help="mutants per worker process")
     ap.add_argument("--real", action="store_true", help="also mutate small real files")
+    ap.add_argument("--limit-gib", type=float, default=2.0,
+                    help="address-space limit of a worker (default 2 GiB)")
+    ap.add_argument("--ceiling-mib", type=float, default=256.0,
+                    help="LIDARSTAT_MAX_READ_BYTES of the workers; 0: unset (the default "
+                         "ceiling, half of the physical memory)")
     ap.add_argument("--src", default=str(ROOT / "src"), help="folder holding lidarstat")
     ap.add_argument("--tmp", type=Path, default=None, help="where seeds and mutants go")
     ap.add_argument("--out", type=Path, default=None, help="JSON report")
@@ -67,7 +73,10 @@ def main(argv=None) -> int:
     start = time.perf_counter()
     results: dict[str, dict] = {}
     with ThreadPoolExecutor(args.workers) as pool:
-        for part in pool.map(lambda b: fs.run_batch(b, src=args.src), batches):
+        limit = int(args.limit_gib * 2**30)
+        ceiling = int(args.ceiling_mib * 2**20) or None
+        for part in pool.map(lambda b: fs.run_batch(b, src=args.src, limit_bytes=limit,
+                                                    ceiling=ceiling), batches):
             results.update(part)
     seconds = time.perf_counter() - start
     counts = fs.summarize(results)

@@ -357,18 +357,21 @@ def worker(limit_bytes: int, alarm_s: int) -> None:
 
 
 def run_batch(files: list[Path], *, limit_bytes: int = 2 << 30, alarm_s: int = 20,
-              ceiling: int = 256 << 20, src: str | None = None) -> dict[str, dict]:
+              ceiling: int | None = 256 << 20, src: str | None = None) -> dict[str, dict]:
     """Read `files` in sandboxed workers; ``{file: {"outcome", "detail"}}``.
 
     `src` is the folder holding the ``lidarstat`` package the workers import (default: the
-    one this process imported); `ceiling` their ``LIDARSTAT_MAX_READ_BYTES``.
+    one this process imported); `ceiling` their ``LIDARSTAT_MAX_READ_BYTES`` (None: unset,
+    the library's default, half of the physical memory).
     """
     if src is None:
         import lidarstat
 
         src = str(Path(lidarstat.__file__).resolve().parents[1])
-    env = dict(os.environ, LIDARSTAT_MAX_READ_BYTES=str(ceiling), PYTHONWARNINGS="ignore",
-               NUMBA_DISABLE_JIT=os.environ.get("NUMBA_DISABLE_JIT", "0"))
+    env = dict(os.environ, PYTHONWARNINGS="ignore")
+    env.pop("LIDARSTAT_MAX_READ_BYTES", None)
+    if ceiling is not None:
+        env["LIDARSTAT_MAX_READ_BYTES"] = str(ceiling)
     env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "")
     results: dict[str, dict] = {}
     todo = [str(f) for f in files]
