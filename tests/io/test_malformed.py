@@ -206,9 +206,12 @@ def test_read_ceiling(tmp_path, monkeypatch):
     assert read_ceiling() == 1000
     with pytest.raises(MalformedFileError, match="read ceiling of 1000 bytes"):
         lio.read(path)
-    monkeypatch.setenv(MAX_READ_ENV, "lots")
-    with pytest.raises(InvalidParameterError, match=MAX_READ_ENV):
-        lio.read(path)
+    for bad in ("lots", "inf", "0", "-5"):
+        monkeypatch.setenv(MAX_READ_ENV, bad)
+        with pytest.raises(InvalidParameterError, match=MAX_READ_ENV):
+            lio.read(path)
+    monkeypatch.setenv(MAX_READ_ENV, "1e6")
+    assert read_ceiling() == 10**6 and read_ceiling(np.int64(7)) == 7
     with pytest.raises(InvalidParameterError, match="max_bytes"):
         lio.read(path, max_bytes=-1)
     monkeypatch.delenv(MAX_READ_ENV)

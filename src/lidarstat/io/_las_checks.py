@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import os
 import struct
 from pathlib import Path
@@ -79,7 +80,7 @@ def read_ceiling(max_bytes=None) -> int:
         if env:
             try:
                 max_bytes = int(float(env))
-            except ValueError:
+            except (ValueError, OverflowError):
                 raise InvalidParameterError(
                     f"{MAX_READ_ENV}={env!r} is not a number of bytes") from None
             if max_bytes <= 0:
@@ -89,10 +90,11 @@ def read_ceiling(max_bytes=None) -> int:
             return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE") // 2
         except (ValueError, OSError, AttributeError):
             return 16 * 2**30
-    if isinstance(max_bytes, bool) or not isinstance(max_bytes, int) or max_bytes <= 0:
+    if (isinstance(max_bytes, bool) or not isinstance(max_bytes, numbers.Integral)
+            or max_bytes <= 0):
         raise InvalidParameterError(f"The 'max_bytes' parameter must be a positive int. "
                                     f"Got {max_bytes!r} instead.")
-    return max_bytes
+    return int(max_bytes)
 
 
 def check_ceiling(path: Path, what: str, need: int, max_bytes=None) -> None:
