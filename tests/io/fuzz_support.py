@@ -122,7 +122,15 @@ def make_seeds(folder: Path, rng: np.random.Generator) -> list[Path]:
     (folder / "pts.txt").write_text("\n".join(ln.replace(",", " ") for ln in lines[1:40]) + "\n")
     np.savez(folder / "pts.npz", xyz=xyz, intensity=arr["intensity"])
     seeds += [folder / "pts.csv", folder / "pts.txt", folder / "pts.npz"]
-    return seeds
+    try:
+        import pye57
+    except ImportError:  # pragma: no cover - pye57 is a test dependency
+        return seeds
+    e57 = pye57.E57(str(folder / "scan.e57"), mode="w")
+    e57.write_scan_raw({"cartesianX": xyz[:, 0], "cartesianY": xyz[:, 1],
+                        "cartesianZ": xyz[:, 2], "intensity": rng.uniform(0, 1, n)})
+    e57.close()
+    return [*seeds, folder / "scan.e57"]
 
 
 # --------------------------------------------------------------------------- mutants
@@ -283,6 +291,66 @@ def _mutate_npz(path: Path, data: bytes, rng) -> bytes:
     return bytes(b)
 
 
+_CRC_TABLE: list[int] = []
+
+
+def _crc32c(data: bytes) -> int:
+    if not _CRC_TABLE:
+        for i in range(256):
+            c = i
+            for _ in range(8):
+                c = (c >> 1) ^ 0x82F63B78 if c & 1 else c >> 1
+            _CRC_TABLE.append(c)
+    c = 0xFFFFFFFF
+    for x in data:
+        c = _CRC_TABLE[(c ^ x) & 0xFF] ^ (c >> 8)
+    return c ^ 0xFFFFFFFF
+
+
+_E57_VALUES = ["0", "-1", "1", "300000000000", "9223372036854775807", "-9223372036854775808",
+               "1e308", "nan", "abc", "", "4294967296", "48", "999999"]
+
+
+def rewrite_e57_xml(data: bytes, edit) -> bytes:
+    """E57 file `data` with its XML section replaced by ``edit(xml)``, pages re-checksummed.
+
+    The XML section is the last one of files written by pye57; the header's physical length
+    and XML length follow the new text.
+    """
+    page = 1024
+    _, _, _, _, xml_at, xml_len, _ = struct.unpack_from("<8sIIQQQQ", data, 0)
+    logical = bytearray(b"".join(data[p:p + page - 4] for p in range(0, len(data), page)))
+    start = xml_at // page * (page - 4) + xml_at % page
+    xml = edit(logical[start:start + xml_len].decode("utf-8", "replace")).encode()
+    new = logical[:start] + xml
+    new += bytes(-len(new) % (page - 4))
+    struct.pack_into("<QQQ", new, 16, len(new) // (page - 4) * page, xml_at, len(xml))
+    out = bytearray()
+    for p in range(0, len(new), page - 4):
+        chunk = bytes(new[p:p + page - 4])
+        out += chunk + _crc32c(chunk).to_bytes(4, "big")
+    return bytes(out)
+
+
+def _mutate_e57(data: bytes, rng) -> bytes:
+    """Change one or two values of the XML section, with valid page checksums (a byte flip
+    alone only fails the checksum of its page)."""
+    if rng.random() < 0.2:
+        return _generic(data, rng)
+    import re
+
+    value = re.compile(r'(?:="|>)([^"<>]*)(?:"|</)')
+
+    def edit(xml: str) -> str:
+        for _ in range(int(rng.integers(1, 3))):
+            spots = [m.span(1) for m in value.finditer(xml)]
+            a, b = spots[int(rng.integers(0, len(spots)))]
+            xml = xml[:a] + str(rng.choice(_E57_VALUES)) + xml[b:]
+        return xml
+
+    return rewrite_e57_xml(data, edit)
+
+
 def make_mutants(seeds: list[Path], folder: Path, count: int, seed: int) -> list[Path]:
     """`count` mutants of the seeds (round robin), reproducible from `seed`."""
     rng = np.random.default_rng(seed)
@@ -298,6 +366,8 @@ def make_mutants(seeds: list[Path], folder: Path, count: int, seed: int) -> list
             new = _mutate_ply(data, rng)
         elif suffix == ".npz":
             new = _mutate_npz(src, data, rng)
+        elif suffix == ".e57":
+            new = _mutate_e57(data, rng)
         else:
             new = _mutate_text(data, rng)
         path = folder / f"m{k:05d}_{src.stem}{suffix}"

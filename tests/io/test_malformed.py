@@ -11,7 +11,7 @@ import zipfile
 import laspy
 import numpy as np
 import pytest
-from fuzz_support import variable_chunk_laz
+from fuzz_support import rewrite_e57_xml, variable_chunk_laz
 from laspy.vlrs.vlrlist import VLRList
 
 import lidarstat.io as lio
@@ -332,3 +332,23 @@ def test_e57_garbage(tmp_path):
     with pytest.raises(PointCloudReadError, match=r"junk\.e57: unreadable E57 file") as exc:
         lio.read(path)
     _one_line(exc, path)
+
+
+def test_e57_record_count_beyond_the_data(tmp_path):
+    pye57 = pytest.importorskip("pye57")
+    path = tmp_path / "scan.e57"
+    xyz = UTM + np.random.default_rng(5).uniform(0, 10, (300, 3))
+    e57 = pye57.E57(str(path), mode="w")
+    e57.write_scan_raw({"cartesianX": xyz[:, 0], "cartesianY": xyz[:, 1],
+                        "cartesianZ": xyz[:, 2]})
+    e57.close()
+    # pye57 writes single-precision coordinates.
+    np.testing.assert_array_equal(lio.read(path).xyz, xyz.astype(np.float32))
+    bad = tmp_path / "count.e57"
+    bad.write_bytes(rewrite_e57_xml(path.read_bytes(), lambda x: x.replace(
+        'recordCount="300"', 'recordCount="999999"')))
+    # pye57 alone returns 999999 points, the last 999699 of them uninitialised memory.
+    with pytest.raises(PointCloudReadError, match=r"count\.e57: unreadable E57 file \(scan 0 "
+                                                  r"announces 999999 points in recordCount, "
+                                                  r"300 found\)"):
+        lio.read(bad)

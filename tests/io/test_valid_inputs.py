@@ -82,3 +82,4 @@ def test_real_files_pass_the_checks():
         layout = check_las(path, path.suffix[1:])
         assert layout.point_count == count, path
         assert len(lio.read(path, fields=[])) == count, path
+
