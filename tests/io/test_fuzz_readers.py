@@ -1,9 +1,10 @@
 """Seeded fuzz run of the readers: every mutant is read or refused cleanly.
 
 A few hundred mutants of small valid seed files (LAS 1.2/1.4 with VLRs, EVLRs and extra
-bytes, LAZ, binary and ASCII PLY, CSV, TXT, NPZ): byte flips, truncations, header fields
-overwritten at their known offsets (counts, offsets, VLR counts and lengths, the LAZ chunk
-table pointer and count, scales). Each mutant goes through ``read``, ``iter_chunks`` and,
+bytes, LAZ with fixed and variable chunks, binary and ASCII PLY, CSV, TXT, NPZ, E57): byte
+flips, truncations, header fields overwritten at their known offsets (counts, offsets, VLR
+counts and lengths, the LAZ chunk table pointer and count, LasZip items, scales), PLY header
+edits, bad text cells, NPZ arrays of the wrong kind, E57 XML values with valid checksums. Each mutant goes through ``read``, ``iter_chunks`` and,
 for LAS/LAZ, ``describe`` in a worker process limited to 2 GiB of address space and 20 s a
 file, so an abort or a hang is a counted failure instead of the end of pytest. Longer runs:
 ``benchmarks/fuzz_readers.py``.

@@ -11,7 +11,7 @@ import zipfile
 import laspy
 import numpy as np
 import pytest
-from fuzz_support import rewrite_e57_xml, variable_chunk_laz
+from fuzz_mutants import rewrite_e57_xml, variable_chunk_laz
 from laspy.vlrs.vlrlist import VLRList
 
 import lidarstat.io as lio
