@@ -13,6 +13,7 @@ __all__ = [
     "InvalidParameterError",
     "InvalidPointsError",
     "PointCloudReadError",
+    "MalformedFileError",
     "PointCloudWriteError",
     "UnknownFormatError",
     "UnknownFieldError",
@@ -35,6 +36,11 @@ class InvalidPointsError(LidarstatError, ValueError):
 
 class PointCloudReadError(LidarstatError, OSError):
     """A file could not be read as a point cloud (missing, truncated, corrupt)."""
+
+
+class MalformedFileError(PointCloudReadError):
+    """A file's structure contradicts itself or its size (header, VLRs, chunk table, scales),
+    or reading it would allocate more than the read ceiling; found before any allocation."""
 
 
 class PointCloudWriteError(LidarstatError, OSError):

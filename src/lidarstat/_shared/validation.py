@@ -8,6 +8,10 @@ import numpy as np
 
 from ..errors import InvalidParameterError, InvalidPointsError
 
+#: Largest accepted coordinate magnitude: float64 spacing there is 0.125, and squared
+#: distances or extents of larger values lose every digit or overflow.
+MAX_COORDINATE = 1e15
+
 
 def check_points(points, *, name: str = "points", min_points: int = 1, source: str | None = None):
     """Return `points` as a C-contiguous ``(N, 3)`` float64 array or raise.
@@ -26,7 +30,8 @@ def check_points(points, *, name: str = "points", min_points: int = 1, source: s
     Raises
     ------
     InvalidPointsError
-        If the array is empty, not (N, 3), or holds NaN or infinite values.
+        If the array is empty, not (N, 3), not numeric, holds NaN or infinite values
+        (the message counts them) or coordinates beyond ``MAX_COORDINATE`` in magnitude.
     """
     where = f"{source}: " if source else ""
     arr = np.asarray(points)
@@ -38,13 +43,30 @@ def check_points(points, *, name: str = "points", min_points: int = 1, source: s
         raise InvalidPointsError(
             f"{where}`{name}` has {arr.shape[0]} points; at least {min_points} are needed"
         )
-    arr = np.ascontiguousarray(arr, dtype=np.float64)
-    if not np.isfinite(arr.sum()):
+    try:
+        if arr.dtype.kind not in "biufO":
+            raise TypeError(arr.dtype)
+        arr = np.ascontiguousarray(arr, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidPointsError(f"{where}`{name}` holds {arr.dtype} values, not numbers"
+                                 ) from None
+    if arr.size == 0:
+        return arr
+    lo, hi = arr.min(), arr.max()  # NaN propagates through both
+    if not (np.isfinite(lo) and np.isfinite(hi)):
         bad = ~np.isfinite(arr).all(axis=1)
         first = int(np.flatnonzero(bad)[0])
         raise InvalidPointsError(
             f"{where}`{name}` has {int(bad.sum())} points with NaN or infinite coordinates "
             f"(first at index {first})"
+        )
+    if max(-lo, hi) > MAX_COORDINATE:
+        bad = (np.abs(arr) > MAX_COORDINATE).any(axis=1)
+        first = int(np.flatnonzero(bad)[0])
+        raise InvalidPointsError(
+            f"{where}`{name}` has {int(bad.sum())} points with a coordinate beyond "
+            f"{MAX_COORDINATE:.0e} in magnitude (first at index {first}, largest "
+            f"{max(-lo, hi):.3g}); float64 keeps no sub-unit precision there"
         )
     return arr
 

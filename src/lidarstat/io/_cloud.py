@@ -216,7 +216,7 @@ def _finish(cloud: PointCloud, path: Path, fields) -> PointCloud:
     return _select_fields(cloud, fields, path)
 
 
-def read(path: str | os.PathLike, *, fields=None) -> PointCloud:
+def read(path: str | os.PathLike, *, fields=None, max_bytes: int | None = None) -> PointCloud:
     """Read a point cloud, choosing the reader from the file suffix (case-insensitive).
 
     Parameters
@@ -226,6 +226,11 @@ def read(path: str | os.PathLike, *, fields=None) -> PointCloud:
         every scan with its pose applied, through pye57).
     fields : sequence of str, optional
         Attributes to keep (coordinates are always read); default: all.
+    max_bytes : int, optional
+        Most bytes the read may allocate, estimated from the file's header (LAS/LAZ, PLY),
+        its uncompressed array sizes (NPZ) or its size (CSV/TXT, E57) before reading.
+        Default: the environment variable ``LIDARSTAT_MAX_READ_BYTES``, else half of the
+        physical memory.
 
     Returns
     -------
@@ -233,8 +238,12 @@ def read(path: str | os.PathLike, *, fields=None) -> PointCloud:
 
     Raises
     ------
+    MalformedFileError
+        If the file's structure contradicts itself or its size (a LAS header, VLR or LAZ
+        chunk table pointing past the end, a zero or non-finite scale, more points than
+        bytes ...) or reading would exceed `max_bytes`; checked before any allocation.
     PointCloudReadError
-        If the file is missing, truncated or corrupt.
+        If the file is missing, truncated or corrupt (the base class of the above).
     UnknownFormatError
         If the suffix is not supported.
     InvalidPointsError
@@ -248,7 +257,7 @@ def read(path: str | os.PathLike, *, fields=None) -> PointCloud:
         raise PointCloudReadError(f"{path}: no such file")
     if path.is_dir():
         raise PointCloudReadError(f"{path}: is a directory, not a point-cloud file")
-    cloud = _module(fmt).read_file(path, fmt)
+    cloud = _module(fmt).read_file(path, fmt, max_bytes=max_bytes)
     return _finish(cloud, path, fields)
 
 
@@ -330,12 +339,14 @@ def write(path: str | os.PathLike, cloud: PointCloud, *,
     return path
 
 
-def iter_chunks(path: str | os.PathLike, points_per_chunk: int = 1_000_000
-                ) -> Iterator[PointCloud]:
+def iter_chunks(path: str | os.PathLike, points_per_chunk: int = 1_000_000, *,
+                max_bytes: int | None = None) -> Iterator[PointCloud]:
     """Yield the file as consecutive :class:`PointCloud` chunks.
 
-    LAS/LAZ files are streamed with laspy's chunk iterator; other formats are read whole
-    and yielded as one chunk.
+    LAS/LAZ files are streamed chunk by chunk; other formats are read whole and yielded as
+    one chunk. The file gets the checks of :func:`read`: an empty or malformed file raises,
+    and a LAS/LAZ file holding fewer points than its header announces raises
+    :class:`PointCloudReadError` at the missing chunk.
 
     Parameters
     ----------
@@ -343,6 +354,8 @@ def iter_chunks(path: str | os.PathLike, points_per_chunk: int = 1_000_000
         Point-cloud file.
     points_per_chunk : int
         Largest number of points per chunk (LAS/LAZ only).
+    max_bytes : int, optional
+        Most bytes reading one chunk may allocate; see :func:`read`.
     """
     from .._shared.validation import check_scalar
 
@@ -352,12 +365,14 @@ def iter_chunks(path: str | os.PathLike, points_per_chunk: int = 1_000_000
     fmt = _format_of(path)
     if not path.exists():
         raise PointCloudReadError(f"{path}: no such file")
+    if path.is_dir():
+        raise PointCloudReadError(f"{path}: is a directory, not a point-cloud file")
     if fmt in ("las", "laz"):
         from . import _las
 
-        yield from _las.iter_file(path, fmt, points_per_chunk)
+        yield from _las.iter_file(path, fmt, points_per_chunk, max_bytes)
     else:
-        yield read(path)
+        yield read(path, max_bytes=max_bytes)
 
 
 def rewrite(src: str | os.PathLike, dst: str | os.PathLike, fields_of, *,

@@ -55,23 +55,75 @@ def scan_positions(path) -> np.ndarray:
         e57.close()
 
 
-def read_file(path: Path, fmt: str = "e57") -> PointCloud:
+#: Bytes per point while reading: float64 x/y/z, the attribute buffers and the copies.
+_BYTES_PER_POINT = 112
+_CARTESIAN = ("cartesianX", "cartesianY", "cartesianZ")
+_SPHERICAL = ("sphericalRange", "sphericalAzimuth", "sphericalElevation")
+
+
+def _read_scan(e57, i: int, path: Path) -> dict:
+    """Scan `i` as pye57's ``read_scan`` gives it, refusing a scan that holds fewer records
+    than it announces (pye57 would return uninitialised values for the missing ones)."""
+    from pye57.utils import convert_spherical_to_cartesian
+
+    header = e57.get_header(i)
+    n = int(header.point_count)
+    present = set(header.point_fields)
+    if all(f in present for f in _CARTESIAN):
+        coords, invalid = _CARTESIAN, "cartesianInvalidState"
+    elif all(f in present for f in _SPHERICAL):
+        coords, invalid = _SPHERICAL, "sphericalInvalidState"
+    else:
+        raise PointCloudReadError(f"{path}: scan {i} of the E57 file has neither cartesian nor "
+                                  "spherical coordinates")
+    fields = [*coords, *(f for f in (*_RENAME, invalid) if f in present)]
+    data, buffers = e57.make_buffers(fields, n)
+    reader = header.points.reader(buffers)
+    try:
+        got = reader.read() if n else 0
+    finally:
+        reader.close()
+    if got != n:
+        raise PointCloudReadError(f"{path}: unreadable E57 file (scan {i} announces {n} points "
+                                  f"in recordCount, {got} found)")
+    if invalid in data:
+        keep = ~data.pop(invalid).astype(bool)
+        data = {k: v[keep] for k, v in data.items()}
+    xyz = np.column_stack([data.pop(c) for c in coords]).astype(np.float64)
+    if coords == _SPHERICAL:
+        xyz = convert_spherical_to_cartesian(xyz)
+    if header.has_pose():
+        xyz = e57.to_global(xyz, header.rotation, header.translation)
+    data["xyz"] = xyz
+    return data
+
+
+def read_file(path: Path, fmt: str = "e57", max_bytes=None) -> PointCloud:
     """Read every scan of an E57 file, poses applied, as one :class:`PointCloud`."""
+    from ._las import NOT_FOREIGN, short_cause
+    from ._las_checks import check_ceiling
+
     e57 = _open(path)
     try:
+        try:
+            total = sum(int(e57.get_header(i).point_count) for i in range(e57.scan_count))
+        except NOT_FOREIGN:
+            raise
+        except BaseException as exc:
+            raise PointCloudReadError(
+                f"{path}: unreadable E57 file ({short_cause(exc)})") from exc
+        check_ceiling(path, f"{total} E57 points", total * _BYTES_PER_POINT, max_bytes)
         xyz, attrs = [], {}
         for i in range(e57.scan_count):
             try:
-                data = e57.read_scan(i, intensity=True, colors=True, row_column=True,
-                                     ignore_missing_fields=True)
-            except Exception as exc:
-                from ._las import short_cause
-
+                data = _read_scan(e57, i, path)
+            except (PointCloudReadError, *NOT_FOREIGN):
+                raise
+            except BaseException as exc:
                 raise PointCloudReadError(
                     f"{path}: cannot read scan {i} of the E57 file ({short_cause(exc)})"
                 ) from exc
-            xyz.append(np.column_stack([data.pop("cartesianX"), data.pop("cartesianY"),
-                                        data.pop("cartesianZ")]))
+            xyz.append(data.pop("xyz"))
             for key, name in _RENAME.items():
                 if key in data:
                     attrs.setdefault(name, []).append(data[key])

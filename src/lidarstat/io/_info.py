@@ -13,9 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import PointCloudReadError
+from ..errors import LidarstatError, PointCloudReadError
 from ._cloud import _format_of, read
 
+_CHUNK = 2_000_000
 _EPSG_RE = re.compile(r'(?:AUTHORITY|ID)\[\s*"EPSG"\s*,\s*"?(\d+)"?\s*\]', re.IGNORECASE)
 
 
@@ -75,27 +76,29 @@ def _densities(count: int, lo, hi) -> tuple[float | None, float | None]:
     return (count / area if area > 0 else None), (count / volume if volume > 0 else None)
 
 
-def _describe_las(path: Path, fmt: str) -> dict:
+def _describe_las(path: Path, fmt: str, max_bytes) -> dict:
     import laspy
     from laspy.vlrs.known import LasZipVlr
 
-    from ._las import _BACKEND, crs_of, short_cause
+    from ._las import _BACKEND, NOT_FOREIGN, _checked, _unreadable, crs_of, read_chunks
 
+    _checked(path, fmt, _CHUNK, max_bytes, allow_empty=True)
     ranges = _Ranges()
     try:
         with laspy.open(path, laz_backend=_BACKEND) as reader:
             h = reader.header
-            for points in reader.chunk_iterator(2_000_000):
+            crs, epsg = _crs_summary(crs_of(h))
+            for points in read_chunks(reader, path, fmt, _CHUNK):
                 for name in h.point_format.dimension_names:
                     if name not in ("X", "Y", "Z"):
                         ranges.add(name, points[name])
-    except Exception as exc:
-        raise PointCloudReadError(
-            f"{path}: unreadable {fmt.upper()} file ({short_cause(exc)})") from exc
+    except (LidarstatError, *NOT_FOREIGN):
+        raise
+    except BaseException as exc:  # lazrs panics are BaseExceptions
+        raise _unreadable(path, fmt, exc) from exc
     count = int(h.point_count)
     lo = [float(v) for v in h.mins] if count else None
     hi = [float(v) for v in h.maxs] if count else None
-    crs, epsg = _crs_summary(crs_of(h))
     return {
         "las_version": f"{h.version.major}.{h.version.minor}",
         "point_format": int(h.point_format.id),
@@ -113,8 +116,8 @@ def _describe_las(path: Path, fmt: str) -> dict:
     }
 
 
-def _describe_other(path: Path) -> dict:
-    cloud = read(path)
+def _describe_other(path: Path, max_bytes) -> dict:
+    cloud = read(path, max_bytes=max_bytes)
     ranges = _Ranges()
     for name, values in cloud.attributes.items():
         ranges.add(name, values)
@@ -136,13 +139,18 @@ def _describe_other(path: Path) -> dict:
     }
 
 
-def describe(path: str | os.PathLike) -> dict:
+def describe(path: str | os.PathLike, *, max_bytes: int | None = None) -> dict:
     """Summarise a point-cloud file.
+
+    LAS/LAZ files get the structure checks of :func:`lidarstat.io.read` and are read in
+    chunks; an empty LAS/LAZ file is described (0 points), not refused.
 
     Parameters
     ----------
     path : path-like
         Any file :func:`lidarstat.io.read` understands.
+    max_bytes : int, optional
+        Read ceiling, as in :func:`lidarstat.io.read` (for LAS/LAZ: per chunk).
 
     Returns
     -------
@@ -158,14 +166,15 @@ def describe(path: str | os.PathLike) -> dict:
 
     Raises
     ------
-    PointCloudReadError, UnknownFormatError, InvalidPointsError
+    MalformedFileError, PointCloudReadError, UnknownFormatError, InvalidPointsError
         As :func:`lidarstat.io.read`.
     """
     path = Path(path)
     fmt = _format_of(path)
     if not path.is_file():
         raise PointCloudReadError(f"{path}: no such file")
-    info = _describe_las(path, fmt) if fmt in ("las", "laz") else _describe_other(path)
+    info = (_describe_las(path, fmt, max_bytes) if fmt in ("las", "laz")
+            else _describe_other(path, max_bytes))
     d2, d3 = _densities(info["point_count"], info["bounds"]["min"], info["bounds"]["max"])
     return {"path": str(path), "format": fmt, "file_size": path.stat().st_size, **info,
             "density_2d": d2, "density_3d": d3}

@@ -20,16 +20,23 @@ from laspy.vlrs.known import GeoKeyDirectoryVlr, LasZipVlr, WktCoordinateSystemV
 from .._shared._atomic import atomic_path
 from ..errors import (
     InvalidParameterError,
+    InvalidPointsError,
     LidarstatWarning,
     PointCloudReadError,
     PointCloudWriteError,
 )
+from . import _las_checks
 from ._cloud import PointCloud
 
 _BACKEND = laspy.LazBackend.Lazrs
 _MAX_EB_NAME = 32
 _EB_TYPES = {"b": "u1", "u1": "u1", "u2": "u2", "u4": "u4", "u8": "u8", "i1": "i1",
              "i2": "i2", "i4": "i4", "i8": "i8", "f2": "f4", "f4": "f4", "f8": "f8"}
+
+
+#: Exceptions a reader lets through; every other one (including the PanicException lazrs
+#: raises, a BaseException) becomes a PointCloudReadError naming the file.
+NOT_FOREIGN = (KeyboardInterrupt, SystemExit, GeneratorExit)
 
 
 def short_cause(exc: BaseException, limit: int = 120) -> str:
@@ -76,55 +83,106 @@ def _strip_laszip(header):
 
 
 def _cloud_from_points(points, header, path: Path, fmt: str, crs) -> PointCloud:
-    xyz = np.empty((len(points), 3), dtype=np.float64)
-    for j, dim in enumerate("XYZ"):
-        xyz[:, j] = np.asarray(points[dim], dtype=np.float64) * header.scales[j] + header.offsets[j]
-    attrs = {}
-    for name in header.point_format.dimension_names:
-        if name not in ("X", "Y", "Z"):
-            attrs[name] = np.array(points[name])
+    try:
+        xyz = np.empty((len(points), 3), dtype=np.float64)
+        for j, dim in enumerate("XYZ"):
+            xyz[:, j] = (np.asarray(points[dim], dtype=np.float64) * header.scales[j]
+                         + header.offsets[j])
+        attrs = {}
+        for name in header.point_format.dimension_names:
+            if name not in ("X", "Y", "Z"):
+                attrs[name] = np.array(points[name])
+    except NOT_FOREIGN:
+        raise
+    except BaseException as exc:  # e.g. extra-bytes VLR describing fields the records lack
+        raise _unreadable(path, fmt, exc) from exc
     return PointCloud(xyz, attrs, crs=crs, source_path=path, source_format=fmt,
                       las_header=header)
 
 
-def read_file(path: Path, fmt: str) -> PointCloud:
-    """Read a whole LAS/LAZ file into a :class:`PointCloud`."""
+def _unreadable(path: Path, fmt: str, exc: BaseException) -> PointCloudReadError:
+    return PointCloudReadError(f"{path}: unreadable {fmt.upper()} file ({short_cause(exc)})")
+
+
+def _checked(path: Path, fmt: str, chunk: int | None, max_bytes, allow_empty: bool = False
+             ) -> _las_checks.LasLayout:
+    """Structural checks shared by :func:`read_file`, :func:`iter_file` and ``describe``."""
+    try:
+        layout = _las_checks.check_las(path, fmt)
+    except OSError as exc:
+        if isinstance(exc, PointCloudReadError):
+            raise
+        raise PointCloudReadError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    if layout.point_count == 0 and not allow_empty:
+        raise InvalidPointsError(f"{path}: empty point cloud (0 points)")
+    n = layout.point_count if chunk is None else min(chunk, layout.point_count)
+    _las_checks.check_ceiling(path, f"{n} points of {layout.record_length} bytes",
+                              layout.bytes_for(n), max_bytes)
+    return layout
+
+
+def read_file(path: Path, fmt: str, max_bytes=None) -> PointCloud:
+    """Read a whole LAS/LAZ file into a :class:`PointCloud` (structure checked first)."""
+    _checked(path, fmt, None, max_bytes)
     try:
         las = laspy.read(path, laz_backend=_BACKEND)
         points = las.points
         n_header = las.header.point_count
-    except Exception as exc:
-        raise PointCloudReadError(
-            f"{path}: unreadable {fmt.upper()} file ({short_cause(exc)})") from exc
+        header = _strip_laszip(las.header)
+        crs = crs_of(header)
+    except NOT_FOREIGN:
+        raise
+    except BaseException as exc:  # ZeroDivisionError, MemoryError, lazrs panics ...
+        raise _unreadable(path, fmt, exc) from exc
     if len(points) != n_header:
         raise PointCloudReadError(f"{path}: unreadable {fmt.upper()} file (header announces "
                                   f"{n_header} points, {len(points)} found)")
-    header = _strip_laszip(las.header)
-    return _cloud_from_points(points, header, path, fmt, crs_of(header))
+    return _cloud_from_points(points, header, path, fmt, crs)
 
 
-def iter_file(path: Path, fmt: str, points_per_chunk: int) -> Iterator[PointCloud]:
-    """Stream a LAS/LAZ file as clouds of at most `points_per_chunk` points."""
+def iter_file(path: Path, fmt: str, points_per_chunk: int, max_bytes=None
+              ) -> Iterator[PointCloud]:
+    """Stream a LAS/LAZ file as clouds of at most `points_per_chunk` points.
+
+    The file gets the checks of :func:`read_file`, and every chunk must hold the points the
+    header promises: a short file raises :class:`PointCloudReadError` instead of ending early.
+    """
+    _checked(path, fmt, points_per_chunk, max_bytes)
     try:
         reader = laspy.open(path, laz_backend=_BACKEND)
-    except Exception as exc:
-        raise PointCloudReadError(
-            f"{path}: unreadable {fmt.upper()} file ({short_cause(exc)})") from exc
+    except NOT_FOREIGN:
+        raise
+    except BaseException as exc:
+        raise _unreadable(path, fmt, exc) from exc
     with reader:
-        header = _strip_laszip(reader.header)
-        crs = crs_of(header)
-        chunks = reader.chunk_iterator(points_per_chunk)
-        while True:
-            try:
-                points = next(chunks)
-            except StopIteration:
-                return
-            except Exception as exc:
-                raise PointCloudReadError(
-                    f"{path}: unreadable {fmt.upper()} file ({short_cause(exc)})") from exc
-            if len(points) == 0:
-                return
+        try:
+            header = _strip_laszip(reader.header)
+            crs = crs_of(header)
+        except NOT_FOREIGN:
+            raise
+        except BaseException as exc:
+            raise _unreadable(path, fmt, exc) from exc
+        for points in read_chunks(reader, path, fmt, points_per_chunk):
             yield _cloud_from_points(points, header, path, fmt, crs)
+
+
+def read_chunks(reader, path: Path, fmt: str, points_per_chunk: int):
+    """Yield the point records of an open laspy reader, each chunk as long as promised."""
+    total, done = int(reader.header.point_count), 0
+    while done < total:
+        want = min(points_per_chunk, total - done)
+        try:
+            points = reader.read_points(want)
+        except NOT_FOREIGN:
+            raise
+        except BaseException as exc:
+            raise _unreadable(path, fmt, exc) from exc
+        if len(points) != want:
+            raise PointCloudReadError(
+                f"{path}: unreadable {fmt.upper()} file (header announces {total} "
+                f"points, {done + len(points)} found)")
+        done += want
+        yield points
 
 
 # ---------------------------------------------------------------------- writing

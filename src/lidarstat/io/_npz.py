@@ -7,18 +7,62 @@ N rows becomes an attribute; a 0-d string array ``crs`` is the CRS.
 
 from __future__ import annotations
 
+import math
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from .._shared._atomic import atomic_path
 from .._shared.validation import check_points
-from ..errors import InvalidParameterError, PointCloudReadError
+from ..errors import InvalidParameterError, MalformedFileError, PointCloudReadError
 from ._cloud import PointCloud
 
 
-def read_file(path: Path, fmt: str = "npz") -> PointCloud:
+def check_members(path: Path, max_bytes=None) -> None:
+    """Compare each array's announced shape with its archive member, before loading.
+
+    Raises
+    ------
+    MalformedFileError
+        If an array's header announces more bytes than its member holds, or the arrays
+        together exceed the read ceiling.
+    """
+    from ._las import short_cause
+    from ._las_checks import check_ceiling
+
+    total = 0
+    try:
+        with zipfile.ZipFile(path) as zf:
+            for info in zf.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                with zf.open(info) as fh:
+                    fmt = np.lib.format
+                    version = fmt.read_magic(fh)
+                    read_header = (fmt.read_array_header_1_0 if version == (1, 0)
+                                   else fmt.read_array_header_2_0)
+                    shape, _, dtype = read_header(fh)
+                nbytes = math.prod(shape) * dtype.itemsize
+                if dtype.hasobject:
+                    raise MalformedFileError(f"{path}: array {info.filename[:-4]!r} holds "
+                                             "Python objects, which need pickle; refused")
+                if nbytes > info.file_size:
+                    raise MalformedFileError(
+                        f"{path}: unreadable NPZ file (malformed array header: "
+                        f"{info.filename[:-4]!r} announces shape {shape} ({nbytes} bytes), but "
+                        f"its member holds {info.file_size} bytes)")
+                total += nbytes
+    except MalformedFileError:
+        raise
+    except Exception as exc:  # zipfile, bad .npy header ...
+        raise PointCloudReadError(f"{path}: unreadable NPZ file ({short_cause(exc)})") from exc
+    check_ceiling(path, f"{total} bytes of arrays", 2 * total, max_bytes)
+
+
+def read_file(path: Path, fmt: str = "npz", max_bytes=None) -> PointCloud:
     """Read an ``.npz`` archive written by :func:`write_file` or with x/y/z columns."""
+    check_members(path, max_bytes)
     try:
         with np.load(path, allow_pickle=False) as archive:
             arrays = {k: archive[k] for k in archive.files}
@@ -45,6 +89,9 @@ def read_file(path: Path, fmt: str = "npz") -> PointCloud:
     else:
         raise PointCloudReadError(f"{path}: no 'xyz' array nor 'x', 'y', 'z' arrays; found: "
                                   f"{', '.join(arrays) or 'nothing'}")
+    if xyz.dtype.kind not in "biuf":
+        raise MalformedFileError(f"{path}: the coordinates hold {xyz.dtype} values, not "
+                                 "numbers")
     xyz = check_points(xyz, name="xyz", min_points=0, source=str(path))
     attrs = {}
     for name, values in arrays.items():

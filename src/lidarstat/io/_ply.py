@@ -12,7 +12,12 @@ import numpy as np
 import plyfile
 
 from .._shared._atomic import atomic_path
-from ..errors import InvalidParameterError, PointCloudReadError, PointCloudWriteError
+from ..errors import (
+    InvalidParameterError,
+    MalformedFileError,
+    PointCloudReadError,
+    PointCloudWriteError,
+)
 from ._cloud import PointCloud
 
 _CRS_COMMENT = "crs "
@@ -27,8 +32,64 @@ def _short(exc: BaseException) -> str:
     return short_cause(exc)
 
 
-def read_file(path: Path, fmt: str = "ply") -> PointCloud:
+_HEADER_LIMIT = 1 << 20  # a PLY header longer than 1 MiB is not a point cloud's
+_SIZES = {"int8": 1, "char": 1, "uint8": 1, "uchar": 1, "int16": 2, "short": 2, "uint16": 2,
+          "ushort": 2, "int32": 4, "int": 4, "uint32": 4, "uint": 4, "float32": 4,
+          "float": 4, "float64": 8, "double": 8}
+
+
+def check_header(path: Path, max_bytes=None) -> None:
+    """Compare the element counts of a PLY header with the bytes after it.
+
+    A binary row needs at least the sum of its scalar property sizes (plus the length
+    field of each list), an ASCII row at least two characters per property. Headers the
+    check cannot parse are left to plyfile, whose errors the reader converts.
+
+    Raises
+    ------
+    MalformedFileError
+        If an element announces more rows than the file can hold, or reading would exceed
+        the read ceiling.
+    """
+    from ._las_checks import check_ceiling
+
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(_HEADER_LIMIT)
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        return
+    body_start = head.find(b"\n", end)
+    room = size - (body_start + 1 if body_start >= 0 else size)
+    lines = head[:end].decode("ascii", "replace").splitlines()
+    ascii_ = any(ln.split()[:2] == ["format", "ascii"] for ln in lines)
+    elements: list[list] = []  # [name, count, min row bytes, properties]
+    for ln in lines:
+        tok = ln.split()
+        if len(tok) == 3 and tok[0] == "element" and tok[2].isdigit():
+            elements.append([tok[1], int(tok[2]), 0, 0])
+        elif elements and tok and tok[0] == "property":
+            row = elements[-1]
+            row[3] += 1
+            if len(tok) >= 5 and tok[1] == "list":
+                row[2] += _SIZES.get(tok[2], 1)
+            elif len(tok) >= 3:
+                row[2] += _SIZES.get(tok[1], 1)
+    need_file = need_mem = 0
+    for name, count, row_bytes, n_props in elements:
+        per_row = 2 * n_props if ascii_ else row_bytes
+        need_file += count * per_row
+        need_mem += count * (max(row_bytes, 8 * n_props) + 24)
+        if need_file > room:
+            raise MalformedFileError(
+                f"{path}: unreadable PLY file (malformed header: element {name!r} announces {count} rows of "
+                f"at least {per_row} bytes, but {room} bytes follow the header)")
+    check_ceiling(path, f"{sum(e[1] for e in elements)} PLY rows", need_mem, max_bytes)
+
+
+def read_file(path: Path, fmt: str = "ply", max_bytes=None) -> PointCloud:
     """Read the ``vertex`` element of a PLY file; x/y/z (any case) are the coordinates."""
+    check_header(path, max_bytes)
     try:
         ply = plyfile.PlyData.read(str(path))
         vertex = ply["vertex"]
@@ -44,6 +105,10 @@ def read_file(path: Path, fmt: str = "ply") -> PointCloud:
         raise PointCloudReadError(
             f"{path}: PLY vertex element has no {'/'.join(missing)} property; found: "
             f"{', '.join(names)}")
+    bad = [lower[c] for c in "xyz" if data.dtype[lower[c]].kind not in "iuf"]
+    if bad:
+        raise MalformedFileError(f"{path}: unreadable PLY file (malformed header: coordinate "
+                                 f"property {bad[0]!r} is a list, not a number)")
     xyz = np.column_stack([np.asarray(data[lower[c]], dtype=np.float64) for c in "xyz"])
     coords = {lower[c] for c in "xyz"}
     attrs = {}

@@ -34,8 +34,20 @@ def _detect(header: str) -> str | None:
     return None
 
 
-def read_file(path: Path, fmt: str) -> PointCloud:
+#: Peak bytes of memory per byte of text while parsing (strings, lists, then float64):
+#: measured 9 for a CSV of UTM coordinates and an integer column.
+TEXT_MEMORY_FACTOR = 10
+
+
+def read_file(path: Path, fmt: str, max_bytes=None) -> PointCloud:
     """Read a delimited text file whose first line names the columns."""
+    from ._las_checks import check_ceiling
+
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise PointCloudReadError(f"{path}: unreadable {fmt.upper()} file ({exc})") from exc
+    check_ceiling(path, f"{size} bytes of text", TEXT_MEMORY_FACTOR * size, max_bytes)
     try:
         with open(path, encoding="utf-8-sig") as fh:
             lines = fh.read().splitlines()
