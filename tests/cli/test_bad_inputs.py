@@ -386,7 +386,9 @@ OPTION_CASES = [
 
 def _option_id(case):
     argv, opt = case
-    return f"{argv[0]}{' ' + argv[4] if argv[0] == 'segment' else ''} {opt} {argv[-1]!r}"
+    rest = argv[len(argv) - argv[::-1].index(opt):]
+    value = rest[:next((i for i, a in enumerate(rest) if a.startswith("--")), len(rest))]
+    return f"{argv[0]}{' ' + argv[4] if argv[0] == 'segment' else ''} {opt} {' '.join(value)!r}"
 
 
 def option_cloud(folder: Path) -> Path:
