@@ -130,6 +130,9 @@ def build_inputs(folder: Path) -> dict[str, tuple[Path, str]]:
         arr[5, 2] = float(value)
         np.savez(f / f"{label}.npz", xyz=arr)
         add(f"{label}.npz", f / f"{label}.npz", INVALID)
+    rows = bad.tolist()
+    rows[5][2] = rows[9][0] = 1.5e308  # their sum overflows
+    add("overflow.csv", _csv(f / "overflow.csv", rows), INVALID)
     add("nan.ply", _ply_ascii(f / "nan.ply", [(0, 0, 0), (1, "nan", 0), (0, 1, 0)]), INVALID)
     add("1-point.las", _las(f / "one.las", [[1.0, 2.0, 3.0]]), DEGENERATE)
     add("2-points.las", _las(f / "two.las", [[1.0, 2.0, 3.0], [1.1, 2.0, 3.0]]), DEGENERATE)

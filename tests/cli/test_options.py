@@ -88,6 +88,9 @@ def test_error_line_names_the_input_and_the_option():
                                          "Got 8 instead.")
     exc = InsufficientNeighborsError("jets: no point has 16 neighbours\nsecond line")
     assert opt.error_line(exc, args) == "in/scan.las: jets: no point has 16 neighbours"
+    exc = InvalidParameterError("the estimated noise is 0; give `sigma` (`points` exact)")
+    assert opt.error_line(exc, args) == ("in/scan.las: the estimated noise is 0; give --sigma "
+                                         "(`points` exact)")
 
 
 def test_error_line_keeps_a_message_that_starts_with_a_path():

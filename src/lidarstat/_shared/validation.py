@@ -41,8 +41,14 @@ def check_points(points, *, name: str = "points", min_points: int = 1, source: s
     if arr.dtype.kind not in "biuf":
         raise InvalidPointsError(f"{where}`{name}` must hold numbers; got {arr.dtype} values")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
-    if not np.isfinite(arr.sum()):
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = arr.sum()
+    if not np.isfinite(total):
         bad = ~np.isfinite(arr).all(axis=1)
+        if not bad.any():  # finite coordinates whose sum overflows
+            raise InvalidPointsError(
+                f"{where}`{name}` has coordinates too large to compute with (largest "
+                f"magnitude {float(np.abs(arr).max()):.3g})")
         first = int(np.flatnonzero(bad)[0])
         raise InvalidPointsError(
             f"{where}`{name}` has {int(bad.sum())} points with NaN or infinite coordinates "

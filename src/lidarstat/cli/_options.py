@@ -216,6 +216,7 @@ _INPUTS = ("input", "file", "result")
 _PATHS = ("output", "reference", "table", "lines", "summary_json", "report", "json",
           "diagnostics", "outdir")
 _PARAMETER = re.compile(r"The '(\w+)' parameter of \w+ must be")
+_QUOTED = re.compile(r"`(\w+)`")
 
 
 def _starts_with_path(msg, args):
@@ -233,8 +234,8 @@ def error_line(exc, args) -> str:
     """One line reporting `exc`, raised by a command run with the parsed `args`.
 
     The message keeps its first line; a library parameter the command line sets is named
-    by its option (``--k`` for ``'k'``); a message that does not start with a path is
-    prefixed by the command's input file as typed.
+    by its option (``--k`` for ``'k'`` or a back-quoted k); a message that does not start
+    with a path is prefixed by the command's input file as typed.
 
     Parameters
     ----------
@@ -258,6 +259,7 @@ def error_line(exc, args) -> str:
         return f"{name} must be" if name else m.group(0)
 
     msg = _PARAMETER.sub(option, msg, count=1)
+    msg = _QUOTED.sub(lambda m: options.get(m.group(1), m.group(0)), msg)
     src = next((getattr(args, a) for a in _INPUTS if getattr(args, a, None)), None)
     from ..errors import LidarstatError
 
