@@ -3,7 +3,7 @@
 Each option's ``type=`` is one of the converters below, so a value outside its domain is
 refused before any file is read, with the option named as the user typed it::
 
-    lidarstat covariance: error: argument --k: invalid value '0': must be an integer >= 1
+    lidarstat covariance: error: argument --k: invalid value '0': must be an integer >= 3
 
 Converters are built from a few declarative factories (:func:`real`, :func:`integer`,
 :func:`one_of_or`); conditions between options (``--tile`` larger than ``--radius``) are
@@ -18,6 +18,8 @@ import argparse
 import math
 import re
 from pathlib import Path
+
+from ..errors import LidarstatError
 
 __all__ = [
     "Parser", "add_check", "error_line", "real", "integer", "one_of_or", "codes_list",
@@ -261,8 +263,6 @@ def error_line(exc, args) -> str:
     msg = _PARAMETER.sub(option, msg, count=1)
     msg = _QUOTED.sub(lambda m: options.get(m.group(1), m.group(0)), msg)
     src = next((getattr(args, a) for a in _INPUTS if getattr(args, a, None)), None)
-    from ..errors import LidarstatError
-
     if src is not None and isinstance(exc, LidarstatError) and not _starts_with_path(msg, args):
         msg = f"{src}: {msg}"
     return msg
