@@ -100,8 +100,8 @@ def test_bad_input_one_line_error_no_output(tmp_path, capsys, case):
 
 
 @pytest.mark.parametrize("argv,words", [
-    (["--radius", "0"], "'radius' parameter"),
-    (["--radius", "-1"], "'radius' parameter"),
+    (["--radius", "0"], "argument --radius: invalid value '0': must be a number > 0"),
+    (["--radius", "-1"], "argument --radius: invalid value '-1': must be a number > 0"),
 ])
 def test_bad_radius_cli(sample_las, tmp_path, capsys, argv, words):
     out = tmp_path / "o.las"

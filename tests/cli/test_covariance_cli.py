@@ -52,7 +52,7 @@ def test_covariance_radius_and_paper_thresholds(box_las, tmp_path, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["covariance", "missing.laz", "out.laz"], "missing.laz"),
     (["covariance", "IN", "out.xyz"], "unknown point-cloud format"),
-    (["covariance", "IN", "out.laz", "--k", "1"], "'k' parameter"),
+    (["covariance", "IN", "out.laz", "--k", "1"], "argument --k: invalid value '1'"),
 ])
 def test_covariance_errors(box_las, tmp_path, capsys, argv, message):
     argv = [str(box_las) if a == "IN" else (str(tmp_path / a) if a.startswith("out") else a)

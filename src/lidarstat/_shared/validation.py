@@ -73,31 +73,40 @@ def check_points(points, *, name: str = "points", min_points: int = 1, source: s
 
 def check_scalar(value, name: str, *, func: str, low=None, high=None, closed="neither",
                  integer: bool = False):
-    """Validate a real scalar in an interval and return it as float (or int).
+    """Validate a finite real scalar in an interval and return it as float (or int).
 
-    ``closed`` is one of ``"neither"``, ``"left"``, ``"right"``, ``"both"``.
+    ``closed`` is one of ``"neither"``, ``"left"``, ``"right"``, ``"both"``. NaN, infinite
+    values, booleans, strings and other non-real values are refused whatever the interval.
     The message reads: ``The 'radius' parameter of fit_quadrics must be a float in the
     range (0, inf). Got -1.0 instead.``
+
+    Raises
+    ------
+    InvalidParameterError
+        If `value` is not a finite real number in the interval (an integral one when
+        `integer`).
     """
     kind = "an int" if integer else "a float"
     lo = "-inf" if low is None else low
     hi = "inf" if high is None else high
     lb = "[" if closed in ("left", "both") and low is not None else "("
     rb = "]" if closed in ("right", "both") and high is not None else ")"
+    got = repr(value) if len(repr(value)) <= 40 else repr(value)[:37] + "..."
     msg = (f"The '{name}' parameter of {func} must be {kind} in the range "
-           f"{lb}{lo}, {hi}{rb}. Got {value!r} instead.")
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+           f"{lb}{lo}, {hi}{rb}. Got {got} instead.")
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         raise InvalidParameterError(msg)
-    if integer and not float(value).is_integer():
-        raise InvalidParameterError(msg)
-    v = float(value)
-    if not np.isfinite(v) and not (v == np.inf and high is None and closed in ("neither", "left")):
+    try:
+        v = float(value)
+    except (OverflowError, ValueError, TypeError):  # e.g. an int beyond the float range
+        raise InvalidParameterError(msg) from None
+    if not np.isfinite(v) or (integer and not v.is_integer()):
         raise InvalidParameterError(msg)
     if low is not None and (v < low or (v == low and lb == "(")):
         raise InvalidParameterError(msg)
     if high is not None and (v > high or (v == high and rb == ")")):
         raise InvalidParameterError(msg)
-    return int(v) if integer else v
+    return int(value) if integer else v
 
 
 def check_option(value, name: str, options, *, func: str):

@@ -587,6 +587,12 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     smoothing = check_scalar(smoothing, "smoothing", func=func, low=0, high=0.5,
                              closed="left")
     surface_cell = check_scalar(surface_cell, "surface_cell", func=func, low=0)
+    opening_window = check_scalar(opening_window, "opening_window", func=func, low=0)
+    iterations = check_scalar(iterations, "iterations", func=func, low=0, closed="left",
+                              integer=True)
+    if workers is not None:
+        workers = check_scalar(workers, "workers", func=func, low=1, closed="left",
+                               integer=True)
     check_option(scheduler, "scheduler", ("threads", "sync", "dask"), func=func)
     check_option(road_rule, "road_rule", ("antimode", "kurtosis-peak"), func=func)
     ground_spread = check_scalar(ground_spread, "ground_spread", func=func, low=0,

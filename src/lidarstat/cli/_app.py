@@ -18,6 +18,7 @@ from .. import __version__
 from .._shared._atomic import output_group
 from .._shared._outputs import Output, check_outputs
 from ..errors import LidarstatError
+from . import _options as opt
 
 logger = logging.getLogger("lidarstat")
 
@@ -198,20 +199,29 @@ def cmd_demo(args):
 def _tile_options(s):
     """Options of out-of-core, tiled processing (lidarstat.pipeline)."""
     g = s.add_argument_group("large files (tiles with halos; memory independent of size)")
-    g.add_argument("--tile", type=float, default=None, metavar="SIZE",
+    g.add_argument("--tile", type=opt.positive_float, default=None, metavar="SIZE",
                    help="process square tiles of this side, each with a halo of the radius; "
                    "LAS/LAZ are streamed in chunks")
     g.add_argument("--scheduler", choices=("sync", "threads", "dask"), default="threads",
                    help="how tiles run (default threads)")
-    g.add_argument("--workers", type=int, default=None, help="threads for tiles")
-    g.add_argument("--chunk-points", type=int, default=1_000_000,
+    g.add_argument("--workers", type=opt.int_at_least(1), default=None,
+                   help="threads for tiles (default: one per core)")
+    g.add_argument("--chunk-points", type=opt.int_at_least(1), default=1_000_000,
                    help="points per streamed chunk")
+
+
+def _tile_exceeds_radius(args):
+    """``--tile`` must exceed the largest ``--radius``, the halo every tile carries."""
+    if args.tile is not None and args.tile <= max(args.radius):
+        return "--tile", (f"invalid value '{args.tile:g}': must be larger than the largest "
+                          f"--radius ({max(args.radius):g}), the halo of every tile")
+    return None
 
 
 def build_parser() -> argparse.ArgumentParser:
     from ..synth import SCENES
 
-    p = argparse.ArgumentParser(
+    p = opt.Parser(
         prog="lidarstat",
         description="Classify and segment point clouds with statistically tested geometry.",
     )
@@ -229,48 +239,51 @@ def build_parser() -> argparse.ArgumentParser:
                        "point, test it, and write K, H, their tests and the surface type.")
     s.add_argument("input")
     s.add_argument("output", help="output file; format from the suffix")
-    s.add_argument("--radius", type=float, nargs="+", required=True,
+    s.add_argument("--radius", type=opt.positive_float, nargs="+", required=True,
                    help="sphere radius (bandwidth); several radii = multi-scale")
-    s.add_argument("--sigma", type=float, default=None,
+    s.add_argument("--sigma", type=opt.positive_float, default=None,
                    help="measurement noise std (default: estimated from the data)")
-    s.add_argument("--alpha", type=float, default=0.05)
+    s.add_argument("--alpha", type=opt.probability, default=0.05)
     s.add_argument("--test", choices=("calibrated", "paper"), default="calibrated")
     s.add_argument("--frame", choices=("z", "auto", "pca"), default="z")
-    s.add_argument("--sensor", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
-                   help="scanner position (orients normals; noise along the ray)")
+    s.add_argument("--sensor", type=opt.finite_float, nargs=3, metavar=("X", "Y", "Z"),
+                   default=None, help="scanner position (orients normals; noise along the ray)")
     s.add_argument("--noise", choices=("z", "range", "normal"), default=None,
                    help="direction of the noise sigma (default: range with --sensor, else z)")
-    s.add_argument("--min-neighbors", type=int, default=7)
+    s.add_argument("--min-neighbors", type=opt.int_at_least(7), default=7)
     s.add_argument("--minimal-detectable", action="store_true",
                    help="also write K_min and H_min (eq. 19)")
     s.add_argument("--summary-json", default=None, help="write the summary as JSON here")
     _tile_options(s)
     s.add_argument("-q", "--quiet", action="store_true")
     s.set_defaults(func=cmd_curvature)
+    opt.add_check(s, _tile_exceeds_radius)
 
     s = sub.add_parser("bandwidth", help="smallest radius whose tests detect K0 and H0")
-    s.add_argument("--K0", type=float, required=True)
-    s.add_argument("--H0", type=float, required=True)
-    s.add_argument("--sigma", type=float, required=True)
-    s.add_argument("--density", type=float, required=True, help="points per unit area")
-    s.add_argument("--alpha", type=float, default=0.05)
-    s.add_argument("--power", type=float, default=0.5)
+    s.add_argument("--K0", type=opt.finite_float, required=True)
+    s.add_argument("--H0", type=opt.finite_float, required=True)
+    s.add_argument("--sigma", type=opt.positive_float, required=True)
+    s.add_argument("--density", type=opt.positive_float, required=True,
+                   help="points per unit area")
+    s.add_argument("--alpha", type=opt.probability, default=0.05)
+    s.add_argument("--power", type=opt.real(0.5, 1, "left", what="probability"), default=0.5)
     s.add_argument("--test", choices=("calibrated", "paper"), default="calibrated")
     s.set_defaults(func=cmd_bandwidth)
 
     s = sub.add_parser("synth", help="write a synthetic scene with exact truth fields")
     s.add_argument("scene", choices=sorted(SCENES))
     s.add_argument("output")
-    s.add_argument("--sigma", type=float, default=None,
+    s.add_argument("--sigma", type=opt.nonnegative_float, default=None,
                    help="noise std (default: the scene's own; 0 for the analytic patches)")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=opt.seed, default=0)
     s.set_defaults(func=cmd_synth)
 
     s = sub.add_parser("demo", help="run curvature on a generated sample; LAS + PNG views")
     s.add_argument("outdir", nargs="?", default="lidarstat_demo")
-    s.add_argument("--sigma", type=float, default=0.015, help="noise added (dm)")
-    s.add_argument("--radius", type=float, default=0.2)
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--sigma", type=opt.nonnegative_float, default=0.015,
+                   help="noise added (dm)")
+    s.add_argument("--radius", type=opt.positive_float, default=0.2)
+    s.add_argument("--seed", type=opt.seed, default=0)
     s.set_defaults(func=cmd_demo)
 
     for name in COMMAND_MODULES:
@@ -316,10 +329,14 @@ def main(argv=None) -> int:
     files are removed on every one of these exits.
     """
     verbose = False
+    args = None
     try:
         with _sigterm_unwinds():
             parser = build_parser()
-            args = parser.parse_args(argv)
+            try:
+                args = parser.parse_args(argv)
+            except SystemExit as exc:  # --help, --version or a usage error, already printed
+                return exc.code
             verbose = args.verbose
             logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,
                                 format="%(levelname)s %(name)s: %(message)s")
@@ -332,8 +349,7 @@ def main(argv=None) -> int:
         _fail("interrupted")
         return 130
     except (LidarstatError, OSError) as exc:
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        _fail(f"error: {msg}")
+        _fail(f"error: {opt.error_line(exc, args)}")
         return 2
     except MemoryError as exc:
         _fail(f"error: out of memory{f' ({exc})' if str(exc) else ''}")

@@ -6,10 +6,15 @@ Shared options used: ``--radius`` (curvature bandwidth, required), ``--sigma``,
 
 from __future__ import annotations
 
+from . import _options as opt
+
+#: ``--min-size`` of this method when it is not given.
+DEFAULT_MIN_SIZE = 30
+
 
 def add_arguments(group):
     """Options only the curvature method has."""
-    group.add_argument("--normal-angle", type=float, default=10.0,
+    group.add_argument("--normal-angle", type=opt.angle_degrees(0, 180), default=10.0,
                        help="largest normal angle between neighbours of a unit (degrees)")
     group.add_argument("--curvature-frame", default="z", choices=("z", "auto", "pca"),
                        help="local frame of the curvature quadrics (default z; 'auto' or "
@@ -33,7 +38,8 @@ def run(args, cloud):
                                     "bandwidth)")
     return segment_curvature(cloud.xyz, radius=args.radius, sigma=args.sigma,
                              alpha=args.alpha, max_angle=args.normal_angle,
-                             min_size=args.min_size or 30, refine=args.refine,
+                             min_size=DEFAULT_MIN_SIZE if args.min_size is None
+                             else args.min_size, refine=args.refine,
                              frame=args.curvature_frame, noise=args.curvature_noise,
                              sensor=args.sensor,
                              diagnostics=getattr(args, "diagnostics", None))

@@ -2,23 +2,25 @@
 
 from __future__ import annotations
 
+from . import _options as opt
+
 
 def add_arguments(group):
     """Options of the ridges method (the shared ones live in cli/segment.py)."""
     from .ridges import add_jet_arguments
 
-    group.add_argument("--jet-radius", type=float, default=None,
+    group.add_argument("--jet-radius", type=opt.positive_float, default=None,
                        help="radius of the jets (default --radius; or --k neighbours)")
-    group.add_argument("--ridge-grow-k", type=int, default=8,
+    group.add_argument("--ridge-grow-k", type=opt.int_at_least(2), default=8,
                        help="neighbours of the region-growing graph")
-    group.add_argument("--band", type=float, default=None,
+    group.add_argument("--band", type=opt.positive_float, default=None,
                        help="half-width of the barrier band around ridge lines")
-    group.add_argument("--extend", type=float, default=None,
+    group.add_argument("--extend", type=opt.nonnegative_float, default=None,
                        help="longest extension of ridge lines at their ends (default the "
                             "jet radius; 0 none)")
     group.add_argument("--ridges-only", action="store_true",
                        help="barrier = ridge band only (no chi-square rejections, no "
-                            "jet-consistent edges, barrier points not assigned): session 2")
+                            "jet-consistent edges, barrier points not assigned)")
     add_jet_arguments(group)
 
 

@@ -6,6 +6,11 @@ penalised PRESS), ``--sigma``, ``--alpha`` (planarity test), ``--min-size``.
 
 from __future__ import annotations
 
+from . import _options as opt
+
+#: ``--min-size`` of this method when it is not given.
+DEFAULT_MIN_SIZE = 30
+
 
 def add_arguments(group):
     """Options only the SAR method has."""
@@ -17,28 +22,29 @@ def add_arguments(group):
                        "0.75 b, 0.5 b whose local plane passes the planarity test), 'geary' "
                        "(Geary's local indicator; also the bare flag) or 'none'")
     group.add_argument("--sar-degree", default="1",
+                       type=opt.one_of_or(("auto",), opt.int_range(1, 3), "1, 2, 3 or 'auto'"),
                        help="polynomial order of the units: 1 (planes), 2, 3 or 'auto' "
                        "(t tests up to 3)")
-    group.add_argument("--edge-alpha", type=float, default=0.05,
+    group.add_argument("--edge-alpha", type=opt.probability, default=0.05,
                        help="level of the height/slope tests of region growing (0.05)")
-    group.add_argument("--search", type=float, default=None,
+    group.add_argument("--search", type=opt.positive_float, default=None,
                        help="search-area distance from a raw cluster (default 3 b)")
-    group.add_argument("--w-radius", type=float, default=None,
+    group.add_argument("--w-radius", type=opt.positive_float, default=None,
                        help="radius of the SAR adjacency W (default 1.5 x point spacing)")
-    group.add_argument("--fs-alpha", type=float, default=0.001,
+    group.add_argument("--fs-alpha", type=opt.probability, default=0.001,
                        help="level of the Forward Search F test")
-    group.add_argument("--fs-envelope", type=float, default=0.001,
+    group.add_argument("--fs-envelope", type=opt.probability, default=0.001,
                        help="level of the deletion-residual envelope")
     group.add_argument("--fs-stop", default="both", choices=("both", "f", "residual"),
                        help="Forward Search stopping rule")
-    group.add_argument("--fs-block", type=int, default=1,
+    group.add_argument("--fs-block", type=opt.int_at_least(1), default=1,
                        help="points added per Forward Search step (1 = unitary)")
-    group.add_argument("--outlier-alpha", type=float, default=0.01,
+    group.add_argument("--outlier-alpha", type=opt.probability_or_zero, default=0.01,
                        help="per-point level of the final outlier test of the points the "
                        "search added (iterated data snooping, deletion residuals with a "
                        "robust segment scale fixed before the iterations; 0.01); 0 "
                        "disables it")
-    group.add_argument("--gof-alpha", type=float, default=0.001,
+    group.add_argument("--gof-alpha", type=opt.probability_or_zero, default=0.001,
                        help="level of the per-segment goodness-of-fit test (residual scale "
                        "against the noise, chi-square with the SAR correlation); a "
                        "segment it rejects is split into two surfaces when that removes "
@@ -50,17 +56,10 @@ def add_arguments(group):
 
 def run(args, cloud):
     """Segment `cloud` by :func:`lidarstat.segment.segment_sar`."""
-    from ..errors import InvalidParameterError
     from ..features import select_plane_bandwidth
     from ..segment import segment_sar
 
-    deg = None if str(args.sar_degree) == "auto" else args.sar_degree
-    if deg is not None:
-        try:
-            deg = int(deg)
-        except ValueError:
-            raise InvalidParameterError(f"--sar-degree must be 1, 2, 3 or 'auto'; got "
-                                        f"{args.sar_degree!r}") from None
+    deg = None if args.sar_degree == "auto" else int(args.sar_degree)
     b = args.radius
     if b is None:
         b = select_plane_bandwidth(cloud.xyz, criterion=args.criterion).bandwidth
@@ -68,6 +67,11 @@ def run(args, cloud):
                        edge_alpha=args.edge_alpha, fs_alpha=args.fs_alpha,
                        alpha_residual=args.fs_envelope, stop=args.fs_stop, degree=deg,
                        adaptive=args.adaptive, threshold=args.search, w_radius=args.w_radius,
-                       min_size=args.min_size or 30, block=args.fs_block,
-                       outlier_alpha=args.outlier_alpha or None,
-                       gof_alpha=args.gof_alpha or None, diagnostics=args.diagnostics)
+                       min_size=DEFAULT_MIN_SIZE if args.min_size is None else args.min_size,
+                       block=args.fs_block, outlier_alpha=_level_or_off(args.outlier_alpha),
+                       gof_alpha=_level_or_off(args.gof_alpha), diagnostics=args.diagnostics)
+
+
+def _level_or_off(alpha):
+    """A test level where 0 switches the test off (None for the library)."""
+    return None if alpha == 0 else alpha

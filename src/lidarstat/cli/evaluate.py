@@ -6,10 +6,7 @@ import json
 
 import numpy as np
 
-
-def _codes(text):
-    return tuple(int(v) for v in text.split(",") if v.strip())
-
+from . import _options as opt
 
 def _run(args):
     from ..classify import class_scores, filter_errors
@@ -26,10 +23,10 @@ def _run(args):
             f"{len(ref)}; evaluate compares the same points in the same order")
     r = np.asarray(res[args.field]).astype(np.int64)
     t = np.asarray(ref[args.reference_field]).astype(np.int64)
-    gcodes = _codes(args.ground_codes)
+    gcodes = args.ground_codes
     rg = np.isin(r, gcodes)
-    tg = np.isin(t, _codes(args.reference_ground_codes) if args.reference_ground_codes
-                 else gcodes)
+    tg = np.isin(t, gcodes if args.reference_ground_codes is None
+                 else args.reference_ground_codes)
     fe = filter_errors(rg, tg)
     out = {"result": str(args.result), "reference": str(args.reference),
            "field": args.field, "reference_field": args.reference_field,
@@ -73,9 +70,9 @@ def register(sub):
     s.add_argument("--field", default="classification", help="class field of RESULT")
     s.add_argument("--reference-field", default="classification",
                    help="class field of REF")
-    s.add_argument("--ground-codes", default="2,8,9,11",
+    s.add_argument("--ground-codes", type=opt.codes_list, default="2,8,9,11",
                    help="codes counted as ground (comma-separated)")
-    s.add_argument("--reference-ground-codes", default=None,
+    s.add_argument("--reference-ground-codes", type=opt.codes_list, default=None,
                    help="ground codes of REF when they differ")
     s.add_argument("--classes", action="store_true", help="full multi-class comparison")
     s.add_argument("--json", default=None, help="write the scores as JSON here")

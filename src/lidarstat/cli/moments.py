@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from . import _options as opt
 from ._app import Output, check_plan, write_summary_json
 
 
@@ -61,10 +62,6 @@ def _run(args):
     return 0
 
 
-def _bandwidth(v):
-    return v if v in ("silverman", "scott") else float(v)
-
-
 def register(sub):
     """Add the ``moments`` subcommand."""
     s = sub.add_parser(
@@ -75,30 +72,32 @@ def register(sub):
     s.add_argument("input")
     s.add_argument("output", help="output file; format from the suffix")
     s.add_argument("--method", choices=("moments", "skewness-balancing"), default="moments")
-    s.add_argument("--tile-size", type=float, default=64.0,
+    s.add_argument("--tile-size", type=opt.positive_float, default=64.0,
                    help="side of the regular tiles (metres)")
-    s.add_argument("--min-tile-size", type=float, default=16.0,
+    s.add_argument("--min-tile-size", type=opt.positive_float, default=16.0,
                    help="smallest side reached by the progressive split (metres)")
-    s.add_argument("--alpha", type=float, default=0.05, help="level of the dip tests")
-    s.add_argument("--min-cluster", type=int, default=10)
-    s.add_argument("--cycle", type=int, default=None,
+    s.add_argument("--alpha", type=opt.probability, default=0.05, help="level of the dip tests")
+    s.add_argument("--min-cluster", type=opt.int_at_least(1), default=10)
+    s.add_argument("--cycle", type=opt.int_at_least(0), default=None,
                    help="override the separating cycle of each tile's first analysis")
     s.add_argument("--elevation-rule", choices=("symmetry", "plateau"), default="symmetry")
-    s.add_argument("--bandwidth", type=_bandwidth, default="silverman",
+    s.add_argument("--bandwidth", default="silverman",
+                   type=opt.one_of_or(("silverman", "scott"), opt.positive_float,
+                                      "'silverman', 'scott' or a number > 0"),
                    help="density bandwidth: silverman, scott or a number (the paper's h)")
-    s.add_argument("--surface-cell", type=float, default=4.0,
+    s.add_argument("--surface-cell", type=opt.positive_float, default=4.0,
                    help="cell of the ground surface model, one median point per cell (metres)")
-    s.add_argument("--opening-window", type=float, default=20.0,
+    s.add_argument("--opening-window", type=opt.positive_float, default=20.0,
                    help="window of the opening giving the first lower envelope (metres)")
     s.add_argument("--units", default="auto",
                    choices=("auto", "metre", "m", "foot", "ft", "us-foot", "us-ft"),
                    help="unit of the coordinates; auto reads it from the file's CRS (metres "
                    "without a CRS); every length option is in metres and converted")
-    s.add_argument("--scale", type=float, default=None,
+    s.add_argument("--scale", type=opt.positive_float, default=None,
                    help="metres per coordinate unit (overrides --units), e.g. 0.3048")
-    s.add_argument("--iterations", type=int, default=4,
+    s.add_argument("--iterations", type=opt.int_at_least(0), default=4,
                    help="refits of the ground surface")
-    s.add_argument("--ground-spread", type=float, default=3.0,
+    s.add_argument("--ground-spread", type=opt.nonnegative_float, default=3.0,
                    help="a tile's cut stays at least this many robust SDs above the centre "
                         "of the ground cluster it leaves (0: off)")
     s.add_argument("--no-continuity", action="store_true",
@@ -111,7 +110,8 @@ def register(sub):
     s.add_argument("--no-intensity", action="store_true", help="analyse elevation only")
     s.add_argument("--no-low-noise", action="store_true",
                    help="do not flag isolated points under the terrain as low noise (7)")
-    s.add_argument("--workers", type=int, default=None, help="threads for the tiles")
+    s.add_argument("--workers", type=opt.int_at_least(1), default=None,
+                   help="threads for the tiles (default: one per core)")
     s.add_argument("--scheduler", choices=("threads", "sync", "dask"), default="threads",
                    help="how tiles run (lidarstat.pipeline.map_tiles); same result")
     s.add_argument("--report", default=None,

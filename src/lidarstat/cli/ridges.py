@@ -5,7 +5,12 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from . import _options as opt
 from ._app import Output, check_plan, progress, write_summary_json
+
+
+#: Fewest neighbours of a degree-4 jet: its 15 coefficients and one degree of freedom.
+JET_NEIGHBORS = 16
 
 
 def _lines_path(args, out: Path) -> Path:
@@ -52,9 +57,9 @@ def add_jet_arguments(s):
                    help="tricube weights or CGAL's unweighted jet fit")
     s.add_argument("--noise", choices=("z", "range", "normal"), default=None,
                    help="direction of the noise sigma (default: range with --sensor, else z)")
-    s.add_argument("--ratio", type=float, default=2.0,
+    s.add_argument("--ratio", type=opt.real(1, closed="left"), default=2.0,
                    help="a ridge's curvature must exceed RATIO times the other")
-    s.add_argument("--min-length", type=float, default=None,
+    s.add_argument("--min-length", type=opt.nonnegative_float, default=None,
                    help="shorter ridge lines are dropped (default: twice the jet radius)")
 
 
@@ -68,14 +73,16 @@ def register(sub):
     s.add_argument("input")
     s.add_argument("output", help="output file; format from the suffix")
     g = s.add_mutually_exclusive_group(required=True)
-    g.add_argument("--radius", type=float, default=None, help="sphere radius (bandwidth)")
-    g.add_argument("--k", type=int, default=None, help="k nearest neighbours")
-    s.add_argument("--sigma", type=float, default=None,
+    g.add_argument("--radius", type=opt.positive_float, default=None,
+                   help="sphere radius (bandwidth)")
+    g.add_argument("--k", type=opt.int_at_least(JET_NEIGHBORS), default=None,
+                   help=f"k nearest neighbours (at least {JET_NEIGHBORS}, a degree-4 jet)")
+    s.add_argument("--sigma", type=opt.positive_float, default=None,
                    help="measurement noise std (default: estimated from the data)")
-    s.add_argument("--alpha", type=float, default=0.01,
+    s.add_argument("--alpha", type=opt.probability, default=0.01,
                    help="level of the jet, curvature and k'' tests")
-    s.add_argument("--sensor", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
-                   help="scanner position (orients normals; noise along the ray)")
+    s.add_argument("--sensor", type=opt.finite_float, nargs=3, metavar=("X", "Y", "Z"),
+                   default=None, help="scanner position (orients normals; noise along the ray)")
     add_jet_arguments(s)
     s.add_argument("--lines", default=None,
                    help="ridge lines (.geojson, .csv, .las/.laz; default OUT stem + "

@@ -15,6 +15,7 @@ import time
 from importlib import import_module
 from pathlib import Path
 
+from . import _options as opt
 from ._app import SENSOR_HELP, Output, check_plan, resolve_sensor, write_summary_json
 
 #: method name -> module path (``add_arguments``, ``run``). Add a method by adding it here.
@@ -66,6 +67,16 @@ def cmd_segment(args):
     return 0
 
 
+def _method_neighbours(args):
+    """``--method ridges`` fits degree-4 jets: ``--k`` needs at least 16 neighbours."""
+    from .ridges import JET_NEIGHBORS
+
+    if args.method == "ridges" and args.k is not None and args.k < JET_NEIGHBORS:
+        return "--k", (f"invalid value '{args.k}': --method ridges needs at least "
+                       f"{JET_NEIGHBORS} neighbours (a degree-4 jet)")
+    return None
+
+
 def register(sub):
     """Add the ``segment`` subcommand and every registered method's options."""
     s = sub.add_parser(
@@ -76,15 +87,18 @@ def register(sub):
     s.add_argument("output", help="output file with segment_id; format from the suffix")
     s.add_argument("--method", required=True, choices=sorted(SEGMENT_METHODS),
                    help="segmentation method")
-    s.add_argument("--k", type=int, default=None, help="neighbours per point (kNN)")
-    s.add_argument("--radius", type=float, default=None, help="neighbourhood radius")
-    s.add_argument("--min-size", type=int, default=None,
+    s.add_argument("--k", type=opt.int_at_least(3), default=None,
+                   help="neighbours per point (kNN)")
+    s.add_argument("--radius", type=opt.positive_float, default=None,
+                   help="neighbourhood radius")
+    s.add_argument("--min-size", type=opt.int_at_least(1), default=None,
                    help="smallest segment kept (points); method default if omitted")
-    s.add_argument("--sensor", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
+    s.add_argument("--sensor", type=opt.finite_float, nargs=3, metavar=("X", "Y", "Z"), default=None,
                    help=SENSOR_HELP)
-    s.add_argument("--sigma", type=float, default=None,
+    s.add_argument("--sigma", type=opt.positive_float, default=None,
                    help="measurement noise std (default: estimated from the data)")
-    s.add_argument("--alpha", type=float, default=0.05, help="significance level of tests")
+    s.add_argument("--alpha", type=opt.probability, default=0.05,
+                   help="significance level of tests")
     s.add_argument("--table", default=None,
                    help="segment table (.csv or .json; default OUT stem + .segments.csv)")
     s.add_argument("--lines", default=None,
@@ -96,3 +110,4 @@ def register(sub):
         group = s.add_argument_group(f"--method {name}")
         import_module(SEGMENT_METHODS[name]).add_arguments(group)
     s.set_defaults(func=cmd_segment)
+    opt.add_check(s, _method_neighbours)

@@ -159,6 +159,11 @@ def process_file(func: Callable, src, dst, *, size: float, halo: float,
     check_option(scheduler, "scheduler", ("sync", "threads", "dask"), func="process_file")
     size = check_scalar(size, "size", func="process_file", low=0, closed="neither")
     halo = check_scalar(halo, "halo", func="process_file", low=0, high=size, closed="left")
+    if workers is not None:
+        workers = check_scalar(workers, "workers", func="process_file", low=1, closed="left",
+                               integer=True)
+    points_per_chunk = check_scalar(points_per_chunk, "points_per_chunk", func="process_file",
+                                    low=1, closed="left", integer=True)
     lo, hi, n = _bounds(src, points_per_chunk)
     grid = TileGrid.covering(lo, hi, size, halo)
     parent = Path(workdir) if workdir is not None else dst.parent
@@ -212,7 +217,7 @@ def _run_tiles(func, src, dst, grid, n, buckets, results, *, scheduler, workers,
             progress(done, n)
 
     # Tiles go in batches, so that finished results never pile up in memory.
-    nworkers = workers or os.cpu_count() or 1
+    nworkers = workers if workers is not None else (os.cpu_count() or 1)
     batch = 1 if scheduler == "sync" else 2 * nworkers
     pool = ThreadPoolExecutor(max_workers=nworkers) if scheduler == "threads" else None
     try:

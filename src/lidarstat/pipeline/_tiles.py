@@ -235,6 +235,9 @@ def map_tiles(func: Callable, xyz, *, size: float | None = None, halo: float = 0
     """
     xyz = check_points(xyz, name="xyz", min_points=1)
     check_option(scheduler, "scheduler", ("sync", "threads", "dask"), func="map_tiles")
+    if workers is not None:
+        workers = check_scalar(workers, "workers", func="map_tiles", low=1, closed="left",
+                               integer=True)
     if tiles is None:
         if size is None:
             raise InvalidParameterError("map_tiles needs `size` or precomputed `tiles`")

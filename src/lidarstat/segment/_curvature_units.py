@@ -126,7 +126,15 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
     if curv is None:
         curv = curvature(points, radius=radius, sigma=sigma, alpha=alpha, frame=frame,
                          noise=noise, sensor=sensor)
-    grow_radius = grow_radius or radius / 2.0
+    max_angle = check_scalar(max_angle, "max_angle", func=func, low=0.0, high=180.0,
+                             closed="right")
+    min_size = check_scalar(min_size, "min_size", func=func, low=1, closed="left", integer=True)
+    grow_radius = (radius / 2.0 if grow_radius is None else
+                   check_scalar(grow_radius, "grow_radius", func=func, low=0.0))
+    if threshold is not None:
+        threshold = check_scalar(threshold, "threshold", func=func, low=0.0)
+    if w_radius is not None:
+        w_radius = check_scalar(w_radius, "w_radius", func=func, low=0.0)
     labels, types = curvature_units(points, curv, grow_radius=grow_radius, max_angle=max_angle,
                                     min_size=min_size)
     st = np.asarray(curv.fields["surface_type"]).astype(np.uint8)
@@ -139,8 +147,10 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
     from ._sar import refine_raw_clusters
 
     degrees = np.where(types == 1, 1, 2)
-    seg = refine_raw_clusters(points, labels, threshold=threshold or radius,
-                              w_radius=w_radius or radius / 2.0, degrees=degrees, alpha=fs_alpha,
+    seg = refine_raw_clusters(points, labels,
+                              threshold=radius if threshold is None else threshold,
+                              w_radius=radius / 2.0 if w_radius is None else w_radius,
+                              degrees=degrees, alpha=fs_alpha,
                               min_size=min_size, diagnostics=diagnostics)
     # type of each refined unit = type of its raw cluster
     raw_of = np.array([int(np.bincount(labels[u.raw]).argmax()) for u in seg.units], dtype=int)

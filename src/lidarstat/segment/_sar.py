@@ -744,8 +744,21 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
     progress : callable, optional
         ``progress(done, total)`` after each cluster.
     """
+    func = "refine_raw_clusters"
+    # Checked here once: refine_cluster would refuse them cluster by cluster.
+    block = check_scalar(block, "block", func=func, low=1, closed="left", integer=True)
+    max_steps = check_scalar(max_steps, "max_steps", func=func, low=1, closed="left",
+                             integer=True)
+    min_size = check_scalar(min_size, "min_size", func=func, low=1, closed="left", integer=True)
+    alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0)
+    alpha_residual = check_scalar(alpha_residual, "alpha_residual", func=func, low=0.0,
+                                  high=1.0)
+    for name, level in (("outlier_alpha", outlier_alpha), ("gof_alpha", gof_alpha),
+                        ("merge_alpha", merge_alpha)):
+        if level is not None:
+            check_scalar(level, name, func=func, low=0.0, high=1.0)
     n = points.shape[0]
-    raw_labels = relabel(raw_labels, max(int(min_size), 1))
+    raw_labels = relabel(raw_labels, min_size)
     graph = graph if graph is not None else delaunay_graph(points)
     areas = search_areas(points, raw_labels, threshold, graph=graph)
     c_max = int(raw_labels.max()) if n else 0
@@ -934,9 +947,12 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
         bandwidth = select_plane_bandwidth(points, rng=rng).bandwidth
     b = check_scalar(bandwidth, "bandwidth", func=func, low=0.0)
     spacing = _mean_spacing(points)
-    grow_radius = grow_radius or min(b, 2.0 * spacing)
-    threshold = threshold or 3.0 * b
-    w_radius = w_radius or 1.5 * spacing
+    grow_radius = (min(b, 2.0 * spacing) if grow_radius is None else
+                   check_scalar(grow_radius, "grow_radius", func=func, low=0.0))
+    threshold = (3.0 * b if threshold is None else
+                 check_scalar(threshold, "threshold", func=func, low=0.0))
+    w_radius = (1.5 * spacing if w_radius is None else
+                check_scalar(w_radius, "w_radius", func=func, low=0.0))
     graph = delaunay_graph(points)
     nbh = radius_neighbors(points, grow_radius, dim=2)
 
