@@ -291,11 +291,12 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-class Terminated(BaseException):
+class Terminated(KeyboardInterrupt):
     """SIGTERM, raised in the main thread so that the run unwinds like an exception.
 
-    A BaseException, like KeyboardInterrupt: ``except Exception`` in library code does not
-    swallow it, and every ``finally`` (temporary files) runs.
+    A KeyboardInterrupt, like Ctrl-C: ``except Exception`` in library code does not swallow
+    it, code that lets interrupts through (the readers' conversion of foreign exceptions)
+    lets it through too, and every ``finally`` (temporary files) runs.
     """
 
 
