@@ -13,7 +13,7 @@ from .._shared.validation import check_option, check_points, check_scalar
 from ..classify import SurfaceType, hk_surface_types
 from ..errors import InsufficientNeighborsError, InvalidParameterError
 from ..neighbors import CellIndex
-from ..neighbors._duplicates import find_duplicates, run_on_unique
+from ..neighbors._duplicates import copies_degenerate, find_duplicates, run_on_unique
 from . import _curvature_kernels as _ck
 from . import _quadric_kernels as _k
 from ._quadric import FitStatus, _run_cells, _run_kernel, check_fit_options, unfitted_reason
@@ -387,7 +387,11 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
             sensor=sensor, noise=noise, min_neighbors=min_neighbors,
             minimal_detectable=minimal_detectable, block_size=block_size,
             progress=progress), what=func)
-        return replace(res, fields={k: dup.broadcast(v) for k, v in res.fields.items()})
+        fields = dict(res.fields)
+        fields["status"] = copies_degenerate(
+            dup, pts[dup.first], radii[-1], fields["status"], too_few=FitStatus.TOO_FEW_NEIGHBORS,
+            degenerate=FitStatus.DEGENERATE, min_neighbors=min_neighbors)
+        return replace(res, fields={k: dup.broadcast(v) for k, v in fields.items()})
     index = CellIndex(pts, radii[0])
     estimated = sigma is None
     if estimated:

@@ -28,7 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._shared.validation import check_points
-from ..errors import DuplicatePointsError, InsufficientNeighborsError
+from ..errors import DuplicatePointsError, LidarstatError
+from ._csr import Neighborhoods
 
 logger = logging.getLogger("lidarstat")
 
@@ -193,24 +194,24 @@ def refuse_dominated(dup: Duplicates, *, what: str, max_share: float = 0.5,
 def run_on_unique(dup: Duplicates, run, *, what: str):
     """Call ``run()`` (a model on the unique cloud), adding the counts to its refusals.
 
-    Logs one warning naming the counts. An
-    :class:`~lidarstat.errors.InsufficientNeighborsError` of the model (too few
-    neighbours everywhere) is raised again with :meth:`Duplicates.describe` appended, so
-    a cloud of copies is refused for what it is.
+    Logs one warning naming the counts. A refusal of the model (any
+    :class:`~lidarstat.errors.LidarstatError`, e.g. too few neighbours everywhere) is
+    raised again with :meth:`Duplicates.describe` appended, so a cloud of copies is
+    refused for what it is.
     """
     logger.warning("%s: %s; each location enters the model once and its result is "
                    "written to every point at it", what, dup.describe())
     try:
         return run()
-    except InsufficientNeighborsError as exc:
+    except LidarstatError as exc:
         raise type(exc)(f"{exc} ({dup.describe()}; each location counts once)") from None
 
 
 def map_rows(obj, n_rows: int, rows):
     """`obj` with every per-point array (first axis `n_rows`) replaced by ``arr[rows]``.
 
-    `obj` is an array, a dict of them, or a dataclass whose array and dict attributes are
-    mapped (other attributes are kept). With ``rows = dup.inverse`` a result of the
+    `obj` is an array, a dict of them, or a dataclass whose attributes are mapped
+    recursively (other values, and :class:`Neighborhoods`, are kept). With ``rows = dup.inverse`` a result of the
     unique cloud becomes the result of every input point; with ``rows = dup.first`` a
     result given for the input cloud becomes one of its unique cloud.
     """
@@ -218,9 +219,34 @@ def map_rows(obj, n_rows: int, rows):
         return np.take(obj, rows, axis=0) if obj.ndim and obj.shape[0] == n_rows else obj
     if isinstance(obj, dict):
         return {k: map_rows(v, n_rows, rows) for k, v in obj.items()}
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+    if (dataclasses.is_dataclass(obj) and not isinstance(obj, type)
+            and not isinstance(obj, Neighborhoods)):  # CSR rows are not per-point arrays
         changes = {f.name: map_rows(getattr(obj, f.name), n_rows, rows)
-                   for f in dataclasses.fields(obj)
-                   if isinstance(getattr(obj, f.name), (np.ndarray, dict))}
+                   for f in dataclasses.fields(obj) if f.init}
         return dataclasses.replace(obj, **changes)
     return obj
+
+
+def copies_degenerate(dup: Duplicates, unique_points, radius, status, *, too_few, degenerate,
+                      min_neighbors):
+    """Statuses of the unique cloud, with "too few" turned into "degenerate" by copies.
+
+    A location whose sphere holds fewer than `min_neighbors` distinct locations but at
+    least `min_neighbors` points once the copies are counted has enough points and too
+    little geometry: its status becomes `degenerate` (as a singular fit of all the copies
+    would have given), not `too_few`.
+
+    Returns
+    -------
+    (U,) ndarray
+        A copy of `status`.
+    """
+    from ._query import radius_neighbors
+
+    status = np.array(status, copy=True)
+    few = np.flatnonzero(status == too_few)
+    if few.size:
+        nb = radius_neighbors(unique_points, radius, query=few)  # < min_neighbors a row
+        points_in = np.add.reduceat(dup.counts[nb.indices], nb.indptr[:-1])
+        status[few[points_in >= min_neighbors]] = degenerate
+    return status
