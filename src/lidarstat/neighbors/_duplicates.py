@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -185,10 +186,29 @@ def refuse_dominated(dup: Duplicates, *, what: str, max_share: float = 0.5,
     if not dup.any:
         return
     share = dup.n_copies / dup.n_points
-    if share > max_share or (max_copies is not None and dup.largest > max_copies):
-        raise DuplicatePointsError(
-            f"{dup.describe()}; {what} needs distinct locations (remove the duplicate "
-            "points first)")
+    if share > max_share:
+        why = f"{share:.0%} of them are copies"
+    elif max_copies is not None and dup.largest > max_copies:
+        why = f"more than {max_copies:,} at one location"
+    else:
+        return
+    raise DuplicatePointsError(
+        f"{dup.describe()} ({why}); {what} needs distinct locations: remove the duplicate "
+        "points first")
+
+
+def check_copies(points, *, what: str) -> Duplicates:
+    """:func:`refuse_dominated` with the defaults of the segmentation methods.
+
+    Refused: more than half of the points are copies, or one location holds more points
+    than the square root of :func:`~lidarstat.neighbors.max_pairs` (its copies alone
+    would make more neighbour pairs than the ceiling). Returns the :class:`Duplicates`.
+    """
+    from ._budget import max_pairs
+
+    dup = find_duplicates(points)
+    refuse_dominated(dup, what=what, max_copies=math.isqrt(max_pairs()))
+    return dup
 
 
 def run_on_unique(dup: Duplicates, run, *, what: str):

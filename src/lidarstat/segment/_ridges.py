@@ -12,7 +12,7 @@ from ..errors import InvalidParameterError
 from ..features import FitStatus, jets
 from ..features._jets import MONGE_NAMES, JET_FIELDS
 from ..neighbors import knn_neighbors, radius_neighbors
-from ..neighbors._duplicates import find_duplicates, map_rows, run_on_unique
+from ..neighbors._duplicates import check_copies, find_duplicates, map_rows, run_on_unique
 from . import _ridge_kernels as _rk
 from ._grow import components
 from ._result import Polylines, Segmentation, segment_table
@@ -398,6 +398,7 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_si
 
     func = "ridge_segments"
     pts = check_points(points)
+    check_copies(pts, what=func)  # neighbors/_duplicates.py
     k = check_scalar(k, "k", func=func, low=2, closed="left", integer=True)
     min_size = check_scalar(min_size, "min_size", func=func, low=1, closed="left", integer=True)
     n = pts.shape[0]
