@@ -389,7 +389,7 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
             progress=progress), what=func)
         fields = dict(res.fields)
         fields["status"] = copies_degenerate(
-            dup, pts[dup.first], radii[-1], fields["status"], too_few=FitStatus.TOO_FEW_NEIGHBORS,
+            dup, fields["status"], too_few=FitStatus.TOO_FEW_NEIGHBORS,
             degenerate=FitStatus.DEGENERATE, min_neighbors=min_neighbors)
         return replace(res, fields={k: dup.broadcast(v) for k, v in fields.items()})
     index = CellIndex(pts, radii[0])

@@ -425,7 +425,7 @@ def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge
         why = unfitted_reason(fit.status, fit.neighbors, min_neighbors)
         raise InsufficientNeighborsError(
             f"{func}: no jet could be fitted: {why} (degree {degree} needs "
-            f"{(degree + 1) * (degree + 2) // 2 + 1} points off a common line and plane); "
+            f"{(degree + 1) * (degree + 2) // 2 + 1} points, not all on one line); "
             "enlarge `radius`/`k`")
     with np.errstate(invalid="ignore", divide="ignore"):
         s0 = fit.q / fit.trace_b

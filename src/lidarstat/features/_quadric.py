@@ -241,7 +241,7 @@ def unfitted_reason(status, neighbors, min_neighbors) -> str:
     Examples
     --------
     >>> unfitted_reason(np.array([2, 2, 1]), np.array([40, 40, 3]), 16)
-    '2 of 3 points have degenerate neighbourhoods (collinear, coplanar beyond the model or at one location) and 1 has fewer than 16 neighbours (most: 40)'
+    '2 of 3 points have degenerate neighbourhoods (on one line or at one location) and 1 has fewer than 16 neighbours (most: 40)'
     """
     status = np.asarray(status)
     n = status.size
@@ -251,7 +251,7 @@ def unfitted_reason(status, neighbors, min_neighbors) -> str:
     parts = []
     if degenerate:
         parts.append(f"{degenerate:,} of {n:,} points have degenerate neighbourhoods "
-                     "(collinear, coplanar beyond the model or at one location)")
+                     "(on one line or at one location)")
     if few:
         lead = f"{few:,}" if degenerate else f"{few:,} of {n:,} points"
         verb = "has" if few == 1 and degenerate else "have"

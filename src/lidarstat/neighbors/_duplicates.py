@@ -247,26 +247,19 @@ def map_rows(obj, n_rows: int, rows):
     return obj
 
 
-def copies_degenerate(dup: Duplicates, unique_points, radius, status, *, too_few, degenerate,
-                      min_neighbors):
-    """Statuses of the unique cloud, with "too few" turned into "degenerate" by copies.
+def copies_degenerate(dup: Duplicates, status, *, too_few, degenerate, min_neighbors):
+    """Statuses of the unique cloud, with "too few" turned into "degenerate" at clumps.
 
-    A location whose sphere holds fewer than `min_neighbors` distinct locations but at
-    least `min_neighbors` points once the copies are counted has enough points and too
-    little geometry: its status becomes `degenerate` (as a singular fit of all the copies
-    would have given), not `too_few`.
+    A location that by itself holds at least `min_neighbors` points (copies) has enough
+    points and no geometry: its status becomes `degenerate`, as the singular fit of all
+    its copies gave, not `too_few`. Elsewhere the statuses are those of the unique cloud
+    (a doubled cloud gives exactly its unique cloud's).
 
     Returns
     -------
     (U,) ndarray
         A copy of `status`.
     """
-    from ._query import radius_neighbors
-
     status = np.array(status, copy=True)
-    few = np.flatnonzero(status == too_few)
-    if few.size:
-        nb = radius_neighbors(unique_points, radius, query=few)  # < min_neighbors a row
-        points_in = np.add.reduceat(dup.counts[nb.indices], nb.indptr[:-1])
-        status[few[points_in >= min_neighbors]] = degenerate
+    status[(status == too_few) & (dup.counts >= min_neighbors)] = degenerate
     return status
