@@ -15,8 +15,12 @@ import numpy as np
 import pytest
 
 from lidarstat.classify import classify_moments, covariance
-from lidarstat.errors import (DuplicatePointsError, InsufficientNeighborsError,
-                              LidarstatError, TooManyNeighborsError)
+from lidarstat.errors import (
+    DuplicatePointsError,
+    InsufficientNeighborsError,
+    LidarstatError,
+    TooManyNeighborsError,
+)
 from lidarstat.features import FitStatus, curvature, jets
 from lidarstat.segment import ridges, segment_covariance, segment_curvature, segment_sar
 

@@ -6,8 +6,13 @@ import numpy as np
 import pytest
 
 from lidarstat.errors import DuplicatePointsError, InvalidParameterError, TooManyNeighborsError
-from lidarstat.neighbors import (CellIndex, find_duplicates, knn_neighbors, max_pairs,
-                                 radius_neighbors)
+from lidarstat.neighbors import (
+    CellIndex,
+    find_duplicates,
+    knn_neighbors,
+    max_pairs,
+    radius_neighbors,
+)
 from lidarstat.neighbors._budget import half_radius_population
 from lidarstat.neighbors._duplicates import map_rows, refuse_dominated
 

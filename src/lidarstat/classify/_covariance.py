@@ -645,12 +645,14 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         sigma = a + b * features.ray_range
         if not np.all(sigma > 0):
             raise InvalidParameterError(
-                f"{func}: the estimated noise is 0 (exact planes); give `sigma` or thresholds")
+                f"{func}: the estimated noise is 0 (the neighbourhoods are exact planes or "
+                "lines); give `sigma` or thresholds")
     elif estimated:
         sigma = estimate_plane_sigma(evals, counts)
         if not sigma > 0:
             raise InvalidParameterError(
-                f"{func}: the estimated noise is 0 (exact planes); give `sigma` or thresholds")
+                f"{func}: the estimated noise is 0 (the neighbourhoods are exact planes or "
+                "lines); give `sigma` or thresholds")
     elif np.ndim(sigma) == 0:
         sigma = check_scalar(sigma, "sigma", func=func, low=0.0)
     else:
