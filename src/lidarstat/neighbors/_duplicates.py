@@ -30,6 +30,7 @@ import numpy as np
 
 from .._shared.validation import check_points
 from ..errors import DuplicatePointsError, LidarstatError
+from . import _kernels
 from ._csr import Neighborhoods
 
 logger = logging.getLogger("lidarstat")
@@ -93,7 +94,7 @@ class Duplicates:
 
 
 def find_duplicates(points) -> Duplicates:
-    """Group the points by exact coordinates (a lexicographic sort, no per-point loop).
+    """Group the points by exact coordinates (one hashed pass, no per-point Python loop).
 
     Parameters
     ----------
@@ -117,52 +118,19 @@ def find_duplicates(points) -> Duplicates:
     if n == 0:
         empty = np.zeros(0, dtype=np.int64)
         return Duplicates(empty, empty, empty)
-    order, s = _sorted_by_location(pts)
-    new = np.empty(n, dtype=bool)
-    new[0] = True
-    np.any(s[1:] != s[:-1], axis=1, out=new[1:])
-    if new.all():  # the common case: every point at its own location
-        ident = np.arange(n, dtype=np.int64)
-        return Duplicates(ident, ident, np.ones(n, dtype=np.int64))
-    group = np.cumsum(new) - 1                       # location of each sorted point
-    starts = np.flatnonzero(new)
-    counts = np.diff(np.append(starts, n))
-    first_of_group = np.minimum.reduceat(order, starts)
-    rank = np.argsort(first_of_group, kind="stable")  # locations in input order
-    relabel = np.empty_like(rank)
-    relabel[rank] = np.arange(rank.size)
-    inverse = np.empty(n, dtype=np.int64)
-    inverse[order] = relabel[group]
-    return Duplicates(first_of_group[rank].astype(np.int64), inverse,
-                      counts[rank].astype(np.int64))
+    return Duplicates(*_kernels.unique_rows(pts, _row_hash(pts)))
 
 
-def _sorted_by_location(pts):
-    """A permutation putting equal coordinates next to each other, and the sorted points.
-
-    One argsort of a 64-bit hash of the coordinates' bits (a lexicographic sort of three
-    float columns is about ten times slower); the rare runs of equal hashes holding
-    different coordinates are sorted again by the coordinates themselves.
-    """
-    coords = pts + 0.0  # -0.0 becomes 0.0: equal coordinates, equal bits
-    bits = coords.view(np.uint64)
+def _row_hash(pts):
+    """A 64-bit hash (as int64) of each row's coordinate bits; -0.0 hashes as 0.0."""
+    bits = (pts + 0.0).view(np.uint64)
     h = bits[:, 0] * np.uint64(0x9E3779B97F4A7C15)
     h ^= bits[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)
     h ^= bits[:, 2] * np.uint64(0x165667B19E3779F9)
     h ^= h >> np.uint64(29)
-    order = np.argsort(h)
-    hs = h[order]
-    s = coords[order]
-    clash = (hs[1:] == hs[:-1]) & np.any(s[1:] != s[:-1], axis=1)
-    if clash.any():
-        # every position of a run of equal hashes that holds two different locations
-        bad_hash = np.unique(hs[1:][clash])
-        pos = np.flatnonzero(np.isin(hs, bad_hash))
-        sub = order[pos]
-        sub = sub[np.lexsort((coords[sub, 2], coords[sub, 1], coords[sub, 0], h[sub]))]
-        order[pos] = sub
-        s = coords[order]
-    return order, s
+    h *= np.uint64(0xBF58476D1CE4E5B9)
+    h ^= h >> np.uint64(32)
+    return h.view(np.int64)
 
 
 def refuse_dominated(dup: Duplicates, *, what: str, max_share: float = 0.5,

@@ -277,3 +277,42 @@ def radix_order(keys, nbits):
         order, nxt_order = nxt_order, order
         shift += _RADIX_BITS
     return order, cur
+
+
+# ------------------------------------------------------------------ exact copies
+@njit
+def unique_rows(pts, h):
+    """Group equal rows of `pts` by open addressing on their hashes `h` (int64), in O(N).
+
+    Returns ``(first, inverse, counts)``: the first index of each distinct row in input
+    order, the group of every row and the group sizes. Rows compare as floats, so -0.0
+    and 0.0 are equal (the hash must agree: callers hash ``pts + 0.0``).
+    """
+    n = pts.shape[0]
+    size = 1
+    while size < 2 * n:
+        size <<= 1
+    mask = size - 1
+    table = np.full(size, -1, dtype=np.int64)
+    first = np.empty(n, dtype=np.int64)
+    inverse = np.empty(n, dtype=np.int64)
+    counts = np.zeros(n, dtype=np.int64)
+    ng = 0
+    for i in range(n):
+        slot = h[i] & mask
+        while True:
+            g = table[slot]
+            if g < 0:
+                table[slot] = ng
+                first[ng] = i
+                counts[ng] = 1
+                inverse[i] = ng
+                ng += 1
+                break
+            j = first[g]
+            if pts[j, 0] == pts[i, 0] and pts[j, 1] == pts[i, 1] and pts[j, 2] == pts[i, 2]:
+                inverse[i] = g
+                counts[g] += 1
+                break
+            slot = (slot + 1) & mask
+    return first[:ng], inverse, counts[:ng]
