@@ -70,6 +70,7 @@ ENTRY_POINTS = {
     "curvature": lambda p: curvature(p, radius=0.4, sigma=SIGMA),
     "curvature_sigma": lambda p: curvature(p, radius=0.4),
     "ridges": lambda p: ridges(p, radius=0.6, sigma=SIGMA),
+    "jets_knn": lambda p: jets(p, k=20, sigma=SIGMA),
     "covariance": lambda p: covariance(p, k=20),
     "moments": lambda p: classify_moments(p, None),
     "segment_curvature": lambda p: segment_curvature(p, radius=0.4, sigma=SIGMA),

@@ -419,6 +419,10 @@ def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge
         fit = _to_fit(out, degree, monge_degree, weight)
     else:
         k = check_scalar(k, "k", func=func, low=2, closed="left", integer=True)
+        if k > pts.shape[0]:
+            raise InvalidParameterError(
+                f"The 'k' parameter of {func} must be at most the number of points: the "
+                f"cloud has {pts.shape[0]:,} (distinct locations), fewer than k = {k}")
         fit = fit_jets(pts, knn_neighbors(pts, k), **kw)
     ok = fit.status == FitStatus.OK
     if not ok.any():
