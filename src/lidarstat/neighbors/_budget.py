@@ -98,18 +98,19 @@ def half_radius_population(points_local, queries_local, radius, dim):
     -------
     (M,) ndarray of int64
     """
+    from ._duplicates import find_duplicates
+
     h = radius / 2.0
-    lim = float(1 << 62)
+    lim = float(1 << 52)  # integers exact in float64
 
     def keys(p):
+        k = np.zeros((p.shape[0], 3))
         with np.errstate(over="ignore", invalid="ignore"):
-            k = np.floor(p[:, :dim] / h)
-        return np.clip(k, -lim, lim).astype(np.int64)
+            k[:, :dim] = np.floor(p[:, :dim] / h)
+        return np.clip(k, -lim, lim, out=k)
 
     kc = keys(points_local)
-    kq = keys(queries_local)
     n = kc.shape[0]
-    _, inv = np.unique(np.concatenate([kc, kq]), axis=0, return_inverse=True)
-    inv = inv.ravel()
-    counts = np.bincount(inv[:n], minlength=int(inv.max()) + 1 if inv.size else 0)
-    return counts[inv[n:]].astype(np.int64)
+    cells = find_duplicates(np.concatenate([kc, keys(queries_local)]))
+    counts = np.bincount(cells.inverse[:n], minlength=cells.n_unique)
+    return counts[cells.inverse[n:]].astype(np.int64)
