@@ -199,9 +199,10 @@ def map_rows(obj, n_rows: int, rows):
     """`obj` with every per-point array (first axis `n_rows`) replaced by ``arr[rows]``.
 
     `obj` is an array, a dict of them, or a dataclass whose attributes are mapped
-    recursively (other values, and :class:`Neighborhoods`, are kept). With ``rows = dup.inverse`` a result of the
-    unique cloud becomes the result of every input point; with ``rows = dup.first`` a
-    result given for the input cloud becomes one of its unique cloud.
+    recursively (other values, and :class:`Neighborhoods`, are kept). With
+    ``rows = dup.inverse`` a result of the unique cloud becomes the result of every
+    input point; with ``rows = dup.first`` a result given for the input cloud becomes
+    one of its unique cloud.
     """
     if isinstance(obj, np.ndarray):
         return np.take(obj, rows, axis=0) if obj.ndim and obj.shape[0] == n_rows else obj
