@@ -184,15 +184,15 @@ def run_on_unique(dup: Duplicates, run, *, what: str):
 
     Logs one warning naming the counts. A refusal of the model (any
     :class:`~lidarstat.errors.LidarstatError`, e.g. too few neighbours everywhere) is
-    raised again with :meth:`Duplicates.describe` appended, so a cloud of copies is
-    refused for what it is.
+    raised again after :meth:`Duplicates.describe`, so a cloud of copies is refused for
+    what it is.
     """
     logger.warning("%s: %s; each location enters the model once and its result is "
                    "written to every point at it", what, dup.describe())
     try:
         return run()
     except LidarstatError as exc:
-        raise type(exc)(f"{exc} ({dup.describe()}; each location counts once)") from None
+        raise type(exc)(f"{dup.describe()} and each location counts once: {exc}") from None
 
 
 def map_rows(obj, n_rows: int, rows):
