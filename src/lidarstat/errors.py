@@ -18,6 +18,8 @@ __all__ = [
     "UnknownFormatError",
     "UnknownFieldError",
     "InsufficientNeighborsError",
+    "DuplicatePointsError",
+    "TooManyNeighborsError",
     "LidarstatWarning",
 ]
 
@@ -60,6 +62,19 @@ class UnknownFieldError(LidarstatError, KeyError):
 
 class InsufficientNeighborsError(LidarstatError, ValueError):
     """No point has enough neighbours for the requested local model."""
+
+
+class DuplicatePointsError(InvalidPointsError):
+    """Too many points share a location for the requested method (the message has the counts)."""
+
+
+class TooManyNeighborsError(LidarstatError, ValueError):
+    """A neighbourhood query would exceed the neighbour-pair ceiling (memory and time).
+
+    Raised before anything of that size is allocated; the ceiling is
+    :func:`lidarstat.neighbors.max_pairs` (environment variable
+    ``LIDARSTAT_MAX_PAIRS``).
+    """
 
 
 class LidarstatWarning(UserWarning):

@@ -26,6 +26,7 @@ from numba import prange
 
 from .._shared._columns import column_max, column_min
 from .._shared._jit import njit, njit_parallel
+from ..neighbors._duplicates import find_duplicates
 from ._surface import cell_keys, cell_order
 from ..features._covariance_kernels import (_CELL_CHUNK, _block_ranges, _count, _knn_point,
                                             _scratch)
@@ -92,6 +93,18 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     """
     xy = np.asarray(xy, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
+    dup = find_duplicates(np.c_[xy, z]) if z.size else None
+    if dup is not None and dup.any:
+        # copies of a point are joined to it (distance 0, same elevation) and share its
+        # patch: the graph is built on the distinct points, whose kNN search does not
+        # scan every copy of a location for each copy (neighbors/_duplicates.py)
+        sub_rank = None
+        if rank is not None:
+            sub_rank = np.argsort(np.argsort(np.asarray(rank)[dup.first], kind="stable"))
+        return dup.broadcast(raised_patches(
+            xy[dup.first], z[dup.first], k=k, step=step, slope=slope,
+            above_fraction=above_fraction, min_points=min_points, chunk=chunk,
+            rank=sub_rank))
     n = z.size
     if n < 2 * min_points:
         return np.zeros(n, bool)

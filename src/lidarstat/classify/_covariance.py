@@ -54,7 +54,7 @@ from enum import IntEnum
 import numpy as np
 from scipy import special as _sp
 
-from .._shared.validation import check_option, check_scalar
+from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
 
 #: Per-point output fields of the classification, name -> (dtype, description).
@@ -645,12 +645,14 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         sigma = a + b * features.ray_range
         if not np.all(sigma > 0):
             raise InvalidParameterError(
-                f"{func}: the estimated noise is 0 (exact planes); give `sigma` or thresholds")
+                f"{func}: the estimated noise is 0 (the neighbourhoods are exact planes or "
+                "lines); give `sigma` or thresholds")
     elif estimated:
         sigma = estimate_plane_sigma(evals, counts)
         if not sigma > 0:
             raise InvalidParameterError(
-                f"{func}: the estimated noise is 0 (exact planes); give `sigma` or thresholds")
+                f"{func}: the estimated noise is 0 (the neighbourhoods are exact planes or "
+                "lines); give `sigma` or thresholds")
     elif np.ndim(sigma) == 0:
         sigma = check_scalar(sigma, "sigma", func=func, low=0.0)
     else:
@@ -837,7 +839,21 @@ def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None
     True
     """
     from ..features import covariance_features
+    from ..neighbors._duplicates import find_duplicates, map_rows, run_on_unique
 
+    pts = check_points(points)
+    dup = find_duplicates(pts)
+    if dup.any and not keep_neighbors:
+        # every location once, its result to every point at it (neighbors/_duplicates.py)
+        res = run_on_unique(dup, lambda: covariance(
+            pts[dup.first], k=k, radius=radius, sensor=sensor, sigma=sigma, noise=noise,
+            alpha=alpha, boundary_alpha=boundary_alpha,
+            curvature_threshold=curvature_threshold, variance_threshold=variance_threshold,
+            curved=curved, curved_alpha=curved_alpha, eigen_mode=eigen_mode,
+            progress=progress, boundary=boundary, edge_boundary_alpha=edge_boundary_alpha,
+            jump_alpha=jump_alpha, noise_estimate=noise_estimate, border_band=border_band),
+            what="covariance")
+        return map_rows(res, dup.n_unique, dup.inverse)
     feats = covariance_features(points, k=k, radius=radius, sensor=sensor,
                                 eigen_mode=eigen_mode, keep_neighbors=keep_neighbors,
                                 progress=progress)

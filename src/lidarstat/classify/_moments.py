@@ -214,6 +214,7 @@ def opening_surface(xy, z, *, window: float, cell: float = 1.0) -> np.ndarray:
 
     ij = np.floor((xy - column_min(xy)) / cell).astype(np.int64)
     shape = tuple(column_max(ij) + 1)
+    _check_raster(shape, cell)
     g = np.full(shape, np.inf)
     np.minimum.at(g, (ij[:, 0], ij[:, 1]), z)
     empty = ~np.isfinite(g)
@@ -223,6 +224,31 @@ def opening_surface(xy, z, *, window: float, cell: float = 1.0) -> np.ndarray:
     k = max(3, int(round(window / cell)) | 1)
     op = ndi.grey_opening(g, size=(k, k))
     return op[ij[:, 0], ij[:, 1]]
+
+
+#: Bytes a cell of the opening's raster costs at its peak (grid, nearest-filled indices,
+#: opening and masks).
+_RASTER_CELL_BYTES = 48
+
+
+def _check_raster(shape, cell):
+    """Refuse a ground raster larger than a quarter of the physical memory.
+
+    The raster covers the cloud's bounding box, so its size follows the extent, not the
+    points: two small areas 100 km apart made a 100,000 x 100,000 raster (75 GB).
+    """
+    from ..errors import InvalidPointsError
+    from ..neighbors._budget import _physical_memory
+
+    cells = int(shape[0]) * int(shape[1])
+    limit = (_physical_memory() or 8 << 30) // 4
+    if cells * _RASTER_CELL_BYTES > limit:
+        raise InvalidPointsError(
+            f"the cloud spans {shape[0] * cell:,.0f} x {shape[1] * cell:,.0f} coordinate "
+            f"units: its ground raster of {cell:g}-unit cells would hold {cells:,} cells "
+            f"({cells * _RASTER_CELL_BYTES / 1e9:,.1f} GB), more than a quarter of the "
+            "memory; split the cloud into its separate areas, or check its units "
+            "(--units, --scale)")
 
 
 def _heights(z, surface):

@@ -333,7 +333,12 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         radius = check_scalar(radius, "radius", func=func, low=0.0)
         kind = "radius"
     else:
-        k = check_scalar(k, "k", func=func, low=3, high=n, closed="both", integer=True)
+        k = check_scalar(k, "k", func=func, low=3, closed="left", integer=True)
+        if k > n:
+            raise InvalidParameterError(
+                f"The 'k' parameter of {func} must be at most the number of points: the "
+                f"cloud has {n:,} (distinct locations), fewer than k = {k}; lower k (at "
+                "least 3)")
         kind = "knn"
 
     keep = None

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import special as _sp
@@ -13,9 +13,10 @@ from .._shared.validation import check_option, check_points, check_scalar
 from ..classify import SurfaceType, hk_surface_types
 from ..errors import InsufficientNeighborsError, InvalidParameterError
 from ..neighbors import CellIndex
+from ..neighbors._duplicates import copies_degenerate, find_duplicates, run_on_unique
 from . import _curvature_kernels as _ck
 from . import _quadric_kernels as _k
-from ._quadric import FitStatus, _run_cells, _run_kernel, check_fit_options
+from ._quadric import FitStatus, _run_cells, _run_kernel, check_fit_options, unfitted_reason
 
 logger = logging.getLogger(__name__)
 
@@ -239,6 +240,7 @@ def estimate_sigma(points, radius, *, frame="z", sensor=None, min_neighbors=7, s
         Estimated sigma (not squared).
     """
     pts = check_points(points)
+    pts = pts[find_duplicates(pts).first]  # a copy is no new observation of the noise
     return _estimate_sigma(CellIndex(pts, radius), frame=frame, sensor=sensor,
                            min_neighbors=min_neighbors, sample=sample, rng=rng)
 
@@ -255,9 +257,10 @@ def _estimate_sigma(index, *, frame, sensor, min_neighbors, sample, rng):
                       sensor=sensor_local, min_neighbors=min_neighbors, covariance="sandwich")
     ok = out["status"] == _k.OK
     if not ok.any():
+        why = unfitted_reason(out["status"], out["npts"], min_neighbors)
         raise InsufficientNeighborsError(
-            f"cannot estimate sigma: no point has {min_neighbors} neighbours within radius {radius}"
-        )
+            f"cannot estimate sigma: no quadric could be fitted within radius {radius:g}: "
+            f"{why}; enlarge the radius or give sigma")
     s2 = out["stats"][ok, 0] / out["stats"][ok, 2]
     return float(np.sqrt(np.median(s2)))
 
@@ -377,6 +380,18 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
                       sensor=sensor)
     block_size = check_scalar(block_size, "block_size", func=func, low=1, closed="left",
                               integer=True)
+    dup = find_duplicates(pts)
+    if dup.any:  # every location once, its result to every point at it (_duplicates)
+        res = run_on_unique(dup, lambda: curvature(
+            pts[dup.first], radius=radius, sigma=sigma, alpha=alpha, test=test, frame=frame,
+            sensor=sensor, noise=noise, min_neighbors=min_neighbors,
+            minimal_detectable=minimal_detectable, block_size=block_size,
+            progress=progress), what=func)
+        fields = dict(res.fields)
+        fields["status"] = copies_degenerate(
+            dup, fields["status"], too_few=FitStatus.TOO_FEW_NEIGHBORS,
+            degenerate=FitStatus.DEGENERATE, min_neighbors=min_neighbors)
+        return replace(res, fields={k: dup.broadcast(v) for k, v in fields.items()})
     index = CellIndex(pts, radii[0])
     estimated = sigma is None
     if estimated:

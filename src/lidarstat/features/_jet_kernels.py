@@ -84,6 +84,12 @@ def n_coef(d):
     return (d + 1) * (d + 2) // 2
 
 
+#: Smallest ratio of the RMS spreads along the two tangent axes of a fitted neighbourhood
+#: (smaller: collinear points, status DEGENERATE). Rounding leaves ~1e-16 across a line; a
+#: real strip 1 mm wide in a 1 m neighbourhood has 1e-3.
+_FLAT = 1e-8
+
+
 @njit
 def _monomials(u, v, nmom_deg, out):
     """out[k(k+1)/2 + i] = u^(k-i) v^i for k <= nmom_deg."""
@@ -425,6 +431,10 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
         dsc[a] = math.sqrt(mom[0, PAIR[a, a]]) / COL_FACT[a]
         if not dsc[a] > 0.0:
             return SINGULAR, p
+    # collinear neighbours: the spread across the line is rounding error, which the
+    # equilibration below would scale up to a well-conditioned (meaningless) system
+    if m > 2 and (dsc[2] < _FLAT * dsc[1] or dsc[1] < _FLAT * dsc[2]):
+        return SINGULAR, p
     for a in range(m):
         for c in range(a, m):
             f = 1.0 / (COL_FACT[a] * COL_FACT[c])

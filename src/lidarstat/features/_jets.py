@@ -10,10 +10,11 @@ import numpy as np
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InsufficientNeighborsError, InvalidParameterError
 from ..neighbors import CellIndex, Neighborhoods, knn_neighbors
+from ..neighbors._duplicates import find_duplicates, map_rows, run_on_unique
 from ..stats import variance_test_satterthwaite
 from . import _jet_kernels as _jk
 from ._curvature import NOISE, height_variance
-from ._quadric import FitStatus, check_fit_options, check_neighborhoods
+from ._quadric import FitStatus, check_fit_options, check_neighborhoods, unfitted_reason
 
 logger = logging.getLogger(__name__)
 
@@ -253,6 +254,7 @@ def _fit_cells(index, *, degree, monge_degree, weight, sensor, min_neighbors, st
     done = 0
     for c0, c1 in index.cell_blocks(block_size):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
+        index.bound_pairs(c0, c1)  # the fits' work is the pairs: refuse an impossible block
         part = {k: v[s0:s1] for k, v in out.items()}
         _jk.fit_jets_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
                            index.dims, float(index.radius), active, params, _outs(part))
@@ -404,6 +406,12 @@ def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge
         raise InvalidParameterError(f"{func}: noise='range' needs the `sensor` position")
     kw = dict(degree=degree, monge_degree=monge_degree, weight=weight, sensor=sensor,
               min_neighbors=min_neighbors, standard_errors=standard_errors)
+    dup = find_duplicates(pts)
+    if dup.any:  # every location once, its result to every point at it (_duplicates)
+        res = run_on_unique(dup, lambda: jets(
+            pts[dup.first], radius=radius, k=k, sigma=sigma, alpha=alpha, noise=noise,
+            block_size=block_size, progress=progress, **kw), what=func)
+        return map_rows(res, dup.n_unique, dup.inverse)
     if radius is not None:
         radius = check_scalar(radius, "radius", func=func, low=0.0)
         index = CellIndex(pts, radius)
@@ -411,12 +419,18 @@ def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge
         fit = _to_fit(out, degree, monge_degree, weight)
     else:
         k = check_scalar(k, "k", func=func, low=2, closed="left", integer=True)
+        if k > pts.shape[0]:
+            raise InvalidParameterError(
+                f"The 'k' parameter of {func} must be at most the number of points: the "
+                f"cloud has {pts.shape[0]:,} (distinct locations), fewer than k = {k}")
         fit = fit_jets(pts, knn_neighbors(pts, k), **kw)
     ok = fit.status == FitStatus.OK
     if not ok.any():
+        why = unfitted_reason(fit.status, fit.neighbors, min_neighbors)
         raise InsufficientNeighborsError(
-            f"{func}: no point has {min_neighbors} neighbours (degree {degree} needs "
-            f"{(degree + 1) * (degree + 2) // 2 + 1}); enlarge `radius`/`k`")
+            f"{func}: no jet could be fitted: {why} (degree {degree} needs "
+            f"{(degree + 1) * (degree + 2) // 2 + 1} points, not all on one line); "
+            "enlarge `radius`/`k`")
     with np.errstate(invalid="ignore", divide="ignore"):
         s0 = fit.q / fit.trace_b
     estimated = sigma is None

@@ -119,6 +119,7 @@ def _run_cells(index, c0, c1, *, bandwidth, frame, sensor, min_neighbors, covari
     """
     if active is None:
         active = np.ones(index.n_points, dtype=np.uint8)
+    index.bound_pairs(c0, c1)  # the fits' work is the pairs: refuse an impossible block
     m = int(index.cell_start[c1] - index.cell_start[c0])
     out = _allocate(m)
     has_sensor = sensor is not None
@@ -223,3 +224,36 @@ def fit_quadrics(points, neighborhoods: Neighborhoods, *, bandwidth=None, frame=
                       frame=frame, sensor=sensor_local, min_neighbors=min_neighbors,
                       covariance=covariance)
     return _to_fit(out, bandwidth, covariance)
+
+
+def unfitted_reason(status, neighbors, min_neighbors) -> str:
+    """Why no point has a local model, in user terms, from the per-point statuses.
+
+    Parameters
+    ----------
+    status : (N,) ndarray of uint8
+        :class:`FitStatus` codes (none OK).
+    neighbors : (N,) ndarray of int
+        Neighbours found per point.
+    min_neighbors : int
+        Neighbours the model needs.
+
+    Examples
+    --------
+    >>> unfitted_reason(np.array([2, 2, 1]), np.array([40, 40, 3]), 16)
+    '2 of 3 points have degenerate neighbourhoods (on one line or at one location) and 1 has fewer than 16 neighbours (most: 40)'
+    """
+    status = np.asarray(status)
+    n = status.size
+    few = int((status == FitStatus.TOO_FEW_NEIGHBORS).sum())
+    degenerate = int((status == FitStatus.DEGENERATE).sum())
+    most = int(np.max(neighbors)) if np.size(neighbors) else 0
+    parts = []
+    if degenerate:
+        parts.append(f"{degenerate:,} of {n:,} points have degenerate neighbourhoods "
+                     "(on one line or at one location)")
+    if few:
+        lead = f"{few:,}" if degenerate else f"{few:,} of {n:,} points"
+        verb = "has" if few == 1 and degenerate else "have"
+        parts.append(f"{lead} {verb} fewer than {min_neighbors} neighbours (most: {most:,})")
+    return " and ".join(parts) or f"none of {n:,} points was fitted"

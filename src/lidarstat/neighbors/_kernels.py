@@ -155,6 +155,39 @@ def fill_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, ndim, indptr, o
                   indptr[i - base], False)
 
 
+@njit
+def cell_candidates(c0, c1, cell_keys, cell_start, dims, ndim):
+    """Upper bound of the neighbour pairs of the points of cells c0..c1-1.
+
+    Each point is paired with every point of the 3**ndim cells around its own (what the
+    search scans), so the sum is exact work and at least the number of pairs. O(cells).
+    """
+    total = 0
+    ranges = np.empty((9, 2), dtype=np.int64)
+    for c in range(c0, c1):
+        nr = _cell_ranges(c, cell_keys, cell_start, dims, ndim, ranges)
+        near = 0
+        for t in range(nr):
+            near += ranges[t, 1] - ranges[t, 0]
+        total += (cell_start[c + 1] - cell_start[c]) * near
+    return total
+
+
+@njit
+def query_candidates(queries, cell_keys, cell_start, cell, dims, ndim):
+    """Points scanned by a radius search of every query coordinate (an upper bound of pairs)."""
+    total = 0
+    ranges = np.empty((9, 2), dtype=np.int64)
+    for i in range(queries.shape[0]):
+        cx = int(np.floor(queries[i, 0] / cell))
+        cy = int(np.floor(queries[i, 1] / cell))
+        cz = int(np.floor(queries[i, 2] / cell)) if ndim == 3 else 0
+        nr = _ranges_at(cx, cy, cz, cell_keys, cell_start, dims, ndim, ranges)
+        for t in range(nr):
+            total += ranges[t, 1] - ranges[t, 0]
+    return total
+
+
 @njit_parallel
 def permute_rows(indptr, indices, distances, row_of, order):
     """Reorder CSR rows: output row ``r`` is input row ``row_of[r]``; indices mapped by `order`."""
@@ -244,3 +277,42 @@ def radix_order(keys, nbits):
         order, nxt_order = nxt_order, order
         shift += _RADIX_BITS
     return order, cur
+
+
+# ------------------------------------------------------------------ exact copies
+@njit
+def unique_rows(pts, h):
+    """Group equal rows of `pts` by open addressing on their hashes `h` (int64), in O(N).
+
+    Returns ``(first, inverse, counts)``: the first index of each distinct row in input
+    order, the group of every row and the group sizes. Rows compare as floats, so -0.0
+    and 0.0 are equal (the hash must agree: callers hash ``pts + 0.0``).
+    """
+    n = pts.shape[0]
+    size = 1
+    while size < 2 * n:
+        size <<= 1
+    mask = size - 1
+    table = np.full(size, -1, dtype=np.int64)
+    first = np.empty(n, dtype=np.int64)
+    inverse = np.empty(n, dtype=np.int64)
+    counts = np.zeros(n, dtype=np.int64)
+    ng = 0
+    for i in range(n):
+        slot = h[i] & mask
+        while True:
+            g = table[slot]
+            if g < 0:
+                table[slot] = ng
+                first[ng] = i
+                counts[ng] = 1
+                inverse[i] = ng
+                ng += 1
+                break
+            j = first[g]
+            if pts[j, 0] == pts[i, 0] and pts[j, 1] == pts[i, 1] and pts[j, 2] == pts[i, 2]:
+                inverse[i] = g
+                counts[g] += 1
+                break
+            slot = (slot + 1) & mask
+    return first[:ng], inverse, counts[:ng]

@@ -6,8 +6,8 @@ import numpy as np
 
 from .._shared._columns import column_max, column_min
 from .._shared.validation import check_option, check_points, check_scalar
-from ..errors import InvalidParameterError
-from . import _kernels
+from ..errors import InvalidParameterError, TooManyNeighborsError
+from . import _budget, _kernels
 from ._csr import Neighborhoods
 
 #: Largest number of grid cells per axis before the cell size is enlarged.
@@ -117,14 +117,68 @@ class CellIndex:
         that memory does not grow with the cloud.
         """
         radius = self._check_radius(radius)
+        self.bound_pairs(c0, c1, radius)
         args = (self.sorted_points, self.cell_keys, self.cell_start, self.dims, radius, self.dim)
         counts = _kernels.count_cells(c0, c1, *args)
         indptr = np.zeros(counts.size + 1, dtype=np.int64)
         np.cumsum(counts, out=indptr[1:])
+        self._check_total(int(indptr[-1]), radius, counts.size)
         idx = np.empty(indptr[-1], dtype=np.int64)
         dist = np.empty(indptr[-1], dtype=np.float64)
         _kernels.fill_cells(c0, c1, *args, indptr, idx, dist)
         return indptr, idx, dist
+
+    def bound_pairs(self, c0=0, c1=None, radius=None):
+        """Refuse a search of cells ``c0..c1-1`` whose neighbour pairs exceed the ceiling.
+
+        Cheap bounds first (module :mod:`lidarstat.neighbors._budget`): the cell
+        populations give an upper bound in O(cells); only above the ceiling, a lower
+        bound from half-radius cells decides (O(N log N)). Callers that scan the cells
+        themselves (the fused drivers of the local fits) call this before their loop;
+        :meth:`query_cells` does it before allocating.
+
+        Returns
+        -------
+        int
+            The upper bound of the pairs (points scanned).
+
+        Raises
+        ------
+        TooManyNeighborsError
+            If at least :func:`~lidarstat.neighbors.max_pairs` pairs are certain.
+        """
+        radius = self._check_radius(radius)
+        c1 = self.n_cells if c1 is None else c1
+        upper = int(_kernels.cell_candidates(c0, c1, self.cell_keys, self.cell_start,
+                                             self.dims, self.dim))
+        ceiling = _budget.max_pairs()
+        if upper > ceiling:
+            s0, s1 = int(self.cell_start[c0]), int(self.cell_start[c1])
+            lower = int(_budget.half_radius_population(
+                self.sorted_points, self.sorted_points[s0:s1], radius, self.dim).sum())
+            if lower > ceiling:
+                _budget.refuse_pairs(lower, radius=radius, exact=False, ceiling=ceiling,
+                                     n_query=s1 - s0)
+        return upper
+
+    def _bound_queries(self, q, radius):
+        """:meth:`bound_pairs` for arbitrary query coordinates (local frame)."""
+        upper = int(_kernels.query_candidates(q, self.cell_keys, self.cell_start, self.cell,
+                                              self.dims, self.dim))
+        ceiling = _budget.max_pairs()
+        if upper > ceiling:
+            lower = int(_budget.half_radius_population(self.sorted_points, q, radius,
+                                                       self.dim).sum())
+            if lower > ceiling:
+                _budget.refuse_pairs(lower, radius=radius, exact=False, ceiling=ceiling,
+                                     n_query=q.shape[0])
+
+    @staticmethod
+    def _check_total(total, radius, n_query):
+        ceiling = _budget.max_pairs()
+        if total > ceiling:
+            _budget.refuse_pairs(total, radius=radius, exact=True, ceiling=ceiling,
+                                 n_query=n_query)
 
     def _check_radius(self, radius):
         radius = self.radius if radius is None else float(radius)
@@ -139,9 +193,11 @@ class CellIndex:
         q = np.ascontiguousarray(q, dtype=np.float64)
         args = (self.sorted_points, self.cell_keys, self.cell_start, self.cell,
                 self.dims, float(radius), self.dim)
+        self._bound_queries(q, radius)
         counts = _kernels.count_radius(q, *args)
         indptr = np.zeros(q.shape[0] + 1, dtype=np.int64)
         np.cumsum(counts, out=indptr[1:])
+        self._check_total(int(indptr[-1]), radius, q.shape[0])
         idx = np.empty(indptr[-1], dtype=np.int64)
         dist = np.empty(indptr[-1], dtype=np.float64)
         _kernels.fill_radius(q, *args, indptr, idx, dist)
@@ -232,9 +288,15 @@ def knn_neighbors(points, k, *, query=None, workers=-1):
     points = check_points(points)
     k = check_scalar(k, "k", func="knn_neighbors", low=1, high=points.shape[0], closed="both",
                      integer=True)
+    qidx = None if query is None else np.asarray(query, dtype=np.int64).ravel()
+    n_query = points.shape[0] if qidx is None else qidx.size
+    ceiling = _budget.max_pairs()
+    if n_query * k > ceiling:
+        raise TooManyNeighborsError(
+            f"k = {k} gives {n_query * k:,} neighbour pairs ({n_query:,} points), above the "
+            f"ceiling of {ceiling:,} (LIDARSTAT_MAX_PAIRS); lower k or thin the cloud")
     origin = points.min(axis=0)
     tree = cKDTree(points - origin)
-    qidx = None if query is None else np.asarray(query, dtype=np.int64).ravel()
     q = points if qidx is None else points[qidx]
     dist, idx = tree.query(q - origin, k=k, workers=workers)
     dist = np.asarray(dist, dtype=np.float64).reshape(q.shape[0], k)

@@ -34,6 +34,7 @@ from .._shared import _memory as _mem
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import Neighborhoods
+from ..neighbors._duplicates import check_copies
 from . import _edge_kernels as _ek
 from ._grow import grow_regions
 from ._result import Polylines, Segmentation
@@ -452,6 +453,7 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
 
     func = "segment_covariance"
     pts = check_points(points)
+    check_copies(pts, what=func)  # neighbors/_duplicates.py
     min_size = check_scalar(min_size, "min_size", func=func, low=1, closed="left", integer=True)
     grow_k = check_scalar(grow_k, "grow_k", func=func, low=2, closed="left", integer=True)
     min_angle = check_scalar(min_angle, "min_angle", func=func, low=0.0, high=90.0)

@@ -15,6 +15,7 @@ import numpy as np
 
 from .._shared.validation import check_points, check_scalar
 from ..neighbors import radius_neighbors
+from ..neighbors._duplicates import check_copies
 from ._grow import components, relabel
 from ._result import Segmentation, segment_table
 
@@ -122,6 +123,7 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
 
     func = "segment_curvature"
     points = check_points(points, min_points=10)
+    check_copies(points, what=func)  # neighbors/_duplicates.py
     radius = check_scalar(radius, "radius", func=func, low=0.0)
     if curv is None:
         curv = curvature(points, radius=radius, sigma=sigma, alpha=alpha, frame=frame,

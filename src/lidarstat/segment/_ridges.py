@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import stats as _st
@@ -12,6 +12,7 @@ from ..errors import InvalidParameterError
 from ..features import FitStatus, jets
 from ..features._jets import MONGE_NAMES, JET_FIELDS
 from ..neighbors import knn_neighbors, radius_neighbors
+from ..neighbors._duplicates import check_copies, find_duplicates, map_rows, run_on_unique
 from . import _ridge_kernels as _rk
 from ._grow import components
 from ._result import Polylines, Segmentation, segment_table
@@ -144,6 +145,17 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     min_vertices = check_scalar(min_vertices, "min_vertices", func=func, low=1, closed="left",
                                 integer=True)
     smooth = check_scalar(smooth, "smooth", func=func, low=1, closed="left", integer=True)
+    dup = find_duplicates(pts)
+    if dup.any:  # every location once, its result to every point at it (_duplicates)
+        if jet_result is not None and len(jet_result) == pts.shape[0]:
+            jet_result = map_rows(jet_result, pts.shape[0], dup.first)
+        res = run_on_unique(dup, lambda: ridges(
+            pts[dup.first], radius=radius, k=k, sigma=sigma, alpha=alpha, weight=weight,
+            sensor=sensor, noise=noise, ratio=ratio, cross_k=cross_k, min_length=min_length,
+            min_vertices=min_vertices, smooth=smooth, jet_result=jet_result,
+            progress=progress), what=func)
+        return replace(res, fields=map_rows(res.fields, dup.n_unique, dup.inverse),
+                       jets=map_rows(res.jets, dup.n_unique, dup.inverse))
     if jet_result is None:
         jet_result = jets(pts, radius=radius, k=k, sigma=sigma, alpha=alpha, degree=4,
                           weight=weight, sensor=sensor, noise=noise, progress=progress)
@@ -386,6 +398,7 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_si
 
     func = "ridge_segments"
     pts = check_points(points)
+    check_copies(pts, what=func)  # neighbors/_duplicates.py
     k = check_scalar(k, "k", func=func, low=2, closed="left", integer=True)
     min_size = check_scalar(min_size, "min_size", func=func, low=1, closed="left", integer=True)
     n = pts.shape[0]

@@ -27,6 +27,7 @@ from scipy import stats as _st
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatWarning
 from ..neighbors import radius_neighbors
+from ..neighbors._duplicates import check_copies
 from ._grow import relabel
 from ._intersect import intersection_lines
 from ._raw_clusters import raw_clusters
@@ -943,6 +944,7 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
 
     func = "segment_sar"
     points = check_points(points, min_points=10)
+    check_copies(points, what=func)  # neighbors/_duplicates.py
     if bandwidth is None:
         bandwidth = select_plane_bandwidth(points, rng=rng).bandwidth
     b = check_scalar(bandwidth, "bandwidth", func=func, low=0.0)

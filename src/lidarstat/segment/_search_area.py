@@ -14,10 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import Delaunay
+from scipy.spatial import Delaunay, QhullError
 
 from .._shared._jit import njit
 from .._shared.validation import check_points, check_scalar
+from ..errors import InvalidPointsError
 
 
 def delaunay_graph(points):
@@ -33,7 +34,12 @@ def delaunay_graph(points):
     """
     points = check_points(points, min_points=3)
     xy = points[:, :2] - points[:, :2].min(axis=0)
-    tri = Delaunay(xy, qhull_options="Qbb Qc Qz Q12")
+    try:
+        tri = Delaunay(xy, qhull_options="Qbb Qc Qz Q12")
+    except QhullError:
+        raise InvalidPointsError(
+            f"the {points.shape[0]:,} points have no planimetric triangulation: in plan (x, y) "
+            "they lie on one line or at one location") from None
     s = tri.simplices.astype(np.int64)
     a = np.concatenate([s[:, 0], s[:, 1], s[:, 2]])
     b = np.concatenate([s[:, 1], s[:, 2], s[:, 0]])

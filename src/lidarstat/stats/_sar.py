@@ -306,8 +306,10 @@ def sar_fit(z, A, W, *, logdet="auto", grid=11, bounds=None, xatol=1e-8, covaria
     resid = ystar - A @ theta
     sigma2 = float(resid @ resid / n)
     loglik = float(-negll(rho) - 0.5 * n * (np.log(2 * np.pi) + 1.0))
-    cov = _information_cov(A, W, theta, rho, sigma2, ld, rng) if covariance else \
-        np.full((r + 2, r + 2), np.nan)
+    # an exact fit (noise-free plane, sigma2 = 0) has no information matrix: NaN, as
+    # without `covariance`
+    cov = _information_cov(A, W, theta, rho, sigma2, ld, rng) if covariance and sigma2 > 0 \
+        else np.full((r + 2, r + 2), np.nan)
     return SARFit(theta, rho, sigma2, cov, loglik, resid, n, ld.method,
                   np.vstack([rhos, -vals - 0.5 * n * (np.log(2 * np.pi) + 1.0)]))
 
