@@ -438,32 +438,10 @@ def _input_names():
 
 
 INPUT_NAMES = _input_names()
-#: Cases that wait for the handling of huge coordinates and degenerate geometry: strict
-#: xfail, so that a mark must be removed once its case passes.
-KNOWN: dict[tuple[str, str], str] = {
-    ("duplicates.las", "segment-sar"): "QhullError escapes the Delaunay graph of 60 "
-                                       "coincident points",
-    ("collinear.las", "segment-sar"): "QhullError escapes the Delaunay graph of a line",
-    ("collinear.las", "moments"): "SystemError escapes the raised-patch check of a line",
-}
-#: Coordinates near 1.5e308 through the neighbour searches: each run takes 5-20 s and
-#: ends in exit 0 or a traceback until huge coordinates are refused; not run until then.
-HANGS = {(f"huge.{ext}", command): "1.5e308 coordinates: 5-20 s, then exit 0 or a traceback"
-         for ext in ("csv", "npz")
-         for command in ("curvature", "curvature-tile", "covariance", "ridges",
-                         "segment-curvature", "segment-sar", "segment-covariance",
-                         "segment-ridges")}
-
-
 def _params():
     for name in INPUT_NAMES:
         for command in COMMANDS:
-            marks = []
-            if (name, command) in HANGS:
-                marks.append(pytest.mark.xfail(run=False, reason=HANGS[(name, command)]))
-            elif (name, command) in KNOWN:
-                marks.append(pytest.mark.xfail(strict=True, reason=KNOWN[(name, command)]))
-            yield pytest.param(name, command, id=f"{name}-{command}", marks=marks)
+            yield pytest.param(name, command, id=f"{name}-{command}")
 
 
 @pytest.mark.parametrize("name,command", list(_params()))

@@ -113,6 +113,8 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     span = np.maximum(column_max(xy) - lo, 1e-12)
     # about k + 1 points per cell: the 3 x 3 block holds the k nearest of most points
     cell = float(np.sqrt((k + 1) * span[0] * span[1] / n))
+    # a cloud that is a line in plan has no area: about k + 1 points per cell along it
+    cell = max(cell, (k + 1) * float(span.max()) / n)
     cell = max(cell, float(span.max()) / 2**20)  # at most 2^20 cells a side (CellIndex)
     grid = _Grid2D(xy, cell, lo, rank)
     zs = z[grid.pos]
