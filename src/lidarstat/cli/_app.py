@@ -19,6 +19,7 @@ from .._shared._atomic import output_group
 from .._shared._outputs import Output, check_outputs
 from ..errors import LidarstatError
 from . import _options as opt
+from ._notices import held_warnings
 
 logger = logging.getLogger("lidarstat")
 
@@ -339,9 +340,8 @@ def main(argv=None) -> int:
             except SystemExit as exc:  # --help, --version or a usage error, already printed
                 return exc.code
             verbose = args.verbose
-            logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,
-                                format="%(levelname)s %(name)s: %(message)s")
-            with output_group():  # all of a command's outputs appear, or none
+            # all of a command's outputs appear, or none; its warnings follow a success
+            with held_warnings(verbose), output_group():
                 return args.func(args)
     except Terminated:
         _fail("terminated (SIGTERM)")
