@@ -229,24 +229,24 @@ def test_read_ceiling_other_formats(tmp_path):
 
 
 # ------------------------------------------------------------------- other formats
-@pytest.mark.parametrize("suffix", [".csv", ".npz"])
-def test_huge_and_nonfinite_coordinates(tmp_path, suffix):
-    xyz = np.array([[1.0, 2.0, 3.0], [1.5e308, 0.0, 0.0], [-1.5e308, 1.0, 1.0], [4, 5, 6]])
-    path = tmp_path / f"huge{suffix}"
-    if suffix == ".csv":
+def _write_xyz(path, xyz):
+    if path.suffix == ".csv":
         path.write_text("x,y,z\n" + "\n".join(",".join(repr(v) for v in r) for r in xyz.tolist()))
     else:
         np.savez(path, xyz=xyz)
+    return path
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_huge_and_nonfinite_coordinates(tmp_path, suffix):
+    xyz = np.array([[1.0, 2.0, 3.0], [1.5e308, 0.0, 0.0], [-1.5e308, 1.0, 1.0], [4, 5, 6]])
+    path = _write_xyz(tmp_path / f"huge{suffix}", xyz)
     with pytest.raises(InvalidPointsError, match=rf"huge\{suffix}: `xyz` has 2 points with a "
                                                  r"coordinate beyond 1e\+15 in magnitude "
                                                  r"\(first at index 1"):
         lio.read(path)
     xyz[1, 2], xyz[2, 0] = np.nan, np.inf
-    nan = tmp_path / f"nan{suffix}"
-    if suffix == ".csv":
-        nan.write_text("x,y,z\n" + "\n".join(",".join(repr(v) for v in r) for r in xyz.tolist()))
-    else:
-        np.savez(nan, xyz=xyz)
+    nan = _write_xyz(tmp_path / f"nan{suffix}", xyz)
     with pytest.raises(InvalidPointsError, match=rf"nan\{suffix}: `xyz` has 2 points with NaN "
                                                  r"or infinite coordinates \(first at index 1\)"):
         lio.read(nan)
