@@ -16,7 +16,9 @@ DESCRIPTION_BYTES = 32
 
 _REGISTERED: dict[str, str] = {}
 # Words (besides bare numbers) a shortened description should not end on.
-_DANGLING = {"a", "an", "and", "at", "by", "for", "in", "of", "on", "or", "the", "to", "with"}
+_DANGLING = {"a", "along", "an", "and", "at", "between", "by", "for", "in", "of", "on", "or",
+             "the", "to", "with"}
+_ARTICLES = {"a", "an", "the"}
 
 
 def register_field_descriptions(table: Mapping[str, object]) -> None:
@@ -38,13 +40,15 @@ def register_field_descriptions(table: Mapping[str, object]) -> None:
 def shorten(text: str, limit: int = DESCRIPTION_BYTES) -> str:
     """`text` as ASCII of at most `limit` bytes.
 
-    Parenthesised asides go first, then whole words from the end; a single word longer
-    than `limit` is cut.
+    Parenthesised asides go first, then articles, then whole words from the end (never
+    ending on a preposition or a bare number); a single word longer than `limit` is cut.
     """
     text = " ".join(text.encode("ascii", "replace").decode("ascii").split())
     if len(text) <= limit:
         return text
     text = " ".join(re.sub(r"\s+\([^)]*\)", "", text).split())
+    if len(text) > limit:
+        text = " ".join(w for w in text.split() if w.lower() not in _ARTICLES)
     while len(text) > limit and re.search(r"[ ,]", text):
         text = re.sub(r"[ ,][^ ,]*$", "", text)
         while re.search(r"[ ,]", text) and (_last(text) in _DANGLING or _last(text).isdigit()):

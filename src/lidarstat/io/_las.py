@@ -237,14 +237,14 @@ def _extra_bytes_param(path: Path, name: str, values: np.ndarray) -> laspy.Extra
 _EB_STATS = 0b110  # min and max bits of an extra-bytes record's options
 
 
-def _drop_statistics(header, names: set[str]) -> None:
-    """Clear the min/max bits of the extra bytes in `names` (see the module docstring)."""
-    try:
-        vlr = header.vlrs.get("ExtraBytesVlr")[0]
-    except IndexError:
-        return
-    for record in vlr.extra_bytes_structs:
-        if record.name.decode(errors="replace") in names:
+def _drop_statistics(header) -> None:
+    """Clear the min/max bits of every extra-bytes record (see the module docstring).
+
+    laspy rebuilds the records of a header's extra bytes, those of the input included, and
+    would write its own min/max for each.
+    """
+    for vlr in header.vlrs.get("ExtraBytesVlr"):
+        for record in vlr.extra_bytes_structs:
             record.options &= ~_EB_STATS
 
 
@@ -347,7 +347,7 @@ def _header_for(path: Path, cloud: PointCloud, new: dict):
     assign, params = _plan(path, cloud, new, header)
     if params:
         header.add_extra_dims(params)
-        _drop_statistics(header, {p.name for p in params})
+    _drop_statistics(header)
     return header, assign
 
 
