@@ -212,7 +212,9 @@ def test_ply_is_binary_with_double_xyz(tmp_path, rng):
     assert not ply.text and ply.byte_order == "<"
     props = {p.name: p.val_dtype for p in ply["vertex"].properties}
     assert [props[c] for c in "xyz"] == ["f8"] * 3
-    assert {"intensity", "classification", "score", "weight"} <= set(props)
+    names = ("intensity", "classification", "score", "weight")
+    assert {f"scalar_{n}" for n in names} <= set(props)
+    assert set(names) <= set(lio.read(out).attributes)
 
 
 def test_memory_cloud_to_las_header(tmp_path, rng):

@@ -56,6 +56,7 @@ from scipy import special as _sp
 
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
+from ..io import register_field_descriptions
 
 #: Per-point output fields of the classification, name -> (dtype, description).
 FIELDS = {
@@ -71,6 +72,7 @@ FIELDS = {
     "border_kind": ("uint8", "nearest border: 1 scan window, 2 no return, 3 depth jump"),
     "border_p": ("float64", "continuity-test p-value of the nearest border (0: observed)"),
 }
+register_field_descriptions(FIELDS)
 
 
 class PointClass(IntEnum):

@@ -10,6 +10,7 @@ import numpy as np
 from .._shared import _memory as _mem
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
+from ..io import register_field_descriptions
 from ..neighbors import CellIndex, Neighborhoods
 from . import _covariance_kernels as _ck
 from . import _scan_kernels as _sk
@@ -44,6 +45,7 @@ FIELDS = {
     "NormalVariation": ("float64", "variance of normals along PrincipalDir"),
     "neighbors": ("int32", "points in the neighbourhood"),
 }
+register_field_descriptions(FIELDS)
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ from scipy import stats as _st
 from .._shared.validation import check_option, check_points, check_scalar
 from ..classify import SurfaceType, hk_surface_types
 from ..errors import InsufficientNeighborsError, InvalidParameterError
+from ..io import register_field_descriptions
 from ..neighbors import CellIndex
 from ..neighbors._duplicates import copies_degenerate, find_duplicates, run_on_unique
 from . import _curvature_kernels as _ck
@@ -47,11 +48,13 @@ FIELDS = {
     "NormalY": ("float64", "surface normal y"),
     "NormalZ": ("float64", "surface normal z"),
 }
+register_field_descriptions(FIELDS)
 OPTIONAL_FIELDS = {
     "K_min": ("float64", "minimal detectable |K| (eq. 19)"),
     "H_min": ("float64", "minimal detectable |H| (eq. 19)"),
     "radius": ("float64", "bandwidth chosen (multi-scale)"),
 }
+register_field_descriptions(OPTIONAL_FIELDS)
 
 
 @dataclass(frozen=True)

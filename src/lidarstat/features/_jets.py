@@ -9,6 +9,7 @@ import numpy as np
 
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InsufficientNeighborsError, InvalidParameterError
+from ..io import register_field_descriptions
 from ..neighbors import CellIndex, Neighborhoods, knn_neighbors
 from ..neighbors._duplicates import find_duplicates, map_rows, run_on_unique
 from ..stats import variance_test_satterthwaite
@@ -41,6 +42,7 @@ JET_FIELDS = {
     "cond": ("float64", "condition number of the fit"),
     "dz0": ("float64", "fitted minus observed height along the PCA normal"),
 }
+register_field_descriptions(JET_FIELDS)
 
 
 @dataclass(frozen=True)

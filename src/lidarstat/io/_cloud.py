@@ -292,7 +292,10 @@ def write(path: str | os.PathLike, cloud: PointCloud, *,
         version, point format, scales, offsets, VLRs, EVLRs and extra bytes survive.
     fields : dict of str to 1-D array, optional
         New per-point results (e.g. ``K``, ``H``, ``surface_type``); they become LAS extra
-        bytes, PLY properties, CSV columns or NPZ arrays.
+        bytes (described, see :func:`lidarstat.io.field_description`), CSV columns, NPZ arrays
+        or PLY properties in CloudCompare's spelling (``NormalX/Y/Z`` as ``nx ny nz``,
+        ``red green blue`` as uchar, any other ``name`` as ``scalar_name``; :func:`read`
+        returns the lidarstat names).
 
     Notes
     -----

@@ -3,6 +3,16 @@
 Reading keeps the laspy header on the :class:`PointCloud` so that writing back preserves
 version, point format, scales, offsets, VLRs, EVLRs, CRS, standard dimensions and existing
 extra bytes; new per-point results become LAS extra bytes.
+
+Every extra-bytes field lidarstat adds is recorded as PDAL's ``writers.las`` records its
+own: a 32-byte description (the field's documented meaning, see
+:func:`lidarstat.io.field_description`), no no-data value and no min/max. Floating-point
+fields mark "no value" with NaN, which PDAL, laspy and CloudCompare all read as NaN; a
+``no_data`` of NaN would add nothing (PDAL ignores ``no_data`` when reading, laspy only uses
+it to skip values in its min/max, by an equality NaN never meets) and a finite sentinel
+would change the values. The min/max laspy computes are left out because they are not
+reliable (wrong once a NaN is among the values, and wrong for integers in laspy 2.7's LAZ
+and LAS writes alike), and a streamed write fixes the header before it has seen every chunk.
 """
 
 from __future__ import annotations
@@ -27,6 +37,7 @@ from ..errors import (
 )
 from . import _las_checks
 from ._cloud import PointCloud
+from ._descriptions import field_description
 
 _BACKEND = laspy.LazBackend.Lazrs
 _MAX_EB_NAME = 32
@@ -220,8 +231,21 @@ def _extra_bytes_param(path: Path, name: str, values: np.ndarray) -> laspy.Extra
     elif values.ndim != 1:
         raise InvalidParameterError(f"{path}: field {name!r} has shape {values.shape}; LAS "
                                     "extra bytes need (N,) or (N, 2|3)")
-    return laspy.ExtraBytesParams(name=name, type=code,
-                                  description=f"lidarstat {name}"[:31])
+    return laspy.ExtraBytesParams(name=name, type=code, description=field_description(name))
+
+
+_EB_STATS = 0b110  # min and max bits of an extra-bytes record's options
+
+
+def _drop_statistics(header) -> None:
+    """Clear the min/max bits of every extra-bytes record (see the module docstring).
+
+    laspy rebuilds the records of a header's extra bytes, those of the input included, and
+    would write its own min/max for each.
+    """
+    for vlr in header.vlrs.get("ExtraBytesVlr"):
+        for record in vlr.extra_bytes_structs:
+            record.options &= ~_EB_STATS
 
 
 def _new_header(cloud: PointCloud, attrs: dict) -> laspy.LasHeader:
@@ -323,6 +347,7 @@ def _header_for(path: Path, cloud: PointCloud, new: dict):
     assign, params = _plan(path, cloud, new, header)
     if params:
         header.add_extra_dims(params)
+    _drop_statistics(header)
     return header, assign
 
 

@@ -1,7 +1,11 @@
-"""PLY reading and writing through plyfile (binary little endian, double x/y/z).
+"""PLY reading and writing through plyfile (binary little endian), in CloudCompare's conventions.
 
-Every attribute becomes a scalar property of the ``vertex`` element, which CloudCompare
-shows as a scalar field. A CRS, if any, is stored in a ``comment crs ...`` header line.
+Writing names the ``vertex`` properties as CloudCompare's PLY filter maps them: the normal
+``NormalX/NormalY/NormalZ`` as ``nx ny nz``, the colour ``red green blue`` as ``uchar``
+(16-bit LAS colours scaled to 8 bits, ``round(v / 257)``) and every other field ``name`` as
+``scalar_name``, which CloudCompare loads as a scalar field called ``name``. Reading accepts
+both spellings (``nx`` -> ``NormalX``, ``scalar_K`` -> ``K``), so the field names of a cloud
+lidarstat wrote come back exactly. A CRS, if any, is stored in a ``comment crs ...`` line.
 """
 
 from __future__ import annotations
@@ -21,6 +25,11 @@ from ..errors import (
 from ._cloud import PointCloud
 
 _CRS_COMMENT = "crs "
+#: Prefix CloudCompare gives (and recognises on) the properties it loads as scalar fields.
+SCALAR_PREFIX = "scalar_"
+#: lidarstat field -> PLY property, for the fields CloudCompare maps to normals and colours.
+NORMALS = {"NormalX": "nx", "NormalY": "ny", "NormalZ": "nz"}
+COLOURS = ("red", "green", "blue")
 # numpy dtype.str (without byte order) -> PLY-representable dtype
 _PLY_TYPES = {"i1": "i1", "u1": "u1", "i2": "i2", "u2": "u2", "i4": "i4", "u4": "u4",
               "f4": "f4", "f8": "f8", "b1": "u1", "f2": "f4"}
@@ -88,7 +97,11 @@ def check_header(path: Path, max_bytes=None) -> None:
 
 
 def read_file(path: Path, fmt: str = "ply", max_bytes=None) -> PointCloud:
-    """Read the ``vertex`` element of a PLY file; x/y/z (any case) are the coordinates."""
+    """Read the ``vertex`` element of a PLY file; x/y/z (any case) are the coordinates.
+
+    Property names become field names through :func:`field_names` (``nx`` -> ``NormalX``,
+    ``scalar_K`` -> ``K``); list properties are skipped.
+    """
     check_header(path, max_bytes)
     try:
         ply = plyfile.PlyData.read(str(path))
@@ -111,16 +124,87 @@ def read_file(path: Path, fmt: str = "ply", max_bytes=None) -> PointCloud:
                                  f"property {bad[0]!r} is a list, not a number)")
     xyz = np.column_stack([np.asarray(data[lower[c]], dtype=np.float64) for c in "xyz"])
     coords = {lower[c] for c in "xyz"}
-    attrs = {}
-    for name in names:
-        if name in coords or data.dtype[name].kind == "O":  # skip list properties
-            continue
-        attrs[name] = np.array(data[name])
+    kept = [n for n in names if n not in coords and data.dtype[n].kind != "O"]  # no lists
+    attrs = {field: np.array(data[prop]) for prop, field in field_names(kept).items()}
     crs = None
     for comment in ply.comments:
         if comment.startswith(_CRS_COMMENT):
             crs = comment[len(_CRS_COMMENT):].strip() or None
     return PointCloud(xyz, attrs, crs=crs, source_path=path, source_format="ply")
+
+
+def field_names(properties: list[str]) -> dict[str, str]:
+    """Map PLY property names to lidarstat field names.
+
+    ``nx``/``ny``/``nz`` become ``NormalX``/``NormalY``/``NormalZ`` and ``scalar_<name>``
+    becomes ``<name>``; every other property keeps its name. A property keeps its own name
+    when the new one would collide with another property's field or with a coordinate.
+
+    Parameters
+    ----------
+    properties : list of str
+        Property names of the ``vertex`` element, coordinates excluded, in file order.
+
+    Returns
+    -------
+    dict of str to str
+        Property name -> field name, in file order.
+    """
+    renamed = {}
+    for prop in properties:
+        if prop in NORMALS.values():
+            renamed[prop] = {v: k for k, v in NORMALS.items()}[prop]
+        elif prop.startswith(SCALAR_PREFIX) and len(prop) > len(SCALAR_PREFIX):
+            renamed[prop] = prop[len(SCALAR_PREFIX):]
+    used = {p for p in properties if p not in renamed} | set("xyzXYZ")
+    out = {}
+    for prop in properties:
+        new = renamed.get(prop, prop)
+        if prop in renamed and (new in used or new.lower() in ("x", "y", "z")):
+            new = prop
+        used.add(new)
+        out[prop] = new
+    return out
+
+
+def property_names(columns: dict[str, np.ndarray]) -> dict[str, str]:
+    """Map lidarstat field names to PLY property names (the inverse of :func:`field_names`).
+
+    The three normal components become ``nx ny nz`` and the three colours keep ``red green
+    blue`` (when all three of either are present, one-dimensional); every other field
+    ``name`` becomes ``scalar_<name>``.
+
+    Parameters
+    ----------
+    columns : dict of str to ndarray
+        The one-dimensional per-point fields to write.
+
+    Returns
+    -------
+    dict of str to str
+        Field name -> property name; normals, then colours, then the rest in input order
+        (CloudCompare fills its normal and colour slots from the first matching names).
+    """
+    normals = all(n in columns for n in NORMALS)
+    colours = all(c in columns for c in COLOURS)
+    out = {n: NORMALS[n] for n in NORMALS if normals}
+    out.update({c: c for c in COLOURS if colours})
+    for name in columns:
+        if name not in out:
+            out[name] = SCALAR_PREFIX + name
+    return out
+
+
+def _colour(path: Path, name: str, values: np.ndarray) -> np.ndarray:
+    """`values` as PLY ``uchar``: 8-bit values as they are, 16-bit ones scaled by 1/257."""
+    v = np.asarray(values)
+    if v.size and (v.dtype.kind not in "biuf" or not np.all(np.isfinite(v))
+                   or v.min() < 0 or v.max() > 65535 or not np.all(v == np.round(v))):
+        raise InvalidParameterError(f"{path}: colour {name!r} must hold integers in 0..65535 "
+                                    "(8-bit or 16-bit colour) to be written as PLY uchar")
+    if v.size and v.max() > 255:
+        v = np.round(v / 257.0)
+    return v.astype(np.uint8)
 
 
 def _ply_dtype(path: Path, name: str, values: np.ndarray) -> np.dtype:
@@ -159,20 +243,42 @@ def _dump(ply: plyfile.PlyData, tmp: Path) -> None:
     ply.write(str(tmp))
 
 
+def _xyz_dtype(xyz: np.ndarray) -> str:
+    """``f4`` when float32 holds every coordinate exactly, else ``f8`` (both read by clients)."""
+    return "<f4" if np.array_equal(xyz.astype(np.float32).astype(np.float64), xyz) else "<f8"
+
+
 def write_file(path: Path, cloud: PointCloud, new: dict, fmt: str = "ply") -> None:
-    """Write a binary little-endian PLY with double x/y/z and one property per field."""
+    """Write a binary little-endian PLY in CloudCompare's conventions.
+
+    ``x y z`` are ``float`` when float32 holds every coordinate exactly and ``double``
+    otherwise (large, e.g. projected, coordinates), so no coordinate is rounded. Normals are
+    written as ``nx ny nz``, colours as ``red green blue`` (``uchar``) and every other field
+    as ``scalar_<name>`` (see :func:`property_names`).
+
+    Raises
+    ------
+    InvalidParameterError
+        If a field name contains white space, a field's dtype has no PLY type, or a colour
+        is not an 8-bit or 16-bit integer colour.
+    PointCloudWriteError
+        If plyfile fails to write the file.
+    """
     cols = _columns(cloud, new)
     bad = [n for n in cols if not n or any(ch.isspace() for ch in n)]
     if bad:
         raise InvalidParameterError(f"{path}: PLY property names cannot contain spaces: "
                                     f"{bad[0]!r}")
-    dtypes = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
-    dtypes += [(n, _ply_dtype(path, n, v)) for n, v in cols.items()]
+    names = property_names(cols)
+    values = {n: (_colour(path, n, v) if names[n] in COLOURS else v) for n, v in cols.items()}
+    coord = _xyz_dtype(cloud.xyz)
+    dtypes = [("x", coord), ("y", coord), ("z", coord)]
+    dtypes += [(names[n], _ply_dtype(path, n, values[n])) for n in names]
     arr = np.empty(len(cloud), dtype=dtypes)
     for j, c in enumerate("xyz"):
         arr[c] = cloud.xyz[:, j]
-    for n, v in cols.items():
-        arr[n] = v
+    for n in names:
+        arr[names[n]] = values[n]
     comments = ["written by lidarstat"]
     if cloud.crs:
         comments.append(_CRS_COMMENT + " ".join(cloud.crs.split()))

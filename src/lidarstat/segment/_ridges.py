@@ -10,7 +10,8 @@ from scipy import stats as _st
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..features import FitStatus, jets
-from ..features._jets import MONGE_NAMES, JET_FIELDS
+from ..features._jets import JET_FIELDS, MONGE_NAMES
+from ..io import register_field_descriptions
 from ..neighbors import knn_neighbors, radius_neighbors
 from ..neighbors._duplicates import check_copies, find_duplicates, map_rows, run_on_unique
 from . import _ridge_kernels as _rk
@@ -24,6 +25,7 @@ RIDGE_FIELDS = {
     "umbilic": ("uint8", "1 where k1 - k2 is not significant"),
     "extremality": ("float64", "derivative of the dominant k along its line"),
 }
+register_field_descriptions(RIDGE_FIELDS)
 #: Attributes of each ridge line.
 LINE_ATTRIBUTES = ("line_id", "ridge", "n_vertices", "n_points", "length", "strength",
                    "sharpness", "mean_k", "position_sd", "k_z")
@@ -330,6 +332,7 @@ SEGMENT_FIELDS = {
     "crease": ("uint8", "0 none, 1 convex, 2 concave: on the boundary between two units"),
     "barrier": ("uint8", "1 ridge band or jet rejected by the chi-square test"),
 }
+register_field_descriptions(SEGMENT_FIELDS)
 
 
 def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_size=50,

@@ -1,0 +1,94 @@
+"""LAS extra bytes as PDAL's writers.las records them: a description, no no-data, no min/max."""
+
+from __future__ import annotations
+
+import laspy
+import numpy as np
+
+import lidarstat.classify  # noqa: F401  (registers the classification's field descriptions)
+import lidarstat.io as lio
+from lidarstat.io._descriptions import field_description, shorten
+
+N = 120
+
+
+def _records(path) -> dict[str, object]:
+    """The extra-bytes records of `path`, read with plain laspy, by name."""
+    vlr = laspy.read(path).header.vlrs.get("ExtraBytesVlr")[0]
+    return {r.name.decode(): r for r in vlr.extra_bytes_structs}
+
+
+def _fields(rng):
+    plane_p = rng.random(N)
+    plane_p[::4] = np.nan  # no value: not tested
+    return {"plane_p": plane_p, "point_class": rng.integers(0, 4, N).astype(np.uint8),
+            "neighbors": np.arange(N, dtype=np.int32), "my_score": rng.normal(size=N),
+            "a_long_but_legal_name_of_32_ch_x": np.ones(N, np.float32)}
+
+
+def _check(path, fields):
+    records = _records(path)
+    assert set(fields) <= set(records)
+    assert records["plane_p"].description == b"p-value of chi-square plane test"
+    assert records["point_class"].description == b"0 undetermined,1 surface,2 edge"
+    assert records["my_score"].description == b"lidarstat field my_score"
+    assert records["a_long_but_legal_name_of_32_ch_x"].description == (
+        b"a_long_but_legal_name_of_32_ch_x")
+    for name in fields:
+        r = records[name]
+        assert 0 < len(r.description) <= 32
+        assert r.no_data is None and r.options == 0, name  # no no_data, min or max: as PDAL
+    back = laspy.read(path)
+    for name, values in fields.items():
+        np.testing.assert_array_equal(back[name], values)  # NaN where NaN
+
+
+def test_extra_bytes_have_descriptions_and_no_no_data(tmp_path, rng):
+    cloud = lio.PointCloud(rng.random((N, 3)) * 10)
+    fields = _fields(rng)
+    for suffix in (".las", ".laz"):
+        out = tmp_path / f"o{suffix}"
+        lio.write(out, cloud, fields=fields)
+        _check(out, fields)
+
+
+def test_streamed_extra_bytes_match(tmp_path, rng):
+    src = tmp_path / "src.las"
+    lio.write(src, lio.PointCloud(rng.random((N, 3)) * 10))
+    fields = _fields(rng)
+    out = tmp_path / "streamed.laz"
+    lio.rewrite(src, out, lambda start, chunk: {k: v[start:start + len(chunk)]
+                                                 for k, v in fields.items()},
+                points_per_chunk=50)
+    _check(out, fields)
+
+
+def test_existing_extra_bytes_keep_their_description(tmp_path, rng):
+    src = tmp_path / "src.las"
+    header = laspy.LasHeader(version="1.4", point_format=6)
+    header.add_extra_dims([laspy.ExtraBytesParams(name="theirs", type="f4",
+                                                  description="from another tool")])
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = rng.random((3, N))
+    las.theirs = np.ones(N, np.float32)
+    las.write(src)
+    out = tmp_path / "o.las"
+    lio.write(out, lio.read(src), fields={"plane_p": rng.random(N)})
+    records = _records(out)
+    assert records["theirs"].description == b"from another tool"
+    assert records["theirs"].options == 0  # laspy would write its own (wrong) min/max
+    assert records["plane_p"].description == b"p-value of chi-square plane test"
+
+
+def test_shorten_keeps_whole_words_within_32_ascii_bytes():
+    assert shorten("distance to the estimated end of the visible surface") == (
+        "distance to estimated end")
+    assert shorten("nearest border: 1 scan window, 2 no return, 3 depth jump") == (
+        "nearest border: 1 scan window")
+    assert shorten("mean curvature (H<0 convex) of the fitted quadric") == (
+        "mean curvature of fitted quadric")
+    assert shorten("p-value of the consistent-curvature test") == (
+        "p-value of consistent-curvature")
+    assert shorten("x" * 40) == "x" * 32
+    assert shorten("angle \u03b8 of the normal") == "angle ? of the normal"
+    assert len(field_description("b" * 32)) <= 32
