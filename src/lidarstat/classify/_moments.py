@@ -29,8 +29,8 @@ import numpy as np
 from .._shared._columns import column_max, column_min
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatWarning
-from ..stats._moments import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
-                              sequential_moments)
+from ..stats import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
+                     sequential_moments)
 from ._cycle import CycleChoice, choose_cycle, skewness_balance_cycle
 from ._continuity import raised_patches
 from ._outliers import low_outliers
