@@ -188,7 +188,7 @@ def cmd_synth(args):
 
 
 def cmd_demo(args):
-    from ..report._demo import DEMO_FILES, run_demo
+    from ..report import DEMO_FILES, run_demo
 
     check_plan([], Output("outdir", args.outdir, "folder", members=DEMO_FILES))
     run_demo(Path(args.outdir), sigma=args.sigma, radius=args.radius, seed=args.seed)
