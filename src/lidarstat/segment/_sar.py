@@ -23,6 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy import stats as _st
 
+from .._shared._geometry import mean_spacing as _mean_spacing
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatWarning
 from ..neighbors import radius_neighbors
@@ -42,12 +43,6 @@ SIGMA_RATIO = 1.25
 
 #: Forward Search stop reasons written to the table (``fs_stop``).
 STOP_CODES = {"exhausted": 0, "f": 1, "residual": 2, "not searched": 3}
-
-
-def _mean_spacing(points):
-    from ..features._plane_regression import _mean_spacing as ms
-
-    return ms(points)
 
 
 def _two_hop_contacts(graph, labels):
