@@ -368,7 +368,7 @@ def _tile_order(roots):
 
 def _tile_pass(xyh, roots, p, inten, scheduler, workers, record, final):
     """Every root tile through :func:`lidarstat.pipeline.map_tiles`; fields and records."""
-    from ..pipeline import map_tiles
+    from .._shared._tiles import map_tiles
 
     index = {t.key: i for i, t in enumerate(roots)}
     outs = [None] * len(roots)
@@ -653,7 +653,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     # tile passes copy slices and the grid and TIN kernels touch memory locally. Inside a
     # tile the input order is kept (the dip test's subsample sees the same sequence) and
     # every tie is broken by the input index `perm` (classes do not depend on the order).
-    from ..pipeline import tile_grid
+    from .._shared._tiles import tile_grid
 
     xyh = np.empty((n, 3))  # x, y and the current heights, in tile order
     xyh[:, :2] = pts[:, :2] - origin[:2]
