@@ -171,7 +171,7 @@ def cmd_bandwidth(args):
 
 
 def cmd_synth(args):
-    from ..io import write
+    from ..io import PointCloud, write
     from ..synth import SCENES
 
     out = check_output(args.output)
@@ -179,7 +179,7 @@ def cmd_synth(args):
     if args.sigma is not None:
         kwargs["sigma"] = args.sigma
     scene = SCENES[args.scene](**kwargs)
-    cloud = scene.to_pointcloud()
+    cloud = PointCloud(xyz=scene.xyz, attributes=dict(scene.attributes))
     fields = scene.to_fields()
     fields.update(edge_distance=scene.edge_distance)
     write(out, cloud, fields=fields)
