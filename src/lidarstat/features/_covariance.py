@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from enum import IntEnum
 
 import numpy as np
 
@@ -44,6 +45,15 @@ FIELDS = {
     "NormalVariation": ("float64", "variance of normals along PrincipalDir"),
     "neighbors": ("int32", "points in the neighbourhood"),
 }
+
+
+class PointClass(IntEnum):
+    """Codes of ``point_class`` (:func:`lidarstat.classify.covariance`; a contract)."""
+
+    UNDETERMINED = 0
+    SURFACE = 1
+    EDGE = 2
+    BOUNDARY = 3
 
 
 @dataclass(frozen=True)

@@ -10,11 +10,11 @@ from scipy import special as _sp
 from scipy import stats as _st
 
 from .._shared.validation import check_option, check_points, check_scalar
-from ..classify import SurfaceType, hk_surface_types
 from ..errors import InsufficientNeighborsError, InvalidParameterError
 from ..neighbors import CellIndex
 from . import _curvature_kernels as _ck
 from . import _quadric_kernels as _k
+from ._hk import SurfaceType, hk_surface_types
 from ._quadric import FitStatus, _run_cells, _run_kernel, check_fit_options
 
 logger = logging.getLogger(__name__)

@@ -9,8 +9,7 @@ from scipy import stats as _st
 
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
-from ..features import FitStatus, jets
-from ..features._jets import MONGE_NAMES, JET_FIELDS
+from ..features import JET_FIELDS, MONGE_NAMES, FitStatus, jets
 from ..neighbors import knn_neighbors, radius_neighbors
 from . import _ridge_kernels as _rk
 from ._grow import components
