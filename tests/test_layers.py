@@ -158,6 +158,29 @@ def test_lidarstat_layers():
     assert not problems, "layer rules broken:\n" + "\n".join(problems)
 
 
+def public_names(root: Path, package: str = PACKAGE) -> dict[str, set[str]]:
+    """``__all__`` of every subpackage's ``__init__.py`` (the names other layers may use)."""
+    names = {}
+    for init in sorted((root / package).glob("*/__init__.py")):
+        tree = ast.parse(init.read_text(encoding="utf-8"))
+        for node in tree.body:
+            if (isinstance(node, ast.Assign) and len(node.targets) == 1
+                    and getattr(node.targets[0], "id", None) == "__all__"):
+                names[f"{package}.{init.parent.name}"] = set(ast.literal_eval(node.value))
+    return names
+
+
+def test_names_used_across_layers_are_in_all():
+    exported = public_names(SRC)
+    missing = [f"{imp.source} (line {imp.lineno}) imports {imp.target}.{imp.name}: "
+               f"not in {imp.target}.__all__"
+               for imp in collect_imports(SRC)
+               if imp.name and imp.target in exported and _unit(imp.source) not in TOP
+               and _unit(imp.source) != _unit(imp.target)
+               and imp.name not in exported[imp.target]]
+    assert not missing, "\n".join(missing)
+
+
 def test_every_unit_has_a_layer():
     units = {p.stem if p.suffix == ".py" else p.name for p in (SRC / PACKAGE).iterdir()
              if (p.suffix == ".py" or (p / "__init__.py").exists())}
