@@ -116,7 +116,9 @@ def child_segment(args, pts):
     from lidarstat.segment import segment_covariance
 
     t0 = time.perf_counter()
-    seg = segment_covariance(pts, k=args.k)
+    from lidarstat.classify import covariance
+
+    seg = segment_covariance(pts, covariance(pts, k=args.k, keep_neighbors=True))
     return dict(seconds=time.perf_counter() - t0, n_segments=seg.n_segments,
                 n_lines=len(seg.lines))
 

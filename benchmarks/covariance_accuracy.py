@@ -156,17 +156,17 @@ def tls(name, step):
     cloud = make(step=step, rng=0)
     t0 = time.perf_counter()
     res = covariance(cloud.xyz, sensor=cloud.scanner, k=50, keep_neighbors=True)
-    seg = segment_covariance(cloud.xyz, sensor=cloud.scanner, result=res)
+    seg = segment_covariance(cloud.xyz, res)
     dt = time.perf_counter() - t0
     h = hoover(seg.labels, cloud.face + 1, 0.8, min_size=200)
     names = cloud.meta["face_names"]
     missed = [names[i - 1] for i in h.missed_ids] + \
         [names[i - 1] for i in h.over_segmented] + \
         [names[i - 1] for m in h.under_segmented.values() for i in m]
-    seg0 = segment_covariance(cloud.xyz, sensor=cloud.scanner, result=res,
+    seg0 = segment_covariance(cloud.xyz, res,
                               adaptive_scale=False)
     h0 = hoover(seg0.labels, cloud.face + 1, 0.8, min_size=200)
-    seg1 = segment_covariance(cloud.xyz, sensor=cloud.scanner, result=res, refine=False)
+    seg1 = segment_covariance(cloud.xyz, res, refine=False)
     h1 = hoover(seg1.labels, cloud.face + 1, 0.8, min_size=200)
     # scan rows across each face: per azimuth column of the scan grid, the number of
     # distinct elevation rows on the face (median and 90 % quantile over its columns)

@@ -64,14 +64,15 @@ def dump(out, names=NAMES):
         d.update(nbh_indptr=nb.indptr, nbh_indices=nb.indices, nbh_distances=nb.distances)
         d.update({f"cls_{k}": np.asarray(v) for k, v in res.classes.fields.items()})
         d["cls_point_class"] = res.classes.point_class
-        seg = segment_covariance(xyz, sensor=sensor, result=res)
+        seg = segment_covariance(xyz, res)
         d["seg_labels"] = seg.labels
         d.update({f"segf_{k}": np.asarray(v) for k, v in seg.fields.items()})
         d.update({f"segt_{k}": np.asarray(v) for k, v in seg.table.items()})
         if seg.lines is not None:
             d.update({f"line_{i}": v for i, v in enumerate(seg.lines.vertices)})
             d.update({f"linea_{k}": np.asarray(v) for k, v in seg.lines.attributes.items()})
-        d["seg2_labels"] = segment_covariance(xyz, sensor=sensor).labels
+        d["seg2_labels"] = segment_covariance(
+            xyz, covariance(xyz, sensor=sensor, keep_neighbors=True)).labels
         np.savez(out / f"{name}.npz", **d)
         print(f"{name}: {len(xyz)} points, {len(d)} arrays, {seg.n_segments} segments, "
               f"{0 if seg.lines is None else len(seg.lines.vertices)} lines "

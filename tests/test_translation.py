@@ -12,6 +12,7 @@ import pytest
 
 from lidarstat.classify import classify_moments, covariance
 from lidarstat.features import curvature
+from lidarstat.io import PointCloud
 from lidarstat.synth import SCENES
 
 OFFSET = np.array([512_000.0, 5_430_000.0, 120.0])
@@ -22,7 +23,8 @@ def _snapped(xyz):
 
 
 def _pair(scene, seed, **kwargs):
-    cloud = SCENES[scene](rng=seed, **kwargs).to_pointcloud()
+    sc = SCENES[scene](rng=seed, **kwargs)
+    cloud = PointCloud(xyz=sc.xyz, attributes=dict(sc.attributes))
     near = _snapped(cloud.xyz)
     near -= np.floor(near.min(axis=0))
     far = near + OFFSET

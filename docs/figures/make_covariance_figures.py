@@ -95,7 +95,9 @@ def run(name, xyz, sensor, view, extra="", show=None):
     from lidarstat.segment import segment_covariance
 
     t0 = time.perf_counter()
-    seg = segment_covariance(xyz, sensor=sensor)
+    from lidarstat.classify import covariance
+
+    seg = segment_covariance(xyz, covariance(xyz, sensor=sensor, keep_neighbors=True))
     dt = time.perf_counter() - t0
     pc = seg.fields["point_class"]
     inseg = (seg.labels > 0).mean()

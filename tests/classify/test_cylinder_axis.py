@@ -3,7 +3,7 @@
 import numpy as np
 from scipy.special import chdtrc
 
-from lidarstat.classify._cylinder import cylinder_test
+from lidarstat.features import cylinder_test
 from lidarstat.neighbors import knn_neighbors
 
 

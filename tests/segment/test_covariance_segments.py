@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from lidarstat.classify import covariance
 from lidarstat.segment import (hoover, local_intersections, segment_covariance,
                                segment_planes)
 from lidarstat.synth import distance_to_creases, make_tls_building
@@ -16,7 +17,7 @@ def _gable(rng, n=30000, sigma=0.003):
 
 def test_gable_roof_two_planes_and_the_ridge(rng):
     pts, truth = _gable(rng)
-    seg = segment_covariance(pts, k=30, min_size=100)
+    seg = segment_covariance(pts, covariance(pts, k=30, keep_neighbors=True), min_size=100)
     assert seg.n_segments == 2
     h = hoover(seg.labels, truth, 0.8)
     assert h.correct == 2
@@ -34,8 +35,10 @@ def test_gable_roof_two_planes_and_the_ridge(rng):
 
 def test_partition_does_not_depend_on_seed_order(rng):
     pts, _ = _gable(rng, n=8000)
-    a = segment_covariance(pts, k=20, seeds="curvature", min_size=20)
-    b = segment_covariance(pts, k=20, seeds="index", min_size=20)
+    a = segment_covariance(pts, covariance(pts, k=20, keep_neighbors=True), seeds="curvature",
+                           min_size=20)
+    b = segment_covariance(pts, covariance(pts, k=20, keep_neighbors=True), seeds="index",
+                           min_size=20)
     assert np.array_equal(a.labels, b.labels)
 
 
@@ -88,7 +91,7 @@ def test_tls_building_hoover_and_lines():
     three-planes fix of ``synth.crease_lines``).
     """
     sc = make_tls_building(rng=0)
-    seg = segment_covariance(sc.xyz, sensor=sc.scanner)
+    seg = segment_covariance(sc.xyz, covariance(sc.xyz, sensor=sc.scanner, keep_neighbors=True))
     h = hoover(seg.labels, sc.face + 1, 0.8, min_size=200)
     assert h.correct == h.n_truth == 14 and h.noise == 0
     assert seg.fields["scale_k"].max() == 50 and (seg.fields["scale_k"] < 50).any()
@@ -132,7 +135,7 @@ def test_tls_plant_pipes_and_tanks_one_cylinder_segment_each(boundary, cylinders
 
     sc = make_tls_plant(step=0.004, rng=0)
     res = covariance(sc.xyz, sensor=sc.scanner, k=50, keep_neighbors=True, boundary=boundary)
-    seg = segment_covariance(sc.xyz, sensor=sc.scanner, result=res)
+    seg = segment_covariance(sc.xyz, res)
     h = hoover(seg.labels, sc.face + 1, 0.8, min_size=200)
     assert h.correct == h.n_truth >= 10
     names = sc.meta["face_names"]
@@ -159,7 +162,7 @@ def test_curved_creases_are_polylines_on_the_true_circles():
     from lidarstat.synth import make_tls_plant
 
     sc = make_tls_plant(rng=0)
-    seg = segment_covariance(sc.xyz, sensor=sc.scanner)
+    seg = segment_covariance(sc.xyz, covariance(sc.xyz, sensor=sc.scanner, keep_neighbors=True))
     h = hoover(seg.labels, sc.face + 1, 0.8, min_size=200)
     assert h.correct == h.n_truth == 11
     cyl = seg.table["model"] == 2

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from lidarstat.errors import InvalidParameterError
+from lidarstat.report import plot_forward_search
 from lidarstat.segment import forward_search
 
 
@@ -66,7 +67,7 @@ def test_monitoring_plot(rng, tmp_path):
     A, y, xy = _plane(rng, n=300)
     y[xy[:, 0] > 15] += 1
     res = forward_search(A, y, xy[:, 0] < 5)
-    res.plot(tmp_path / "fs.png")
+    plot_forward_search(res, tmp_path / "fs.png")
     assert (tmp_path / "fs.png").read_bytes()[:4] == b"\x89PNG"
 
 

@@ -1,11 +1,11 @@
 """Per-point classes: HK surface types (seed 000), surface / edge / boundary (seed 003),
 moments classification and filter scores (seed 004)."""
 
+from ..features import PointClass, SurfaceType, hk_surface_types
 from ._covariance import FIELDS as COVARIANCE_CLASS_FIELDS
-from ._covariance import (CovarianceClasses, CovarianceClassification, PointClass,
+from ._covariance import (CovarianceClasses, CovarianceClassification,
                           classify_covariance, covariance, estimate_plane_sigma)
 from ._cycle import CycleChoice, choose_cycle, skewness_balance_cycle
-from ._hk import SurfaceType, hk_surface_types
 from ._outliers import low_outliers
 from ._moments import ASPRS, MomentsClassification, MomentsStep, classify_moments
 from ._scores import GROUND_CODES, ClassScores, FilterErrors, class_scores, filter_errors

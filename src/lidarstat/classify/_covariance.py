@@ -49,13 +49,13 @@ Three tests, each written beside the label as a p-value (see docs/methods/covari
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import IntEnum
 
 import numpy as np
 from scipy import special as _sp
 
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
+from ..features import PointClass
 from ..io import register_field_descriptions
 
 #: Per-point output fields of the classification, name -> (dtype, description).
@@ -73,15 +73,6 @@ FIELDS = {
     "border_p": ("float64", "continuity-test p-value of the nearest border (0: observed)"),
 }
 register_field_descriptions(FIELDS)
-
-
-class PointClass(IntEnum):
-    """Codes of ``point_class``."""
-
-    UNDETERMINED = 0
-    SURFACE = 1
-    EDGE = 2
-    BOUNDARY = 3
 
 
 @dataclass(frozen=True)
@@ -275,7 +266,7 @@ def estimate_smooth_range_noise(points, features, *, bins=8, max_points=SMOOTH_N
     -------
     a, b : float
     """
-    from ._cylinder import cylinder_test
+    from ..features import cylinder_test
 
     n = np.asarray(features.fields["neighbors"], dtype=np.float64)
     ok = (n >= 7) & np.isfinite(features.eigenvalues).all(axis=1) & (features.ray_cos >= 0.2)
@@ -452,7 +443,7 @@ def _cylinder_axes(features, query):
 
 
 def curved_surface_test(points, features, query, sigma, *, sensor=None, return_model=False):
-    """p-values of the cylinder test (:mod:`._cylinder`) at the points `query`.
+    """p-values of the cylinder test (:func:`lidarstat.features.cylinder_test`) at the points `query`.
 
     `sigma` (scalar or per point) is along the rays with a `sensor`, else across the
     surface.
@@ -466,7 +457,7 @@ def curved_surface_test(points, features, query, sigma, *, sensor=None, return_m
         A point of the fitted cylinder's axis (NaN where planar) and its unit axis (the
         starting axis, to which the radius and centre belong); with `return_model` only.
     """
-    from ._cylinder import cylinder_test
+    from ..features import cylinder_test
 
     indptr, idx = _neighbour_rows(points, features, query)
     axes = _cylinder_axes(features, query)
@@ -526,7 +517,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     curved : {'cylinder', 'variation'}, optional
         Test 2, where the plane is rejected: ``'cylinder'`` (default when `points` are
         given) fits a circular cylinder along the minimum-curvature direction and tests
-        its weighted residuals, ``chi2(n - 3)`` (:mod:`lidarstat.classify._cylinder`);
+        its weighted residuals, ``chi2(n - 3)`` (:func:`lidarstat.features.cylinder_test`);
         ``'variation'`` is the paper's variance of curvature as a ratio test against
         the scan's own planes.
     curved_alpha : float, optional

@@ -16,7 +16,7 @@ import numpy as np
 
 from .._shared._jit import njit
 from ..errors import InvalidParameterError
-from ..stats._moments import SequentialMoments
+from ..stats import SequentialMoments
 
 __all__ = ["CycleChoice", "choose_cycle", "skewness_balance_cycle"]
 

@@ -29,8 +29,8 @@ import numpy as np
 from .._shared._columns import column_max, column_min
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatWarning
-from ..stats._moments import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
-                              sequential_moments)
+from ..stats import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
+                     sequential_moments)
 from ._cycle import CycleChoice, choose_cycle, skewness_balance_cycle
 from ._continuity import raised_patches
 from ._outliers import low_outliers
@@ -394,7 +394,7 @@ def _tile_order(roots):
 
 def _tile_pass(xyh, roots, p, inten, scheduler, workers, record, final):
     """Every root tile through :func:`lidarstat.pipeline.map_tiles`; fields and records."""
-    from ..pipeline import map_tiles
+    from .._shared._tiles import map_tiles
 
     index = {t.key: i for i, t in enumerate(roots)}
     outs = [None] * len(roots)
@@ -679,7 +679,7 @@ def classify_moments(xyz, intensity=None, *, number_of_returns=None, return_numb
     # tile passes copy slices and the grid and TIN kernels touch memory locally. Inside a
     # tile the input order is kept (the dip test's subsample sees the same sequence) and
     # every tie is broken by the input index `perm` (classes do not depend on the order).
-    from ..pipeline import tile_grid
+    from .._shared._tiles import tile_grid
 
     xyh = np.empty((n, 3))  # x, y and the current heights, in tile order
     xyh[:, :2] = pts[:, :2] - origin[:2]

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._shared._columns import column_max, column_min
-from ..stats._moments import density_estimate, dip_test, sequential_moments
+from ..stats import density_estimate, dip_test, sequential_moments
 from ._cycle import CycleChoice, choose_cycle
 from ._surface import cell_keys, cell_median_values
 

@@ -70,7 +70,7 @@ import numpy as np
 from numba import prange
 
 from .._shared._jit import njit, njit_parallel
-from ..features._quadric_kernels import _eigh3
+from .._shared._kernels import eigh3 as _eigh3
 
 #: Grid neighbours kept per point (8-neighbourhood of a regular angular grid).
 SLOTS = 8
@@ -456,7 +456,7 @@ def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_
     (per point), ``step``
     (azimuth and elevation steps), ``edge_z``, ``edge_p`` and ``adjacency`` (per grid edge).
     """
-    from ..features._scan_kernels import scan_angles
+    from .._shared._geometry import scan_angles
 
     _, pts, sens, rng, dirs, sig = _rays(points, sensor, ray_sigma)
     with np.errstate(divide="ignore"):
@@ -1140,7 +1140,7 @@ def grid_boundary(points, sensor, normals, ray_sigma, *, vis, jump_alpha, smooth
     from scipy.spatial import cKDTree
     from scipy.special import ndtri
 
-    from ..features._scan_kernels import scan_angles
+    from .._shared._geometry import scan_angles
 
     origin, pts, sens, rng, dirs, sig = _rays(points, sensor, ray_sigma)
     adj = vis["adjacency"]

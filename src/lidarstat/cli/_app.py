@@ -172,7 +172,7 @@ def cmd_bandwidth(args):
 
 
 def cmd_synth(args):
-    from ..io import write
+    from ..io import PointCloud, write
     from ..synth import SCENES
 
     out = check_output(args.output)
@@ -180,7 +180,7 @@ def cmd_synth(args):
     if args.sigma is not None:
         kwargs["sigma"] = args.sigma
     scene = SCENES[args.scene](**kwargs)
-    cloud = scene.to_pointcloud()
+    cloud = PointCloud(xyz=scene.xyz, attributes=dict(scene.attributes))
     fields = scene.to_fields()
     fields.update(edge_distance=scene.edge_distance)
     write(out, cloud, fields=fields)
@@ -189,7 +189,7 @@ def cmd_synth(args):
 
 
 def cmd_demo(args):
-    from ..report._demo import DEMO_FILES, run_demo
+    from ..report import DEMO_FILES, run_demo
 
     check_plan([], Output("outdir", args.outdir, "folder", members=DEMO_FILES))
     run_demo(Path(args.outdir), sigma=args.sigma, radius=args.radius, seed=args.seed)

@@ -31,15 +31,20 @@ def add_arguments(group):
 
 
 def run(args, cloud):
-    """Segment `cloud` by :func:`lidarstat.segment.segment_covariance`."""
+    """Segment `cloud` by :func:`lidarstat.classify.covariance` and
+    :func:`lidarstat.segment.segment_covariance`."""
+    from ..classify import covariance
     from ..segment import segment_covariance
 
-    return segment_covariance(
-        cloud.xyz, k=DEFAULT_K if args.k is None else args.k, radius=args.radius, sensor=args.sensor, sigma=args.sigma,
-        alpha=args.alpha, boundary_alpha=args.boundary_alpha,
-        curvature_threshold=args.curvature_threshold,
+    result = covariance(
+        cloud.xyz, k=DEFAULT_K if args.k is None else args.k, radius=args.radius,
+        sensor=args.sensor, sigma=args.sigma, alpha=args.alpha,
+        boundary_alpha=args.boundary_alpha, curvature_threshold=args.curvature_threshold,
         variance_threshold=args.variance_threshold, curved=args.curved,
         curved_alpha=args.curved_alpha, noise_estimate=args.noise_estimate,
+        keep_neighbors=True)
+    return segment_covariance(
+        cloud.xyz, result,
         min_size=DEFAULT_MIN_SIZE if args.min_size is None else args.min_size,
         grow_k=args.grow_k, seeds=args.seeds, min_angle=args.min_angle,
         reintegration=not args.no_reintegration,

@@ -41,5 +41,4 @@ def run(args, cloud):
                              min_size=DEFAULT_MIN_SIZE if args.min_size is None
                              else args.min_size, refine=args.refine,
                              frame=args.curvature_frame, noise=args.curvature_noise,
-                             sensor=args.sensor,
-                             diagnostics=getattr(args, "diagnostics", None))
+                             sensor=args.sensor)

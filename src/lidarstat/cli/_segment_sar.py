@@ -69,7 +69,7 @@ def run(args, cloud):
                        adaptive=args.adaptive, threshold=args.search, w_radius=args.w_radius,
                        min_size=DEFAULT_MIN_SIZE if args.min_size is None else args.min_size,
                        block=args.fs_block, outlier_alpha=_level_or_off(args.outlier_alpha),
-                       gof_alpha=_level_or_off(args.gof_alpha), diagnostics=args.diagnostics)
+                       gof_alpha=_level_or_off(args.gof_alpha))
 
 
 def _level_or_off(alpha):

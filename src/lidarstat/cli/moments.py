@@ -12,7 +12,7 @@ from ._app import Output, check_plan, write_summary_json
 def _run(args):
     from ..classify import classify_moments
     from ..io import linear_units, read, write
-    from ..report._moments import write_moments_report
+    from ..report import write_moments_report
 
     out = Path(args.output)
     folder = None

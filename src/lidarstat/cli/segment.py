@@ -50,6 +50,10 @@ def cmd_segment(args):
     t0 = time.perf_counter()
     seg = method.run(args, cloud)
     elapsed = time.perf_counter() - t0
+    if diagnostics is not None and getattr(seg, "units", None) is not None:
+        from ..report import plot_forward_search_units
+
+        plot_forward_search_units(diagnostics, seg.units)
     write(out, cloud, fields=seg.to_fields())
     seg.write_table(table)
     if seg.lines is not None:

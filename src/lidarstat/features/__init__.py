@@ -3,11 +3,13 @@
 from ._curvature import (FIELDS, CurvatureResult, curvature, curvature_tests, estimate_sigma,
                          height_variance)
 from ._covariance import FIELDS as COVARIANCE_FIELDS
-from ._covariance import CovarianceResult, covariance_features, eigen_features
+from ._covariance import CovarianceResult, PointClass, covariance_features, eigen_features
+from ._cylinder import cylinder_test
+from ._hk import SurfaceType, hk_surface_types
 from ._bandwidth import BandwidthResult, optimal_bandwidth
 from ._curvature_formulas import curvature_jacobian, curvatures, principal_jacobian
-from ._jets import (JET_FIELDS, JetFit, JetResult, PrincipalDirections, fit_jets, jet_tests,
-                    jets, principal_directions)
+from ._jets import (JET_FIELDS, MONGE_NAMES, JetFit, JetResult, PrincipalDirections, fit_jets,
+                    jet_tests, jets, principal_directions)
 from ._quadric import FitStatus, QuadricFit, fit_quadrics
 from ._plane_regression import (PLANE_FIELDS, BandwidthSelection, LocalPlaneFit,
                                 geary_bandwidths, local_planes, select_plane_bandwidth)
@@ -17,5 +19,7 @@ __all__ = ["COVARIANCE_FIELDS", "CovarianceResult", "covariance_features", "eige
            "curvature_jacobian", "curvature_tests", "curvatures", "estimate_sigma",
            "fit_quadrics", "height_variance", "principal_jacobian",
            "PLANE_FIELDS", "BandwidthSelection", "LocalPlaneFit", "geary_bandwidths",
-           "local_planes", "select_plane_bandwidth", "JET_FIELDS", "JetFit", "JetResult",
-           "PrincipalDirections", "fit_jets", "jet_tests", "jets", "principal_directions"]
+           "local_planes", "select_plane_bandwidth", "JET_FIELDS", "MONGE_NAMES",
+           "JetFit", "JetResult",
+           "PrincipalDirections", "fit_jets", "jet_tests", "jets", "principal_directions",
+           "SurfaceType", "hk_surface_types", "cylinder_test", "PointClass"]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from enum import IntEnum
 
 import numpy as np
 
@@ -46,6 +47,15 @@ FIELDS = {
     "neighbors": ("int32", "points in the neighbourhood"),
 }
 register_field_descriptions(FIELDS)
+
+
+class PointClass(IntEnum):
+    """Codes of ``point_class`` (:func:`lidarstat.classify.covariance`; a contract)."""
+
+    UNDETERMINED = 0
+    SURFACE = 1
+    EDGE = 2
+    BOUNDARY = 3
 
 
 @dataclass(frozen=True)

@@ -10,13 +10,13 @@ from scipy import special as _sp
 from scipy import stats as _st
 
 from .._shared.validation import check_option, check_points, check_scalar
-from ..classify import SurfaceType, hk_surface_types
 from ..errors import InsufficientNeighborsError, InvalidParameterError
 from ..io import register_field_descriptions
 from ..neighbors import CellIndex
 from ..neighbors._duplicates import copies_degenerate, find_duplicates, run_on_unique
 from . import _curvature_kernels as _ck
 from . import _quadric_kernels as _k
+from ._hk import SurfaceType, hk_surface_types
 from ._quadric import FitStatus, _run_cells, _run_kernel, check_fit_options, unfitted_reason
 
 logger = logging.getLogger(__name__)

@@ -32,7 +32,7 @@ import numpy as np
 from numba import prange
 
 from .._shared._jit import njit, njit_parallel
-from ..neighbors._drivers import make_drivers
+from ..neighbors import make_drivers
 from ._quadric_kernels import _eigh3, cholesky_inverse_n
 
 OK = 0

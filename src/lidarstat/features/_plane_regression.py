@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._shared._geometry import mean_spacing as _mean_spacing
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import Neighborhoods, radius_neighbors
@@ -471,17 +472,6 @@ class BandwidthSelection:
     scores: np.ndarray
     press: np.ndarray
     criterion: str
-
-
-def _mean_spacing(points):
-    xy = points[:, :2]
-    extent = np.ptp(xy, axis=0)
-    # occupied area from a coarse grid (robust to holes and L-shaped clouds)
-    cell = max(float(np.sqrt(np.prod(np.maximum(extent, 1e-9)) / max(points.shape[0], 1))) * 4,
-               1e-9)
-    ij = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64)
-    occupied = np.unique(ij[:, 0] * (ij[:, 1].max() + 1) + ij[:, 1]).size
-    return float(np.sqrt(occupied * cell * cell / points.shape[0]))
 
 
 def select_plane_bandwidth(points, candidates=None, *, criterion="rice", trim=0.25,

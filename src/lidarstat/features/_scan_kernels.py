@@ -41,6 +41,7 @@ from __future__ import annotations
 import numpy as np
 from numba import prange
 
+from .._shared._geometry import scan_angles  # noqa: F401 (used by features._covariance)
 from .._shared._jit import njit_parallel
 
 #: Columns of :func:`scan_centroid_rows`'s output.
@@ -160,11 +161,3 @@ def scan_centroid_rows(pts, angles, rowpoint, indptr, idx, normals, major, senso
         # T2 = m c' S^-1 c with S = sums / (m - 1)
         out[r, S_T2] = mi * (mi - 1) * (cu * cu * svv - 2.0 * cu * cv * suv
                                         + cv * cv * suu) / det
-
-
-def scan_angles(pts, sensor):
-    """(N, 2) azimuth and elevation of every point seen from `sensor` (same origin)."""
-    q = pts - sensor
-    h = np.hypot(q[:, 0], q[:, 1])
-    return np.ascontiguousarray(np.stack([np.arctan2(q[:, 1], q[:, 0]),
-                                          np.arctan2(q[:, 2], h)], axis=1))

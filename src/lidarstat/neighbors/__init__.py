@@ -7,8 +7,9 @@ are found by :func:`find_duplicates` (the policy of the local models is in
 
 from ._budget import max_pairs
 from ._csr import Neighborhoods
+from ._drivers import Drivers, make_drivers
 from ._duplicates import Duplicates, find_duplicates
 from ._query import CellIndex, knn_neighbors, radius_neighbors
 
 __all__ = ["Neighborhoods", "CellIndex", "radius_neighbors", "knn_neighbors",
-           "Duplicates", "find_duplicates", "max_pairs"]
+           "Duplicates", "find_duplicates", "max_pairs", "Drivers", "make_drivers"]

@@ -47,7 +47,24 @@ Drivers = namedtuple("Drivers", ["block", "cells"])
 
 
 def make_drivers(fit_point, workspace, skip) -> Drivers:
-    """The CSR-block and fused-cell drivers of one per-point fit (module docstring)."""
+    """The CSR-block and fused-cell drivers of one per-point fit.
+
+    Parameters
+    ----------
+    fit_point : numba dispatcher
+        ``fit_point(i, pts, idx, dist, s, e, r, params, ws, buf, outs)``: fits point ``i``
+        from its neighbours ``idx[s:e]`` and writes output row ``r`` of `outs`.
+    workspace : numba dispatcher
+        ``workspace(params)``: the per-thread scratch arrays (a tuple).
+    skip : numba dispatcher
+        ``skip(r, outs)``: marks output row ``r`` as not fitted.
+
+    Returns
+    -------
+    Drivers
+        ``(block, cells)``: the loop over CSR rows and the fused grid search and fit over
+        the cells of a :class:`CellIndex` (signatures in the module docstring).
+    """
     @njit_parallel
     def block(pts, query, indptr, idx, dist, params, outs):
         mq = query.size

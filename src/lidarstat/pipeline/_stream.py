@@ -32,10 +32,10 @@ from typing import Callable
 import numpy as np
 
 from .._shared._atomic import unnamed_file
+from .._shared._tiles import TileGrid, _fields_of
 from .._shared.validation import check_option, check_scalar
 from ..errors import InvalidPointsError
 from ..io import iter_chunks, rewrite
-from ._tiles import TileGrid, _fields_of
 
 _REC = np.dtype([("i", "<i8"), ("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("core", "u1")])
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from .._shared._atomic import atomic_path
@@ -44,3 +46,24 @@ def plot_forward_search(res, path, *, title=None):
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", bbox_inches="tight")
     plt.close(fig)
+
+
+def plot_forward_search_units(folder, units, *, limit: int = 40) -> None:
+    """Monitoring plots ``fs_NNNN.png`` of the Forward Search of the first `limit` units.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Created if missing.
+    units : sequence of SurfaceUnit
+        Refined units in segment order (``Segmentation.units`` of
+        :func:`lidarstat.segment.segment_sar`), segment ``s`` is ``units[s - 1]``.
+    limit : int, optional
+        At most this many plots.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    for s, unit in enumerate(units[:limit], start=1):
+        plot_forward_search(unit.fs, folder / f"fs_{s:04d}.png",
+                            title=f"segment {s}: n_s={unit.n_s}, n_sa={unit.n_sa}, m={unit.m}, "
+                                  f"stop: {unit.fs.stop_reason}")

@@ -33,6 +33,7 @@ import numpy as np
 from .._shared import _memory as _mem
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
+from ..features import PointClass
 from ..neighbors import Neighborhoods
 from ..neighbors._duplicates import check_copies
 from . import _edge_kernels as _ek
@@ -392,22 +393,18 @@ def surface_tested(feats, classes):
     return (classes.point_class != 0) & (low | consistent)
 
 
-def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, alpha=0.05,
-                       boundary_alpha=None, curvature_threshold=None, variance_threshold=None,
-                       curved="cylinder", curved_alpha=None, adaptive_scale=True, min_size=50,
-                       grow_k=20, seeds="curvature", min_angle=20.0, reintegration=True,
-                       lines=True, refine=True, result=None,
-                       noise_estimate=None) -> Segmentation:
-    """Covariance classification, region growing (Fig. 4), intersection lines (eq. 9-17).
+def segment_covariance(points, result, *, adaptive_scale=True, min_size=50, grow_k=20,
+                       seeds="curvature", min_angle=20.0, reintegration=True, lines=True,
+                       refine=True) -> Segmentation:
+    """Region growing (Fig. 4) and intersection lines (eq. 9-17) of a covariance classification.
 
     Parameters
     ----------
     points : (N, 3) array_like
-    k, radius, sensor, sigma, alpha, boundary_alpha, curvature_threshold, variance_threshold
-        As for :func:`lidarstat.classify.covariance`.
-    curved, curved_alpha, noise_estimate
-        The consistent-curvature test, its level and the range-noise estimate (as for
-        :func:`lidarstat.classify.classify_covariance`).
+    result : CovarianceClassification
+        The classification of `points` by :func:`lidarstat.classify.covariance`, computed
+        with ``keep_neighbors=True`` (its noise, levels, sensor and neighbourhoods are the
+        segmentation's).
     adaptive_scale : bool
         Also grow through each point's largest planar neighbourhood prefix
         (:func:`lidarstat.segment._scales.planar_scales`: 8 to k nearest, plane test at
@@ -434,8 +431,6 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         on connected strips, kept when the plane is identified and passes the plane test).
     lines : bool
         Compute the intersection lines.
-    result : CovarianceClassification, optional
-        A classification computed before with ``keep_neighbors=True`` (skips that step).
 
     Returns
     -------
@@ -449,8 +444,6 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         segment), ``NormalX/Y/Z``,
         ``SurfaceVariation``.
     """
-    from ..classify import PointClass, covariance
-
     func = "segment_covariance"
     pts = check_points(points)
     check_copies(pts, what=func)  # neighbors/_duplicates.py
@@ -461,13 +454,6 @@ def segment_covariance(points, *, k=50, radius=None, sensor=None, sigma=None, al
         raise InvalidParameterError(
             f"The 'seeds' parameter of {func} must be one of 'curvature', 'index'. "
             f"Got {seeds!r} instead.")
-    if result is None:
-        result = covariance(pts, k=k, radius=radius, sensor=sensor, sigma=sigma, alpha=alpha,
-                            boundary_alpha=boundary_alpha,
-                            curvature_threshold=curvature_threshold,
-                            variance_threshold=variance_threshold, curved=curved,
-                            curved_alpha=curved_alpha, keep_neighbors=True,
-                            noise_estimate=noise_estimate)
     feats, classes = result.features, result.classes
     # the segment-level models (whole-segment planes and cylinders, their borders and
     # lines) use the classification's segment scale when it has one: with the estimated

@@ -64,7 +64,7 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_size=30):
 
 def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
                       grow_radius=None, min_size=30, refine=False, threshold=None,
-                      w_radius=None, fs_alpha=0.001, diagnostics=None, curv=None,
+                      w_radius=None, fs_alpha=0.001, curv=None,
                       frame="z", noise=None, sensor=None):
     """Segment by tested curvature classes, optionally refined by SAR-FS (seed 000).
 
@@ -87,7 +87,7 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
     refine : bool
         Refine the raw clusters by SAR-FS (polynomial order 1 for planar units, 2 for
         the others) and intersect adjacent surfaces.
-    threshold, w_radius, fs_alpha, diagnostics
+    threshold, w_radius, fs_alpha
         Refinement settings (:func:`refine_raw_clusters`); defaults radius and radius / 2.
     curv : CurvatureResult, optional
         Precomputed curvature of `points`.
@@ -153,7 +153,7 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
                               threshold=radius if threshold is None else threshold,
                               w_radius=radius / 2.0 if w_radius is None else w_radius,
                               degrees=degrees, alpha=fs_alpha,
-                              min_size=min_size, diagnostics=diagnostics)
+                              min_size=min_size)
     # type of each refined unit = type of its raw cluster
     raw_of = np.array([int(np.bincount(labels[u.raw]).argmax()) for u in seg.units], dtype=int)
     seg.table["surface_type"] = types[raw_of - 1] if raw_of.size else np.zeros(0, np.uint8)

@@ -4,7 +4,7 @@ A segment's axis is the direction its normals are perpendicular to: the eigenvec
 the smallest eigenvalue of ``sum n n'`` over its points (for a plane every in-plane
 direction qualifies, and the projected circle degenerates to a line). The points are
 projected on the plane perpendicular to the axis and a circle is fitted as in the
-consistent-curvature test (:mod:`lidarstat.classify._cylinder`: algebraic start,
+consistent-curvature test (:func:`lidarstat.features.cylinder_test`: algebraic start,
 Gauss-Newton on the geometric residuals weighted by the per-point noise). A segment is a
 *cylinder* when the circle explains significantly more than a straight line does (the
 plane), ``F = ((RSS_line - RSS_circle) / 1) / (RSS_circle / (n - 3))`` against
@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import special as _sp
 
-from ..classify._cylinder import cylinder_test
+from ..features import cylinder_test
 
 
 def group_outer(vectors, groups, m):

@@ -73,12 +73,6 @@ class ForwardSearchResult:
     stop_reason: str
     theta: np.ndarray
 
-    def plot(self, path, *, title=None):
-        """Write the monitoring plots (deletion residual and F against m) as a PNG."""
-        from ..report._fs_plots import plot_forward_search
-
-        plot_forward_search(self, path, title=title)
-
 
 def _truncation_factor(p):
     """Variance of a standard normal truncated to its central fraction p."""

@@ -9,8 +9,7 @@ from scipy import stats as _st
 
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
-from ..features import FitStatus, jets
-from ..features._jets import JET_FIELDS, MONGE_NAMES
+from ..features import JET_FIELDS, MONGE_NAMES, FitStatus, jets
 from ..io import register_field_descriptions
 from ..neighbors import knn_neighbors, radius_neighbors
 from ..neighbors._duplicates import check_copies, find_duplicates, map_rows, run_on_unique

@@ -18,12 +18,12 @@ import dataclasses
 import logging
 import time
 import warnings
-from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 from scipy import stats as _st
 
+from .._shared._geometry import mean_spacing as _mean_spacing
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatWarning
 from ..neighbors import radius_neighbors
@@ -44,12 +44,6 @@ SIGMA_RATIO = 1.25
 
 #: Forward Search stop reasons written to the table (``fs_stop``).
 STOP_CODES = {"exhausted": 0, "f": 1, "residual": 2, "not searched": 3}
-
-
-def _mean_spacing(points):
-    from ..features._plane_regression import _mean_spacing as ms
-
-    return ms(points)
 
 
 def _two_hop_contacts(graph, labels):
@@ -694,8 +688,7 @@ def _units_noise(sd, sigma_local):
 def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, max_degree=3,
                         alpha=0.001, alpha_residual=0.001, stop="both", block=1,
                         max_steps=500, min_size=10, merge_alpha=0.01, outlier_alpha=0.01,
-                        sigma=None, gof_alpha=0.001, graph=None, diagnostics=None,
-                        progress=None):
+                        sigma=None, gof_alpha=0.001, graph=None, progress=None):
     """SAR-FS refinement of given raw clusters; returns a :class:`Segmentation`.
 
     Parameters
@@ -740,8 +733,6 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
         ``gof_p``, ``scale_ratio``, ``split``). None: no test.
     graph : tuple, optional
         Precomputed :func:`delaunay_graph`.
-    diagnostics : path, optional
-        Folder for the Forward Search monitoring plots (``fs_NNNN.png``, 40 largest units).
     progress : callable, optional
         ``progress(done, total)`` after each cluster.
     """
@@ -838,13 +829,6 @@ def refine_raw_clusters(points, raw_labels, *, threshold, w_radius, degrees=1, m
         lines = intersection_lines(points, labels, kept, pts_c, seg_c, max_shift=threshold)
     else:
         lines = Polylines([], {})
-    if diagnostics is not None:
-        folder = Path(diagnostics)
-        folder.mkdir(parents=True, exist_ok=True)
-        for s, unit in enumerate(kept[:40], start=1):
-            unit.fs.plot(folder / f"fs_{s:04d}.png",
-                         title=f"segment {s}: n_s={unit.n_s}, n_sa={unit.n_sa}, m={unit.m}, "
-                               f"stop: {unit.fs.stop_reason}")
     residual = np.full(n, np.nan)
     for s, unit in enumerate(kept, start=1):
         mine = labels[unit.accepted] == s
@@ -865,7 +849,7 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
                 fs_alpha=0.001, alpha_residual=0.001, stop="both", degree=1, max_degree=3,
                 adaptive="multiscale", grow_radius=None, threshold=None, w_radius=None,
                 min_size=30, block=1, max_steps=500, outlier_alpha=0.01, gof_alpha=0.001,
-                diagnostics=None, progress=None, rng=0):
+                progress=None, rng=0):
     """Segment a cloud into planar (or polynomial) surface units by SAR-FS (seed 002).
 
     Parameters
@@ -913,8 +897,6 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
     gof_alpha : float or None
         Level of the per-segment goodness-of-fit test against the noise `sigma` (given or
         estimated) and of the split of the segments it rejects (:func:`refine_raw_clusters`).
-    diagnostics : path, optional
-        Folder for the Forward Search plots.
     progress : callable, optional
         ``progress(done, total)``.
     rng : int or Generator
@@ -968,7 +950,7 @@ def segment_sar(points, *, bandwidth=None, sigma=None, alpha=0.05, edge_alpha=0.
                                   max_steps=max_steps, min_size=min_size, graph=graph,
                                   outlier_alpha=outlier_alpha,
                                   sigma=float(np.sqrt(fit.sigma2)), gof_alpha=gof_alpha,
-                                  diagnostics=diagnostics, progress=progress)
+                                  progress=progress)
         return fit, seg
 
     fit, seg = one_pass(sigma)

@@ -26,7 +26,7 @@ import scipy.sparse as sp
 from scipy.special import ndtri
 from scipy.spatial import cKDTree
 
-from ..stats._sar import PolynomialBasis, SARFit, sar_fit, sar_trend, select_degree
+from ..stats import PolynomialBasis, SARFit, sar_fit, sar_trend, select_degree
 from ._forward_search import ForwardSearchResult, forward_search
 
 #: Largest subset on which rho is estimated by full ML; larger clusters estimate rho on

@@ -27,7 +27,7 @@ import numpy as np
 from scipy import special as _sp
 
 from .._shared._jit import njit_parallel
-from ..features._quadric_kernels import _eigh3
+from .._shared._kernels import eigh3 as _eigh3
 
 _CHUNK = 256  # points per parallel task (scratch arrays allocated once per task)
 

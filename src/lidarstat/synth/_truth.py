@@ -137,8 +137,9 @@ class SyntheticCloud:
     attributes : dict of str to ndarray
         Simulated *sensor* attributes under laspy's standard names (``intensity``,
         ``return_number``, ``number_of_returns``, ``classification``, ``scan_angle``,
-        ``gps_time``, ...); they become a :class:`lidarstat.io.PointCloud`'s attributes
-        (standard LAS dimensions) via :meth:`to_pointcloud`.
+        ``gps_time``, ...); as the attributes of a :class:`lidarstat.io.PointCloud`
+        (``PointCloud(xyz=scene.xyz, attributes=scene.attributes)``) they are written to
+        the standard LAS dimensions.
     """
 
     xyz: np.ndarray
@@ -223,22 +224,6 @@ class SyntheticCloud:
             "face": self.face.copy(),
             **{k: np.array(v) for k, v in self.fields.items()},
         }
-
-    def to_pointcloud(self):
-        """A :class:`lidarstat.io.PointCloud` of the (noisy) coordinates with the simulated
-        sensor :attr:`attributes` (``intensity``, ``classification``, ... become the
-        standard LAS dimensions when written).
-
-        Examples
-        --------
-        >>> from lidarstat.synth import make_plane
-        >>> make_plane(extent=0.2, spacing=0.1).to_pointcloud().xyz.shape
-        (9, 3)
-        """
-        from ..io import PointCloud
-
-        return PointCloud(xyz=np.array(self.xyz),
-                          attributes={k: np.array(v) for k, v in self.attributes.items()})
 
 
 def _build(*, xyz_true, normal, K, H, face, edge_distance, sigma, rng, name, meta,

@@ -1,5 +1,8 @@
 """Planimetric tiles with halos, and running a per-point method tile by tile.
 
+Published as :mod:`lidarstat.pipeline`; the tile driver lives below every method so that a
+method that is tiled by construction (the moments classification) can use it.
+
 Every lidarstat method is a function of each point's neighbourhood, so a tile extended
 by a halo at least as wide as the neighbourhood gives its core points exactly the answer
 the whole cloud gives. Tiles run one after the other, in threads (the Numba kernels

@@ -1,0 +1,69 @@
+"""Numba kernels shared by several subpackages (features, classify, segment).
+
+:func:`eigh3` is the one 3x3 symmetric eigen-solver of the local models (covariance
+normals, PCA frames of the quadric and jet fits, the visible-boundary and scale kernels).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._jit import njit
+
+__all__ = ["eigh3"]
+
+
+@njit
+def eigh3(a, evals, evecs):
+    """Cyclic Jacobi eigen-decomposition of a symmetric 3x3 matrix (ascending order).
+
+    `a` is overwritten. Columns of `evecs` are the eigenvectors.
+    """
+    for i in range(3):
+        for j in range(3):
+            evecs[i, j] = 1.0 if i == j else 0.0
+    for _sweep in range(50):
+        off = a[0, 1] * a[0, 1] + a[0, 2] * a[0, 2] + a[1, 2] * a[1, 2]
+        diag = a[0, 0] * a[0, 0] + a[1, 1] * a[1, 1] + a[2, 2] * a[2, 2]
+        if off <= 1e-30 * diag or off == 0.0:
+            break
+        for p in range(2):
+            for q in range(p + 1, 3):
+                apq = a[p, q]
+                if apq == 0.0:
+                    continue
+                theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+                t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
+                if theta < 0:
+                    t = -t
+                c = 1.0 / np.sqrt(t * t + 1.0)
+                s = t * c
+                for k in range(3):
+                    akp = a[k, p]
+                    akq = a[k, q]
+                    a[k, p] = c * akp - s * akq
+                    a[k, q] = s * akp + c * akq
+                for k in range(3):
+                    apk = a[p, k]
+                    aqk = a[q, k]
+                    a[p, k] = c * apk - s * aqk
+                    a[q, k] = s * apk + c * aqk
+                for k in range(3):
+                    vkp = evecs[k, p]
+                    vkq = evecs[k, q]
+                    evecs[k, p] = c * vkp - s * vkq
+                    evecs[k, q] = s * vkp + c * vkq
+    for i in range(3):
+        evals[i] = a[i, i]
+    # sort ascending (insertion sort on 3 items, columns follow)
+    for i in range(1, 3):
+        j = i
+        while j > 0 and evals[j - 1] > evals[j]:
+            tmp = evals[j - 1]
+            evals[j - 1] = evals[j]
+            evals[j] = tmp
+            for k in range(3):
+                tv = evecs[k, j - 1]
+                evecs[k, j - 1] = evecs[k, j]
+                evecs[k, j] = tv
+            j -= 1
