@@ -27,7 +27,7 @@ from numba import prange
 from .._shared._columns import column_max, column_min
 from .._shared._grid_knn import _CELL_CHUNK, _block_ranges, _count, _knn_point, _scratch
 from .._shared._jit import njit, njit_parallel
-from ..neighbors._duplicates import find_duplicates
+from ..neighbors import find_duplicates
 from ._surface import cell_keys, cell_order
 
 __all__ = ["raised_patches"]

@@ -832,7 +832,7 @@ def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None
     True
     """
     from ..features import covariance_features
-    from ..neighbors._duplicates import find_duplicates, map_rows, run_on_unique
+    from ..neighbors import find_duplicates, map_rows, run_on_unique
 
     pts = check_points(points)
     dup = find_duplicates(pts)

@@ -238,10 +238,10 @@ def _check_raster(shape, cell):
     points: two small areas 100 km apart made a 100,000 x 100,000 raster (75 GB).
     """
     from ..errors import InvalidPointsError
-    from ..neighbors._budget import _physical_memory
+    from .._shared._memory import physical_memory
 
     cells = int(shape[0]) * int(shape[1])
-    limit = (_physical_memory() or 8 << 30) // 4
+    limit = (physical_memory() or 8 << 30) // 4
     if cells * _RASTER_CELL_BYTES > limit:
         raise InvalidPointsError(
             f"the cloud spans {shape[0] * cell:,.0f} x {shape[1] * cell:,.0f} coordinate "

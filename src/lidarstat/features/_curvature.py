@@ -13,7 +13,7 @@ from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InsufficientNeighborsError, InvalidParameterError
 from ..io import register_field_descriptions
 from ..neighbors import CellIndex
-from ..neighbors._duplicates import copies_degenerate, find_duplicates, run_on_unique
+from ..neighbors import copies_degenerate, find_duplicates, run_on_unique
 from . import _curvature_kernels as _ck
 from . import _quadric_kernels as _k
 from ._hk import SurfaceType, hk_surface_types

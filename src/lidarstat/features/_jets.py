@@ -11,7 +11,7 @@ from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InsufficientNeighborsError, InvalidParameterError
 from ..io import register_field_descriptions
 from ..neighbors import CellIndex, Neighborhoods, knn_neighbors
-from ..neighbors._duplicates import find_duplicates, map_rows, run_on_unique
+from ..neighbors import find_duplicates, map_rows, run_on_unique
 from ..stats import variance_test_satterthwaite
 from . import _jet_kernels as _jk
 from ._curvature import NOISE, height_variance

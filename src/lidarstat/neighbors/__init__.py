@@ -8,8 +8,10 @@ are found by :func:`find_duplicates` (the policy of the local models is in
 from ._budget import max_pairs
 from ._csr import Neighborhoods
 from ._drivers import Drivers, make_drivers
-from ._duplicates import Duplicates, find_duplicates
+from ._duplicates import (Duplicates, check_copies, copies_degenerate, find_duplicates,
+                          map_rows, refuse_dominated, run_on_unique)
 from ._query import CellIndex, knn_neighbors, radius_neighbors
 
 __all__ = ["Neighborhoods", "CellIndex", "radius_neighbors", "knn_neighbors",
-           "Duplicates", "find_duplicates", "max_pairs", "Drivers", "make_drivers"]
+           "Duplicates", "find_duplicates", "check_copies", "copies_degenerate", "map_rows",
+           "refuse_dominated", "run_on_unique", "max_pairs", "Drivers", "make_drivers"]

@@ -26,19 +26,13 @@ import os
 import numpy as np
 
 from ..errors import InvalidParameterError, TooManyNeighborsError
+from .._shared._memory import physical_memory
 
 #: Bytes of one neighbour pair in a CSR neighbourhood (int64 index + float64 distance).
 PAIR_BYTES = 16
 
 #: Fallback ceiling when the physical memory is unknown.
 _DEFAULT_PAIRS = 1 << 28
-
-
-def _physical_memory() -> int | None:
-    try:
-        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
-    except (AttributeError, ValueError, OSError):
-        return None
 
 
 def max_pairs() -> int:
@@ -62,7 +56,7 @@ def max_pairs() -> int:
             raise InvalidParameterError(
                 f"LIDARSTAT_MAX_PAIRS must be a positive integer; got {env!r}")
         return value
-    mem = _physical_memory()
+    mem = physical_memory()
     if not mem:
         return _DEFAULT_PAIRS
     return max(1 << 26, mem // 4 // PAIR_BYTES)

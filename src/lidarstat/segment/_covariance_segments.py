@@ -35,7 +35,7 @@ from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..features import PointClass
 from ..neighbors import Neighborhoods
-from ..neighbors._duplicates import check_copies
+from ..neighbors import check_copies
 from . import _edge_kernels as _ek
 from ._grow import grow_regions
 from ._result import Polylines, Segmentation

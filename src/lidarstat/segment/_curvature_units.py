@@ -15,7 +15,7 @@ import numpy as np
 
 from .._shared.validation import check_points, check_scalar
 from ..neighbors import radius_neighbors
-from ..neighbors._duplicates import check_copies
+from ..neighbors import check_copies
 from ._grow import components, relabel
 from ._result import Segmentation, segment_table
 

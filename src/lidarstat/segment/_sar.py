@@ -27,7 +27,7 @@ from .._shared._geometry import mean_spacing as _mean_spacing
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatWarning
 from ..neighbors import radius_neighbors
-from ..neighbors._duplicates import check_copies
+from ..neighbors import check_copies
 from ._grow import relabel
 from ._intersect import intersection_lines
 from ._raw_clusters import raw_clusters
