@@ -402,7 +402,7 @@ def strip_segments(points, labels, nbh, sigma, *, candidates, sensor=None, alpha
     (N,) ndarray of int32
         Labels with the accepted planes added as new ids after the existing ones.
     """
-    from ._grow import components, relabel
+    from ._grow import relabel
 
     labels = np.asarray(labels).astype(np.int32, copy=True)
     pts = np.asarray(points, dtype=np.float64)

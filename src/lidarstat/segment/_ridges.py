@@ -11,8 +11,13 @@ from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..features import JET_FIELDS, MONGE_NAMES, FitStatus, jets
 from ..io import register_field_descriptions
-from ..neighbors import knn_neighbors, radius_neighbors
-from ..neighbors import check_copies, find_duplicates, map_rows, run_on_unique
+from ..neighbors import (
+    check_copies,
+    find_duplicates,
+    knn_neighbors,
+    map_rows,
+    run_on_unique,
+)
 from . import _ridge_kernels as _rk
 from ._grow import components
 from ._result import Polylines, Segmentation, segment_table
