@@ -75,7 +75,8 @@ ENTRY_POINTS = {
     "moments": lambda p: classify_moments(p, None),
     "segment_curvature": lambda p: segment_curvature(p, radius=0.4, sigma=SIGMA),
     "segment_sar": lambda p: segment_sar(p, bandwidth=0.5, sigma=SIGMA),
-    "segment_covariance": lambda p: segment_covariance(p, k=20),
+    "segment_covariance": lambda p: segment_covariance(p, covariance(p, k=20,
+                                                                     keep_neighbors=True)),
 }
 
 
@@ -120,8 +121,13 @@ def test_ridges_name_the_real_reason():
 
 
 def test_segmentation_refuses_copies_with_counts():
-    with pytest.raises(DuplicatePointsError, match=r"20,000 points share 1 location \(100% "):
-        segment_covariance(CLOUDS["copies"], k=20)
+    """A cloud that is mostly copies: keeping every point's neighbourhood for the region
+    growing would search every copy, so it is refused with the counts."""
+    plane = CLOUDS["coplanar"]
+    pts = np.vstack([plane, np.tile([[100.0, 100.0, 0.0]], (20000, 1))])
+    with pytest.raises(DuplicatePointsError,
+                       match=r"up to 20,000 at one\) \(93% of them are copies\)"):
+        segment_covariance(pts, covariance(pts, k=20, sigma=0.01, keep_neighbors=True))
 
 
 def _equal_fields(a, b):

@@ -48,6 +48,8 @@ Three tests, each written beside the label as a p-value (see docs/methods/covari
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -832,11 +834,17 @@ def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None
     True
     """
     from ..features import covariance_features
-    from ..neighbors import find_duplicates, map_rows, run_on_unique
+    from ..neighbors import (find_duplicates, map_rows, max_pairs, refuse_dominated,
+                             run_on_unique)
 
     pts = check_points(points)
     dup = find_duplicates(pts)
-    if dup.any and not keep_neighbors:
+    if dup.any and keep_neighbors:
+        # the neighbourhoods of every point are kept: each copy is searched, so a cloud
+        # dominated by copies is refused (as by the segmentations that need them)
+        refuse_dominated(dup, what="covariance with keep_neighbors",
+                         max_copies=math.isqrt(max_pairs()))
+    elif dup.any:
         # every location once, its result to every point at it (neighbors/_duplicates.py)
         res = run_on_unique(dup, lambda: covariance(
             pts[dup.first], k=k, radius=radius, sensor=sensor, sigma=sigma, noise=noise,
