@@ -28,13 +28,13 @@ Three tests, each written beside the label as a p-value (see docs/methods/covari
    neighbourhood in linearised scan coordinates (:mod:`lidarstat.features._scan_kernels`),
    where an interior point of any scan pattern is the centre of a centrally symmetric set
    of grid nodes. With a sensor and the points the default is ``boundary='grid'``
-   (session 6, :func:`._visible.grid_boundary`): not a symptom of the border but its
+   (:func:`._visible.grid_boundary`): not a symptom of the border but its
    distance - border points are estimated on the scan grid (no return, the scan window,
    a depth jump the continuity test rejects between two resolved surfaces, unless a
    recess face the grid did not sample explains it; on a pipe at its silhouette) and a
    point closer than ``border_band`` (0.5) of its neighbourhood's reach is a boundary,
    boundary winning over edge; written as ``border_distance`` / ``border_kind`` /
-   ``border_p``. ``boundary='visible'`` (session 5's default, :mod:`._visible`): the
+   ``border_p``. ``boundary='visible'`` (:mod:`._visible`): the
    complete disc gathered on the scan grid, over grid edges that pass a
    range-continuity test (a crease keeps the range continuous, an occlusion does not),
    written as ``jump_z`` / ``jump_p``. Both run on surface points (0.05 visible, 0.01
@@ -556,7 +556,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         ``'smooth'`` (default when `points` are given) from the residuals of the best
         smooth model (cylinder or plane) of every neighbourhood,
         :func:`estimate_smooth_range_noise`; ``'median'`` from the plane residuals,
-        :func:`estimate_range_noise` (session 4's default, inflated where curved surfaces
+        :func:`estimate_range_noise` (inflated where curved surfaces
         fill a range bin).
 
     Returns

@@ -497,7 +497,7 @@ def visible_boundary(points, sensor, normals, major, ray_sigma, radius, *, jump_
 
 
 # ---------------------------------------------------------------------------------------
-# The 'grid' boundary test: the distance to the end of the visible surface (session 6)
+# The 'grid' boundary test: the distance to the end of the visible surface
 # ---------------------------------------------------------------------------------------
 
 #: The eight unit offsets of a grid node's neighbours, in (azimuth, elevation) steps.

@@ -201,7 +201,7 @@ def _knn_cell_size(points, k, rng=0, sample=4000, min_k=12, min_tree=200_000):
     The thinning's tree is most of this function's time: at 2M points and k = 50, ``min_k``
     24 / ``min_tree`` 400k (a 940k-point tree) took 0.38-0.43 s, 12 / 200k (450k points)
     0.16 s, with a 4 % larger cell, the same kNN time within its run-to-run spread and
-    bit-identical features and neighbourhoods (session 7).
+    bit-identical features and neighbourhoods.
     """
     from scipy.spatial import cKDTree
 

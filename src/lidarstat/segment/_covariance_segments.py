@@ -457,7 +457,7 @@ def segment_covariance(points, result, *, adaptive_scale=True, min_size=50, grow
     feats, classes = result.features, result.classes
     # the segment-level models (whole-segment planes and cylinders, their borders and
     # lines) use the classification's segment scale when it has one: with the estimated
-    # range noise, session 4's plane-median line (noise plus the typical model error of a
+    # range noise, the plane-median line (noise plus the typical model error of a
     # real scan's surfaces, never below the noise; docs/methods/covariance.md)
     seg_sigma = classes.meta.get("segment_sigma", classes.sigma)
     nbh = feats.neighborhoods

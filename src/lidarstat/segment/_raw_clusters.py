@@ -128,7 +128,7 @@ def raw_clusters(points, fit, neighborhoods, *, alpha=0.01, min_size=10, core=No
     """Region growing of raw clusters on the tested plane agreement (section 5.2).
 
     Connected components of the accepted edges among growable points (union-find,
-    deterministic ids by decreasing size, the lead's :func:`components` kernel);
+    deterministic ids by decreasing size, the :func:`components` kernel);
     clusters smaller than `min_size` are dropped (label 0).
 
     With `core` (e.g. the points whose plane passed at the full bandwidth of a

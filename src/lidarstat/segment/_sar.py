@@ -295,8 +295,8 @@ def _outlier_test(points, labels, units, alpha):
     outlier does not mask the others. The raw clusters' points are not tested: the local
     tests accepted them. The segment's reported surface stays the raw cluster's.
 
-    *Why a fixed scale* (session 5): with the leave-one-out scale ``s_(i)`` of the points
-    still kept (Pope's tau test, the session-4 version), every removal truncates the
+    *Why a fixed scale*: with the leave-one-out scale ``s_(i)`` of the points
+    still kept (Pope's tau test), every removal truncates the
     sample and shrinks the scale, so the next points cross the critical value: on the
     158k synthetic town that cascade raised the rate on true roof points from 1.12 % (one
     pass) to 1.73 % at alpha = 0.01 (docs/methods/sar.md). The MAD is neither inflated by
