@@ -170,8 +170,7 @@ def test_smooth_range_noise_is_not_inflated_by_pipes_and_tanks():
     """The range noise of tls_plant (default step; truth 0.002 + 5e-5 r) from the
     residuals of the best smooth model (cylinder, the plane its limit) is within 10 % of
     the truth at 8, 15 and 22 m; the medians of the plane residuals, where pipes and tanks
-    fill a range bin, are more than 1.5 times too large at 15 and 22 m (session 4's
-    estimate, b = 2.9e-4). (At step 0.004 the k = 50 neighbourhoods of the pipe rack
+    fill a range bin, are more than 1.5 times too large at 15 and 22 m (b = 2.9e-4). (At step 0.004 the k = 50 neighbourhoods of the pipe rack
     straddle two pipes and a support, most of its range bin is edges, and the smooth
     estimate is 1.3-1.7 times too large there: docs/methods/covariance.md.)"""
     sc = make_tls_plant(rng=0)
@@ -183,7 +182,9 @@ def test_smooth_range_noise_is_not_inflated_by_pipes_and_tanks():
     a0, b0 = estimate_range_noise(f.eigenvalues, f.fields["neighbors"], f.ray_range, f.ray_cos)
     assert np.all((a0 + b0 * r)[1:] / truth[1:] > 1.5), (a0, b0)
     cl = classify_covariance(f, points=sc.xyz)
-    assert cl.meta["noise_estimate"] == "smooth" and cl.meta["range_noise"] == (a, b)
+    assert cl.meta["range_noise"] == (a, b) and cl.params["range_noise"] == [a, b]
+    with pytest.raises(InvalidParameterError, match="estimated from the `points`"):
+        classify_covariance(f, boundary="centroid")
 
 
 @pytest.mark.parametrize("make", [make_tls_building, make_tls_plant])
@@ -214,8 +215,10 @@ def test_bad_parameters(rng):
         classify_covariance(feats, alpha=1.5)
     with pytest.raises(InvalidParameterError, match="'sigma' parameter"):
         classify_covariance(feats, sigma=np.ones(3))
-    with pytest.raises(InvalidParameterError, match="'noise_estimate' parameter"):
-        classify_covariance(feats, noise_estimate="mean")
+    with pytest.raises(TypeError, match="noise_estimate"):
+        classify_covariance(feats, noise_estimate="median")
+    with pytest.raises(InvalidParameterError, match="'curved' parameter"):
+        classify_covariance(feats, curved="sphere")
     exact = np.c_[rng.uniform(0, 1, (200, 2)), np.zeros(200)]
     with pytest.raises(InvalidParameterError, match="estimated noise is 0"):
         classify_covariance(covariance_features(exact, k=10))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import enum
 import logging
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -18,7 +19,24 @@ from . import _scan_kernels as _sk
 
 logger = logging.getLogger(__name__)
 
-EIGEN_MODES = ("raw", "sqrt", "normalized")
+
+
+class EigenMode(str, enum.Enum):
+    """What the eigen features' ratios are computed from (PDAL's ``mode``,
+    ``--eigen-mode``)."""
+
+    #: The eigenvalues (jakteristics, CloudCompare).
+    RAW = "raw"
+    #: Their square roots (PDAL's default, pgeof).
+    SQRT = "sqrt"
+    #: The eigenvalues divided by their sum.
+    NORMALIZED = "normalized"
+
+    def __str__(self):
+        return self.value
+
+
+EIGEN_MODES = tuple(m.value for m in EigenMode)
 
 #: Per-point output fields, name -> (dtype, description). Names follow PDAL's
 #: ``filters.covariancefeatures`` / ``filters.normal`` / ``filters.eigenvalues``.
@@ -143,7 +161,7 @@ def eigen_features(evals, normal, major, *, mode="raw"):
         Eigenvalues in ascending order ``l0 <= l1 <= l2`` (``l0`` is the paper's lambda0).
     normal, major : (N, 3) ndarray
         Eigenvectors of ``l0`` and ``l2`` (the middle one is their cross product).
-    mode : {'raw', 'sqrt', 'normalized'}
+    mode : EigenMode or {'raw', 'sqrt', 'normalized'}
         What the ratios are computed from, as PDAL's ``mode`` option: the eigenvalues
         (jakteristics, CloudCompare), their square roots (PDAL's default, pgeof,
         Guinard and Landrieu 2017) or the eigenvalues divided by their sum.
@@ -153,7 +171,7 @@ def eigen_features(evals, normal, major, *, mode="raw"):
     -------
     dict of str -> (N,) ndarray
     """
-    check_option(mode, "mode", EIGEN_MODES, func="eigen_features")
+    mode = EigenMode(check_option(mode, "mode", EIGEN_MODES, func="eigen_features")).value
     raw = np.asarray(evals, dtype=np.float64)
     total = raw.sum(axis=1)
     if mode == "sqrt":
@@ -296,7 +314,7 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         Precomputed neighbourhoods (one row per point) instead of either.
     sensor : (3,) array_like, optional
         Scanner position; normals point toward it. Default: normals point up (+z).
-    eigen_mode : {'raw', 'sqrt', 'normalized'}
+    eigen_mode : EigenMode or {'raw', 'sqrt', 'normalized'}
         See :func:`eigen_features`.
     keep_neighbors : bool
         Keep the neighbourhoods in the result (for segmentation); kNN rows are sorted by
@@ -329,7 +347,8 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
     pts = check_points(points)
     n = pts.shape[0]
     sensor = _check_sensor(sensor, func)
-    check_option(eigen_mode, "eigen_mode", EIGEN_MODES, func=func)
+    eigen_mode = EigenMode(check_option(eigen_mode, "eigen_mode", EIGEN_MODES,
+                                        func=func)).value
     block_size = check_scalar(block_size, "block_size", func=func, low=1, closed="left",
                               integer=True)
     if neighborhoods is not None:

@@ -15,8 +15,8 @@ from ._sar_refine import SurfaceUnit, refine_cluster
 from ._intersect import intersection_lines
 from ._sar import refine_raw_clusters, segment_sar
 from ._curvature_units import curvature_units, segment_curvature
-from ._covariance_segments import (fit_lines, local_intersections, reintegrate, segment_covariance,
-                                   segment_planes)
+from ._covariance_lines import fit_lines, local_intersections
+from ._covariance_segments import SeedOrder, reintegrate, segment_covariance, segment_planes
 from ._ridges import RIDGE_FIELDS, RidgeResult, ridge_segments, ridges
 
 __all__ = ["Segmentation", "Polylines", "segment_table", "components", "grow_regions",
@@ -25,6 +25,6 @@ __all__ = ["Segmentation", "Polylines", "segment_table", "components", "grow_reg
            "ForwardSearchResult", "forward_search", "SearchAreas", "delaunay_graph",
            "search_areas", "RawClusters", "plane_edges", "raw_clusters", "SurfaceUnit",
            "refine_cluster", "intersection_lines", "refine_raw_clusters", "segment_sar",
-           "curvature_units", "segment_curvature", "segment_covariance", "segment_planes",
+           "curvature_units", "segment_curvature", "segment_covariance", "SeedOrder", "segment_planes",
            "local_intersections", "fit_lines", "reintegrate", "ridges", "ridge_segments",
            "RidgeResult", "RIDGE_FIELDS"]
