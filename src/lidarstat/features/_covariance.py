@@ -105,8 +105,8 @@ class CovarianceResult:
     scan_boundary : (N, 4) ndarray or None
         With a sensor: Hotelling T2 of the complete-disc centroid in linearised scan
         coordinates, the disc's point count m, its radius over the neighbourhood's and the
-        neighbourhood's reach (:mod:`lidarstat.features._scan_kernels`; the ``'scan'`` and
-        ``'visible'`` boundary tests).
+        neighbourhood's reach (:mod:`lidarstat.features._scan_kernels`; the reach is the
+        scale of the ``'grid'`` boundary test).
     """
 
     fields: dict
