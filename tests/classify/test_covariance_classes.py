@@ -5,11 +5,9 @@ import pytest
 from scipy.spatial import cKDTree
 
 from lidarstat.classify import PointClass, classify_covariance, covariance
-from lidarstat.classify._covariance import (
-    curved_surface_test,
-    estimate_range_noise,
-    estimate_smooth_range_noise,
-)
+from lidarstat.classify._covariance_noise import (estimate_range_noise,
+                                                  estimate_smooth_range_noise)
+from lidarstat.classify._covariance_tests import curved_surface_test
 from lidarstat.errors import InvalidParameterError
 from lidarstat.features import covariance_features
 from lidarstat.synth import make_tls_building, make_tls_plant
@@ -222,3 +220,27 @@ def test_bad_parameters(rng):
     exact = np.c_[rng.uniform(0, 1, (200, 2)), np.zeros(200)]
     with pytest.raises(InvalidParameterError, match="estimated noise is 0"):
         classify_covariance(covariance_features(exact, k=10))
+
+
+def test_enums_strings_and_params(rng):
+    """The choices take the enums or their strings; ``params`` records what was used; the
+    replay options of earlier versions are gone."""
+    from lidarstat.classify import BoundaryTest, CurvedTest
+    from lidarstat.features import EigenMode
+
+    pts = _plane(rng, n=1500)
+    a = covariance(pts, k=20, boundary=BoundaryTest.CENTROID, curved=CurvedTest.VARIATION,
+                   eigen_mode=EigenMode.SQRT)
+    b = covariance(pts, k=20, boundary="centroid", curved="variation", eigen_mode="sqrt")
+    assert np.array_equal(a.point_class, b.point_class)
+    assert np.array_equal(a["Linearity"], b["Linearity"], equal_nan=True)
+    p = a.params
+    assert (p["boundary"], p["curved"], p["eigen_mode"]) == ("centroid", "variation", "sqrt")
+    assert p["k"] == 20 and p["sensor"] is None and p["sigma_estimated"]
+    assert p["boundary_alpha"] == 0.001 and p["curved_alpha"] == p["alpha"] == 0.05
+    assert "centroid test at 0.001" in a.summary()
+    for gone in ("noise_estimate", "edge_boundary_alpha"):
+        with pytest.raises(TypeError, match=gone):
+            covariance(pts, k=20, **{gone: None})
+    with pytest.raises(InvalidParameterError, match="'eigen_mode' parameter"):
+        covariance(pts, k=20, eigen_mode="log")
