@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InvalidParameterError
-from ..stats import chi2_quantile
+from ..stats import chi2_critical
 from ._covariance_tests import _cylinder_axes, _neighbour_rows
 
 def estimate_plane_sigma(evals, counts):
@@ -33,7 +33,7 @@ def estimate_plane_sigma(evals, counts):
         raise InvalidParameterError("cannot estimate sigma: no neighbourhood has 4 points")
     ss = (n[ok] - 1) * l0[ok]
     df = float(np.median(n[ok])) - 3
-    med = chi2_quantile(0.5, df)  # median of chi2(df)
+    med = chi2_critical(0.5, df)  # median of chi2(df)
     return float(np.sqrt(np.median(ss) / med))
 
 
@@ -97,11 +97,11 @@ def estimate_range_noise(evals, counts, ray_range, ray_cos, *, bins=8,
         raise InvalidParameterError("cannot estimate the range noise: too few usable points")
     df = float(np.median(n[ok])) - 3
     rho, r, nn = rho[ok], ray_range[ok], n[ok]
-    a, b = _range_line(rho, r, chi2_quantile(0.5, df), bins)
-    trunc = chi2_quantile((1.0 - alpha) / 2, df)
+    a, b = _range_line(rho, r, chi2_critical(0.5, df), bins)
+    trunc = chi2_critical(1.0 - (1.0 - alpha) / 2, df)
     for _ in range(iterations):
         with np.errstate(invalid="ignore", divide="ignore"):
-            accepted = rho / (a + b * r) ** 2 < chi2_quantile(1.0 - alpha, nn - 3)
+            accepted = rho / (a + b * r) ** 2 < chi2_critical(alpha, nn - 3)
         a1, b1 = _range_line(rho, r, trunc, bins, keep=accepted)
         if not (np.isfinite(a1) and a1 + b1 * r.max() > 0 and a1 + b1 * r.min() > 0):
             break
@@ -159,7 +159,7 @@ def estimate_smooth_range_noise(points, features, *, bins=8, max_points=SMOOTH_N
     stat, dof, _ = cylinder_test(points, query, indptr, idx, _cylinder_axes(features, query),
                                  1.0, sensor=features.sensor, refine_axis=True)
     with np.errstate(invalid="ignore", divide="ignore"):
-        s2 = stat / chi2_quantile(0.5, np.where(dof > 0, dof, np.nan))
+        s2 = stat / chi2_critical(0.5, np.where(dof > 0, dof, np.nan))
     good = np.isfinite(s2)
     if good.sum() < 20:
         raise InvalidParameterError("cannot estimate the range noise: too few usable points")
