@@ -2,6 +2,7 @@
 Dask (local threads and a ``distributed`` LocalCluster of several worker processes)."""
 
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -208,3 +209,39 @@ def test_bad_catalogues_are_refused_before_any_work(tmp_path, make, error, words
     with pytest.raises(error, match=words):
         make(tmp_path, paths)
     assert all(p.read_bytes() == b for p, b in before.items())
+
+
+def test_copc_tiles_are_read_by_bounds_queries(tmp_path):
+    pytest.importorskip("copclib", reason="copclib (writes the COPC test files) is missing")
+    sys.path.insert(0, str(Path(__file__).parent))
+    from _copc import write_copc
+
+    from lidarstat.io import file_extent, read_window
+
+    las_tiles = _cut(_synthetic(8, n=6000), tmp_path / "las")
+    (tmp_path / "copc").mkdir()
+    for p in las_tiles:
+        c = read(p)
+        write_copc(tmp_path / "copc" / (p.stem + ".copc.laz"), c.xyz,
+                   c.attributes["intensity"], scale=c.las_header.scales.tolist())
+    extent = file_extent(tmp_path / "copc" / "tile_0_0.copc.laz")
+    assert extent.copc and extent.n_points == len(read(las_tiles[0]).xyz)
+    window = (extent.xmin, extent.ymin, extent.xmin + 7.0, extent.ymin + 5.0)
+    got = read_window(extent.path, window)
+    want = read_window(las_tiles[0], window)
+    assert len(got.xyz) == len(want.xyz) > 0
+    np.testing.assert_allclose(got.xyz[np.lexsort(got.xyz.T[::-1])],
+                               want.xyz[np.lexsort(want.xyz.T[::-1])], atol=1e-9)
+    runs = process_catalogue(_curvature_fields, tmp_path / "copc", tmp_path / "out",
+                             buffer=RADIUS, scheduler="sync",
+                             template="{stem}_curvature.laz")
+    assert sorted(r.output.name for r in runs)[0] == "tile_0_0_curvature.laz"
+    process_catalogue(_curvature_fields, tmp_path / "las", tmp_path / "ref", buffer=RADIUS,
+                      scheduler="sync")
+    for p in sorted((tmp_path / "ref").iterdir()):
+        a = read(p)
+        b = read(tmp_path / "out" / (p.stem + "_curvature.laz"))
+        ia, ib = np.lexsort(a.xyz.T[::-1]), np.lexsort(b.xyz.T[::-1])
+        np.testing.assert_allclose(b.xyz[ib], a.xyz[ia], atol=1e-9)
+        np.testing.assert_array_equal(b.attributes["surface_type"][ib],
+                                      a.attributes["surface_type"][ia])
