@@ -93,10 +93,13 @@ class BufferedTile:
         The tile's own points, every field of its file.
     buffer : PointCloud
         Points of the neighbouring tiles within the buffer distance of the tile's extent.
+    extent : FileExtent, optional
+        The tile's file: its path and header bounds.
     """
 
     core: PointCloud
     buffer: PointCloud
+    extent: FileExtent | None = None
 
     @property
     def n_core(self) -> int:
@@ -183,12 +186,12 @@ class Catalogue:
                  for j in self.neighbours(i, buffer)] if buffer > 0 else []
         parts = [p for p in parts if len(p.xyz)]
         if not parts:
-            return BufferedTile(core, PointCloud(np.empty((0, 3))))
+            return BufferedTile(core, PointCloud(np.empty((0, 3))), self.files[i])
         names = set.intersection(*(set(p.attributes) for p in parts))
         xyz = np.concatenate([p.xyz for p in parts])
         attrs = {n: np.concatenate([np.asarray(p.attributes[n]) for p in parts])
                  for n in names}
-        return BufferedTile(core, PointCloud(xyz, attrs))
+        return BufferedTile(core, PointCloud(xyz, attrs), self.files[i])
 
     def outputs(self, outdir, template: str = DEFAULT_TEMPLATE) -> list[Path]:
         """The output path of every tile; refused before any work when two tiles get one
