@@ -57,6 +57,21 @@ def test_cli_reference_escapes_table_cells():
     assert "tool cmd [options]" in text
 
 
+def test_fields_page_names_every_published_field():
+    # The field tables the library publishes (name -> (dtype, meaning)) are what the
+    # commands write; users' scripts rely on the names, so the manual must give each one.
+    from lidarstat.classify import COVARIANCE_CLASS_FIELDS
+    from lidarstat.features import COVARIANCE_FIELDS, FIELDS, JET_FIELDS
+    from lidarstat.segment import RIDGE_FIELDS
+
+    page = (DOCS / "fields.md").read_text(encoding="utf-8")
+    tables = {"curvature": FIELDS, "covariance": COVARIANCE_FIELDS, "jets": JET_FIELDS,
+              "covariance classes": COVARIANCE_CLASS_FIELDS, "ridges": RIDGE_FIELDS}
+    missing = [f"{table}: {name}" for table, fields in tables.items() for name in fields
+               if f"`{name}`" not in page]
+    assert not missing, "fields not documented in docs/fields.md: " + ", ".join(missing)
+
+
 def test_no_development_history_in_the_manual():
     pages = [ROOT / "README.md", *sorted(DOCS.glob("*.md")), DOCS / "methods" / "synthetic.md"]
     history = re.compile(r"session|the lead|quiet machine|used to|the old default",
