@@ -27,11 +27,11 @@ from sphinx.pycode import ModuleAnalyzer
 # The package from this checkout, before any installed copy.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
-import lidarstat  # noqa: E402
+import lidarstat
 
 project = "lidarstat"
 author = "lidarstat developers"
-copyright = "lidarstat developers"  # noqa: A001 -- the Sphinx setting's name
+copyright = "lidarstat developers"
 version = release = lidarstat.__version__
 
 extensions = [
