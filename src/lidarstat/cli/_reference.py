@@ -219,8 +219,9 @@ def _command(name: str, summary: str | None, parser: argparse.ArgumentParser,
         out += _table(main, parser.prog) + [""]
     for title, description, actions in groups:
         if title not in _DEFAULT_TITLES:
-            out += [f"Options of {_code(title)}" if title.startswith("-")
-                    else f"Options: {_escape(title)}", ""]
+            heading = "#" * (level + 1)
+            out += [f"{heading} Options of {_code(title)}" if title.startswith("-")
+                    else f"{heading} Options: {_escape(title)}", ""]
             if description:
                 out += [_escape(description), ""]
             out += _table(actions, parser.prog) + [""]
