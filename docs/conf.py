@@ -74,7 +74,8 @@ def _attribute_doc(package, name, obj):
     holds it (autodoc looks only in the module named in the directive, while the public
     constants are defined in private modules); ``([], None)`` when there is none."""
     modnames = [package.__name__]
-    modnames += [f"{package.__name__}.{m.name}" for m in pkgutil.iter_modules(package.__path__)]
+    modnames += [f"{package.__name__}.{m.name}"
+                 for m in pkgutil.iter_modules(getattr(package, "__path__", []))]
     for modname in modnames:
         if getattr(importlib.import_module(modname), name, None) is not obj:
             continue
