@@ -13,6 +13,7 @@ the argument parser by ``python -m lidarstat.cli._reference docs/cli.md``.
 
 from __future__ import annotations
 
+import enum
 import importlib
 import inspect
 import pkgutil
@@ -106,7 +107,8 @@ class LidarstatAPI(Directive):
     """``.. lidarstat-api:: lidarstat.io``: a summary table and the documentation of every
     name in the module's ``__all__``, in that order.
 
-    Classes are documented with their public members, functions with their signature,
+    Classes are documented with their public members (enumerations with every code),
+    functions with their signature,
     data with the ``#:`` comment of the private module that defines it (without its value,
     which is often a long table). A name re-exported from another public subpackage (e.g.
     ``lidarstat.classify.SurfaceType``, defined in ``lidarstat.features``) is documented
@@ -136,6 +138,8 @@ class LidarstatAPI(Directive):
         for name, obj, doc, elsewhere in entries:
             if inspect.isclass(obj):
                 lines += [f".. autoclass:: {name}", "   :members:", "   :show-inheritance:"]
+                if issubclass(obj, enum.Enum):  # the codes are a contract: list every one
+                    lines.append("   :undoc-members:")
             elif callable(obj):
                 lines += [f".. autofunction:: {name}"]
             else:
