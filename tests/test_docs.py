@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import re
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -55,6 +56,32 @@ def test_cli_reference_escapes_table_cells():
     assert r"p \< 0.05 \| \*bold\*" in row
     assert "`[{a,b}]`; alone: `a`" in text
     assert "tool cmd [options]" in text
+
+
+def _example_commands():
+    """Every ``lidarstat ...`` command line in the bash blocks of the user's pages."""
+    pages = [ROOT / "README.md", *sorted(DOCS.glob("*.md")), DOCS / "methods" / "synthetic.md"]
+    for page in pages:
+        blocks = re.findall(r"```bash\n(.*?)```", page.read_text(encoding="utf-8"), re.DOTALL)
+        for block in blocks:
+            for line in block.splitlines():
+                for part in line.split("#", 1)[0].split("&&"):
+                    words = shlex.split(part)
+                    if words[:1] == ["lidarstat"]:
+                        yield f"{page.relative_to(ROOT)}: {part.strip()}", words[1:]
+
+
+def test_example_commands_parse():
+    # The examples of the README and the manual use options that exist, with valid values.
+    examples = list(_example_commands())
+    assert len(examples) > 20
+    bad = []
+    for where, argv in examples:
+        try:
+            build_parser().parse_args(argv)
+        except SystemExit:
+            bad.append(where)
+    assert not bad, "example commands the parser refuses:\n" + "\n".join(bad)
 
 
 def test_fields_page_names_every_published_field():
