@@ -84,6 +84,14 @@ def test_example_commands_parse():
     assert not bad, "example commands the parser refuses:\n" + "\n".join(bad)
 
 
+def test_readme_links_resolve():
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    targets = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text)
+    assert targets
+    missing = [t for t in targets if "://" not in t and not (ROOT / t).exists()]
+    assert not missing, f"README links to missing files: {missing}"
+
+
 def test_fields_page_names_every_published_field():
     # The field tables the library publishes (name -> (dtype, meaning)) are what the
     # commands write; users' scripts rely on the names, so the manual must give each one.
