@@ -73,16 +73,19 @@ nitpicky = False
 def _attribute_doc(package, name, obj):
     """The ``#:`` comment documenting data member `name` of `package`, and the module that
     holds it (autodoc looks only in the module named in the directive, while the public
-    constants are defined in private modules); ``([], None)`` when there is none."""
+    constants are defined in private modules, sometimes under another name:
+    ``COVARIANCE_FIELDS`` is ``_covariance.FIELDS``); ``([], None)`` when there is none."""
     modnames = [package.__name__]
     modnames += [f"{package.__name__}.{m.name}"
                  for m in pkgutil.iter_modules(getattr(package, "__path__", []))]
     for modname in modnames:
-        if getattr(importlib.import_module(modname), name, None) is not obj:
-            continue
-        lines = ModuleAnalyzer.for_module(modname).find_attr_docs().get(("", name))
-        if lines:
-            return list(lines), modname
+        module = importlib.import_module(modname)
+        docs = ModuleAnalyzer.for_module(modname).find_attr_docs()
+        for (cls, attr), lines in docs.items():
+            # an alias counts unless the value is a scalar that two names may share
+            alias_ok = attr == name or not isinstance(obj, (int, float, str, bool))
+            if not cls and lines and alias_ok and getattr(module, attr, None) is obj:
+                return list(lines), modname
     return [], None
 
 
