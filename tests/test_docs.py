@@ -84,6 +84,18 @@ def test_example_commands_parse():
     assert not bad, "example commands the parser refuses:\n" + "\n".join(bad)
 
 
+def test_options_named_in_the_manual_exist():
+    # Prose names options too (`--boundary grid`); each must be an option of some command.
+    options = {o for _, sub in _subparsers(build_parser()) for a in sub._actions
+               for o in a.option_strings}
+    pages = [ROOT / "README.md", *sorted(p for p in DOCS.glob("*.md") if p.name != "cli.md"),
+             DOCS / "methods" / "synthetic.md"]
+    unknown = sorted({f"{p.relative_to(ROOT)}: {o}" for p in pages
+                      for o in re.findall(r"`(--[a-z][a-z0-9-]*)", p.read_text(encoding="utf-8"))
+                      if o not in options})
+    assert not unknown, "options the parser does not have:\n" + "\n".join(unknown)
+
+
 def test_readme_links_resolve():
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     targets = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text)
