@@ -21,6 +21,7 @@ __all__ = [
     "DuplicatePointsError",
     "TooManyNeighborsError",
     "LidarstatWarning",
+    "LidarstatDeprecationWarning",
 ]
 
 
@@ -79,3 +80,11 @@ class TooManyNeighborsError(LidarstatError, ValueError):
 
 class LidarstatWarning(UserWarning):
     """Recoverable problems the user should know about."""
+
+
+class LidarstatDeprecationWarning(FutureWarning):
+    """A parameter or option spelled in a deprecated way; it still works, and says so.
+
+    A ``FutureWarning``, so that users see it by default (as scikit-learn and
+    scikit-image do for their renamed parameters).
+    """

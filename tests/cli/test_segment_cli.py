@@ -11,6 +11,10 @@ from lidarstat.cli import segment as segment_cli
 from lidarstat.io import PointCloud, read, write
 
 
+#: The shared options of ``segment`` this test method uses.
+USES = frozenset({"min_points"})
+
+
 def add_arguments(group):
     group.add_argument("--gap", type=float, default=1.0, help="test option")
 
@@ -20,7 +24,7 @@ def run(args, cloud):
     from lidarstat.neighbors import radius_neighbors
     from lidarstat.segment import Polylines, Segmentation, components, segment_table
 
-    lab = components(radius_neighbors(cloud.xyz, args.gap), min_size=args.min_size or 1)
+    lab = components(radius_neighbors(cloud.xyz, args.gap), min_size=args.min_points or 1)
     lines = Polylines.from_segments([[0, 0, 0]], [[1, 0, 0]])
     return Segmentation(lab, segment_table(lab, cloud.xyz), lines=lines, method="fake",
                         params={"gap": args.gap})
@@ -68,3 +72,33 @@ def test_segment_custom_table_and_errors(fake_method, two_blobs, tmp_path, capsy
     assert "missing.las" in capsys.readouterr().err
     assert main(["segment", str(two_blobs), str(two_blobs), "--method", "fake"]) == 2
     assert "refusing to overwrite" in capsys.readouterr().err
+
+
+def test_option_of_another_method_is_refused(fake_method, two_blobs, tmp_path, capsys):
+    out = tmp_path / "out.laz"
+    rc = main(["segment", str(two_blobs), str(out), "--method", "fake", "--fs-alpha", "0.01"])
+    err = capsys.readouterr().err
+    assert rc == 2 and not out.exists()
+    assert "argument --fs-alpha: an option of --method sar, not of --method fake" in err
+
+
+@pytest.mark.parametrize("option", [["--k", "10"], ["--radius", "1"], ["--sensor", "0", "0", "9"],
+                                    ["--sigma", "0.1"], ["--noise", "z"]])
+def test_shared_option_the_method_does_not_use_is_refused(fake_method, two_blobs, tmp_path,
+                                                          capsys, option):
+    out = tmp_path / "out.laz"
+    rc = main(["segment", str(two_blobs), str(out), "--method", "fake", *option])
+    err = capsys.readouterr().err
+    assert rc == 2 and not out.exists()
+    assert f"argument {option[0]}: --method fake does not use it" in err
+
+
+def test_deprecated_spelling_works_and_says_so(fake_method, two_blobs, tmp_path, capsys):
+    out = tmp_path / "out.laz"
+    rc = main(["segment", str(two_blobs), str(out), "--method", "fake", "--min-size", "150",
+               "-q"])
+    err = capsys.readouterr().err
+    assert rc == 0
+    assert "lidarstat: warning: --min-size is deprecated; use --min-points" in err
+    labels = read(out).attributes["segment_id"]
+    assert set(np.unique(labels)) == {0, 1}  # the 100-point blob is below 150 points

@@ -342,6 +342,8 @@ def main(argv=None) -> int:
             verbose = args.verbose
             # all of a command's outputs appear, or none; its warnings follow a success
             with held_warnings(verbose), output_group():
+                for text in getattr(args, "_deprecations", ()):
+                    logger.warning(text)
                 return args.func(args)
     except Terminated:
         _fail("terminated (SIGTERM)")

@@ -197,17 +197,54 @@ class Parser(argparse.ArgumentParser):
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
+    def _typed_options(self, args) -> dict[str, str]:
+        """Option strings typed on the command line (full spelling) -> their destination.
+
+        Abbreviations are resolved as argparse resolves them (a unique prefix); the
+        tokens after ``--`` are values, not options.
+        """
+        import sys
+
+        tokens = sys.argv[1:] if args is None else list(args)
+        found: dict[str, str] = {}
+        known = self._option_string_actions
+        for tok in tokens:
+            if tok == "--":
+                break
+            if not isinstance(tok, str) or not tok.startswith("-") or len(tok) < 2:
+                continue
+            if self._negative_number_matcher.match(tok):
+                continue
+            name = tok.split("=", 1)[0]
+            if name not in known and name.startswith("--") and self.allow_abbrev:
+                hits = [o for o in known if o.startswith(name)]
+                name = hits[0] if len({known[h].dest for h in hits}) == 1 and hits else name
+            action = known.get(name)
+            if action is not None and action.dest != "help":
+                found[name] = action.dest
+        return found
+
     def parse_known_args(self, args=None, namespace=None):
+        typed = self._typed_options(args)
         namespace, extras = super().parse_known_args(args, namespace)
+        namespace._given = {*getattr(namespace, "_given", ()), *typed.values()}
+        aliases = self.get_default("_deprecated") or {}
+        namespace._deprecations = [*getattr(namespace, "_deprecations", ()),
+                                   *(f"{t} is deprecated; use {aliases[t]}"
+                                     for t in typed if t in aliases)]
+        if not hasattr(namespace, "_option_names"):
+            namespace._option_names = {
+                a.dest: next((o for o in a.option_strings if o.startswith("--")),
+                             a.option_strings[-1])
+                for a in self._actions if a.option_strings and a.dest != "help"}
+            # messages name an option as the user typed it
+            namespace._option_names.update({dest: text for text, dest in typed.items()})
         checks = self.get_default("_checks")
         if checks:
             for check in checks:
                 failed = check(namespace)
                 if failed:
                     self.error(f"argument {failed[0]}: {failed[1]}")
-        if not hasattr(namespace, "_option_names"):
-            namespace._option_names = {a.dest: a.option_strings[-1] for a in self._actions
-                                       if a.option_strings and a.dest != "help"}
         return namespace, extras
 
 

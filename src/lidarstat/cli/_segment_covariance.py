@@ -4,8 +4,11 @@ from __future__ import annotations
 
 from . import _options as opt
 
+#: The shared options of ``segment`` this method uses (the others are refused).
+USES = frozenset({"k", "radius", "sigma", "sensor", "alpha", "min_points"})
 
-#: ``--k`` and ``--min-size`` of this method when they are not given.
+
+#: ``--k`` and ``--min-points`` of this method when they are not given.
 DEFAULT_K, DEFAULT_MIN_SIZE = 50, 50
 
 
@@ -45,7 +48,7 @@ def run(args, cloud):
         keep_neighbors=True)
     return segment_covariance(
         cloud.xyz, result,
-        min_size=DEFAULT_MIN_SIZE if args.min_size is None else args.min_size,
+        min_size=DEFAULT_MIN_SIZE if args.min_points is None else args.min_points,
         grow_k=args.grow_k, seeds=args.seeds, min_angle=args.min_angle,
         reintegration=not args.no_reintegration,
         adaptive_scale=not args.no_adaptive_scale, refine=not args.no_refine)

@@ -1,28 +1,32 @@
 """``lidarstat segment IN OUT --method curvature``: units from tested HK classes (seed 000).
 
 Shared options used: ``--radius`` (curvature bandwidth, required), ``--sigma``,
-``--alpha``, ``--min-size``.
+``--alpha``, ``--min-points``.
 """
 
 from __future__ import annotations
 
 from . import _options as opt
 
-#: ``--min-size`` of this method when it is not given.
+#: The shared options of ``segment`` this method uses (the others are refused).
+USES = frozenset({"radius", "sigma", "noise", "sensor", "alpha", "min_points"})
+
+#: ``--min-points`` of this method when it is not given.
 DEFAULT_MIN_SIZE = 30
 
 
 def add_arguments(group):
     """Options only the curvature method has."""
+    from ._common import deprecated_alias
+
+    deprecated_alias(group, "--curvature-frame", "--frame")
     group.add_argument("--normal-angle", type=opt.angle_degrees(0, 180), default=10.0,
                        help="largest normal angle between neighbours of a unit (degrees)")
-    group.add_argument("--curvature-frame", default="z", choices=("z", "auto", "pca"),
+    group.add_argument("--frame", "--curvature-frame", default="z", choices=("z", "auto", "pca"),
+                       dest="frame",
                        help="local frame of the curvature quadrics (default z; 'auto' or "
-                       "'pca' with --curvature-noise normal also find walls, which --refine "
+                       "'pca' with --noise normal also find walls, which --refine "
                        "models in their own plane)")
-    group.add_argument("--curvature-noise", default=None, choices=("z", "range", "normal"),
-                       help="direction of the noise sigma (default z, or range with --sensor; "
-                       "'normal' for isotropic noise, needed for walls)")
     group.add_argument("--refine", action="store_true",
                        help="refine the units by SAR-FS (order 1 planar, 2 curved) and "
                        "intersect adjacent surfaces")
@@ -38,7 +42,7 @@ def run(args, cloud):
                                     "bandwidth)")
     return segment_curvature(cloud.xyz, radius=args.radius, sigma=args.sigma,
                              alpha=args.alpha, max_angle=args.normal_angle,
-                             min_size=DEFAULT_MIN_SIZE if args.min_size is None
-                             else args.min_size, refine=args.refine,
-                             frame=args.curvature_frame, noise=args.curvature_noise,
+                             min_size=DEFAULT_MIN_SIZE if args.min_points is None
+                             else args.min_points, refine=args.refine,
+                             frame=args.frame, noise=args.noise,
                              sensor=args.sensor)

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from . import _options as opt
 
+#: The shared options of ``segment`` this method uses (the others are refused).
+USES = frozenset({"k", "radius", "sigma", "noise", "sensor", "alpha", "min_points"})
+
 
 def add_arguments(group):
     """Options of the ridges method (the shared ones live in cli/segment.py)."""
@@ -35,7 +38,7 @@ def run(args, cloud):
     res = ridges(cloud.xyz, radius=radius, k=None if radius is not None else args.k,
                  sigma=args.sigma, alpha=args.alpha, weight=args.weight, sensor=args.sensor,
                  noise=args.noise, ratio=args.ratio, min_length=args.min_length)
-    min_size = args.min_size if args.min_size is not None else 50
+    min_size = args.min_points if args.min_points is not None else 50
     full = not args.ridges_only
     return ridge_segments(cloud.xyz, res, k=args.ridge_grow_k, width=args.band,
                           min_size=min_size, extend=args.extend, chi2_barrier=full,

@@ -1,14 +1,17 @@
 """``lidarstat segment IN OUT --method sar``: SAR models and the Forward Search (seed 002).
 
 Shared options used: ``--radius`` (plane-regression bandwidth b; default chosen by the
-penalised PRESS), ``--sigma``, ``--alpha`` (planarity test), ``--min-size``.
+penalised PRESS), ``--sigma``, ``--alpha`` (planarity test), ``--min-points``.
 """
 
 from __future__ import annotations
 
 from . import _options as opt
 
-#: ``--min-size`` of this method when it is not given.
+#: The shared options of ``segment`` this method uses (the others are refused).
+USES = frozenset({"radius", "sigma", "alpha", "min_points"})
+
+#: ``--min-points`` of this method when it is not given.
 DEFAULT_MIN_SIZE = 30
 
 
@@ -67,7 +70,7 @@ def run(args, cloud):
                        edge_alpha=args.edge_alpha, fs_alpha=args.fs_alpha,
                        alpha_residual=args.fs_envelope, stop=args.fs_stop, degree=deg,
                        adaptive=args.adaptive, threshold=args.search, w_radius=args.w_radius,
-                       min_size=DEFAULT_MIN_SIZE if args.min_size is None else args.min_size,
+                       min_size=DEFAULT_MIN_SIZE if args.min_points is None else args.min_points,
                        block=args.fs_block, outlier_alpha=_level_or_off(args.outlier_alpha),
                        gof_alpha=_level_or_off(args.gof_alpha))
 

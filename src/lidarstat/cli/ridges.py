@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 
 from . import _options as opt
+from ._common import add_noise
 from ._app import Output, check_plan, progress, write_summary_json
 
 
@@ -55,8 +56,6 @@ def add_jet_arguments(s):
     """Options shared by ``ridges`` and ``segment --method ridges``."""
     s.add_argument("--weight", choices=("tricube", "none"), default="tricube",
                    help="tricube weights or CGAL's unweighted jet fit")
-    s.add_argument("--noise", choices=("z", "range", "normal"), default=None,
-                   help="direction of the noise sigma (default: range with --sensor, else z)")
     s.add_argument("--ratio", type=opt.real(1, closed="left"), default=2.0,
                    help="a ridge's curvature must exceed RATIO times the other")
     s.add_argument("--min-length", type=opt.nonnegative_float, default=None,
@@ -77,12 +76,9 @@ def register(sub):
                    help="sphere radius (bandwidth)")
     g.add_argument("--k", type=opt.int_at_least(JET_NEIGHBORS), default=None,
                    help=f"k nearest neighbours (at least {JET_NEIGHBORS}, a degree-4 jet)")
-    s.add_argument("--sigma", type=opt.positive_float, default=None,
-                   help="measurement noise std (default: estimated from the data)")
+    add_noise(s)
     s.add_argument("--alpha", type=opt.probability, default=0.01,
                    help="level of the jet, curvature and k'' tests")
-    s.add_argument("--sensor", type=opt.finite_float, nargs=3, metavar=("X", "Y", "Z"),
-                   default=None, help="scanner position (orients normals; noise along the ray)")
     add_jet_arguments(s)
     s.add_argument("--lines", default=None,
                    help="ridge lines (.geojson, .csv, .las/.laz; default OUT stem + "

@@ -16,7 +16,7 @@ from importlib import import_module
 from pathlib import Path
 
 from . import _options as opt
-from ._app import SENSOR_HELP, Output, check_plan, resolve_sensor, write_summary_json
+from ._app import Output, check_plan, resolve_sensor, write_summary_json
 
 #: method name -> module path (``add_arguments``, ``run``). Add a method by adding it here.
 SEGMENT_METHODS: dict[str, str] = {
@@ -81,37 +81,75 @@ def _method_neighbours(args):
     return None
 
 
+#: Options every method shares (destinations), each used by the methods whose
+#: module lists it in ``USES``.
+SHARED = ("k", "radius", "min_points", "sensor", "sigma", "noise", "alpha")
+
+
+def _refuse_unusable(owners):
+    """A check refusing an option the chosen ``--method`` cannot use (never ignored)."""
+
+    def check(args):
+        method = import_module(SEGMENT_METHODS[args.method])
+        names = getattr(args, "_option_names", {})
+        for dest in sorted(getattr(args, "_given", ())):
+            owner = owners.get(dest)
+            if dest in SHARED and dest not in method.USES:
+                users = sorted(m for m in SEGMENT_METHODS
+                               if dest in import_module(SEGMENT_METHODS[m]).USES)
+                return names.get(dest, dest), (
+                    f"--method {args.method} does not use it (used by --method "
+                    f"{', '.join(users) or 'none'})")
+            if owner is not None and owner != args.method:
+                return names.get(dest, dest), (
+                    f"an option of --method {owner}, not of --method {args.method}")
+        return None
+
+    return check
+
+
 def register(sub):
     """Add the ``segment`` subcommand and every registered method's options."""
+    from ._common import add_noise, add_run_outputs, deprecated_alias
+
     s = sub.add_parser(
         "segment", help="group points into surface segments (--method ...)",
         description="Segment a point cloud into surface units and write segment_id per "
-        "point, a table of segments and the lines where adjacent segments meet.")
+        "point, a table of segments and the lines where adjacent segments meet. An option "
+        "the chosen method cannot use is refused.")
     s.add_argument("input")
     s.add_argument("output", help="output file with segment_id; format from the suffix")
     s.add_argument("--method", required=True, choices=sorted(SEGMENT_METHODS),
                    help="segmentation method")
-    s.add_argument("--k", type=opt.int_at_least(3), default=None,
-                   help="neighbours per point (kNN)")
-    s.add_argument("--radius", type=opt.positive_float, default=None,
-                   help="neighbourhood radius")
-    s.add_argument("--min-size", type=opt.int_at_least(1), default=None,
-                   help="smallest segment kept (points); method default if omitted")
-    s.add_argument("--sensor", type=opt.finite_float, nargs=3, metavar=("X", "Y", "Z"), default=None,
-                   help=SENSOR_HELP)
-    s.add_argument("--sigma", type=opt.positive_float, default=None,
-                   help="measurement noise std (default: estimated from the data)")
-    s.add_argument("--alpha", type=opt.probability, default=0.05,
-                   help="significance level of tests")
+    shared = s.add_argument_group("options of several methods (each says which)")
+
+    def users(dest):
+        return ", ".join(m for m in sorted(SEGMENT_METHODS)
+                         if dest in import_module(SEGMENT_METHODS[m]).USES)
+
+    shared.add_argument("--k", type=opt.int_at_least(3), default=None,
+                        help=f"neighbours per point (kNN; {users('k')})")
+    shared.add_argument("--radius", type=opt.positive_float, default=None,
+                        help=f"neighbourhood radius ({users('radius')})")
+    shared.add_argument("--min-points", "--min-size", type=opt.int_at_least(1), default=None,
+                        dest="min_points",
+                        help="smallest segment kept, in points (method default if omitted)")
+    deprecated_alias(s, "--min-size", "--min-points")
+    add_noise(shared)
+    shared.add_argument("--alpha", type=opt.probability, default=0.05,
+                        help="significance level of the method's main test [0.05]")
     s.add_argument("--table", default=None,
                    help="segment table (.csv or .json; default OUT stem + .segments.csv)")
     s.add_argument("--lines", default=None,
                    help="lines between segments (.geojson, .csv, .las/.laz; "
                    "default OUT stem + .lines.geojson)")
-    s.add_argument("--summary-json", default=None, help="write a run summary as JSON here")
-    s.add_argument("-q", "--quiet", action="store_true")
+    add_run_outputs(s)
+    owners = {}
     for name in sorted(SEGMENT_METHODS):
         group = s.add_argument_group(f"--method {name}")
         import_module(SEGMENT_METHODS[name]).add_arguments(group)
+        for action in group._group_actions:
+            owners.setdefault(action.dest, name)
     s.set_defaults(func=cmd_segment)
     opt.add_check(s, _method_neighbours)
+    opt.add_check(s, _refuse_unusable(owners))

@@ -1,5 +1,7 @@
 """Vectorised hypothesis tests (chi-square, Wald, z, F, dip), sequential moments and densities."""
 
+from ._critical import (chi2_critical, chi2_quantile, chi2_test, f_pvalue, f_test,
+                        normal_quantile, t_critical, z_critical, z_test_statistic)
 from ._moments import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
                        sequential_moments, standard_moments)
 from ._results import TestResult
@@ -8,7 +10,8 @@ from ._sar import (LogDet, PolynomialBasis, SARFit, sar_fit, sar_mean_surface, s
 from ._tests import (f_test_paper, variance_test_paper, variance_test_satterthwaite, wald_test,
                      z_test)
 
-__all__ = ["TestResult", "variance_test_paper", "variance_test_satterthwaite", "wald_test",
+__all__ = ["TestResult", "z_critical", "t_critical", "chi2_critical", "chi2_quantile",
+           "normal_quantile", "f_pvalue", "f_test", "chi2_test", "z_test_statistic", "variance_test_paper", "variance_test_satterthwaite", "wald_test",
            "z_test", "f_test_paper", "LogDet", "PolynomialBasis", "SARFit", "sar_fit",
            "sar_mean_surface", "sar_trend", "sar_variance_test", "select_degree", "weights_matrix",
            "SequentialMoments", "sequential_moments", "standard_moments", "DensityEstimate", "density_estimate",
