@@ -220,8 +220,13 @@ def _command(name: str, summary: str | None, parser: argparse.ArgumentParser,
     for title, description, actions in groups:
         if title not in _DEFAULT_TITLES:
             heading = "#" * (level + 1)
-            out += [f"{heading} Options of {_code(title)}" if title.startswith("-")
-                    else f"{heading} Options: {_escape(title)}", ""]
+            if title.startswith("-"):  # a group named after an option value
+                text = f"Options of {_code(title)}"
+            elif title.lower().startswith("option"):
+                text = _escape(title[0].upper() + title[1:])
+            else:
+                text = f"Options: {_escape(title)}"
+            out += [f"{heading} {text}", ""]
             if description:
                 out += [_escape(description), ""]
             out += _table(actions, parser.prog) + [""]
