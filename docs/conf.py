@@ -111,9 +111,8 @@ class LidarstatAPI(Directive):
     name in the module's ``__all__``, in that order.
 
     Classes are documented with their public members (enumerations with every code),
-    functions with their signature,
-    data with the ``#:`` comment of the private module that defines it (without its value,
-    which is often a long table). A name re-exported from another public subpackage (e.g.
+    functions with their signature, data with the ``#:`` comment of the private module
+    that defines it (without its value, which is often a long table). A name re-exported from another public subpackage (e.g.
     ``lidarstat.classify.SurfaceType``, defined in ``lidarstat.features``) is documented
     in both places but indexed only where it is defined. The summary is each docstring's
     whole first paragraph (autosummary's first-sentence cut can split inline markup).
@@ -169,6 +168,7 @@ def _escape_bars(line):
 
 
 def escape_absolute_values(app, what, name, obj, options, lines):
+    """``autodoc-process-docstring`` handler: escape the bars of absolute values."""
     literal_indent = None
     for i, line in enumerate(lines):
         stripped = line.lstrip()
