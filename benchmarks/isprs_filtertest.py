@@ -37,7 +37,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
 
-from lidarstat.classify import classify_moments, filter_errors  # noqa: E402
+from lidarstat.classify import filter_errors, moments  # noqa: E402
 from lidarstat.errors import LidarstatWarning  # noqa: E402
 from lidarstat.io import read  # noqa: E402
 
@@ -83,9 +83,9 @@ def run(samples):
         row = {"sample": f"samp{s}", "points": len(c), "ground": int(ref.sum()),
                "spacing_m": spacing(c.xyz)}
         methods = {
-            "moments": lambda: classify_moments(
+            "moments": lambda: moments(
                 c.xyz, c["intensity"], number_of_returns=None, return_number=None).ground,
-            "skewness_balancing": lambda: classify_moments(
+            "skewness_balancing": lambda: moments(
                 c.xyz, c["intensity"], method="skewness-balancing").ground,
             "csf_1m": lambda: csf_ground(c.xyz, 1.0),
             "csf_2spacing": lambda: csf_ground(c.xyz, 2 * row["spacing_m"]),
