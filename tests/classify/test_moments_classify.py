@@ -2,12 +2,11 @@
 
 import numpy as np
 import pytest
+from conftest import shared_file
 
 from lidarstat.classify import ASPRS, choose_cycle, filter_errors, low_outliers, moments
 from lidarstat.errors import InvalidParameterError, InvalidPointsError, LidarstatWarning
 from lidarstat.stats import sequential_moments
-
-from conftest import shared_file
 
 
 def _scene(rng, n=12000):
@@ -364,3 +363,20 @@ def test_result_shape(rng):
     assert p["window"] == 50 and p["min_window"] == 16 and p["min_points"] == 10
     assert p["rng"] == 0 and p["returns"] and p["intensity"]
     assert all("window" in w for w in res.windows)
+
+
+def test_cycle_and_road_helpers_renamed_min_points(rng):
+    """choose_cycle and road_cut take min_points; min_cluster still works and warns."""
+    from lidarstat.classify._roads import road_cut
+    from lidarstat.errors import LidarstatDeprecationWarning
+
+    sm = sequential_moments(np.r_[rng.normal(0, 0.2, 3000), rng.normal(8, 0.5, 600)])
+    ref = choose_cycle(sm, "elevation", min_points=50)
+    with pytest.warns(LidarstatDeprecationWarning, match="min_cluster"):
+        old = choose_cycle(sm, "elevation", min_cluster=50)
+    assert old == ref and ref.evidence["min_points"] == 50
+    v = np.r_[rng.normal(30, 3, 3000), rng.normal(60, 6, 7000)]
+    with pytest.warns(LidarstatDeprecationWarning, match="min_cluster"):
+        assert road_cut(v, min_cluster=20)[0] == road_cut(v, min_points=20)[0]
+    with pytest.raises(InvalidParameterError, match="elevation_rule"):
+        choose_cycle(sm, "elevation", elevation_rule="flat")

@@ -3,11 +3,9 @@ change no label (TIN evaluation, cell medians, curve smoothing, tiling)."""
 
 import numpy as np
 import pytest
-
-from lidarstat.classify import _cycle, _moments_ground, _moments_windows, _surface
-from lidarstat.classify import moments
-
 from classify.test_moments_classify import _scene
+
+from lidarstat.classify import _cycle, _moments_ground, _moments_windows, _surface, moments
 
 
 def _scipy_surface(xy_ground, z_ground, *, cell, which="median", rank=None):

@@ -202,6 +202,8 @@ def choose_cycle(sm: SequentialMoments, category: str, *, min_points: int = 10,
     if category not in ("elevation", "intensity"):
         raise InvalidParameterError("The 'category' parameter of choose_cycle must be "
                                     f"'elevation' or 'intensity'. Got {category!r} instead.")
+    check_option(elevation_rule, "elevation_rule", [r.value for r in ElevationRule],
+                 func="choose_cycle")
     m = sm.cycle.size
     if cycle is not None:
         k = int(np.clip(int(cycle), 0, m - 1))

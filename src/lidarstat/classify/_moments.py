@@ -36,7 +36,7 @@ from ._moments_windows import root_windows
 from ._outliers import low_outliers
 from ._roads import RoadRule, road_points
 
-__all__ = ["moments", "classify_moments"]
+__all__ = ["classify_moments", "moments"]
 
 _FUNC = "moments"
 

@@ -25,7 +25,7 @@ from ._moments_options import MomentsMethod, MomentsOptions
 from ._moments_result import MomentsStep, thin_curves
 from ._surface import cell_keys
 
-__all__ = ["analyse", "dip_tests", "progressive_cut", "paper_clusters"]
+__all__ = ["analyse", "dip_tests", "paper_clusters", "progressive_cut"]
 
 
 def analyse(values, category, p: MomentsOptions, *, window, step, population, dips,

@@ -21,7 +21,7 @@ from ._moments_windows import window_pass
 from ._seams import interpolate_cuts
 from ._surface import ground_surface
 
-__all__ = ["opening_surface", "heights", "ground_cut", "drop_raised_patches"]
+__all__ = ["drop_raised_patches", "ground_cut", "heights", "opening_surface"]
 
 #: Bytes a cell of the opening's raster costs at its peak (grid, nearest-filled indices,
 #: opening and masks).

@@ -7,7 +7,7 @@ import numpy as np
 from ._moments_result import ASPRS
 from ._surface import cell_keys
 
-__all__ = ["vegetation_like", "asprs_classes"]
+__all__ = ["asprs_classes", "vegetation_like"]
 
 
 def vegetation_like(xy, height, obj, multi, cell, spread):

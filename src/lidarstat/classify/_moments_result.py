@@ -11,7 +11,7 @@ from ..errors import LidarstatDeprecationWarning
 from ..stats import DensityEstimate, SequentialMoments
 from ._cycle import CycleChoice
 
-__all__ = ["ASPRS", "MomentsStep", "MomentsClassification", "thin_curves"]
+__all__ = ["ASPRS", "MomentsClassification", "MomentsStep", "thin_curves"]
 
 #: ASPRS LAS classification codes written by ``moments``.
 ASPRS = {"unclassified": 1, "ground": 2, "low_vegetation": 3, "medium_vegetation": 4,

@@ -3,15 +3,15 @@
 Crosilla et al. split the ground cluster by its intensity: the ground's intensity density
 is bimodal where asphalt is darker than the land around it, and the sequential moments of
 the intensity give the cut (their cycle 153, "a local maximum of kurtosis").  Three things
-make that work on real ground clusters (measured in docs/methods/moments.md):
+make that work on real ground clusters (measured on AHN3 tiles):
 
 1. **Speckle.** One echo's intensity scatters about as much as road and land differ (AHN3
    Amsterdam: carriageway quartiles 18-34, the rest 40-76 per point).  Roads are areas, so
    each ground point takes the median intensity of its ground cell (cells of about
-   ``points_per_cell`` ground points): quartiles 26-32 against 49-73 on the same tile.
+   ``points_per_cell`` ground points): quartiles 26-32 against 49-73 on the same area.
 2. **One population.** The sub-cluster is analysed on the ground of the whole cloud, not per
-   64 m tile: a tile holding a street and its pavements is often not significantly bimodal
-   by the dip test (AHN3 Delft: p = 0.24-0.74 on tiles that are 25-53 % street), while the
+   64 m window: a window holding a street and its pavements is often not significantly bimodal
+   by the dip test (AHN3 Delft: p = 0.24-0.74 on windows that are 25-53 % street), while the
    whole ground cluster is.
 3. **The cut.** The kurtosis peaks of the smoothed curve are coarse and, with the skewness
    peak the paper asks for, rarely coincide on real data (Delft: the kurtosis maximum at

@@ -6,7 +6,6 @@ import html
 import json
 from pathlib import Path
 
-
 from .._shared._atomic import atomic_path
 from ._views import _save
 
