@@ -210,22 +210,13 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     ux, uz = unit_factors(units, source)
 
     # 1. low noise, out of every analysis
-    n_all = n
+    pts_all = pts
     noise = (low_outliers(pts[:, :2], pts[:, 2], min_depth=0.5 / uz) if low_noise
              else np.zeros(n, bool))
-    pts_all = pts
-    if noise.any():
-        keep = ~noise
-        if keep.sum() < 8:
-            raise InvalidParameterError(f"{source or 'points'}: fewer than 8 points left "
-                                        "after removing low outliers")
-        pts, n = pts[keep], int(keep.sum())
-        inten, nret, rnum = (None if a is None else a[keep] for a in (inten, nret, rnum))
-    has_returns = nret is not None and rnum is not None
-    multi = np.zeros(n, bool)
-    if has_returns:
-        multi = (nret.astype(int) > 1) & (rnum.astype(int) < nret.astype(int))
+    pts, inten, multi, has_returns = _without_low_noise(noise, pts, inten, nret, rnum, source)
     del nret, rnum
+    if not noise.any():
+        del pts_all  # only the low noise's heights need the caller's points
 
     # 2. analysis windows; the points in root-window order, local coordinates. Every tie
     # is broken by the input index `perm`, so classes do not depend on the order.
@@ -273,15 +264,16 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                   ground_spread=ground_spread, continuity=continuity, rng=seed,
                   n_low_noise=int(noise.sum()), units={"horizontal_m": ux, "vertical_m": uz})
     # back to the input order, low noise included
-    arrays = _expand(perm, n, cls, fields["cluster_id"], height, ground, cut,
-                     fill=(0, 0, 0.0, False, 0.0))
+    cls, cluster_id, height, ground, cut = _expand(
+        perm, len(perm), cls, fields["cluster_id"], height, ground, cut,
+        fill=(0, 0, 0.0, False, 0.0))
     if noise.any():
-        arrays = _expand(keep, n_all, *arrays,
-                         fill=(ASPRS["low_noise"], 0, np.nan, False, np.nan))
+        cls, cluster_id, height, ground, cut = _expand(
+            ~noise, noise.size, cls, cluster_id, height, ground, cut,
+            fill=(ASPRS["low_noise"], 0, np.nan, False, np.nan))
         if surf is not None:  # heights of the low noise under the final ground surface
             q = pts_all[noise] - origin
-            arrays[2][noise] = heights(q[:, 2], surf(q[:, :2]))
-    cls, cluster_id, height, ground, cut = arrays
+            height[noise] = heights(q[:, 2], surf(q[:, :2]))
     return MomentsClassification(classification=cls, cluster_id=cluster_id, height=height,
                                  ground=ground, steps=steps, windows=windows, params=params,
                                  cut=cut)
@@ -299,6 +291,23 @@ def _seed(rng) -> int:
     if isinstance(rng, np.random.Generator):
         return int(rng.integers(2**32))
     return check_scalar(rng, "rng", func=_FUNC, low=0, closed="left", integer=True)
+
+
+def _without_low_noise(noise, pts, inten, nret, rnum, source):
+    """The points and attributes left out of the low noise, and the vegetation candidates
+    (non-last returns of multi-return pulses): ``(pts, inten, multi, has_returns)``."""
+    if noise.any():
+        keep = ~noise
+        if keep.sum() < 8:
+            raise InvalidParameterError(f"{source or 'points'}: fewer than 8 points left "
+                                        "after removing low outliers")
+        pts = pts[keep]
+        inten, nret, rnum = (None if a is None else a[keep] for a in (inten, nret, rnum))
+    has_returns = nret is not None and rnum is not None
+    multi = np.zeros(len(pts), bool)
+    if has_returns:
+        multi = (nret.astype(int) > 1) & (rnum.astype(int) < nret.astype(int))
+    return pts, inten, multi, has_returns
 
 
 def _attribute(a, name, n, source):

@@ -130,8 +130,8 @@ class MomentsClassification:
     def summary(self) -> str:
         """A few lines for the terminal."""
         tot = max(1, self.classification.size)
-        lines = [f"{self.classification.size} points, {len(self.windows)} analysis windows, "
-                 f"{len(self.steps)} moment analyses"]
+        lines = [(f"{self.classification.size} points, {len(self.windows)} analysis "
+                  f"windows, {len(self.steps)} moment analyses")]
         for name, k in self.counts().items():
             lines.append(f"  {name:<18}{k:>10}  {100 * k / tot:5.1f} %")
         return "\n".join(lines)
