@@ -23,7 +23,7 @@ def truncated_normal_variance(p):
     the fraction p of the points nearest the fit is divided by its square root.
 
     >>> round(float(truncated_normal_variance(0.5)), 4)
-    0.1426
+    0.1427
     """
     p = np.clip(np.asarray(p, dtype=np.float64), 1e-9, 1 - 1e-12)
     q = _st.norm.ppf((1 + p) / 2)
