@@ -43,8 +43,8 @@ def _town(extent, density, rng=1):
     return cloud, time.perf_counter() - t
 
 
-def _normal_errors(cloud, seg, min_size=30):
-    """Per correctly found roof plane (Hoover 0.8, planes of at least `min_size` points):
+def _normal_errors(cloud, seg, min_points=30):
+    """Per correctly found roof plane (Hoover 0.8, planes of at least `min_points` points):
     the angle (degrees) between its table normal and the truth, the propagated angular
     standard error ``normal_se_deg`` and ``t2``, the Mahalanobis distance of the true
     gradient (chi-square(2) when the plane is unbiased and its covariance right)."""
@@ -54,7 +54,7 @@ def _normal_errors(cloud, seg, min_size=30):
     errors, ses, t2s = [], [], []
     for pid, n_true in zip(planes["id"], planes["normal"]):
         mine = rp == pid
-        if mine.sum() < min_size:
+        if mine.sum() < min_points:
             continue
         lab = seg.labels[mine]
         lab = lab[lab > 0]

@@ -56,7 +56,9 @@ def test_old_and_new_name_together_are_refused(gable):
 
 
 @pytest.mark.parametrize("kw", [{"fs_stop": "never"}, {"adaptive": "sometimes"},
-                                {"criterion": "aic"}, {"min_points": 0}])
+                                {"criterion": "aic"}, {"min_points": 0}, {"fs_alpha": 1.5},
+                                {"envelope_alpha": 0.0}, {"gof_alpha": float("nan")},
+                                {"fs_block": 0}, {"sigma": -0.1}])
 def test_invalid_choices_are_refused(gable, kw):
     with pytest.raises(InvalidParameterError, match=next(iter(kw))):
         segment_sar(gable, radius=1.5, **kw)

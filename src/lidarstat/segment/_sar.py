@@ -154,6 +154,17 @@ def segment_sar(points, *, radius=None, sigma=None, alpha=0.05, edge_alpha=0.05,
             adaptive, "adaptive", [m.value for m in AdaptiveBandwidth], func=func)).value
     min_points = check_scalar(min_points, "min_points", func=func, low=1, closed="left",
                               integer=True)
+    for name, level in (("alpha", alpha), ("edge_alpha", edge_alpha), ("fs_alpha", fs_alpha),
+                        ("envelope_alpha", envelope_alpha), ("outlier_alpha", outlier_alpha),
+                        ("gof_alpha", gof_alpha)):
+        if level is not None or name not in ("outlier_alpha", "gof_alpha"):
+            check_scalar(level, name, func=func, low=0.0, high=1.0)
+    fs_block = check_scalar(fs_block, "fs_block", func=func, low=1, closed="left",
+                            integer=True)
+    if sigma is not None:
+        sigma = check_scalar(sigma, "sigma", func=func, low=0.0)
+    if radius is not None:
+        radius = check_scalar(radius, "radius", func=func, low=0.0)
     check_copies(points, what=func)  # neighbors/_duplicates.py
     selected = radius is None
     if selected:
