@@ -74,7 +74,7 @@ ENTRY_POINTS = {
     "covariance": lambda p: covariance(p, k=20),
     "moments": lambda p: moments(p, None),
     "segment_curvature": lambda p: segment_curvature(p, radius=0.4, sigma=SIGMA),
-    "segment_sar": lambda p: segment_sar(p, bandwidth=0.5, sigma=SIGMA),
+    "segment_sar": lambda p: segment_sar(p, radius=0.5, sigma=SIGMA),
     "segment_covariance": lambda p: segment_covariance(p, covariance(p, k=20,
                                                                      keep_neighbors=True)),
 }
