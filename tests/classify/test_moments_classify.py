@@ -380,3 +380,30 @@ def test_cycle_and_road_helpers_renamed_min_points(rng):
         assert road_cut(v, min_cluster=20)[0] == road_cut(v, min_points=20)[0]
     with pytest.raises(InvalidParameterError, match="elevation_rule"):
         choose_cycle(sm, "elevation", elevation_rule="flat")
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_classes_do_not_depend_on_the_order_of_the_points(seed):
+    """A catalogue's tiles bring the points in another order than the whole file."""
+    from lidarstat.classify import moments
+    from lidarstat.synth import make_als_town
+
+    town = make_als_town(extent=(90.0, 70.0), density=6.0, rng=seed)
+    inten = np.asarray(town.attributes["intensity"])
+    xyz = np.round(town.xyz, 1)  # a coarse LAS scale: many points share x, y or z
+    a = moments(xyz, inten, window=32.0)
+    p = np.random.default_rng(seed).permutation(len(xyz))
+    b = moments(xyz[p], inten[p], window=32.0)
+    np.testing.assert_array_equal(a.classification[p], b.classification)
+    np.testing.assert_array_equal(a.ground[p], b.ground)
+
+
+def test_classes_of_a_real_tile_do_not_depend_on_the_order(shared_data):
+    from lidarstat.io import read
+
+    c = read(shared_data / "ahn3_amsterdam" / "ahn_2386_9702.laz")
+    kw = {k: np.asarray(c[k]) for k in ("number_of_returns", "return_number")}
+    a = moments(c.xyz, np.asarray(c["intensity"]), **kw)
+    p = np.random.default_rng(0).permutation(len(c.xyz))
+    b = moments(c.xyz[p], np.asarray(c["intensity"])[p], **{k: v[p] for k, v in kw.items()})
+    np.testing.assert_array_equal(a.classification[p], b.classification)

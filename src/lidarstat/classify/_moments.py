@@ -208,6 +208,13 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         (return_number, "return_number")))
     inten = _usable_intensity(inten, source)
     ux, uz = unit_factors(units, source)
+    # The classes must not depend on the order of the points (the tiles of a catalogue
+    # bring them in another order than the whole file): every step runs on the points
+    # sorted by x, y, z and intensity, and the results go back to the caller's order.
+    canon = np.lexsort(tuple(c for c in (inten, pts[:, 2], pts[:, 1], pts[:, 0])
+                             if c is not None))
+    pts = pts[canon]
+    inten, nret, rnum = (None if a is None else a[canon] for a in (inten, nret, rnum))
 
     # 1. low noise, out of every analysis
     pts_all = pts
@@ -274,6 +281,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         if surf is not None:  # heights of the low noise under the final ground surface
             q = pts_all[noise] - origin
             height[noise] = heights(q[:, 2], surf(q[:, :2]))
+    cls, cluster_id, height, ground, cut = _expand(
+        canon, n, cls, cluster_id, height, ground, cut, fill=(0, 0, 0.0, False, 0.0))
     return MomentsClassification(classification=cls, cluster_id=cluster_id, height=height,
                                  ground=ground, steps=steps, windows=windows, params=params,
                                  cut=cut)
