@@ -225,8 +225,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     if not noise.any():
         del pts_all  # only the low noise's heights need the caller's points
 
-    # 2. analysis windows; the points in root-window order, local coordinates. Every tie
-    # is broken by the input index `perm`, so classes do not depend on the order.
+    # 2. analysis windows; the points in root-window order, local coordinates. Ties are
+    # broken by the index in the sorted order above, not by the caller's order.
     p = MomentsOptions(alpha=alpha, min_points=min_points, smoothing=smoothing, cycle=cycle,
                        bandwidth=bandwidth, method=method, elevation_rule=elevation_rule,
                        window=window / ux, min_window=min_window / ux,
