@@ -241,6 +241,9 @@ def _run_one(func, cat: Catalogue, i: int, out: Path, buffer: float, points_per_
     t0 = time.perf_counter()
     tile = cat.read_tile(i, buffer, points_per_chunk=points_per_chunk)
     fields = func(tile)
+    info = {}
+    if isinstance(fields, tuple):
+        fields, info = fields
     n = tile.n_core
     core_fields = {}
     for name, values in fields.items():
@@ -253,7 +256,7 @@ def _run_one(func, cat: Catalogue, i: int, out: Path, buffer: float, points_per_
     with output_group(defer=False):  # each tile appears when complete (resume)
         write(out, tile.core, fields=core_fields)
     return TileRun(i, cat.files[i].path, out, "done", n, len(tile.buffer.xyz),
-                   time.perf_counter() - t0)
+                   time.perf_counter() - t0, dict(info))
 
 
 def process_catalogue(func: Callable[[BufferedTile], dict], catalogue, outdir, *,
@@ -267,7 +270,8 @@ def process_catalogue(func: Callable[[BufferedTile], dict], catalogue, outdir, *
     ----------
     func : callable
         ``func(tile: BufferedTile) -> dict`` of per-point arrays over ``tile.xyz`` (core
-        points first, then the buffer); the core rows are written.
+        points first, then the buffer); the core rows are written. It may return
+        ``(fields, info)``, `info` a dict kept as the tile's :attr:`TileRun.summary`.
     catalogue : Catalogue or inputs of :class:`Catalogue`
     outdir : path-like
         Folder of the outputs (created if missing).
