@@ -231,7 +231,10 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                        bandwidth=bandwidth, method=method, elevation_rule=elevation_rule,
                        window=window / ux, min_window=min_window / ux,
                        ground_spread=float(ground_spread), seed=seed)
+    # the windows and rasters lie on multiples of the window side in the file's own
+    # coordinates, so that the tiles of a catalogue share the whole area's windows
     origin = column_min(pts)
+    origin[:2] = np.floor(origin[:2] / p.window) * p.window
     perm, roots = root_windows(pts[:, :2] - origin[:2], p.window)
     xy = np.ascontiguousarray(pts[perm, :2] - origin[:2])
     z = pts[:, 2][perm]

@@ -38,7 +38,10 @@ def opening_surface(xy, z, *, window: float, cell: float = 1.0) -> np.ndarray:
     """
     from scipy import ndimage as ndi
 
-    ij = np.floor((xy - column_min(xy)) / cell).astype(np.int64)
+    # cells on multiples of `cell` (not on the points' corner): every tile of an area
+    # sees the same raster
+    ij = np.floor(xy / cell).astype(np.int64)
+    ij -= column_min(ij)
     shape = tuple(column_max(ij) + 1)
     _check_raster(shape, cell)
     g = np.full(shape, np.inf)

@@ -48,14 +48,15 @@ def window_order(roots):
 
 
 def root_windows(xy, size):
-    """Root windows of side `size` over local planimetric coordinates `xy`.
+    """Root windows of side `size` over local planimetric coordinates `xy`, on the grid
+    of multiples of `size` (the caller's origin is one, so all tiles of an area share it).
 
     Returns ``(perm, roots)``: the point order that makes every root window a contiguous
     block, and the windows (``Tile`` records, points as positions in that order).
     """
     xyh = np.zeros((len(xy), 3))
     xyh[:, :2] = xy
-    return window_order(tile_grid(xyh, size))
+    return window_order(tile_grid(xyh, size, anchor=(0.0, 0.0)))
 
 
 def _cut_window(xyh, p, record):
