@@ -17,7 +17,8 @@ from ._sar import refine_raw_clusters, segment_sar
 from ._curvature_units import curvature_units, segment_curvature
 from ._covariance_segments import (fit_lines, local_intersections, reintegrate, segment_covariance,
                                    segment_planes)
-from ._ridges import RIDGE_FIELDS, RidgeResult, ridge_segments, ridges
+from ._ridges import RIDGE_FIELDS, RidgeResult, ridges
+from ._ridge_segments import ridge_segments
 
 __all__ = ["Segmentation", "Polylines", "segment_table", "components", "grow_regions",
            "relabel", "adjacency", "hoover", "HooverScore", "binary_scores",
