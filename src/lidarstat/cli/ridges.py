@@ -7,9 +7,8 @@ from pathlib import Path
 
 from .._shared._choices import Weight
 from . import _options as opt
-from ._common import add_alpha, add_neighbourhood, add_noise, add_run_outputs
 from ._app import Output, check_plan, progress, resolve_sensor, write_summary_json
-
+from ._common import add_alpha, add_neighbourhood, add_noise, add_run_outputs
 
 #: Fewest neighbours of a degree-4 jet: its 15 coefficients and one degree of freedom.
 JET_NEIGHBORS = 16

@@ -10,8 +10,7 @@ import numpy as np
 from .._shared._choices import Frame, Noise, Test
 from .._shared.validation import check_points, check_scalar
 from ..errors import InsufficientNeighborsError, InvalidParameterError
-from ..neighbors import CellIndex
-from ..neighbors import copies_degenerate, find_duplicates, run_on_unique
+from ..neighbors import CellIndex, copies_degenerate, find_duplicates, run_on_unique
 from ..stats import chi2_test, z_critical
 from . import _curvature_kernels as _ck
 from . import _quadric_kernels as _k

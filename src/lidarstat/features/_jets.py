@@ -12,11 +12,17 @@ from .._shared._choices import Noise
 from .._shared.validation import check_points, check_scalar
 from ..errors import InsufficientNeighborsError, InvalidParameterError
 from ..io import register_field_descriptions
-from ..neighbors import CellIndex, knn_neighbors
-from ..neighbors import find_duplicates, map_rows, run_on_unique
+from ..neighbors import CellIndex, find_duplicates, knn_neighbors, map_rows, run_on_unique
 from ..stats import variance_test_satterthwaite
-from ._jet_fit import (MONGE_NAMES, _N_MONGE_OF, JetFit, _check_options, _fit_cells, _to_fit,
-                       fit_jets)
+from ._jet_fit import (
+    _N_MONGE_OF,
+    MONGE_NAMES,
+    JetFit,
+    _check_options,
+    _fit_cells,
+    _to_fit,
+    fit_jets,
+)
 from ._noise import height_variance, resolve_noise
 from ._quadric import FitStatus, unfitted_reason
 

@@ -11,9 +11,10 @@ from .._shared._choices import Frame
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import Neighborhoods
+from . import _frame_kernels as _fk
 from . import _quadric_kernels as _k
 
-FRAMES = {"z": _k.FRAME_Z, "auto": _k.FRAME_AUTO, "pca": _k.FRAME_PCA}
+FRAMES = {"z": _fk.FRAME_Z, "auto": _fk.FRAME_AUTO, "pca": _fk.FRAME_PCA}
 COVARIANCES = {"paper": _k.COV_PAPER, "sandwich": _k.COV_SANDWICH}
 
 
