@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lidarstat.features import (Test, curvature, curvature_tests, fit_quadrics,
-                                height_variance, optimal_bandwidth)
+from lidarstat.features import (Test, Weight, curvature, curvature_tests, fit_jets,
+                                fit_quadrics, height_variance, jet_tests, optimal_bandwidth)
 from lidarstat.neighbors import radius_neighbors
 from lidarstat.report._demo import face_radius_table
 from lidarstat.synth import make_agpart
@@ -33,6 +33,15 @@ def simulate(kind, test, n, seed, **kw):
     out = dict(status=fit.status, npts=fit.neighbors, beta=fit.beta, cof=fit.cofactor,
                frames=fit.frame, stats=np.c_[fit.q, fit.sum_w, fit.trace_b, fit.trace_b2])
     return curvature_tests(out, sigma2=height_variance(fit.frame, SIGMA), alpha=ALPHA, test=test)
+
+
+def jet_rejections(kind, weight, n, seed, **kw):
+    """Share of independent neighbourhoods whose degree-4 jet the chi-square rejects."""
+    pts, centres = make_replicates(kind, n_replicates=n, sigma=SIGMA, rng=seed, **kw)
+    fit = fit_jets(pts, radius_neighbors(pts, 1.0, query=centres), degree=4, weight=weight)
+    fields = jet_tests(fit, height_variance(fit.frame, SIGMA), ALPHA)
+    ok = fit.status == 0
+    return float(1.0 - fields["chi2_pass"][ok].mean())
 
 
 def rate(res, what):
@@ -89,6 +98,14 @@ def main():
                 print(f"| {sigma} | {b} | {test} | {100 * acc:.1f}% | "
                       f"{radii['shaft_side']:.3f} | {radii['disk_side']:.3f} | "
                       f"{radii['bore_side']:.3f} |")
+    print(f"\n### Chi-square test of the degree-4 jet ({n} neighbourhoods, alpha = {ALPHA})\n")
+    print("| weight | size (quadric) | power (crease, slopes +-0.1) |\n|---|---|---|")
+    res["jets"] = []
+    for w in Weight:
+        size = jet_rejections("quadric", w, n, 1)
+        power = jet_rejections("ridge", w, n, 2, curvature=0.1)
+        res["jets"].append(dict(weight=str(w), size=size, power_crease_0_1=power))
+        print(f"| {w} | {size:.4f} | {power:.3f} |")
     # the bandwidth design of eq. 19-21 for the agpart shaft (H0 = -1/(2 R), R = 1.1 dm)
     density = 1 / (0.02 * 0.0168)
     res["bandwidth"] = {str(t): optimal_bandwidth(K0=0, H0=-1 / 2.2, sigma=0.015,
