@@ -287,6 +287,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     for name in COMMAND_MODULES:
         import_module(f".{name}", __package__).register(sub)
+    from ._catalogue import install
+
+    install(sub)  # IN may be a catalogue of tiles
     return p
 
 

@@ -13,14 +13,15 @@ from ._curvature_formulas import curvature_jacobian, curvatures, principal_jacob
 from ._jet_fit import MONGE_NAMES, JetFit, PrincipalDirections, fit_jets, principal_directions
 from ._jets import JET_FIELDS, JetResult, jet_tests, jets
 from ._quadric import FitStatus, QuadricFit, fit_quadrics
-from ._plane_regression import (PLANE_FIELDS, BandwidthSelection, LocalPlaneFit,
-                                geary_bandwidths, local_planes, select_plane_bandwidth)
+from ._plane_regression import (PLANE_FIELDS, AdaptiveBandwidth, LocalPlaneFit,
+                                geary_bandwidths, local_planes)
+from ._plane_bandwidth import BandwidthCriterion, BandwidthSelection, select_plane_bandwidth
 
 __all__ = ["COVARIANCE_FIELDS", "CovarianceResult", "covariance_features", "eigen_features",
            "BandwidthResult", "optimal_bandwidth", "FIELDS", "CurvatureResult", "FitStatus", "QuadricFit", "curvature",
            "curvature_jacobian", "curvature_tests", "curvatures", "estimate_sigma",
            "fit_quadrics", "height_variance", "principal_jacobian",
-           "PLANE_FIELDS", "BandwidthSelection", "LocalPlaneFit", "geary_bandwidths",
+           "PLANE_FIELDS", "AdaptiveBandwidth", "BandwidthCriterion", "BandwidthSelection", "LocalPlaneFit", "geary_bandwidths",
            "local_planes", "select_plane_bandwidth", "JET_FIELDS", "MONGE_NAMES",
            "JetFit", "JetResult",
            "PrincipalDirections", "fit_jets", "jet_tests", "jets", "principal_directions",

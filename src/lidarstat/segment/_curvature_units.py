@@ -146,14 +146,14 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
         return Segmentation(labels, table, None, {"surface_type": st}, "curvature",
                             {"radius": radius, "max_angle": max_angle,
                              "grow_radius": grow_radius, "alpha": alpha})
-    from ._sar import refine_raw_clusters
+    from ._sar_units import refine_raw_clusters
 
     degrees = np.where(types == 1, 1, 2)
     seg = refine_raw_clusters(points, labels,
-                              threshold=radius if threshold is None else threshold,
+                              search=radius if threshold is None else threshold,
                               w_radius=radius / 2.0 if w_radius is None else w_radius,
-                              degrees=degrees, alpha=fs_alpha,
-                              min_size=min_size)
+                              degrees=degrees, fs_alpha=fs_alpha,
+                              min_points=min_size)
     # type of each refined unit = type of its raw cluster
     raw_of = np.array([int(np.bincount(labels[u.raw]).argmax()) for u in seg.units], dtype=int)
     seg.table["surface_type"] = types[raw_of - 1] if raw_of.size else np.zeros(0, np.uint8)
