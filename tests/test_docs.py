@@ -35,11 +35,15 @@ def test_cli_reference_lists_every_option_of_every_command():
     text = cli_reference()
     for name, sub in _subparsers(build_parser()):
         section = text.split(f"## `lidarstat {name}`", 1)[1].split("\n## ", 1)[0]
+        old = sub.get_default("_deprecated") or {}
         for action in sub._actions:
             if action.dest == "help":
                 continue
-            label = ", ".join(action.option_strings) or action.dest
-            assert f"| `{label}` |" in section, f"{name}: {label} missing"
+            label = ", ".join(o for o in action.option_strings if o not in old) or action.dest
+            row = next((r for r in section.splitlines() if r.startswith(f"| `{label}` |")), None)
+            assert row is not None, f"{name}: {label} missing"
+            for spelling in (o for o in action.option_strings if o in old):
+                assert f"deprecated spelling, still accepted: {spelling}" in row
 
 
 def test_cli_reference_escapes_table_cells():

@@ -166,11 +166,14 @@ def _usage(parser: argparse.ArgumentParser) -> str:
     return " ".join(words)
 
 
-def _table(actions, prog: str) -> list[str]:
+def _table(actions, prog: str, deprecated=None) -> list[str]:
+    deprecated = deprecated or {}
     rows = ["| option | value | default | meaning |", "|---|---|---|---|"]
     for action in actions:
         positional = not action.option_strings
-        name = action.dest if positional else ", ".join(action.option_strings)
+        old = [o for o in action.option_strings if o in deprecated]
+        name = action.dest if positional else ", ".join(
+            o for o in action.option_strings if o not in deprecated)
         value = "" if positional else _metavar(action, positional)
         cells = [_code(name), _code(value) if value else "", _default(action), ""]
         domain = _domain(action)
@@ -182,6 +185,8 @@ def _table(actions, prog: str) -> list[str]:
         meaning = _help(action, prog)
         if isinstance(action, argparse._VersionAction):
             meaning = meaning or "print the version and exit"
+        if old:
+            meaning += f" (deprecated spelling, still accepted: {', '.join(old)})"
         cells[3] = _escape(meaning)
         rows.append("| " + " | ".join(cells) + " |")
     return rows
@@ -215,8 +220,9 @@ def _command(name: str, summary: str | None, parser: argparse.ArgumentParser,
     groups = list(_groups(parser))
     # argparse's own groups (positionals, options) form the command's first table
     main = [a for title, _, actions in groups if title in _DEFAULT_TITLES for a in actions]
+    old = parser.get_default("_deprecated") or {}
     if main:
-        out += _table(main, parser.prog) + [""]
+        out += _table(main, parser.prog, old) + [""]
     for title, description, actions in groups:
         if title not in _DEFAULT_TITLES:
             heading = "#" * (level + 1)
@@ -229,7 +235,7 @@ def _command(name: str, summary: str | None, parser: argparse.ArgumentParser,
             out += [f"{heading} {text}", ""]
             if description:
                 out += [_escape(description), ""]
-            out += _table(actions, parser.prog) + [""]
+            out += _table(actions, parser.prog, old) + [""]
     for sub_name, sub_summary, sub in _subcommands(parser):
         out += _command(sub_name, sub_summary, sub, level + 1)
     return out
