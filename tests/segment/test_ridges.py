@@ -200,6 +200,26 @@ def test_min_size_is_a_deprecated_spelling_of_min_points(crest_result):
     assert new.params["min_points"] == 100 and "min_size" not in new.params
 
 
+def test_k_of_the_growing_graph_is_grow_k(crest_result):
+    from lidarstat.errors import LidarstatDeprecationWarning
+
+    pts, res = crest_result
+    new = ridge_segments(pts, res, grow_k=10, min_points=100)
+    with pytest.warns(LidarstatDeprecationWarning, match="k is deprecated; use grow_k"):
+        old = ridge_segments(pts, res, k=10, min_points=100)
+    np.testing.assert_array_equal(new.labels, old.labels)
+    assert new.params["grow_k"] == 10
+
+
+def test_segmentation_routes_k_to_the_jets_only(crest_result):
+    """One vocabulary: ``k`` is the jets' neighbourhood, the growing graph is ``grow_k``."""
+    from lidarstat.pipeline import segmentation
+
+    pts, _ = crest_result
+    seg = segmentation(pts, method="ridges", k=200, sigma=SIGMA, alpha=0.05, min_points=100)
+    assert seg.params["k"] == 200 and seg.params["grow_k"] == 8
+
+
 def test_ridge_result_params(crest_result):
     _, res = crest_result
     p = res.params

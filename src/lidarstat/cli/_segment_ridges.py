@@ -13,13 +13,9 @@ DEFAULT_MIN_POINTS = 50
 
 def add_arguments(group):
     """Options of the ridges method (the shared ones live in cli/segment.py)."""
-    from ._common import deprecated_alias
     from .ridges import add_jet_arguments
 
-    # the jets' neighbourhood is --radius (or --k); --jet-radius is its deprecated spelling
-    group.add_argument("--jet-radius", type=opt.positive_float, default=None,
-                       help="deprecated spelling of --radius")
-    deprecated_alias(group, "--jet-radius", "--radius")
+    # the jets' neighbourhood is the shared --radius (or --k)
     group.add_argument("--ridge-grow-k", type=opt.int_at_least(2), default=8,
                        help="neighbours of the region-growing graph")
     group.add_argument("--band", type=opt.positive_float, default=None,
@@ -36,16 +32,11 @@ def run(args, cloud):
     from ..segment import ridge_segments, ridges
 
     radius = args.radius
-    if args.jet_radius is not None:
-        if radius is not None:
-            raise InvalidParameterError("give --radius only (--jet-radius is its deprecated "
-                                        "spelling)")
-        radius = args.jet_radius
     if radius is None and args.k is None:
         raise InvalidParameterError("segment --method ridges needs --radius or --k")
     res = ridges(cloud.xyz, radius=radius, k=None if radius is not None else args.k,
                  sigma=args.sigma, alpha=args.alpha, weight=args.weight, sensor=args.sensor,
                  noise=args.noise, ratio=args.ratio, min_length=args.min_length)
     min_points = DEFAULT_MIN_POINTS if args.min_points is None else args.min_points
-    return ridge_segments(cloud.xyz, res, k=args.ridge_grow_k, width=args.band,
+    return ridge_segments(cloud.xyz, res, grow_k=args.ridge_grow_k, width=args.band,
                           min_points=min_points, extend=args.extend)

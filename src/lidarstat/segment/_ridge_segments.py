@@ -26,8 +26,8 @@ SEGMENT_FIELDS = {
 register_field_descriptions(SEGMENT_FIELDS)
 
 
-@renamed_parameters(min_size="min_points")
-def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_points=50,
+@renamed_parameters(min_size="min_points", k="grow_k")
+def ridge_segments(points, ridge_result: RidgeResult, *, grow_k=8, width=None, min_points=50,
                    extend=None):
     """Direct segmentation: surface units are the regions that creases and ridges separate.
 
@@ -42,7 +42,7 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_po
        the rejections form a band about one jet radius wide on each side of every crease,
        and they close the gaps where the ridge lines stop (weak k'', thinly sampled faces,
        line ends at silhouettes).
-    2. **Units.** Connected components of the other points over the k-nearest-neighbour
+    2. **Units.** Connected components of the other points over the `grow_k`-nearest-neighbour
        graph (:func:`lidarstat.segment.components`), smaller than `min_points` dropped. An
        edge is used only when each end lies on the other's fitted jet
        within the noise (``|residual| <= sqrt(2) z_{alpha/2} sigma``, sigma the jets'
@@ -57,7 +57,7 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_po
        Points of the ridge band (within `width` of a ridge line, where the surface may be
        smooth and both sides' jets fit) join the unit of their nearest unit point
        instead.
-    4. **Creases.** Points with one of their `k` neighbours in another unit within 1.5
+    4. **Creases.** Points with one of their `grow_k` neighbours in another unit within 1.5
        `width` lie on the boundary between two units: ``crease`` 1 where the crease is convex, 2 concave (the
        unit normals open away from, or toward, each other across it).
 
@@ -66,11 +66,11 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_po
     points : (N, 3) array_like
     ridge_result : RidgeResult
         From :func:`ridges` on the same points.
-    k : int
+    grow_k : int
         Neighbours of the growing graph.
     width : float, optional
         Half-width of the band around ridge lines and largest crease-pair distance; default
-        the median distance to the k-th neighbour (so that no edge jumps over the band).
+        the median distance to the `grow_k`-th neighbour (so that no edge jumps over the band).
     min_points : int
         Smaller units get 0 (their points are then assigned like barrier points).
     extend : float, optional
@@ -87,7 +87,7 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_po
     func = "ridge_segments"
     pts = check_points(points)
     check_copies(pts, what=func)  # neighbors/_duplicates.py
-    k = check_scalar(k, "k", func=func, low=2, closed="left", integer=True)
+    grow_k = check_scalar(grow_k, "grow_k", func=func, low=2, closed="left", integer=True)
     min_points = check_scalar(min_points, "min_points", func=func, low=1, closed="left",
                               integer=True)
     n = pts.shape[0]
@@ -96,7 +96,7 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_po
                                     f"{len(ridge_result.fields['ridge'])} points, `points` {n}")
     origin = pts.mean(axis=0)
     local = pts - origin
-    nb = knn_neighbors(local, min(k, n))
+    nb = knn_neighbors(local, min(grow_k, n))
     if width is None:
         width = float(np.median(nb.distances[nb.indptr[1:] - 1]))
     width = check_scalar(width, "width", func=func, low=0.0)
@@ -144,7 +144,7 @@ def ridge_segments(points, ridge_result: RidgeResult, *, k=8, width=None, min_po
                         fields={"ridge": ridge, "crease": crease,
                                 "barrier": band.astype(np.uint8)},
                         method="ridges",
-                        params={**ridge_result.params, "grow_k": k, "width": width,
+                        params={**ridge_result.params, "grow_k": grow_k, "width": width,
                                 "min_points": min_points, "extend": extend})
 
 
