@@ -226,3 +226,20 @@ def test_ridge_result_params(crest_result):
     assert p["sigma"] == res.jets.sigma and p["alpha"] == 0.05 and p["weight"] == "tricube"
     assert res.jets.params["noise"] == "z" and res.jets.params["radius"] == 0.25
     assert "jets of degree 4" in res.jets.summary()
+
+
+def test_segment_curvature_speaks_the_shared_vocabulary():
+    """segment_curvature: min_points and search (min_size, threshold deprecated)."""
+    from lidarstat.errors import LidarstatDeprecationWarning
+    from lidarstat.segment import segment_curvature
+
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(0, 10, (3000, 2))
+    z = np.where(xy[:, 0] < 5, 0.0, 0.2 * (xy[:, 0] - 5) ** 2) + rng.normal(0, 0.005, 3000)
+    pts = np.c_[xy, z]
+    new = segment_curvature(pts, radius=1.0, sigma=0.005, min_points=40)
+    with pytest.warns(LidarstatDeprecationWarning, match="min_size is deprecated"):
+        old = segment_curvature(pts, radius=1.0, sigma=0.005, min_size=40)
+    np.testing.assert_array_equal(new.labels, old.labels)
+    assert new.params["min_points"] == 40 and new.params["sigma"] == 0.005
+    assert new.params["noise"] == "z"

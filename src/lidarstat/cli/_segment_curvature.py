@@ -46,7 +46,7 @@ def run(args, cloud):
                                     "bandwidth)")
     return segment_curvature(cloud.xyz, radius=args.radius, sigma=args.sigma,
                              alpha=args.alpha, max_angle=args.max_angle,
-                             min_size=DEFAULT_MIN_POINTS if args.min_points is None
+                             min_points=DEFAULT_MIN_POINTS if args.min_points is None
                              else args.min_points, refine=args.refine,
                              frame=args.frame, noise=args.noise,
                              sensor=args.sensor)
