@@ -57,16 +57,45 @@ def test_curvature_estimates_one_sigma_for_the_area(tmp_path, capsys):
     assert "used for every tile" in capsys.readouterr().out
 
 
-def test_moments_catalogue_report_and_rerun(tmp_path, capsys):
+def test_moments_catalogue_report_terrain_and_rerun(tmp_path, capsys):
+    from lidarstat.io import read_geotiff
+
     _tiles(tmp_path, seed=2, n=6000)
-    args = ["moments", str(tmp_path / "tiles"), str(tmp_path / "out"), "--window", "30"]
+    args = ["moments", str(tmp_path / "tiles"), str(tmp_path / "out"), "--window", "30",
+            "--dtm", str(tmp_path / "dtm"), "--dtm-resolution", "2"]
     assert main(args) == 0
     out = capsys.readouterr().out
     assert "9 tiles processed" in out and "report:" in out
     page = (tmp_path / "out" / "report" / "index.html").read_text()
-    assert "classes.png" in page and "tile_1_1.laz" in page
+    assert "classes.png" in page and "terrain.png" in page and "tile_1_1.laz" in page
+    assert "tiles/tile_1_1/index.html" in page
+    assert (tmp_path / "out" / "report" / "tiles" / "tile_1_1" / "index.html").is_file()
+    assert len(list((tmp_path / "dtm").glob("*.tif"))) == 9
+    mosaic = read_geotiff(tmp_path / "dtm" / "dtm.vrt")
+    assert mosaic.resolution == 2.0 and np.isfinite(mosaic.values).mean() > 0.9
     assert main(args) == 0
     assert "0 tiles processed, 9 skipped" in capsys.readouterr().out
+
+
+def test_moments_one_file_terrain_model(tmp_path, capsys, shared_data):
+    from lidarstat.io import read_geotiff
+
+    src = shared_data / "ahn3_amsterdam" / "ahn_2386_9702.laz"
+    tif = tmp_path / "dtm.tif"
+    assert main(["moments", str(src), str(tmp_path / "o.laz"), "--dtm", str(tif),
+                 "--no-report", "-q"]) == 0
+    dtm = read_geotiff(tif)
+    ground = read(tmp_path / "o.laz")
+    g = np.isin(ground["classification"], (2, 11))
+    # the model passes through the ground points: at each ground point's cell the height
+    # is within the spread of the ground heights in that 1 m cell
+    c = np.floor((ground.xyz[g, 0] - dtm.left) / dtm.resolution).astype(int)
+    r = np.floor((dtm.top - ground.xyz[g, 1]) / dtm.resolution).astype(int)
+    ok = (r >= 0) & (r < dtm.shape[0]) & (c >= 0) & (c < dtm.shape[1])
+    diff = np.abs(dtm.values[r[ok], c[ok]] - ground.xyz[g, 2][ok])
+    assert np.nanmedian(diff) < 0.05
+    rc = main(["moments", str(src), str(tmp_path / "o2.laz"), "--dtm", str(tmp_path / "d.png")])
+    assert rc == 2 and "--dtm" in capsys.readouterr().err
 
 
 def test_resume_after_a_kill(tmp_path):

@@ -82,6 +82,17 @@ def _curvature_fields(args, extra):
     return fields
 
 
+def _moments_prepare(args, cat):
+    """Where each tile's terrain model and report go (named after its output)."""
+    outputs = cat.outputs(args.output, args.template)
+    if args.dtm:
+        Path(args.dtm).mkdir(parents=True, exist_ok=True)
+    report = None
+    if not args.no_report:
+        report = Path(args.report) if args.report else Path(args.output) / "report"
+    return {"outputs": {f.path: p for f, p in zip(cat.files, outputs)}, "report": report}
+
+
 def _moments_buffer(args, cat):
     from ..io import linear_units
 
@@ -91,7 +102,9 @@ def _moments_buffer(args, cat):
 
 def _moments_fields(args, extra):
     from ..classify import moments
-    from ..io import linear_units
+    from ..io import linear_units, write_geotiff
+    from ..pipeline import terrain_model
+    from ..report import write_moments_report
 
     def fields(tile):
         core = tile.core
@@ -108,12 +121,17 @@ def _moments_fields(args, extra):
             iterations=args.iterations, units=units, low_noise=not args.no_low_noise,
             road_rule=args.road_rule, ground_spread=args.ground_spread,
             continuity=not args.no_continuity, rng=args.seed, source=str(tile.extent.path))
-        n = tile.n_core
-        counts = {}
-        codes, k = __import__("numpy").unique(res.classification[:n], return_counts=True)
-        for c, m in zip(codes, k):
-            counts[int(c)] = int(m)
-        return res.to_fields(), {"counts": counts}
+        stem = Path(extra["outputs"][tile.extent.path]).stem
+        if args.dtm:  # the tile's extent, from the ground of the tile and its buffer
+            e = tile.extent
+            dtm = terrain_model(tile.xyz, res.classification,
+                                resolution=args.dtm_resolution / units.horizontal,
+                                bounds=(e.xmin, e.ymin, e.xmax, e.ymax), crs=core.crs)
+            write_geotiff(Path(args.dtm) / f"{stem}.tif", dtm)
+        if extra.get("report") is not None:
+            write_moments_report(extra["report"] / "tiles" / stem, res, max_plots=12,
+                                 input_path=tile.extent.path)
+        return res.to_fields(), {}
 
     return fields
 
@@ -122,7 +140,7 @@ def _moments_fields(args, extra):
 #: prepare(args, catalogue) -> extra). The buffer is the default of ``--buffer``.
 TILE_METHODS = {
     "curvature": (_curvature_buffer, _curvature_fields, _curvature_prepare),
-    "moments": (_moments_buffer, _moments_fields, None),
+    "moments": (_moments_buffer, _moments_fields, _moments_prepare),
 }
 
 
@@ -153,9 +171,15 @@ def _run_catalogue(args, command):
     if args.address is not None and args.scheduler != "dask":
         raise InvalidParameterError("--address: needs --scheduler dask")
     cat.outputs(out, args.template)  # every output checked before any work
-    report = None
-    if command == "moments" and not args.no_report:
-        report = Path(args.report) if args.report else out / "report"
+    report = dtm = None
+    if command == "moments":
+        if not args.no_report:
+            report = Path(args.report) if args.report else out / "report"
+        if args.dtm:
+            dtm = Path(args.dtm)
+            if dtm.exists() and not dtm.is_dir():
+                raise PointCloudWriteError(f"{args.dtm}: with a catalogue of tiles --dtm "
+                                           "is a folder (one GeoTIFF per tile and dtm.vrt)")
     extra = prepare(args, cat) if prepare is not None else {}
     if not args.quiet:
         print(f"{len(cat)} tiles, {cat.n_points} points, buffer {buffer:g} -> {out}/")
@@ -173,8 +197,18 @@ def _run_catalogue(args, command):
         print(f"{done} tiles processed, {len(runs) - done} skipped  "
               f"({time.perf_counter() - t0:.1f} s)")
     seconds = time.perf_counter() - t0
+    mosaic = None
+    if dtm is not None:
+        from .._shared._atomic import output_group
+        from ..io import write_vrt
+
+        tiles = [dtm / f"{r.output.stem}.tif" for r in runs]
+        with output_group(defer=False):  # the report reads it back
+            mosaic = write_vrt(dtm / "dtm.vrt", [t for t in tiles if t.exists()])
+        if not args.quiet:
+            print(f"terrain model: {mosaic}")
     if report is not None:
-        page = _area_report(report, args, cat, runs, buffer, seconds)
+        page = _area_report(report, args, cat, runs, buffer, seconds, mosaic)
         if not args.quiet:
             print(f"report: {page}")
     if args.summary_json:
@@ -189,15 +223,16 @@ def _run_catalogue(args, command):
     return 0
 
 
-def _area_report(folder, args, cat, runs, buffer, seconds):
-    """One page for the area: the classes of every tile on one map, shares per tile."""
+def _area_report(folder, args, cat, runs, buffer, seconds, mosaic=None):
+    """One page for the area: the classes of every tile on one map, shares per tile, the
+    terrain model's hillshade, and each tile's moment analyses behind a link."""
     import numpy as np
 
-    from ..io import read
+    from ..io import read, read_geotiff
     from ..report import ASPRS_COLOURS, write_run_report
 
     step = max(1, -(-cat.n_points // 1_500_000))  # at most ~1.5M points on the map
-    xyz, cls, rows = [], [], []
+    xyz, cls, rows, links = [], [], [], {}
     for r in runs:
         c = read(r.output, fields=["classification"])
         k = np.asarray(c.attributes["classification"])
@@ -205,6 +240,9 @@ def _area_report(folder, args, cat, runs, buffer, seconds):
         cls.append(k[::step])
         codes, n = np.unique(k, return_counts=True)
         row = {"tile": r.input.name, "points": len(k)}
+        page = folder / "tiles" / r.output.stem / "index.html"
+        if page.exists():
+            links[f"{r.input.name}: moment analyses"] = f"tiles/{r.output.stem}/index.html"
         row.update({ASPRS_COLOURS.get(int(v), (str(v),))[0]: f"{100 * m / len(k):.1f} %"
                     for v, m in zip(codes, n)})
         rows.append(row)
@@ -214,7 +252,8 @@ def _area_report(folder, args, cat, runs, buffer, seconds):
               if not k.startswith("_") and k not in ("func", "input", "output")}
     return write_run_report(folder, title=f"lidarstat {args.command}", facts=facts,
                             params=params, xyz=np.concatenate(xyz),
-                            classes=np.concatenate(cls), tiles=rows)
+                            classes=np.concatenate(cls), tiles=rows, links=links,
+                            dtm=read_geotiff(mosaic) if mosaic is not None else None)
 
 
 def _dispatch(run_one, command):

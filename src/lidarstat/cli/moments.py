@@ -22,6 +22,7 @@ def _run(args):
     check_plan([args.input], Output("output", out),
                Output("--report", folder, "folder", default=not args.report,
                       members=("report.json", "index.html")),
+               Output("--dtm", args.dtm, "raster"),
                Output("--summary-json", args.summary_json, "json"))
     cloud = read(args.input)
     if len(cloud) == 0:
@@ -45,6 +46,13 @@ def _run(args):
         source=str(args.input))
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
+    if args.dtm:
+        from ..io import write_geotiff
+        from ..pipeline import terrain_model
+
+        dtm = terrain_model(cloud.xyz, res.classification,
+                            resolution=args.dtm_resolution / units.horizontal, crs=cloud.crs)
+        write_geotiff(args.dtm, dtm)
     report = None
     if folder is not None:
         report = write_moments_report(folder, res, input_path=args.input, output_path=out,
@@ -130,6 +138,12 @@ def register(sub):
                    help="do not flag isolated points under the terrain as low noise (7)")
     add_seed(s)
     add_workers(s, help_what="analysis windows")
+    s.add_argument("--dtm", default=None, metavar="FILE.tif",
+                   help="write a terrain model (GeoTIFF, the TIN of the ground and road "
+                   "points) here; with a catalogue a folder, one GeoTIFF per tile and a "
+                   "VRT mosaic dtm.vrt")
+    s.add_argument("--dtm-resolution", type=opt.positive_float, default=1.0,
+                   help="cell size of the terrain model (metres) [1]")
     s.add_argument("--report", default=None,
                    help="report folder (default: OUT stem + '_report')")
     s.add_argument("--no-report", action="store_true")

@@ -240,7 +240,8 @@ def _run_one(func, cat: Catalogue, i: int, out: Path, buffer: float, points_per_
              ) -> TileRun:
     t0 = time.perf_counter()
     tile = cat.read_tile(i, buffer, points_per_chunk=points_per_chunk)
-    fields = func(tile)
+    with output_group(defer=False):  # what the method writes of a tile appears at once
+        fields = func(tile)
     info = {}
     if isinstance(fields, tuple):
         fields, info = fields

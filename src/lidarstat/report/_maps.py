@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._views import _save
+from ._views import _save, locked
 
 __all__ = ["ASPRS_COLOURS", "class_grid", "hillshade", "plot_class_map", "plot_flag_map",
            "plot_hillshade"]
@@ -87,6 +87,7 @@ def _map_figure(title, extent):
     return fig, ax, plt
 
 
+@locked
 def plot_class_map(path, xyz, classes, *, resolution, title="classes", names=None):
     """A PNG of the class of the topmost point per cell, with a legend of the classes present.
 
@@ -118,6 +119,7 @@ def plot_class_map(path, xyz, classes, *, resolution, title="classes", names=Non
     _save(fig, plt, path)
 
 
+@locked
 def plot_flag_map(path, xyz, flags, *, resolution, title):
     """A PNG of the share of flagged points per cell (white: no point)."""
     xyz = np.asarray(xyz, dtype=np.float64)
@@ -135,6 +137,7 @@ def plot_flag_map(path, xyz, flags, *, resolution, title):
     _save(fig, plt, path)
 
 
+@locked
 def plot_hillshade(path, raster, *, title="terrain model"):
     """A PNG of a terrain model's hillshade with its heights in colour."""
     left, bottom, right, top = raster.bounds

@@ -7,11 +7,12 @@ import json
 from pathlib import Path
 
 from .._shared._atomic import atomic_path
-from ._views import _save
+from ._views import _save, locked
 
 __all__ = ["write_moments_report"]
 
 
+@locked
 def _step_png(path, rec):
     import matplotlib
 
