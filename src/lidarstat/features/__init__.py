@@ -1,15 +1,17 @@
 """Local models per point: weighted quadric (Taylor) fits, tested curvature, jets and Monge forms."""
 
-from ._curvature import (FIELDS, CurvatureResult, curvature, curvature_tests, estimate_sigma,
-                         height_variance)
+from .._shared._choices import Frame, Noise, Test, Weight
+from ._curvature import curvature, curvature_tests, estimate_sigma
+from ._curvature_result import FIELDS, CurvatureResult
+from ._noise import height_variance
 from ._covariance import FIELDS as COVARIANCE_FIELDS
 from ._covariance import CovarianceResult, PointClass, covariance_features, eigen_features
 from ._cylinder import cylinder_test
 from ._hk import SurfaceType, hk_surface_types
 from ._bandwidth import BandwidthResult, optimal_bandwidth
 from ._curvature_formulas import curvature_jacobian, curvatures, principal_jacobian
-from ._jets import (JET_FIELDS, MONGE_NAMES, JetFit, JetResult, PrincipalDirections, fit_jets,
-                    jet_tests, jets, principal_directions)
+from ._jet_fit import MONGE_NAMES, JetFit, PrincipalDirections, fit_jets, principal_directions
+from ._jets import JET_FIELDS, JetResult, jet_tests, jets
 from ._quadric import FitStatus, QuadricFit, fit_quadrics
 from ._plane_regression import (PLANE_FIELDS, AdaptiveBandwidth, LocalPlaneFit,
                                 geary_bandwidths, local_planes)
@@ -23,4 +25,5 @@ __all__ = ["COVARIANCE_FIELDS", "CovarianceResult", "covariance_features", "eige
            "local_planes", "select_plane_bandwidth", "JET_FIELDS", "MONGE_NAMES",
            "JetFit", "JetResult",
            "PrincipalDirections", "fit_jets", "jet_tests", "jets", "principal_directions",
-           "SurfaceType", "hk_surface_types", "cylinder_test", "PointClass"]
+           "SurfaceType", "hk_surface_types", "cylinder_test", "PointClass",
+           "Noise", "Test", "Frame", "Weight"]

@@ -19,7 +19,8 @@ from ._sar_units import refine_raw_clusters
 from ._curvature_units import curvature_units, segment_curvature
 from ._covariance_segments import (fit_lines, local_intersections, reintegrate, segment_covariance,
                                    segment_planes)
-from ._ridges import RIDGE_FIELDS, RidgeResult, ridge_segments, ridges
+from ._ridges import RIDGE_FIELDS, RidgeResult, ridges
+from ._ridge_segments import ridge_segments
 
 __all__ = ["Segmentation", "Polylines", "segment_table", "components", "grow_regions",
            "relabel", "adjacency", "hoover", "HooverScore", "binary_scores",
