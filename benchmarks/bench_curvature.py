@@ -130,14 +130,14 @@ def child_lidarstat(args):
 
 
 def child_pieces(args):
-    """The loop of lidarstat.features._curvature._single_radius, timed piece by piece.
+    """The block loop of :func:`lidarstat.features.curvature`, timed piece by piece.
 
     index: CellIndex build; search+fit: the fused Numba kernel (neighbour gathering and
     quadric fit); statistics: noise model, curvature tests, HK types; reorder: back to
     input order. `csr_query` times, separately, building the same neighbourhoods as CSR
     arrays (what `radius_neighbors` returns), for comparison with scipy's pair query.
     """
-    from lidarstat.features import _curvature as C
+    from lidarstat.features import curvature_tests, height_variance
     from lidarstat.features._quadric import _run_cells
     from lidarstat.neighbors import CellIndex
 
@@ -158,8 +158,8 @@ def child_pieces(args):
         out = _run_cells(index, c0, c1, bandwidth=r, frame="z", sensor=None, min_neighbors=7,
                          covariance="sandwich")
         t1 = time.perf_counter()
-        sigma2 = C.height_variance(out["frames"], NOISE, noise="z")
-        res = C.curvature_tests(out, sigma2=sigma2, alpha=0.05, test="calibrated")
+        sigma2 = height_variance(out["frames"], NOISE, noise="z")
+        res = curvature_tests(out, sigma2=sigma2, alpha=0.05, test="calibrated")
         if sorted_fields is None:
             sorted_fields = {k: np.empty(n, dtype=v.dtype) for k, v in res.items()}
         for k, v in res.items():

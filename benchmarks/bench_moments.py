@@ -2,7 +2,7 @@
 
 Cloud: sloped sine terrain, box buildings, tree blobs with two returns, intensity with a
 dark road band, 10 points/m2; generated with NumPy in seconds (deterministic seed). Each
-size runs `classify_moments` (default parameters, tiles in threads) and then CSF (cloth
+size runs `moments` (default parameters, tiles in threads) and then CSF (cloth
 1 m, slope smoothing) on the same points in the same process; the table gives both times,
 their ratio, the CPU time of each (all threads), the ground/object errors against the generator's truth, the time of each
 phase of `moments` and the peak memory of the process.
@@ -31,8 +31,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
 sys.path.insert(0, str(HERE))
 
-import lidarstat.pipeline as _pipeline  # noqa: E402
-from lidarstat.classify import _moments, _surface, classify_moments, filter_errors  # noqa: E402
+from lidarstat.classify import (_moments, _moments_ground, _moments_objects,  # noqa: E402
+                                _moments_windows, _roads, _surface, filter_errors, moments)
 
 FULL_SIZES = (1_000_000, 10_000_000)
 
@@ -62,17 +62,18 @@ def make_cloud(n, seed=20261122):
 
 
 class _Phases:
-    """Wall time of the phases of classify_moments, by wrapping its module functions."""
+    """Wall time of the phases of `moments`, by wrapping its module functions."""
 
-    NAMES = {"opening": (_moments, "opening_surface"), "tiles": (_pipeline, "tile_grid"),
-             "tile passes": (_moments, "_tile_pass"),
-             "surface fit": (_moments, "ground_surface"),
+    NAMES = {"opening": (_moments_ground, "opening_surface"),
+             "windows": (_moments_windows, "tile_grid"),
+             "window passes": (_moments_ground, "window_pass"),
+             "surface fit": (_moments_ground, "ground_surface"),
              "surface eval": (_surface.TinSurface, "__call__"),
              "low noise": (_moments, "low_outliers"),
-             "continuity": (_moments, "raised_patches"),
-             "cut interpolation": (_moments, "interpolate_cuts"),
-             "roads": (_moments, "cell_median"),
-             "vegetation": (_moments, "_vegetation_like")}
+             "continuity": (_moments_ground, "raised_patches"),
+             "cut interpolation": (_moments_ground, "interpolate_cuts"),
+             "roads": (_roads, "cell_median"),
+             "vegetation": (_moments_objects, "vegetation_like")}
 
     def __init__(self):
         self.seconds = defaultdict(float)
@@ -107,8 +108,8 @@ def run(n, scheduler, workers):
     gen = time.perf_counter() - t
     with _Phases() as ph:
         t, c = time.perf_counter(), time.process_time()
-        res = classify_moments(xyz, inten, number_of_returns=nret, return_number=rnum,
-                               scheduler=scheduler, workers=workers)
+        res = moments(xyz, inten, number_of_returns=nret, return_number=rnum,
+                      scheduler=scheduler, workers=workers)
         t_mom, c_mom = time.perf_counter() - t, time.process_time() - c
     phases = {k: round(v, 3) for k, v in ph.seconds.items()}
     phases["other"] = round(t_mom - sum(ph.seconds.values()), 3)
@@ -137,7 +138,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     sizes = [200_000] if args.quick else args.points
     xyz, inten, *_ = make_cloud(20_000)
-    classify_moments(xyz, inten)  # JIT warm-up (or cache load)
+    moments(xyz, inten)  # JIT warm-up (or cache load)
     rows = []
     for n in sizes:
         rows.append(run(n, args.scheduler, args.workers))

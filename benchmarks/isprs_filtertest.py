@@ -10,7 +10,10 @@ for all samples (no tuning per sample):
   parameters at their defaults (rigidness 3, class threshold 0.5 m, 500 iterations);
 * CSF with the cloth resolution set to twice the mean point spacing of each sample (a
   data-driven, not tuned, choice: 1 m cloth cells are finer than the spacing of these
-  0.2-1 pts/m2 samples, so the cloth falls through between points).
+  0.2-1 pts/m2 samples, so the cloth falls through between points);
+* the departures of ``moments`` from the paper, each switched off alone (``VARIANTS``:
+  the paper's kurtosis-plateau rule, no ground-spread bound, no raised-patch check, no
+  low-noise removal), so docs/methods/moments.md can say what each one is worth.
 
 Errors are the definitions of Sithole & Vosselman (2004). The numbers do not depend on the
 CPU, so the quick mode (two samples) and the full mode (seven) give the same per-sample
@@ -37,12 +40,19 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
 
-from lidarstat.classify import classify_moments, filter_errors  # noqa: E402
+from lidarstat.classify import filter_errors, moments  # noqa: E402
 from lidarstat.errors import LidarstatWarning  # noqa: E402
 from lidarstat.io import read  # noqa: E402
 
 DATA = Path(os.environ.get("LIDARSTAT_SHARED_DATA", HERE.parent.parent / "shared" / "data"))
 SAMPLES = ["11", "21", "31", "41", "51", "61", "71"]
+#: The peers of the main table.
+MAIN = ["moments", "skewness_balancing", "csf_1m", "csf_2spacing"]
+#: `moments` with one departure from the paper switched off (keyword arguments).
+VARIANTS = {"plateau_rule": {"elevation_rule": "plateau"},
+            "no_ground_spread": {"ground_spread": 0.0},
+            "no_continuity": {"continuity": False},
+            "no_low_noise": {"low_noise": False}}
 
 
 def csf_ground(xyz, resolution):
@@ -83,12 +93,14 @@ def run(samples):
         row = {"sample": f"samp{s}", "points": len(c), "ground": int(ref.sum()),
                "spacing_m": spacing(c.xyz)}
         methods = {
-            "moments": lambda: classify_moments(
+            "moments": lambda: moments(
                 c.xyz, c["intensity"], number_of_returns=None, return_number=None).ground,
-            "skewness_balancing": lambda: classify_moments(
+            "skewness_balancing": lambda: moments(
                 c.xyz, c["intensity"], method="skewness-balancing").ground,
             "csf_1m": lambda: csf_ground(c.xyz, 1.0),
             "csf_2spacing": lambda: csf_ground(c.xyz, 2 * row["spacing_m"]),
+            **{name: (lambda kw=kw: moments(c.xyz, c["intensity"], **kw).ground)
+               for name, kw in VARIANTS.items()},
         }
         for name, fn in methods.items():
             t = time.perf_counter()
@@ -104,8 +116,7 @@ def run(samples):
     return rows
 
 
-def table(rows):
-    names = ["moments", "skewness_balancing", "csf_1m", "csf_2spacing"]
+def table(rows, names=MAIN):
     out = ["| sample | " + " | ".join(f"{n} I / II / total (%)" for n in names) + " |",
            "|---|" + "---|" * len(names)]
     for r in rows:
@@ -127,7 +138,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     samples = ["21", "51"] if args.quick else SAMPLES
     rows = run(samples)
-    md = table(rows)
+    md = table(rows) + "\n\n" + table(rows, ["moments", *VARIANTS])
     print(md)
     if args.out and not args.quick:
         Path(args.out).write_text(json.dumps({"rows": rows, "markdown": md}, indent=1))

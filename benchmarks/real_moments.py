@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lidarstat.classify import classify_moments, filter_errors
+from lidarstat.classify import filter_errors, moments
 from lidarstat.io import linear_units, read
 from lidarstat.segment import binary_scores
 
@@ -112,8 +112,8 @@ def score(path: Path) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         units = linear_units(cloud.crs, header=cloud.las_header, source=str(path))
-        res = classify_moments(cloud.xyz, a.get("intensity"), source=str(path), units=units,
-                               **kw)
+        res = moments(cloud.xyz, a.get("intensity"), source=str(path), units=units,
+                      **kw)
     seconds = time.perf_counter() - t0
     cls = res.classification.astype(int)
     keep = ~np.isin(ref, LEFT_OUT) & (ref < 19)

@@ -118,7 +118,7 @@ def main(argv=None):
         seg = segment_sar(xyz)
         dt = time.perf_counter() - t
         r = {"points": int(len(xyz)), "seconds": round(dt, 1), "segments": seg.n_segments,
-             "bandwidth": round(seg.params["bandwidth"], 3),
+             "bandwidth": round(seg.params["radius"], 3),
              "sigma": round(seg.params["sigma"], 4),
              "sigma_local": round(seg.params["sigma_local"], 4),
              "sigma_units": round(seg.params["sigma_units"], 4),

@@ -4,10 +4,9 @@
 For every scene the script runs, in the same process:
 
 * ``ridges`` (degree-4 jets, zero crossings of the extremalities, ridge lines) and the
-  direct segmentation ``ridge_segments`` twice: the barrier of session 2 (ridge band only,
-  ``chi2_barrier=False``) and the current one (ridge band + jets rejected by the chi-square
+  direct segmentation ``ridge_segments`` (ridge band + jets rejected by the chi-square
   test, barrier points assigned by the units' jets, unit boundaries as crease points);
-* the indirect segmentation where it applies: ``segment_curvature(refine=True)`` (tested
+* unless ``--skip-indirect``, the indirect segmentation where it applies: ``segment_curvature(refine=True)`` (tested
   curvature classes refined by SAR + Forward Search) on the range scans, ``segment_sar``
   (SAR + Forward Search on heights) on the airborne hip-roof scene (a 2.5-D method: it
   does not apply to the terrestrial scan's walls).
@@ -25,6 +24,7 @@ Usage::
     PYTHONPATH=src python benchmarks/ridge_scenes.py --quick   # column + hip roof, ~1 min
     PYTHONPATH=src python benchmarks/ridge_scenes.py           # all four scenes ->
                                                                # benchmarks/results_ridges.json
+    PYTHONPATH=src python benchmarks/ridge_scenes.py --skip-indirect   # direct only
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ def coverage(sc, mask, tol, creases, truth_face):
                 if mask.any() else None)
 
 
-def run_scene(name):
+def run_scene(name, indirect=True):
     kw, rkw, tol = SCENES[name]
     sc = FACTORY[name](**kw)
     out = dict(scene=name, points=len(sc.xyz), ridges_params=rkw, spacing=tol)
@@ -94,7 +94,6 @@ def run_scene(name):
     t0 = time.perf_counter()
     seg = ridge_segments(sc.xyz, res)
     out["seconds_segments"] = round(time.perf_counter() - t0, 2)
-    old = ridge_segments(sc.xyz, res, chi2_barrier=False, consistent=False, assign=False)
     face = sc.face.astype(np.int64)
     if name == "hip_roof":
         truth = {"roof_planes": sc.fields["roof_plane"].astype(int)}
@@ -108,9 +107,7 @@ def run_scene(name):
         truth = {"faces": face + 1, "connected_parts": connected_parts(sc.xyz, face)}
         min_size = 50
         creases = sc.meta["creases"]
-    out["hoover"] = {"direct": {t: score(seg.labels, v, min_size) for t, v in truth.items()},
-                     "direct_session2_barrier": {t: score(old.labels, v, min_size)
-                                                 for t, v in truth.items()}}
+    out["hoover"] = {"direct": {t: score(seg.labels, v, min_size) for t, v in truth.items()}}
     ridge = seg.fields["ridge"] > 0
     crease = seg.fields["crease"] > 0
     cface = face if name != "hip_roof" else sc.face.astype(np.int64)
@@ -121,7 +118,10 @@ def run_scene(name):
         "barrier": coverage(sc, seg.fields["barrier"] > 0, tol, creases, cface)}
     out["n_segments"] = int(seg.n_segments)
     t0 = time.perf_counter()
-    if name in ("agpart", "column"):
+    if not indirect:
+        ind = None
+        out["indirect"] = "not run (--skip-indirect)"
+    elif name in ("agpart", "column"):
         ind = segment_curvature(sc.xyz, radius=0.2, sigma=0.0015, refine=True)
         out["indirect"] = "segment_curvature(radius=0.2, sigma=0.0015, refine=True)"
     elif name == "hip_roof":
@@ -141,14 +141,16 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="column and hip roof only, no JSON")
     ap.add_argument("--scenes", nargs="*", default=None)
     ap.add_argument("--out", default=str(HERE / "results_ridges.json"))
+    ap.add_argument("--skip-indirect", action="store_true",
+                    help="only the direct segmentation (the indirect methods take minutes)")
     args = ap.parse_args(argv)
     names = args.scenes or (["column", "hip_roof"] if args.quick else list(SCENES))
     # warm-up: compile the kernels on a small scene (not timed)
     ridge_segments(make_column(spacing=0.06, sigma=0.0015, rng=0).xyz,
                    ridges(make_column(spacing=0.06, sigma=0.0015, rng=0).xyz, radius=0.3,
                           sigma=0.0015))
-    results = [run_scene(n) for n in names]
-    print("| scene | points | Hoover direct (session 2 barrier) | Hoover indirect | "
+    results = [run_scene(n, not args.skip_indirect) for n in names]
+    print("| scene | points | Hoover direct | Hoover indirect | "
           "coverage ridge / crease / both | crease points within 1 / 2.5 spacings |")
     print("|---|---|---|---|---|---|")
     for r in results:
@@ -160,11 +162,7 @@ def main(argv=None):
                 continue
             parts = []
             for t, s in h[key].items():
-                txt = f"{t} {s['correct']}/{s['n_truth']}"
-                if key == "direct":
-                    o = h["direct_session2_barrier"][t]
-                    txt += f" ({o['correct']}/{o['n_truth']})"
-                parts.append(txt)
+                parts.append(f"{t} {s['correct']}/{s['n_truth']}")
             cells.append(", ".join(parts))
         c = r["crease_coverage"]
         cp = c["crease_points"]

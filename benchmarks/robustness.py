@@ -172,7 +172,7 @@ def option_cases(valid, d: Path):
         (["segment", v, out, "--method", "sar", "--sar-degree", "7"], "--sar-degree"),
         (["segment", v, out, "--method", "sar", "--fs-block", "0"], "--fs-block"),
         (["segment", v, out, "--method", "sar", "--fs-block", "-1"], "--fs-block"),
-        (["moments", v, out, "--tile-size", "-5"], "--tile-size"),
+        (["moments", v, out, "--window", "-5"], "--window"),
         (["moments", v, out, "--alpha", "0"], "--alpha"),
         (["ridges", v, out, "--k", "-3"], "--k"),
     ]

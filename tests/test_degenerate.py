@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lidarstat.classify import classify_moments, covariance
+from lidarstat.classify import covariance, moments
 from lidarstat.errors import (
     DuplicatePointsError,
     InsufficientNeighborsError,
@@ -72,9 +72,9 @@ ENTRY_POINTS = {
     "ridges": lambda p: ridges(p, radius=0.6, sigma=SIGMA),
     "jets_knn": lambda p: jets(p, k=20, sigma=SIGMA),
     "covariance": lambda p: covariance(p, k=20),
-    "moments": lambda p: classify_moments(p, None),
+    "moments": lambda p: moments(p, None),
     "segment_curvature": lambda p: segment_curvature(p, radius=0.4, sigma=SIGMA),
-    "segment_sar": lambda p: segment_sar(p, bandwidth=0.5, sigma=SIGMA),
+    "segment_sar": lambda p: segment_sar(p, radius=0.5, sigma=SIGMA),
     "segment_covariance": lambda p: segment_covariance(p, covariance(p, k=20,
                                                                      keep_neighbors=True)),
 }

@@ -10,7 +10,7 @@ remains is the rounding inside the kernels, a few ulps of the offset (about 1e-9
 import numpy as np
 import pytest
 
-from lidarstat.classify import classify_moments, covariance
+from lidarstat.classify import covariance, moments
 from lidarstat.features import curvature
 from lidarstat.io import PointCloud
 from lidarstat.synth import SCENES
@@ -70,6 +70,6 @@ def test_covariance_is_translation_invariant(seed):
 def test_moments_is_translation_invariant():
     near, far, attrs = _pair("hip_roof", 0)
     kw = {k: attrs[k] for k in ("number_of_returns", "return_number")}
-    a = classify_moments(near, attrs["intensity"], **kw)
-    b = classify_moments(far, attrs["intensity"], **kw)
+    a = moments(near, attrs["intensity"], **kw)
+    b = moments(far, attrs["intensity"], **kw)
     assert np.mean(a.classification == b.classification) >= 0.999

@@ -2,13 +2,11 @@
 
 import numpy as np
 import pytest
+from conftest import shared_file
 
-from lidarstat.classify import (ASPRS, choose_cycle, classify_moments, filter_errors,
-                                low_outliers)
+from lidarstat.classify import ASPRS, choose_cycle, filter_errors, low_outliers, moments
 from lidarstat.errors import InvalidParameterError, InvalidPointsError, LidarstatWarning
 from lidarstat.stats import sequential_moments
-
-from conftest import shared_file
 
 
 def _scene(rng, n=12000):
@@ -50,8 +48,7 @@ def test_cycle_choice_finds_the_cluster_boundary(rng):
 
 def test_synthetic_scene_against_truth(rng):
     xyz, inten, nret, rnum, truth = _scene(rng)
-    res = classify_moments(xyz, inten, number_of_returns=nret, return_number=rnum,
-                           tile_size=50)
+    res = moments(xyz, inten, number_of_returns=nret, return_number=rnum, window=50)
     tg = np.isin(truth, (2, 11))
     e = filter_errors(res.ground, tg)
     assert e.total < 0.005 and e.kappa > 0.95  # measured 0.0001 / 0.999
@@ -67,7 +64,7 @@ def test_synthetic_scene_against_truth(rng):
 
 def test_skewness_balancing_baseline_runs(rng):
     xyz, inten, *_ , truth = _scene(rng, 6000)
-    res = classify_moments(xyz, inten, method="skewness-balancing", tile_size=50)
+    res = moments(xyz, inten, method="skewness-balancing", window=50)
     e = filter_errors(res.ground, np.isin(truth, (2, 11)))
     assert e.total < 0.1
 
@@ -75,7 +72,7 @@ def test_skewness_balancing_baseline_runs(rng):
 def test_no_intensity_warns_and_runs(rng):
     xyz, *_ = _scene(rng, 3000)
     with pytest.warns(LidarstatWarning, match="intensity"):
-        res = classify_moments(xyz, None, tile_size=50)
+        res = moments(xyz, None, window=50)
     assert ASPRS["road"] not in res.classification
 
 
@@ -85,21 +82,21 @@ def test_no_intensity_warns_and_runs(rng):
 ])
 def test_bad_points(bad, err):
     with pytest.raises(err):
-        classify_moments(bad)
+        moments(bad)
 
 
 def test_bad_parameters(rng):
     xyz = rng.normal(size=(100, 3))
     with pytest.raises(InvalidParameterError):
-        classify_moments(xyz, method="nope")
+        moments(xyz, method="nope")
     with pytest.raises(InvalidParameterError):
-        classify_moments(xyz, np.ones(5))
+        moments(xyz, np.ones(5))
 
 
 def test_input_not_modified(rng):
     xyz, inten, *_ = _scene(rng, 3000)
     a, b = xyz.copy(), inten.copy()
-    classify_moments(xyz, inten, tile_size=50)
+    moments(xyz, inten, window=50)
     assert np.array_equal(a, xyz) and np.array_equal(b, inten)
 
 
@@ -107,13 +104,13 @@ def test_input_not_modified(rng):
 def test_isprs_sample_error_bound(sample, bound):
     """Default parameters (no tuning per sample) against the manual ISPRS reference.
 
-    Measured: samp21 6.34 %, samp31 2.14 % total error (docs/methods/moments.md; session 2:
-    10.19 % and 6.12 %).
+    Measured: samp21 6.69 %, samp31 1.95 % total error
+    (benchmarks/results_isprs_moments.json).
     """
     from lidarstat.io import read
 
     c = read(shared_file(f"isprs_filtertest/joined/{sample}_ref_intensity.laz"))
-    res = classify_moments(c.xyz, c["intensity"])
+    res = moments(c.xyz, c["intensity"])
     e = filter_errors(res.ground, np.asarray(c["classification"]) == 2)
     assert e.total < bound
 
@@ -153,7 +150,7 @@ def test_als_town_against_truth():
     c = make_als_town(extent=(100, 80), density=4, rng=0)
     a = c.attributes
     truth = a["classification"].astype(int)
-    res = classify_moments(c.xyz, a["intensity"], number_of_returns=a["number_of_returns"],
+    res = moments(c.xyz, a["intensity"], number_of_returns=a["number_of_returns"],
                            return_number=a["return_number"])
     cls = res.classification.astype(int)
     scored = truth != 7
@@ -208,7 +205,7 @@ def test_raised_patches_roof_wider_than_the_opening_but_not_a_terrace(rng):
     r = raised_patches(xy, z)
     assert r[roof].mean() > 0.98 and r[~roof].mean() < 0.002
     xyz = np.c_[xy, z]
-    on = classify_moments(xyz, rng.normal(100, 10, n), tile_size=60)
+    on = moments(xyz, rng.normal(100, 10, n), window=60)
     assert (on.classification[roof] == ASPRS["building"]).mean() > 0.95
     assert on.ground[~roof].mean() > 0.97
 
@@ -285,3 +282,128 @@ def test_raised_patches_of_a_reordered_cloud_with_ranks(rng):
     got = raised_patches(xy[perm], z[perm], rank=perm)
     assert ref[roof].mean() > 0.9
     assert np.array_equal(got, ref[perm])
+
+
+def test_deprecated_names_still_work_and_warn(rng):
+    """classify_moments, tile_size, min_tile_size and min_cluster are the deprecated
+    spellings of moments, window, min_window and min_points: same result, and a
+    LidarstatDeprecationWarning."""
+    from lidarstat.classify import classify_moments
+    from lidarstat.errors import LidarstatDeprecationWarning
+
+    xyz, inten, *_ = _scene(rng, 4000)
+    ref = moments(xyz, inten, window=50, min_window=20, min_points=12)
+    with pytest.warns(LidarstatDeprecationWarning, match="classify_moments"):
+        a = classify_moments(xyz, inten, window=50, min_window=20, min_points=12)
+    with pytest.warns(LidarstatDeprecationWarning) as rec:
+        b = moments(xyz, inten, tile_size=50, min_tile_size=20, min_cluster=12)
+    text = " ".join(str(w.message) for w in rec)
+    for old, new in (("tile_size", "window"), ("min_tile_size", "min_window"),
+                     ("min_cluster", "min_points")):
+        assert f"{old} is deprecated; use {new}" in text
+    for r in (a, b):
+        assert np.array_equal(r.classification, ref.classification)
+        assert np.array_equal(r.cluster_id, ref.cluster_id)
+    with pytest.warns(LidarstatDeprecationWarning, match="windows"):
+        assert ref.tiles == ref.windows
+    with pytest.raises(InvalidParameterError, match="window only"):
+        moments(xyz, inten, window=50, tile_size=50)
+
+
+def test_removed_cut_interpolation_is_refused(rng):
+    xyz, inten, *_ = _scene(rng, 2000)
+    with pytest.raises(TypeError, match="cut_interpolation"):
+        moments(xyz, inten, cut_interpolation=False)
+
+
+def test_options_take_the_enum_or_its_string(rng):
+    from lidarstat.classify import ElevationRule, MomentsMethod, RoadRule
+
+    xyz, inten, *_ = _scene(rng, 4000)
+    a = moments(xyz, inten, window=50, method="skewness-balancing", elevation_rule="plateau",
+                road_rule="kurtosis-peak")
+    b = moments(xyz, inten, window=50, method=MomentsMethod.SKEWNESS_BALANCING,
+                elevation_rule=ElevationRule.PLATEAU, road_rule=RoadRule.KURTOSIS_PEAK)
+    assert np.array_equal(a.classification, b.classification)
+    assert a.params == b.params and a.params["method"] == "skewness-balancing"
+    assert type(a.params["road_rule"]) is str  # plain strings in the summary JSON
+    for name in ("elevation_rule", "road_rule", "method"):
+        with pytest.raises(InvalidParameterError, match=f"'{name}' parameter of moments"):
+            moments(xyz, inten, **{name: "nope"})
+
+
+def test_seed_of_the_dip_tests(rng):
+    """rng seeds the dip tests (subsample, dequantisation): the same seed gives the same
+    result, a Generator gives one seed for all tests, a negative seed is refused."""
+    xyz, inten, *_ = _scene(rng, 4000)
+    inten = np.round(inten)  # ties: the dip test dequantises with its generator
+    a = moments(xyz, inten, window=50, rng=7)
+    b = moments(xyz, inten, window=50, rng=7)
+    assert np.array_equal(a.classification, b.classification) and a.params["rng"] == 7
+    assert [s.to_dict() for s in a.steps] == [s.to_dict() for s in b.steps]
+    d = moments(xyz, inten, window=50, rng=8)
+    assert [s.dip for s in a.steps] != [s.dip for s in d.steps]  # the seed reaches the tests
+    c = moments(xyz, inten, window=50, rng=np.random.default_rng(1))
+    assert isinstance(c.params["rng"], int)
+    with pytest.raises(InvalidParameterError, match="rng"):
+        moments(xyz, inten, rng=-1)
+
+
+def test_result_shape(rng):
+    """to_fields (written per point), summary (terminal text), params (the values used)."""
+    xyz, inten, nret, rnum, _ = _scene(rng, 4000)
+    res = moments(xyz, inten, number_of_returns=nret, return_number=rnum, window=50)
+    f = res.to_fields()
+    assert set(f) == {"classification", "cluster_id"}
+    assert all(v.shape == (len(xyz),) for v in f.values())
+    text = res.summary()
+    assert text.startswith(f"{len(xyz)} points") and "ground" in text
+    assert "analysis windows" in text
+    p = res.params
+    assert p["window"] == 50 and p["min_window"] == 16 and p["min_points"] == 10
+    assert p["rng"] == 0 and p["returns"] and p["intensity"]
+    assert all("window" in w for w in res.windows)
+
+
+def test_cycle_and_road_helpers_renamed_min_points(rng):
+    """choose_cycle and road_cut take min_points; min_cluster still works and warns."""
+    from lidarstat.classify._roads import road_cut
+    from lidarstat.errors import LidarstatDeprecationWarning
+
+    sm = sequential_moments(np.r_[rng.normal(0, 0.2, 3000), rng.normal(8, 0.5, 600)])
+    ref = choose_cycle(sm, "elevation", min_points=50)
+    with pytest.warns(LidarstatDeprecationWarning, match="min_cluster"):
+        old = choose_cycle(sm, "elevation", min_cluster=50)
+    assert old == ref and ref.evidence["min_points"] == 50
+    v = np.r_[rng.normal(30, 3, 3000), rng.normal(60, 6, 7000)]
+    with pytest.warns(LidarstatDeprecationWarning, match="min_cluster"):
+        assert road_cut(v, min_cluster=20)[0] == road_cut(v, min_points=20)[0]
+    with pytest.raises(InvalidParameterError, match="elevation_rule"):
+        choose_cycle(sm, "elevation", elevation_rule="flat")
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_classes_do_not_depend_on_the_order_of_the_points(seed):
+    """A catalogue's tiles bring the points in another order than the whole file."""
+    from lidarstat.classify import moments
+    from lidarstat.synth import make_als_town
+
+    town = make_als_town(extent=(90.0, 70.0), density=6.0, rng=seed)
+    inten = np.asarray(town.attributes["intensity"])
+    xyz = np.round(town.xyz, 1)  # a coarse LAS scale: many points share x, y or z
+    a = moments(xyz, inten, window=32.0)
+    p = np.random.default_rng(seed).permutation(len(xyz))
+    b = moments(xyz[p], inten[p], window=32.0)
+    np.testing.assert_array_equal(a.classification[p], b.classification)
+    np.testing.assert_array_equal(a.ground[p], b.ground)
+
+
+def test_classes_of_a_real_tile_do_not_depend_on_the_order(shared_data):
+    from lidarstat.io import read
+
+    c = read(shared_data / "ahn3_amsterdam" / "ahn_2386_9702.laz")
+    kw = {k: np.asarray(c[k]) for k in ("number_of_returns", "return_number")}
+    a = moments(c.xyz, np.asarray(c["intensity"]), **kw)
+    p = np.random.default_rng(0).permutation(len(c.xyz))
+    b = moments(c.xyz[p], np.asarray(c["intensity"])[p], **{k: v[p] for k, v in kw.items()})
+    np.testing.assert_array_equal(a.classification[p], b.classification)

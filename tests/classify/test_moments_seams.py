@@ -1,8 +1,8 @@
-"""Tile cuts interpolated between tiles: no class step at a tile border (classify/_seams.py)."""
+"""Window cuts interpolated between windows: no class step at a window border (_seams.py)."""
 
 import numpy as np
 
-from lidarstat.classify import classify_moments
+from lidarstat.classify import moments
 from lidarstat.classify._seams import interpolate_cuts
 
 
@@ -35,12 +35,12 @@ def test_interpolated_cuts_are_continuous_and_exact_inside_tiles(rng):
     assert np.all(step[np.isfinite(cut)] == 1.25)  # one value everywhere: no rounding
 
 
-def test_no_class_step_at_a_tile_border():
-    """Two 64 m tiles get different cuts (smooth terrain: 0.35 m; rough terrain, 0.25 m
-    noise: 1.0 m). A 0.45 m hedge crosses their border. With step cuts it is object on
-    one side of the border and ground on the other; with interpolated cuts the cut is
-    continuous at the border and the hedge keeps one class across it, while the points
-    beyond the tile centres keep their tile's own cut."""
+def test_no_class_step_at_a_window_border():
+    """Two 64 m windows get different cuts (smooth terrain: 0.35 m; rough terrain, 0.25 m
+    noise: 1.0 m). A 0.45 m hedge crosses their border: under each window's own cut it
+    would be object on one side of the border and ground on the other. The interpolated
+    cut is continuous at the border and the hedge keeps one class across it, while the
+    points beyond the window centres keep their window's own cut."""
     g = np.random.default_rng(0)
     n = 40000
     xy = g.uniform(0, [128, 64], (n, 2))
@@ -53,19 +53,16 @@ def test_no_class_step_at_a_tile_border():
     z[hedge] = terrain[hedge] + 0.45 + g.normal(0, 0.03, hedge.sum())
     left = hedge & (xy[:, 0] >= 62) & (xy[:, 0] < 64)
     right = hedge & (xy[:, 0] >= 64) & (xy[:, 0] < 66)
-    kw = dict(tile_size=64, min_tile_size=64)
-    inten = g.normal(100, 10, n)
-    step = classify_moments(np.c_[xy, z], inten, cut_interpolation=False, **kw)
-    t0, t1 = (t["threshold"] for t in step.tiles)
+    smooth = moments(np.c_[xy, z], g.normal(100, 10, n), window=64, min_window=64)
+    t0, t1 = (t["threshold"] for t in smooth.windows)
     assert t0 < 0.45 < t1 and t1 - t0 > 0.4  # the scene does give two different cuts
-    assert step.ground[left].mean() < 0.1 and step.ground[right].mean() > 0.9  # the step
-    smooth = classify_moments(np.c_[xy, z], inten, **kw)
+    h = smooth.height
+    assert (h[left] > t0).mean() > 0.9 and (h[right] <= t1).mean() > 0.9  # each own cut
     near = np.abs(xy[:, 0] - 64) < 0.25
     cl, cr = smooth.cut[near & ~rough], smooth.cut[near & rough]
     cl, cr = cl[np.isfinite(cl)], cr[np.isfinite(cr)]
     assert abs(np.median(cr) - np.median(cl)) < 0.02  # continuous: no jump at x = 64
     assert abs(smooth.ground[left].mean() - smooth.ground[right].mean()) < 0.1
-    t0, t1 = (t["threshold"] for t in smooth.tiles)
     far0 = (xy[:, 0] < 32) & np.isfinite(smooth.cut)
     far1 = (xy[:, 0] > 96) & np.isfinite(smooth.cut)
     assert np.all(smooth.cut[far0] == t0) and np.all(smooth.cut[far1] == t1)

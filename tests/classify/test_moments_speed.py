@@ -3,11 +3,9 @@ change no label (TIN evaluation, cell medians, curve smoothing, tiling)."""
 
 import numpy as np
 import pytest
-
-from lidarstat.classify import _cycle, _moments, _surface
-from lidarstat.classify import classify_moments
-
 from classify.test_moments_classify import _scene
+
+from lidarstat.classify import _cycle, _moments_ground, _moments_windows, _surface, moments
 
 
 def _scipy_surface(xy_ground, z_ground, *, cell, which="median", rank=None):
@@ -84,11 +82,11 @@ def test_smoothing_equals_convolution(rng, n, w):
 
 def test_classification_identical_to_scipy_surface(rng, monkeypatch):
     xyz, inten, nret, rnum, _ = _scene(rng)
-    kw = dict(number_of_returns=nret, return_number=rnum, tile_size=50)
-    fast = classify_moments(xyz, inten, **kw)
-    monkeypatch.setattr(_moments, "ground_surface", _scipy_surface)
+    kw = dict(number_of_returns=nret, return_number=rnum, window=50)
+    fast = moments(xyz, inten, **kw)
+    monkeypatch.setattr(_moments_ground, "ground_surface", _scipy_surface)
     monkeypatch.setattr(_cycle, "_smooth", _convolve_smooth)
-    ref = classify_moments(xyz, inten, **kw)
+    ref = moments(xyz, inten, **kw)
     assert np.array_equal(fast.classification, ref.classification)
     assert np.array_equal(fast.cluster_id, ref.cluster_id)
     assert np.array_equal(fast.height, ref.height)
@@ -98,34 +96,35 @@ def test_classification_identical_to_scipy_surface(rng, monkeypatch):
 def test_schedulers_give_identical_results(rng):
     pytest.importorskip("dask", reason="the dask scheduler needs dask")
     xyz, inten, nret, rnum, _ = _scene(rng, 6000)
-    kw = dict(number_of_returns=nret, return_number=rnum, tile_size=30, min_tile_size=10)
-    runs = [classify_moments(xyz, inten, scheduler=s, workers=2, **kw)
+    kw = dict(number_of_returns=nret, return_number=rnum, window=30, min_window=10)
+    runs = [moments(xyz, inten, scheduler=s, workers=2, **kw)
             for s in ("sync", "threads", "dask")]
     for r in runs[1:]:
         assert np.array_equal(r.classification, runs[0].classification)
         assert np.array_equal(r.cluster_id, runs[0].cluster_id)
         assert [s.to_dict() for s in r.steps] == [s.to_dict() for s in runs[0].steps]
-        assert r.tiles == runs[0].tiles
-    # cluster ids are unique per tile: no id spans two root tiles
-    key = np.floor((xyz[:, :2] - xyz[:, :2].min(0)) / 30).astype(int) @ [1000, 1]
+        assert r.windows == runs[0].windows
+    # cluster ids are unique per window: no id spans two root windows (the windows lie on
+    # multiples of their side in the file's coordinates)
+    key = np.floor(xyz[:, :2] / 30).astype(int) @ [100000, 1]
     for c in np.unique(runs[0].cluster_id):
         assert np.unique(key[runs[0].cluster_id == c]).size == 1
-    assert len({t["tile"] for t in runs[0].tiles}) == len(runs[0].tiles)
+    assert len({t["window"] for t in runs[0].windows}) == len(runs[0].windows)
 
 
 def test_lengths_in_metres_whatever_the_file_unit(rng):
     """The same scene in feet with units=0.3048 gets the labels of the metre scene."""
     xyz, inten, nret, rnum, _ = _scene(rng, 8000)
-    kw = dict(number_of_returns=nret, return_number=rnum, tile_size=50)
-    ref = classify_moments(xyz, inten, **kw)
-    ft = classify_moments(xyz / 0.3048, inten, units=0.3048, **kw)
+    kw = dict(number_of_returns=nret, return_number=rnum, window=50)
+    ref = moments(xyz, inten, **kw)
+    ft = moments(xyz / 0.3048, inten, units=0.3048, **kw)
     assert (ft.classification == ref.classification).mean() > 0.998
     np.testing.assert_allclose(ft.height * 0.3048, ref.height, atol=1e-5)
-    naive = classify_moments(xyz / 0.3048, inten, **kw)  # windows 3.3 x too small
+    naive = moments(xyz / 0.3048, inten, **kw)  # windows 3.3 x too small
     assert (naive.classification != ref.classification).sum() > \
         5 * (ft.classification != ref.classification).sum()
     with pytest.raises(Exception, match="units"):
-        classify_moments(xyz, inten, units=0, tile_size=50)
+        moments(xyz, inten, units=0, window=50)
 
 
 def test_low_outlier_and_road_cell_kernels_equal_lexsort(rng):
@@ -154,9 +153,9 @@ def test_low_outlier_and_road_cell_kernels_equal_lexsort(rng):
     assert np.array_equal(_roads.cell_median(xy, v, points_per_cell=8), ref)
 
 
-def test_tile_order_changes_no_label(rng, monkeypatch):
-    """Working in root-tile order (contiguous tiles) gives exactly the labels, heights,
-    ids, tiles and report steps of working in input order, on a cloud in random order
+def test_window_order_changes_no_label(rng, monkeypatch):
+    """Working in root-window order (contiguous windows) gives exactly the labels, heights,
+    ids, windows and report steps of working in input order, on a cloud in random order
     with ties everywhere: centimetre coordinates, duplicated positions, low echoes."""
     xyz, inten, nret, rnum, _ = _scene(rng, 16000)
     xyz = np.round(xyz, 2)
@@ -166,16 +165,16 @@ def test_tile_order_changes_no_label(rng, monkeypatch):
     xyz[rng.choice(len(xyz), 10, replace=False), 2] -= 4.0
     o = rng.permutation(len(xyz))
     xyz, inten, nret, rnum = xyz[o], inten[o], nret[o], rnum[o]
-    kw = dict(number_of_returns=nret, return_number=rnum, tile_size=42, min_tile_size=10)
-    fast = classify_moments(xyz, inten, **kw)
-    monkeypatch.setattr(_moments, "_tile_order",
+    kw = dict(number_of_returns=nret, return_number=rnum, window=42, min_window=10)
+    fast = moments(xyz, inten, **kw)
+    monkeypatch.setattr(_moments_windows, "window_order",
                         lambda roots: (np.arange(sum(t.points.size for t in roots)), roots))
-    ref = classify_moments(xyz, inten, **kw)
+    ref = moments(xyz, inten, **kw)
     assert fast.params["n_low_noise"] > 0
     for name in ("classification", "cluster_id", "height", "ground"):
         assert np.array_equal(getattr(fast, name), getattr(ref, name), equal_nan=True), name
     assert [s.to_dict() for s in fast.steps] == [s.to_dict() for s in ref.steps]
-    assert fast.tiles == ref.tiles
+    assert fast.windows == ref.windows
 
 
 def test_cell_keys_equal_the_numpy_expression(rng):

@@ -27,7 +27,7 @@ def scene_file(tmp_path, rng):
 def test_moments_then_evaluate(scene_file, tmp_path, capsys):
     out = tmp_path / "out.las"
     before = scene_file.read_bytes()
-    assert main(["moments", str(scene_file), str(out), "--tile-size", "60", "-q"]) == 0
+    assert main(["moments", str(scene_file), str(out), "--window", "60", "-q"]) == 0
     assert scene_file.read_bytes() == before
     c = read(out)
     assert "cluster_id" in c
@@ -40,8 +40,7 @@ def test_moments_then_evaluate(scene_file, tmp_path, capsys):
     assert main(["evaluate", str(out), "--reference", str(scene_file), "--classes",
                  "--json", str(js)]) == 0
     e = json.loads(js.read_text())
-    # measured: total 0, kappa 1.0 (was 0.81 before the ground surface extrapolated the
-    # terrain slope beyond the hull of its vertices)
+    # measured: total 0, kappa 1.0
     assert e["ground_object"]["total"] < 0.01 and e["ground_object"]["kappa"] > 0.95
     assert "Type I" in capsys.readouterr().out
 
@@ -63,7 +62,7 @@ def test_moments_units_options(scene_file, tmp_path):
     feet = tmp_path / "feet.las"
     write(feet, PointCloud(c.xyz / 0.3048, {"intensity": c["intensity"]}))
     ref, out_s, out_u = tmp_path / "m.las", tmp_path / "s.las", tmp_path / "u.las"
-    common = ["--tile-size", "60", "--no-report", "-q"]
+    common = ["--window", "60", "--no-report", "-q"]
     assert main(["moments", str(scene_file), str(ref), *common]) == 0
     js = tmp_path / "s.json"
     assert main(["moments", str(feet), str(out_s), "--scale", "0.3048", "--summary-json",
@@ -74,3 +73,46 @@ def test_moments_units_options(scene_file, tmp_path):
     assert (read(out_u)["classification"] == a).mean() > 0.998
     assert json.loads(js.read_text())["units"]["horizontal_m"] == 0.3048
     assert main(["moments", str(feet), str(tmp_path / "x.las"), "--scale", "-1"]) == 2
+
+
+def test_moments_summary_json_has_the_parameters_used(scene_file, tmp_path):
+    js = tmp_path / "s.json"
+    assert main(["moments", str(scene_file), str(tmp_path / "o.las"), "--window", "60",
+                 "--min-points", "12", "--seed", "3", "--no-report", "-q",
+                 "--summary-json", str(js)]) == 0
+    params = json.loads(js.read_text())["params"]
+    assert params["window"] == 60 and params["min_window"] == 16
+    assert params["min_points"] == 12 and params["rng"] == 3
+    assert params["method"] == "moments" and params["road_rule"] == "antimode"
+    assert not {"tile_size", "min_tile_size", "min_cluster", "cut_interpolation"} & set(params)
+
+
+def test_deprecated_spellings_work_and_say_so(scene_file, tmp_path, capsys):
+    """--tile-size, --min-tile-size and --min-cluster run as --window, --min-window and
+    --min-points (the same labels) and warn after the run."""
+    new, old = tmp_path / "new.las", tmp_path / "old.las"
+    assert main(["moments", str(scene_file), str(new), "--window", "60", "--min-window",
+                 "20", "--min-points", "12", "--no-report", "-q"]) == 0
+    capsys.readouterr()
+    assert main(["moments", str(scene_file), str(old), "--tile-size", "60",
+                 "--min-tile-size", "20", "--min-cluster", "12", "--no-report", "-q"]) == 0
+    err = capsys.readouterr().err
+    for o, n in (("--tile-size", "--window"), ("--min-tile-size", "--min-window"),
+                 ("--min-cluster", "--min-points")):
+        assert f"lidarstat: warning: {o} is deprecated; use {n}" in err
+    assert np.array_equal(read(new)["classification"], read(old)["classification"])
+
+
+def test_removed_step_cuts_is_refused(scene_file, tmp_path, capsys):
+    out = tmp_path / "o.las"
+    assert main(["moments", str(scene_file), str(out), "--step-cuts", "--no-report"]) == 2
+    assert "--step-cuts" in capsys.readouterr().err and not out.exists()
+
+
+def test_choices_are_the_library_enums():
+    from lidarstat.classify import ElevationRule, MomentsMethod, RoadRule
+    from lidarstat.cli import moments as cli
+
+    assert cli.METHODS == tuple(m.value for m in MomentsMethod)
+    assert cli.ELEVATION_RULES == tuple(r.value for r in ElevationRule)
+    assert cli.ROAD_RULES == tuple(r.value for r in RoadRule)

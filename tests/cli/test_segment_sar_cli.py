@@ -42,6 +42,36 @@ def test_sar_method_writes_ids_table_lines_and_plots(rng, tmp_path, capsys):
         assert "2 segments" in capsys.readouterr().out
 
 
+def test_sar_deprecated_envelope_option_works_and_warns(rng, tmp_path, capsys):
+    src = _gable(rng, tmp_path)
+    runs = {}
+    for opt in ("--envelope-alpha", "--fs-envelope"):
+        out = tmp_path / f"{opt.strip('-')}.las"
+        assert main(["segment", str(src), str(out), "--method", "sar", "--radius", "1.0",
+                     opt, "0.01", "--summary-json", str(tmp_path / "s.json")]) == 0
+        err = capsys.readouterr().err
+        runs[opt] = (read(out).attributes["segment_id"],
+                     __import__("json").loads((tmp_path / "s.json").read_text()))
+        deprecated = "--fs-envelope is deprecated; use --envelope-alpha" in err
+        assert deprecated == (opt == "--fs-envelope")
+    new, old = runs["--envelope-alpha"], runs["--fs-envelope"]
+    np.testing.assert_array_equal(new[0], old[0])
+    assert json_params(new[1])["envelope_alpha"] == json_params(old[1])["envelope_alpha"] == 0.01
+
+
+def json_params(summary):
+    """The parameters block of a ``--summary-json`` file."""
+    return summary.get("params", summary)
+
+
+def test_sar_refuses_options_it_cannot_use(rng, tmp_path, capsys):
+    src = _gable(rng, tmp_path)
+    for extra in (["--k", "8"], ["--sensor", "0", "0", "100"], ["--noise", "z"]):
+        assert main(["segment", str(src), str(tmp_path / "x.las"), "--method", "sar",
+                     *extra]) == 2
+        assert "--method sar does not use it" in capsys.readouterr().err
+
+
 def test_curvature_method_needs_a_radius(rng, tmp_path, capsys):
     src = _gable(rng, tmp_path)
     out = tmp_path / "c.las"

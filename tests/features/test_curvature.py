@@ -162,3 +162,41 @@ def test_bandwidth_detects_what_it_promises():
 def test_bad_parameters(kw, match):
     with pytest.raises(InvalidParameterError, match=match):
         curvature(np.random.default_rng(0).random((50, 3)), **kw)
+
+
+# ------------------------------------------------------------------ vocabulary and results
+def test_options_accept_the_enum_or_its_string():
+    from lidarstat.features import Frame, Noise, Test
+
+    cloud = make_surface("cylinder", sigma=0.001, rng=0)
+    a = curvature(cloud.xyz, radius=0.25, sigma=0.001, frame="pca", test="paper", noise="z")
+    b = curvature(cloud.xyz, radius=0.25, sigma=0.001, frame=Frame.PCA, test=Test.PAPER,
+                  noise=Noise.Z)
+    for f in ("K", "H", "surface_type", "chi2_p"):
+        np.testing.assert_array_equal(a[f], b[f])
+    # the result records plain strings, so params serialise as JSON
+    assert b.params["frame"] == "pca" and type(b.params["frame"]) is str
+    assert type(b.params["test"]) is str and type(b.params["noise"]) is str
+    assert Noise.values() == ("z", "range", "normal")
+
+
+def test_result_shape_params_summary_fields():
+    import json
+
+    cloud = make_surface("peak", sigma=0.002, rng=4)
+    res = curvature(cloud.xyz, radius=0.25)  # sigma estimated
+    p = res.params
+    assert p["sigma_estimated"] and p["sigma"] == res.sigma and p["noise"] == "normal"
+    assert p["radius"] == 0.25 and p["min_neighbors"] == 7 and p["test"] == "calibrated"
+    json.dumps(p)
+    assert "surface types" in res.summary()
+    assert set(res.to_fields()) == set(res.fields)
+    given = curvature(cloud.xyz, radius=0.25, sigma=0.002)
+    assert given.params["noise"] == "z" and not given.params["sigma_estimated"]
+
+
+def test_bandwidth_result_shape():
+    res = optimal_bandwidth(K0=0, H0=-0.45, sigma=0.015, density=3000)
+    assert res.to_fields() == {}
+    assert res.params["radius"] == res.radius and res.params["test"] == "calibrated"
+    assert "smallest radius" in res.summary() and res.table() in res.summary()

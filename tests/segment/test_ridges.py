@@ -108,7 +108,7 @@ def test_no_ridges_on_spheres_cylinders_planes(surface):
 
 def test_direct_segmentation_cuts_along_the_crest(crest_result):
     pts, res = crest_result
-    seg = ridge_segments(pts, res, min_size=100)
+    seg = ridge_segments(pts, res, min_points=100)
     lab = seg.labels
     big = np.bincount(lab)[1:].argsort()[::-1][:2] + 1
     # the two largest regions lie on either side of the crest
@@ -145,16 +145,11 @@ def test_cli_ridges_and_segment(tmp_path, crest_result):
     assert json.loads(summary.read_text())["n_lines"] == len(lines["features"])
     seg_out = tmp_path / "seg.npz"
     assert main(["segment", str(src), str(seg_out), "--method", "ridges", "--radius", "0.25",
-                 "--sigma", str(SIGMA), "--alpha", "0.05", "--min-size", "100", "-q"]) == 0
+                 "--sigma", str(SIGMA), "--alpha", "0.05", "--min-points", "100", "-q"]) == 0
     seg = read(seg_out)
     assert seg.attributes["segment_id"].max() >= 2
     for name in ("ridge", "crease", "barrier"):
         assert name in seg.attributes, name
-    # the crest is smooth: the chi-square accepts it, the ridge band alone cuts it
-    assert main(["segment", str(src), str(seg_out), "--method", "ridges", "--radius", "0.25",
-                 "--sigma", str(SIGMA), "--alpha", "0.05", "--min-size", "100", "--ridges-only",
-                 "-q"]) == 0
-    assert read(seg_out).attributes["barrier"].sum() < seg.attributes["barrier"].sum()
     assert (tmp_path / "seg.segments.csv").exists()
 
 
@@ -192,3 +187,59 @@ def test_scan_scenes_cut_along_their_true_edges(scene):
     assert cov.ratio > 0.85, cov.ratio
     assert np.mean(sc.edge_distance[crease] < 0.05) > 0.99
     assert np.mean(sc.edge_distance[crease] < 0.02) > 0.75
+
+
+def test_min_size_is_a_deprecated_spelling_of_min_points(crest_result):
+    from lidarstat.errors import LidarstatDeprecationWarning
+
+    pts, res = crest_result
+    new = ridge_segments(pts, res, min_points=100)
+    with pytest.warns(LidarstatDeprecationWarning, match="min_size is deprecated"):
+        old = ridge_segments(pts, res, min_size=100)
+    np.testing.assert_array_equal(new.labels, old.labels)
+    assert new.params["min_points"] == 100 and "min_size" not in new.params
+
+
+def test_k_of_the_growing_graph_is_grow_k(crest_result):
+    from lidarstat.errors import LidarstatDeprecationWarning
+
+    pts, res = crest_result
+    new = ridge_segments(pts, res, grow_k=10, min_points=100)
+    with pytest.warns(LidarstatDeprecationWarning, match="k is deprecated; use grow_k"):
+        old = ridge_segments(pts, res, k=10, min_points=100)
+    np.testing.assert_array_equal(new.labels, old.labels)
+    assert new.params["grow_k"] == 10
+
+
+def test_segmentation_routes_k_to_the_jets_only(crest_result):
+    """One vocabulary: ``k`` is the jets' neighbourhood, the growing graph is ``grow_k``."""
+    from lidarstat.pipeline import segmentation
+
+    pts, _ = crest_result
+    seg = segmentation(pts, method="ridges", k=200, sigma=SIGMA, alpha=0.05, min_points=100)
+    assert seg.params["k"] == 200 and seg.params["grow_k"] == 8
+
+
+def test_ridge_result_params(crest_result):
+    _, res = crest_result
+    p = res.params
+    assert p["sigma"] == res.jets.sigma and p["alpha"] == 0.05 and p["weight"] == "tricube"
+    assert res.jets.params["noise"] == "z" and res.jets.params["radius"] == 0.25
+    assert "jets of degree 4" in res.jets.summary()
+
+
+def test_segment_curvature_speaks_the_shared_vocabulary():
+    """segment_curvature: min_points and search (min_size, threshold deprecated)."""
+    from lidarstat.errors import LidarstatDeprecationWarning
+    from lidarstat.segment import segment_curvature
+
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(0, 10, (3000, 2))
+    z = np.where(xy[:, 0] < 5, 0.0, 0.2 * (xy[:, 0] - 5) ** 2) + rng.normal(0, 0.005, 3000)
+    pts = np.c_[xy, z]
+    new = segment_curvature(pts, radius=1.0, sigma=0.005, min_points=40)
+    with pytest.warns(LidarstatDeprecationWarning, match="min_size is deprecated"):
+        old = segment_curvature(pts, radius=1.0, sigma=0.005, min_size=40)
+    np.testing.assert_array_equal(new.labels, old.labels)
+    assert new.params["min_points"] == 40 and new.params["sigma"] == 0.005
+    assert new.params["noise"] == "z"

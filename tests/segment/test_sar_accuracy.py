@@ -14,7 +14,7 @@ import pytest
 from scipy import stats
 
 from lidarstat.segment import hoover, segment_sar
-from lidarstat.segment._sar import OUTLIER_MAX, _outlier_test
+from lidarstat.segment._sar_outliers import OUTLIER_MAX, outlier_test
 from lidarstat.segment._sar_refine import refit_unit
 
 
@@ -62,7 +62,7 @@ def _gable_village(rng, rows=5, cols=7, density=8.0, sigma=0.03):
 @pytest.fixture(scope="module")
 def village():
     pts, face, normals, offsets = _gable_village(np.random.default_rng(11))
-    return pts, face, normals, offsets, segment_sar(pts, bandwidth=0.8)
+    return pts, face, normals, offsets, segment_sar(pts, radius=0.8)
 
 
 def _face_errors(pts, face, normals, seg):
@@ -130,7 +130,7 @@ def test_outlier_test_rejects_at_its_level_under_the_null_and_finds_planted_poin
     unit = refit_unit(pts, np.arange(n_raw), np.arange(n_raw, n_raw + n_extra),
                       w_radius=0.5)
     labels = np.ones(pts.shape[0], dtype=np.int64)
-    new, units, removed = _outlier_test(pts, labels, [unit], alpha)
+    new, units, removed = outlier_test(pts, labels, [unit], alpha)
     assert np.all(removed[planted] == 1) and np.all(new[planted] == 0)
     assert not removed[:n_raw].any()  # raw-cluster points are not tested
     null = np.setdiff1d(np.arange(n_raw, n_raw + n_extra), planted)

@@ -14,7 +14,7 @@ from scipy import stats
 from scipy.sparse.linalg import splu
 
 from lidarstat.segment import refine_raw_clusters
-from lidarstat.segment._sar import _noise_rho
+from lidarstat.segment._sar_gof import _noise_rho
 from lidarstat.segment._sar_refine import _adjacency, _standardised
 from lidarstat.stats import sar_variance_test
 
@@ -68,8 +68,8 @@ def _gable(rng, sigma=0.03, density=8.0):
 def test_a_segment_of_two_faces_is_split_into_the_faces(rng):
     pts, face = _gable(rng)
     raw = np.ones(pts.shape[0], dtype=np.int64)  # one raw cluster over both faces
-    seg = refine_raw_clusters(pts, raw, threshold=2.0, w_radius=W_RADIUS, sigma=0.03,
-                              min_size=30)
+    seg = refine_raw_clusters(pts, raw, search=2.0, w_radius=W_RADIUS, sigma=0.03,
+                              min_points=30)
     assert seg.params["splits"] >= 2
     assert seg.n_segments == 2
     for f in (1, 2):
@@ -83,15 +83,15 @@ def test_a_segment_of_two_faces_is_split_into_the_faces(rng):
     assert np.all(seg.table["gof_p"] > 0.001)
     assert np.all(seg.table["scale_ratio"] < 1.2)
     # without the test the two faces stay one segment with ~0.4 m scatter
-    one = refine_raw_clusters(pts, raw, threshold=2.0, w_radius=W_RADIUS, min_size=30)
+    one = refine_raw_clusters(pts, raw, search=2.0, w_radius=W_RADIUS, min_points=30)
     assert one.n_segments == 1 and one.table["sigma"][0] > 10 * 0.03
 
 
 def test_a_segment_of_one_face_is_not_split(rng):
     pts, face = _gable(rng)
     raw = face.astype(np.int64)  # the right raw clusters
-    seg = refine_raw_clusters(pts, raw, threshold=2.0, w_radius=W_RADIUS, sigma=0.03,
-                              min_size=30)
+    seg = refine_raw_clusters(pts, raw, search=2.0, w_radius=W_RADIUS, sigma=0.03,
+                              min_points=30)
     assert seg.n_segments == 2 and seg.params["splits"] == 0
     assert np.all(seg.table["split"] == 0)
     assert np.all(seg.table["gof_p"] > 0.001)

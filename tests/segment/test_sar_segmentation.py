@@ -43,7 +43,7 @@ def scene():
 @pytest.fixture(scope="module")
 def result(scene):
     pts = scene[0]
-    return segment_sar(pts, bandwidth=1.0)
+    return segment_sar(pts, radius=1.0)
 
 
 def test_roof_planes_found_with_accurate_normals(scene, result):
@@ -119,7 +119,7 @@ def test_small_clusters_are_reported_not_fatal(rng):
     lab[:200] = 1
     lab[200:203] = 2  # three points: too few for a plane, rho and sigma
     with pytest.warns(Warning, match="could not be modelled"):
-        seg = refine_raw_clusters(pts, lab, threshold=1.0, w_radius=0.8, min_size=1)
+        seg = refine_raw_clusters(pts, lab, search=1.0, w_radius=0.8, min_points=1)
     assert seg.n_segments >= 1 and seg.params["skipped"][0][0] == 2
 
 
@@ -182,13 +182,13 @@ def test_one_plane_in_two_raw_clusters_is_merged_two_planes_are_not(rng):
     lab[(xy[:, 0] > 12) & (xy[:, 1] < 9)] = 2    # 4 m apart
     lab[xy[:, 1] > 11] = 3                       # the second plane
     pts = np.c_[xy, z]
-    seg = refine_raw_clusters(pts, lab, threshold=3.0, w_radius=0.5)
+    seg = refine_raw_clusters(pts, lab, search=3.0, w_radius=0.5)
     assert seg.n_segments == 2
     first = seg.labels[(xy[:, 1] < 9)]
     assert np.bincount(first[first > 0]).max() > 0.95 * (first > 0).sum()
     k = np.bincount(first[first > 0]).argmax() - 1
     assert seg.table["n_s"][k] == np.count_nonzero(np.isin(lab, [1, 2]))
-    apart = refine_raw_clusters(pts, lab, threshold=3.0, w_radius=0.5, merge_alpha=None)
+    apart = refine_raw_clusters(pts, lab, search=3.0, w_radius=0.5, merge_alpha=None)
     assert apart.n_segments == 3
 
 
@@ -203,7 +203,7 @@ def test_touching_raw_clusters_of_one_plane_merge_under_the_null(rng):
         xy = rng.uniform(0, [24, 10], (2400, 2))
         z = 5 + 0.4 * xy[:, 0] - 0.2 * xy[:, 1] + rng.normal(0, 0.03, 2400)
         lab = np.where(xy[:, 0] < 11, 1, np.where(xy[:, 0] > 13, 2, 0))
-        seg = refine_raw_clusters(np.c_[xy, z], lab, threshold=3.0, w_radius=0.5)
+        seg = refine_raw_clusters(np.c_[xy, z], lab, search=3.0, w_radius=0.5)
         merged += seg.n_segments == 1
     assert merged >= 9
 
@@ -226,11 +226,11 @@ def test_noise_is_reestimated_on_the_units_when_strips_disagree(rng):
     pts = np.r_[np.c_[xy, gables(xy) + rng.normal(0, 0.02, len(xy))],
                 np.c_[roof_xy, gables(roof_xy) + 0.06 + rng.normal(0, 0.02, len(roof_xy))]]
     roof = pts[:, 2] > 1.0
-    seg = segment_sar(pts, bandwidth=1.0)
+    seg = segment_sar(pts, radius=1.0)
     p = seg.params
     assert p["sigma_local"] < 0.026, p
     assert p["sigma_passes"] == 2 and p["sigma_units"] > 1.25 * p["sigma_local"]
-    one = segment_sar(pts, bandwidth=1.0, sigma=p["sigma_local"])
+    one = segment_sar(pts, radius=1.0, sigma=p["sigma_local"])
     assert np.mean(seg.labels[roof] > 0) > np.mean(one.labels[roof] > 0) + 0.05
 
 

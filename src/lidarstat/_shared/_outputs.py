@@ -38,6 +38,7 @@ _KINDS = {
     "table": ((".csv", ".json"), "table format"),
     "lines": (LINE_SUFFIXES, "format for lines"),
     "png": ((".png",), "image format"),
+    "raster": ((".tif", ".tiff"), "raster format (GeoTIFF)"),
     "folder": (None, "folder"),
 }
 

@@ -120,7 +120,7 @@ class TileGrid:
         return np.concatenate(pid), np.concatenate(key), np.concatenate(is_core)
 
 
-def tile_grid(xyz, size: float, halo: float = 0.0) -> list[Tile]:
+def tile_grid(xyz, size: float, halo: float = 0.0, *, anchor=None) -> list[Tile]:
     """Cut a cloud into square planimetric tiles of side `size` with a `halo` around each.
 
     Parameters
@@ -131,6 +131,9 @@ def tile_grid(xyz, size: float, halo: float = 0.0) -> list[Tile]:
     halo : float, default 0
         Width of the band around a core square whose points are added to the tile as
         context; must be smaller than `size`.
+    anchor : (x, y), optional
+        A corner of the grid (tiles at ``anchor + size * k``); default the points' lower
+        corner. A fixed anchor gives every part of an area the same grid.
 
     Returns
     -------
@@ -150,7 +153,10 @@ def tile_grid(xyz, size: float, halo: float = 0.0) -> list[Tile]:
     size = check_scalar(size, "size", func="tile_grid", low=0, closed="neither")
     halo = check_scalar(halo, "halo", func="tile_grid", low=0, high=size, closed="left")
     xy = xyz[:, :2]
-    grid = TileGrid.covering(column_min(xy), column_max(xy), size, halo)
+    lo = column_min(xy)
+    if anchor is not None:
+        lo = np.asarray(anchor, float) + size * np.floor((lo - np.asarray(anchor, float)) / size)
+    grid = TileGrid.covering(lo, column_max(xy), size, halo)
     pid, key, is_core = grid.memberships(xy)
     if halo > 0:
         order = np.lexsort((pid, key))

@@ -6,14 +6,18 @@ from ._covariance import BoundaryTest, CurvedTest, classify_covariance, covarian
 from ._covariance_noise import estimate_plane_sigma
 from ._covariance_result import FIELDS as COVARIANCE_CLASS_FIELDS
 from ._covariance_result import CovarianceClasses, CovarianceClassification
-from ._cycle import CycleChoice, choose_cycle, skewness_balance_cycle
+from ._cycle import CycleChoice, ElevationRule, choose_cycle, skewness_balance_cycle
 from ._outliers import low_outliers
-from ._moments import ASPRS, MomentsClassification, MomentsStep, classify_moments
+from ._moments import classify_moments, moments
+from ._moments_options import MomentsMethod
+from ._moments_result import ASPRS, MomentsClassification, MomentsStep
+from ._roads import RoadRule
 from ._scores import GROUND_CODES, ClassScores, FilterErrors, class_scores, filter_errors
 
 __all__ = ["SurfaceType", "hk_surface_types", "COVARIANCE_CLASS_FIELDS", "CovarianceClasses",
            "CovarianceClassification", "PointClass", "classify_covariance", "covariance",
            "BoundaryTest", "CurvedTest",
            "estimate_plane_sigma", "ASPRS", "MomentsClassification", "MomentsStep",
-           "classify_moments", "low_outliers", "CycleChoice", "choose_cycle", "skewness_balance_cycle",
+           "moments", "classify_moments", "MomentsMethod", "ElevationRule", "RoadRule",
+           "low_outliers", "CycleChoice", "choose_cycle", "skewness_balance_cycle",
            "GROUND_CODES", "ClassScores", "FilterErrors", "class_scores", "filter_errors"]

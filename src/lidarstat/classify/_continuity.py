@@ -1,7 +1,7 @@
 """Surface continuity of the ground cluster: raised patches are not ground.
 
-The moments cut decides per tile by heights above one ground surface.  Where a roof is
-wider than the opening window (or a tile is filled by roofs) the surface runs over the roof
+The moments cut decides per analysis window by heights above one ground surface.  Where a roof is
+wider than the opening window (or a window is filled by roofs) the surface runs over the roof
 and the roof's points come out as ground.  Such a patch is recognisable by its border, as
 in segment-based filters (Sithole & Vosselman 2005, cited by the seed paper): every point
 is joined to those of its k nearest planimetric neighbours whose elevation differs by at

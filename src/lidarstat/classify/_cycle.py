@@ -10,15 +10,33 @@ the report can show why a cycle was chosen.
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._shared._deprecate import renamed_parameters
 from .._shared._jit import njit
+from .._shared.validation import check_option
 from ..errors import InvalidParameterError
 from ..stats import SequentialMoments
 
-__all__ = ["CycleChoice", "choose_cycle", "skewness_balance_cycle"]
+__all__ = ["CycleChoice", "ElevationRule", "choose_cycle", "skewness_balance_cycle"]
+
+
+class ElevationRule(str, enum.Enum):
+    """Rule choosing the cut of an elevation analysis (:func:`choose_cycle`).
+
+    ``symmetry``: the fewest removals after which what is left is symmetric (skewness not
+    significantly positive) and not platykurtic; ``plateau``: the paper's start of the
+    kurtosis plateau.
+    """
+
+    SYMMETRY = "symmetry"
+    PLATEAU = "plateau"
+
+    def __str__(self) -> str:
+        return self.value
 
 
 @dataclass(frozen=True)
@@ -130,9 +148,10 @@ def skewness_balance_cycle(sm: SequentialMoments) -> CycleChoice:
                        evidence={"skewness": float(sm.skewness[k])})
 
 
-def choose_cycle(sm: SequentialMoments, category: str, *, min_cluster: int = 10,
+@renamed_parameters(min_cluster="min_points")
+def choose_cycle(sm: SequentialMoments, category: str, *, min_points: int = 10,
                  smoothing: float = 0.01, cycle: int | None = None,
-                 elevation_rule: str = "plateau") -> CycleChoice:
+                 elevation_rule: ElevationRule | str = "plateau") -> CycleChoice:
     """Choose the separating cycle of a sequential moment analysis.
 
     Parameters
@@ -141,14 +160,14 @@ def choose_cycle(sm: SequentialMoments, category: str, *, min_cluster: int = 10,
         Curves of the category analysed.
     category : {'elevation', 'intensity'}
         Which of the paper's two rules to apply.
-    min_cluster : int, optional
+    min_points : int, optional
         Smallest cluster on either side of the cut.
     smoothing : float, optional
         Width of the moving average as a fraction of the number of values (at least 3
         cycles), so sampling noise of the curves does not create peaks or plateaus.
     cycle : int, optional
         Use this cycle (the ``--cycle`` override).
-    elevation_rule : {'plateau', 'symmetry'}, optional
+    elevation_rule : ElevationRule or {'plateau', 'symmetry'}, optional
         The paper's plateau rule, or the first cycle at which the skewness of what is left
         is no longer significantly positive (``sk <= 1.645 sqrt(6 / n_k)``, a one-sided
         test of symmetry at 5 %): the fewest removals leaving a symmetric ground cluster.
@@ -160,7 +179,7 @@ def choose_cycle(sm: SequentialMoments, category: str, *, min_cluster: int = 10,
     Notes
     -----
     *Intensity* (kurtosis peak): candidates are local maxima of the smoothed kurtosis over
-    cycles that leave at least `min_cluster` values on each side; a candidate is accepted
+    cycles that leave at least `min_points` values on each side; a candidate is accepted
     when the smoothed skewness also has a local maximum within the smoothing window, and
     the most prominent accepted candidate (kurtosis above the curve's median) is chosen.
 
@@ -183,6 +202,8 @@ def choose_cycle(sm: SequentialMoments, category: str, *, min_cluster: int = 10,
     if category not in ("elevation", "intensity"):
         raise InvalidParameterError("The 'category' parameter of choose_cycle must be "
                                     f"'elevation' or 'intensity'. Got {category!r} instead.")
+    check_option(elevation_rule, "elevation_rule", [r.value for r in ElevationRule],
+                 func="choose_cycle")
     m = sm.cycle.size
     if cycle is not None:
         k = int(np.clip(int(cycle), 0, m - 1))
@@ -190,10 +211,10 @@ def choose_cycle(sm: SequentialMoments, category: str, *, min_cluster: int = 10,
                            evidence={"requested": int(cycle)})
     n = sm.n
     w = max(3, int(smoothing * n) | 1)
-    lo, hi = max(min_cluster, 1), m - 1 - min_cluster
+    lo, hi = max(min_points, 1), m - 1 - min_points
     if hi <= lo:
         return CycleChoice(None, float(sm.threshold[0]), "none", {"reason": "too few values"})
-    ev = {"window": w, "min_cluster": min_cluster}
+    ev = {"window": w, "min_points": min_points}
     if category == "intensity":
         ku = _smooth(sm.kurtosis, w)
         sk = _smooth(sm.skewness, w)

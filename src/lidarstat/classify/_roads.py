@@ -3,15 +3,15 @@
 Crosilla et al. split the ground cluster by its intensity: the ground's intensity density
 is bimodal where asphalt is darker than the land around it, and the sequential moments of
 the intensity give the cut (their cycle 153, "a local maximum of kurtosis").  Three things
-make that work on real ground clusters (measured in docs/methods/moments.md):
+make that work on real ground clusters (measured on AHN3 tiles):
 
 1. **Speckle.** One echo's intensity scatters about as much as road and land differ (AHN3
    Amsterdam: carriageway quartiles 18-34, the rest 40-76 per point).  Roads are areas, so
    each ground point takes the median intensity of its ground cell (cells of about
-   ``points_per_cell`` ground points): quartiles 26-32 against 49-73 on the same tile.
+   ``points_per_cell`` ground points): quartiles 26-32 against 49-73 on the same area.
 2. **One population.** The sub-cluster is analysed on the ground of the whole cloud, not per
-   64 m tile: a tile holding a street and its pavements is often not significantly bimodal
-   by the dip test (AHN3 Delft: p = 0.24-0.74 on tiles that are 25-53 % street), while the
+   64 m window: a window holding a street and its pavements is often not significantly bimodal
+   by the dip test (AHN3 Delft: p = 0.24-0.74 on windows that are 25-53 % street), while the
    whole ground cluster is.
 3. **The cut.** The kurtosis peaks of the smoothed curve are coarse and, with the skewness
    peak the paper asks for, rarely coincide on real data (Delft: the kurtosis maximum at
@@ -26,14 +26,33 @@ of the ground.
 
 from __future__ import annotations
 
+import enum
+
 import numpy as np
 
 from .._shared._columns import column_max, column_min
+from .._shared._deprecate import renamed_parameters
+from .._shared.validation import check_option
 from ..stats import density_estimate, dip_test, sequential_moments
 from ._cycle import CycleChoice, choose_cycle
+from ._moments_result import MomentsStep, thin_curves
 from ._surface import cell_keys, cell_median_values
 
-__all__ = ["cell_median", "road_cut"]
+__all__ = ["RoadRule", "cell_median", "road_cut", "road_points"]
+
+
+class RoadRule(str, enum.Enum):
+    """Cut of the ground's intensity into road and the rest (:func:`road_cut`).
+
+    ``antimode``: the density minimum between its two main modes; ``kurtosis-peak``: the
+    paper's kurtosis peak of the sequential moments.
+    """
+
+    ANTIMODE = "antimode"
+    KURTOSIS_PEAK = "kurtosis-peak"
+
+    def __str__(self) -> str:
+        return self.value
 
 
 def cell_median(xy, values, *, points_per_cell: float = 8.0, return_cells: bool = False):
@@ -94,9 +113,10 @@ def _antimode(de):
                                "valley_ratio": float(f[j] / min(f[a], f[b]))}
 
 
-def road_cut(values, *, alpha: float = 0.05, rule: str = "antimode",
-             min_fraction: float = 0.02, max_fraction: float = 0.8, min_cluster: int = 10,
-             smoothing: float = 0.01, bandwidth="silverman"):
+@renamed_parameters(min_cluster="min_points")
+def road_cut(values, *, alpha: float = 0.05, rule: RoadRule | str = "antimode",
+             min_fraction: float = 0.02, max_fraction: float = 0.8, min_points: int = 10,
+             smoothing: float = 0.01, bandwidth="silverman", rng=0):
     """Cut of the ground's (smoothed) intensity into a darker road cluster and the rest.
 
     Parameters
@@ -106,12 +126,14 @@ def road_cut(values, *, alpha: float = 0.05, rule: str = "antimode",
         ``return_cells=True``).
     alpha : float, optional
         Level of the dip test; without a rejection there is no sub-cluster.
-    rule : {'antimode', 'kurtosis-peak'}, optional
+    rule : RoadRule or {'antimode', 'kurtosis-peak'}, optional
         Cut at the density's antimode, or at the paper's kurtosis peak.
     min_fraction, max_fraction : float, optional
         Admissible share of the darker cluster in the ground.
-    min_cluster, smoothing, bandwidth
-        As in :func:`~lidarstat.classify.classify_moments`.
+    min_points, smoothing, bandwidth
+        As in :func:`~lidarstat.classify.moments`.
+    rng : int, optional
+        Seed of the dip test's subsample and dequantisation.
 
     Returns
     -------
@@ -134,18 +156,19 @@ def road_cut(values, *, alpha: float = 0.05, rule: str = "antimode",
     >>> bool(40 < ch.threshold < 50)
     True
     """
+    rule = RoadRule(check_option(rule, "rule", [r.value for r in RoadRule], func="road_cut"))
     v = np.asarray(values, dtype=np.float64)
-    t = dip_test(v, alpha=alpha)
+    t = dip_test(v, alpha=alpha, rng=rng)
     dip = {"dip": float(t.statistic), "pvalue": float(t.pvalue), "multimodal": bool(t.reject)}
     sm = sequential_moments(v, min_points=max(2, min(4, v.size)))
     de = density_estimate(v, bandwidth=bandwidth, gridsize=512)
-    ev = {"dip_pvalue": dip["pvalue"], "rule_asked": rule}
+    ev = {"dip_pvalue": dip["pvalue"], "rule_asked": rule.value}
     if not t.reject:
         return CycleChoice(None, float(sm.threshold[0]), "none",
                            {**ev, "reason": "ground intensity unimodal (dip test)"}), sm, de, dip
     n = v.size
-    if rule == "kurtosis-peak":
-        ch = choose_cycle(sm, "intensity", min_cluster=min_cluster, smoothing=smoothing)
+    if rule is RoadRule.KURTOSIS_PEAK:
+        ch = choose_cycle(sm, "intensity", min_points=min_points, smoothing=smoothing)
         if ch.cycle is None:
             return ch, sm, de, dip
         k, thr = int(ch.cycle), float(ch.threshold)
@@ -166,4 +189,34 @@ def road_cut(values, *, alpha: float = 0.05, rule: str = "antimode",
         return CycleChoice(None, float(sm.threshold[0]), "none",
                            {**ev, "reason": f"darker cluster holds {100 * frac:.1f} % of "
                                             "the ground"}), sm, de, dip
-    return CycleChoice(k, thr, rule, ev), sm, de, dip
+    return CycleChoice(k, thr, rule.value, ev), sm, de, dip
+
+
+def road_points(xy, intensity, ground, opts, *, road_rule, road_cell_points: float,
+                first_step: int):
+    """Roads: the darker intensity sub-cluster of the whole ground cluster.
+
+    Each ground point takes the median intensity of its cell (about `road_cell_points`
+    ground points per cell); one value per cell is tested and cut (:func:`road_cut`).
+
+    Returns
+    -------
+    road : (N,) ndarray of bool
+    step : MomentsStep or None
+        The analysis, for the report (None without intensity or enough ground).
+    """
+    road = np.zeros(ground.size, bool)
+    gi = np.flatnonzero(ground)
+    if intensity is None or gi.size < 2 * opts.min_points:
+        return road, None
+    smoothed, cells = cell_median(xy[gi], intensity[gi], points_per_cell=road_cell_points,
+                                  return_cells=True)
+    ch, sm, de, dips = road_cut(cells, alpha=opts.alpha, rule=road_rule,
+                                min_points=opts.min_points, smoothing=opts.smoothing,
+                                bandwidth=opts.bandwidth, rng=opts.seed)
+    step = MomentsStep(window=-1, step=first_step, population="ground cluster (cell medians)",
+                       category="intensity", n=int(cells.size), dip={"intensity": dips},
+                       choice=ch, curves=thin_curves(sm), density=de)
+    if ch.cycle is not None:
+        road[gi[smoothed <= ch.threshold]] = True
+    return road, step

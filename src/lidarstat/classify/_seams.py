@@ -1,21 +1,21 @@
-"""Tile cuts interpolated between tiles, so no class step appears at a tile border.
+"""Window cuts interpolated between windows, so no class step appears at a window border.
 
-Every (sub-)tile of the progressive method decides one height cut. Applied as a step
-function, two neighbouring tiles with cuts of 0.4 m and 1.2 m split a hedge of 0.8 m
+Every (sub-)window of the progressive method decides one height cut. Applied as a step
+function, two neighbouring windows with cuts of 0.4 m and 1.2 m split a hedge of 0.8 m
 exactly along their common border. As in adaptive thresholding (local thresholds
 interpolated bilinearly between tile centres, e.g. CLAHE, Zuiderveld 1994), the cut of a
 point here is the bilinear interpolation of per-cell cuts between cell centres:
 
-* the cells are the finest tiles the progressive split can reach (16 m by default), on the
-  grid of the root tiles; a cell's cut is the cut of the points in it (the mean when the
-  cell straddles tiles with different cuts);
+* the cells are the finest windows the progressive split can reach (16 m by default), on the
+  grid of the root windows; a cell's cut is the cut of the points in it (the mean when the
+  cell straddles windows with different cuts);
 * a point's cut is ``sum_c w_c cut_c / sum_c w_c`` over the four cell centres around it
   (bilinear weights ``w_c``; empty cells and cells without a cut are left out and the
-  weights renormalised), so the cut is continuous and piecewise bilinear. Inside a tile
-  more than half a cell from any border with another cut it is the tile's own cut,
+  weights renormalised), so the cut is continuous and piecewise bilinear. Inside a window
+  more than half a cell from any border with another cut it is the window's own cut,
   exactly (equal values are not averaged, so no rounding moves a tie);
-* a point whose tile found no cut at all (a root tile that does not separate: all of it
-  ground) keeps that decision; those tiles do not enter their neighbours' interpolation.
+* a point whose window found no cut at all (a root window that does not separate: all of it
+  ground) keeps that decision; those windows do not enter their neighbours' interpolation.
 """
 
 from __future__ import annotations
@@ -34,11 +34,11 @@ def interpolate_cuts(xy, cut, cell: float) -> np.ndarray:
     Parameters
     ----------
     xy : (N, 2) ndarray
-        Planimetric coordinates, with the origin at the corner of the tile grid.
+        Planimetric coordinates, with the origin at the corner of the window grid.
     cut : (N,) ndarray
-        Each point's tile cut (``inf`` where the tile found none).
+        Each point's window cut (``inf`` where the window found none).
     cell : float
-        Side of the interpolation cells (the finest tile size).
+        Side of the interpolation cells (the finest window size).
 
     Returns
     -------
@@ -48,7 +48,7 @@ def interpolate_cuts(xy, cut, cell: float) -> np.ndarray:
     Examples
     --------
     >>> xy = np.c_[[4.0, 12.0, 16.0, 20.0, 28.0], np.full(5, 4.0)]
-    >>> cut = np.array([1.0, 1.0, 3.0, 3.0, 3.0])  # two 16 m tiles, border at x = 16
+    >>> cut = np.array([1.0, 1.0, 3.0, 3.0, 3.0])  # two 16 m windows, border at x = 16
     >>> interpolate_cuts(xy, cut, 16.0).tolist()
     [1.0, 1.5, 2.0, 2.5, 3.0]
     """

@@ -17,8 +17,10 @@ from pathlib import Path
 from .. import __version__
 from .._shared._atomic import output_group
 from .._shared._outputs import Output, check_outputs
+from .._shared._choices import Frame, Test
 from ..errors import LidarstatError
 from . import _options as opt
+from ._common import add_alpha, add_noise, add_run_outputs, add_tiling
 from ._notices import held_warnings
 
 logger = logging.getLogger("lidarstat")
@@ -104,6 +106,7 @@ def cmd_curvature(args):
     out, _ = check_plan([args.input], Output("output", args.output),
                         Output("--summary-json", args.summary_json, "json"))
     radius = args.radius if len(args.radius) > 1 else args.radius[0]
+    args.sensor = resolve_sensor(args.sensor, args.input, args.quiet)
     opts = dict(alpha=args.alpha, test=args.test, frame=args.frame, sensor=args.sensor,
                 noise=args.noise, min_neighbors=args.min_neighbors,
                 minimal_detectable=args.minimal_detectable)
@@ -121,9 +124,9 @@ def cmd_curvature(args):
         print(f"{args.input} -> {out}  ({elapsed:.2f} s)")
         print(res.summary())
     if args.summary_json:
+        params = res.params
         meta = {"input": str(args.input), "output": str(out), "seconds": elapsed,
-                "sigma": res.sigma, "sigma_estimated": res.sigma_estimated, "alpha": res.alpha,
-                "test": res.test, "frame": res.frame, "radius": res.radius, **res.counts()}
+                **params, **res.counts(), "params": params}
         write_summary_json(args.summary_json, meta)
     return 0
 
@@ -153,9 +156,15 @@ def _curvature_tiled(args, out, radius, opts):
     names = ("status", "surface_type", "neighbors")
     parts = [[c.attributes[k] for k in names] for c in iter_chunks(out, args.chunk_points)]
     fields = {k: np.concatenate([p[j] for p in parts]) for j, k in enumerate(names)}
+    noise = opts["noise"]
+    if estimated:  # estimated on the local heights, as curvature() does
+        noise = "normal"
+    elif noise is None:
+        noise = "z" if args.sensor is None else "range"
     return CurvatureResult(fields=fields, radius=radius, sigma=sigma,
                            sigma_estimated=estimated, alpha=args.alpha, test=args.test,
-                           frame=args.frame)
+                           frame=args.frame, noise=noise, min_neighbors=args.min_neighbors,
+                           minimal_detectable=args.minimal_detectable)
 
 
 def cmd_bandwidth(args):
@@ -163,12 +172,10 @@ def cmd_bandwidth(args):
 
     res = optimal_bandwidth(K0=args.K0, H0=args.H0, sigma=args.sigma, density=args.density,
                             alpha=args.alpha, power=args.power, test=args.test)
-    print(res.table())
-    if res.radius == res.radius:
-        print(f"smallest radius detecting K0={args.K0}, H0={args.H0}: {res.radius:.6g}")
-        return 0
-    print("no radius tried detects these curvatures; lower the noise or raise the density")
-    return 1
+    print(res.summary())
+    if args.summary_json:
+        write_summary_json(args.summary_json, {"params": res.params, **res.params})
+    return 0 if res.radius == res.radius else 1
 
 
 def cmd_synth(args):
@@ -197,20 +204,6 @@ def cmd_demo(args):
 
 
 # --------------------------------------------------------------------------- parser
-def _tile_options(s):
-    """Options of out-of-core, tiled processing (lidarstat.pipeline)."""
-    g = s.add_argument_group("large files (tiles with halos; memory independent of size)")
-    g.add_argument("--tile", type=opt.positive_float, default=None, metavar="SIZE",
-                   help="process square tiles of this side, each with a halo of the radius; "
-                   "LAS/LAZ are streamed in chunks")
-    g.add_argument("--scheduler", choices=("sync", "threads", "dask"), default="threads",
-                   help="how tiles run (default threads)")
-    g.add_argument("--workers", type=opt.int_at_least(1), default=None,
-                   help="threads for tiles (default: one per core)")
-    g.add_argument("--chunk-points", type=opt.int_at_least(1), default=1_000_000,
-                   help="points per streamed chunk")
-
-
 def _tile_exceeds_radius(args):
     """``--tile`` must exceed the largest ``--radius``, the halo every tile carries."""
     if args.tile is not None and args.tile <= max(args.radius):
@@ -242,33 +235,38 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("output", help="output file; format from the suffix")
     s.add_argument("--radius", type=opt.positive_float, nargs="+", required=True,
                    help="sphere radius (bandwidth); several radii = multi-scale")
-    s.add_argument("--sigma", type=opt.positive_float, default=None,
-                   help="measurement noise std (default: estimated from the data)")
-    s.add_argument("--alpha", type=opt.probability, default=0.05)
-    s.add_argument("--test", choices=("calibrated", "paper"), default="calibrated")
-    s.add_argument("--frame", choices=("z", "auto", "pca"), default="z")
-    s.add_argument("--sensor", type=opt.finite_float, nargs=3, metavar=("X", "Y", "Z"),
-                   default=None, help="scanner position (orients normals; noise along the ray)")
-    s.add_argument("--noise", choices=("z", "range", "normal"), default=None,
-                   help="direction of the noise sigma (default: range with --sensor, else z)")
-    s.add_argument("--min-neighbors", type=opt.int_at_least(7), default=7)
+    add_noise(s)
+    add_alpha(s)
+    s.add_argument("--test", choices=Test.values(), default=Test.CALIBRATED.value,
+                   help="family of tests: calibrated to the weighted fit, or the paper's as "
+                   "printed (default calibrated)")
+    s.add_argument("--frame", choices=Frame.values(), default=Frame.Z.value,
+                   help="height axis of the local quadric (default z)")
+    s.add_argument("--min-neighbors", type=opt.int_at_least(7), default=7,
+                   help="smallest neighbourhood a quadric is fitted on [7]")
     s.add_argument("--minimal-detectable", action="store_true",
                    help="also write K_min and H_min (eq. 19)")
-    s.add_argument("--summary-json", default=None, help="write the summary as JSON here")
-    _tile_options(s)
-    s.add_argument("-q", "--quiet", action="store_true")
+    add_run_outputs(s)
+    add_tiling(s)
     s.set_defaults(func=cmd_curvature)
     opt.add_check(s, _tile_exceeds_radius)
 
     s = sub.add_parser("bandwidth", help="smallest radius whose tests detect K0 and H0")
-    s.add_argument("--K0", type=opt.finite_float, required=True)
-    s.add_argument("--H0", type=opt.finite_float, required=True)
-    s.add_argument("--sigma", type=opt.positive_float, required=True)
+    s.add_argument("--K0", type=opt.finite_float, required=True,
+                   help="Gaussian curvature to detect")
+    s.add_argument("--H0", type=opt.finite_float, required=True,
+                   help="mean curvature to detect (not 0)")
+    s.add_argument("--sigma", type=opt.positive_float, required=True,
+                   help="measurement noise std")
     s.add_argument("--density", type=opt.positive_float, required=True,
                    help="points per unit area")
-    s.add_argument("--alpha", type=opt.probability, default=0.05)
-    s.add_argument("--power", type=opt.real(0.5, 1, "left", what="probability"), default=0.5)
-    s.add_argument("--test", choices=("calibrated", "paper"), default="calibrated")
+    add_alpha(s)
+    s.add_argument("--power", type=opt.real(0.5, 1, "left", what="probability"), default=0.5,
+                   help="probability of detecting K0 and H0 [0.5]")
+    s.add_argument("--test", choices=Test.values(), default=Test.CALIBRATED.value,
+                   help="covariance of the tests (default calibrated)")
+    s.add_argument("--summary-json", default=None, metavar="FILE",
+                   help="write the design (parameters and radius) as JSON here")
     s.set_defaults(func=cmd_bandwidth)
 
     s = sub.add_parser("synth", help="write a synthetic scene with exact truth fields")
@@ -289,6 +287,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     for name in COMMAND_MODULES:
         import_module(f".{name}", __package__).register(sub)
+    from ._catalogue import install
+
+    install(sub)  # IN may be a catalogue of tiles
     return p
 
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 
+from .._shared._choices import Noise
 from . import _options as opt
 
 __all__ = ["SENSOR_HELP", "NOISE_CHOICES", "add_neighbourhood", "add_noise", "add_alpha",
@@ -37,7 +38,7 @@ SENSOR_HELP = ("scanner position; normals point to it and the range noise grows 
                "distance from it (default: the position the input carries, as an E57 scan "
                "pose or a FILE.sensor.json sidecar, else normals point up)")
 #: Directions of the measurement noise (``--noise``).
-NOISE_CHOICES = ("z", "range", "normal")
+NOISE_CHOICES = Noise.values()
 
 
 def deprecated_alias(parser, old: str, new: str) -> None:

@@ -1,18 +1,19 @@
 """``lidarstat segment IN OUT --method curvature``: units from tested HK classes (seed 000).
 
 Shared options used: ``--radius`` (curvature bandwidth, required), ``--sigma``,
-``--alpha``, ``--min-points``.
+``--noise``, ``--sensor``, ``--alpha``, ``--min-points``.
 """
 
 from __future__ import annotations
 
+from .._shared._choices import Frame
 from . import _options as opt
 
 #: The shared options of ``segment`` this method uses (the others are refused).
 USES = frozenset({"radius", "sigma", "noise", "sensor", "alpha", "min_points"})
 
 #: ``--min-points`` of this method when it is not given.
-DEFAULT_MIN_SIZE = 30
+DEFAULT_MIN_POINTS = 30
 
 
 def add_arguments(group):
@@ -20,10 +21,13 @@ def add_arguments(group):
     from ._common import deprecated_alias
 
     deprecated_alias(group, "--curvature-frame", "--frame")
-    group.add_argument("--normal-angle", type=opt.angle_degrees(0, 180), default=10.0,
-                       help="largest normal angle between neighbours of a unit (degrees)")
-    group.add_argument("--frame", "--curvature-frame", default="z", choices=("z", "auto", "pca"),
-                       dest="frame",
+    deprecated_alias(group, "--normal-angle", "--max-angle")
+    group.add_argument("--max-angle", "--normal-angle", type=opt.angle_degrees(0, 180),
+                       default=10.0, dest="max_angle",
+                       help="largest angle between the normals of neighbours in one unit "
+                       "(degrees) [10]")
+    group.add_argument("--frame", "--curvature-frame", default=Frame.Z.value,
+                       choices=Frame.values(), dest="frame",
                        help="local frame of the curvature quadrics (default z; 'auto' or "
                        "'pca' with --noise normal also find walls, which --refine "
                        "models in their own plane)")
@@ -41,8 +45,8 @@ def run(args, cloud):
         raise InvalidParameterError("--method curvature needs --radius (the curvature "
                                     "bandwidth)")
     return segment_curvature(cloud.xyz, radius=args.radius, sigma=args.sigma,
-                             alpha=args.alpha, max_angle=args.normal_angle,
-                             min_size=DEFAULT_MIN_SIZE if args.min_points is None
+                             alpha=args.alpha, max_angle=args.max_angle,
+                             min_points=DEFAULT_MIN_POINTS if args.min_points is None
                              else args.min_points, refine=args.refine,
                              frame=args.frame, noise=args.noise,
                              sensor=args.sensor)

@@ -7,13 +7,15 @@ from . import _options as opt
 #: The shared options of ``segment`` this method uses (the others are refused).
 USES = frozenset({"k", "radius", "sigma", "noise", "sensor", "alpha", "min_points"})
 
+#: ``--min-points`` of this method when it is not given.
+DEFAULT_MIN_POINTS = 50
+
 
 def add_arguments(group):
     """Options of the ridges method (the shared ones live in cli/segment.py)."""
     from .ridges import add_jet_arguments
 
-    group.add_argument("--jet-radius", type=opt.positive_float, default=None,
-                       help="radius of the jets (default --radius; or --k neighbours)")
+    # the jets' neighbourhood is the shared --radius (or --k)
     group.add_argument("--ridge-grow-k", type=opt.int_at_least(2), default=8,
                        help="neighbours of the region-growing graph")
     group.add_argument("--band", type=opt.positive_float, default=None,
@@ -21,9 +23,6 @@ def add_arguments(group):
     group.add_argument("--extend", type=opt.nonnegative_float, default=None,
                        help="longest extension of ridge lines at their ends (default the "
                             "jet radius; 0 none)")
-    group.add_argument("--ridges-only", action="store_true",
-                       help="barrier = ridge band only (no chi-square rejections, no "
-                            "jet-consistent edges, barrier points not assigned)")
     add_jet_arguments(group)
 
 
@@ -32,14 +31,12 @@ def run(args, cloud):
     from ..errors import InvalidParameterError
     from ..segment import ridge_segments, ridges
 
-    radius = args.jet_radius if args.jet_radius is not None else args.radius
+    radius = args.radius
     if radius is None and args.k is None:
-        raise InvalidParameterError("segment --method ridges needs --radius, --jet-radius or --k")
+        raise InvalidParameterError("segment --method ridges needs --radius or --k")
     res = ridges(cloud.xyz, radius=radius, k=None if radius is not None else args.k,
                  sigma=args.sigma, alpha=args.alpha, weight=args.weight, sensor=args.sensor,
                  noise=args.noise, ratio=args.ratio, min_length=args.min_length)
-    min_size = args.min_points if args.min_points is not None else 50
-    full = not args.ridges_only
-    return ridge_segments(cloud.xyz, res, k=args.ridge_grow_k, width=args.band,
-                          min_size=min_size, extend=args.extend, chi2_barrier=full,
-                          consistent=full, assign=full)
+    min_points = DEFAULT_MIN_POINTS if args.min_points is None else args.min_points
+    return ridge_segments(cloud.xyz, res, grow_k=args.ridge_grow_k, width=args.band,
+                          min_points=min_points, extend=args.extend)

@@ -1,7 +1,7 @@
 """``lidarstat segment IN OUT --method sar``: SAR models and the Forward Search (seed 002).
 
-Shared options used: ``--radius`` (plane-regression bandwidth b; default chosen by the
-penalised PRESS), ``--sigma``, ``--alpha`` (planarity test), ``--min-points``.
+Shared options used: ``--radius`` (plane-regression bandwidth b; default chosen by
+``--criterion``), ``--sigma``, ``--alpha`` (planarity test), ``--min-points``.
 """
 
 from __future__ import annotations
@@ -12,15 +12,22 @@ from . import _options as opt
 USES = frozenset({"radius", "sigma", "alpha", "min_points"})
 
 #: ``--min-points`` of this method when it is not given.
-DEFAULT_MIN_SIZE = 30
+DEFAULT_MIN_POINTS = 30
 
 
 def add_arguments(group):
     """Options only the SAR method has."""
-    group.add_argument("--criterion", default="rice", choices=("rice", "gcv", "press"),
+    from ..features import AdaptiveBandwidth, BandwidthCriterion
+    from ..segment import StopRule
+    from ._common import deprecated_alias
+
+    deprecated_alias(group, "--fs-envelope", "--envelope-alpha")
+    group.add_argument("--criterion", default=BandwidthCriterion.RICE.value,
+                       choices=[m.value for m in BandwidthCriterion],
                        help="bandwidth selector when --radius is omitted (default rice)")
-    group.add_argument("--adaptive", nargs="?", const="geary", default="multiscale",
-                       choices=("multiscale", "geary", "none"),
+    group.add_argument("--adaptive", nargs="?", const=AdaptiveBandwidth.GEARY.value,
+                       default=AdaptiveBandwidth.MULTISCALE.value,
+                       choices=[m.value for m in AdaptiveBandwidth],
                        help="per-point bandwidths: 'multiscale' (default: the largest of b, "
                        "0.75 b, 0.5 b whose local plane passes the planarity test), 'geary' "
                        "(Geary's local indicator; also the bare flag) or 'none'")
@@ -36,9 +43,11 @@ def add_arguments(group):
                        help="radius of the SAR adjacency W (default 1.5 x point spacing)")
     group.add_argument("--fs-alpha", type=opt.probability, default=0.001,
                        help="level of the Forward Search F test")
-    group.add_argument("--fs-envelope", type=opt.probability, default=0.001,
-                       help="level of the deletion-residual envelope")
-    group.add_argument("--fs-stop", default="both", choices=("both", "f", "residual"),
+    group.add_argument("--envelope-alpha", "--fs-envelope", dest="envelope_alpha",
+                       type=opt.probability, default=0.001,
+                       help="level of the Forward Search deletion-residual envelope")
+    group.add_argument("--fs-stop", default=StopRule.BOTH.value,
+                       choices=[m.value for m in StopRule],
                        help="Forward Search stopping rule")
     group.add_argument("--fs-block", type=opt.int_at_least(1), default=1,
                        help="points added per Forward Search step (1 = unitary)")
@@ -59,19 +68,17 @@ def add_arguments(group):
 
 def run(args, cloud):
     """Segment `cloud` by :func:`lidarstat.segment.segment_sar`."""
-    from ..features import select_plane_bandwidth
     from ..segment import segment_sar
 
     deg = None if args.sar_degree == "auto" else int(args.sar_degree)
-    b = args.radius
-    if b is None:
-        b = select_plane_bandwidth(cloud.xyz, criterion=args.criterion).bandwidth
-    return segment_sar(cloud.xyz, bandwidth=b, sigma=args.sigma, alpha=args.alpha,
-                       edge_alpha=args.edge_alpha, fs_alpha=args.fs_alpha,
-                       alpha_residual=args.fs_envelope, stop=args.fs_stop, degree=deg,
-                       adaptive=args.adaptive, threshold=args.search, w_radius=args.w_radius,
-                       min_size=DEFAULT_MIN_SIZE if args.min_points is None else args.min_points,
-                       block=args.fs_block, outlier_alpha=_level_or_off(args.outlier_alpha),
+    min_points = DEFAULT_MIN_POINTS if args.min_points is None else args.min_points
+    return segment_sar(cloud.xyz, radius=args.radius, criterion=args.criterion,
+                       sigma=args.sigma, alpha=args.alpha, edge_alpha=args.edge_alpha,
+                       fs_alpha=args.fs_alpha, envelope_alpha=args.envelope_alpha,
+                       fs_stop=args.fs_stop, degree=deg, adaptive=args.adaptive,
+                       search=args.search, w_radius=args.w_radius,
+                       min_points=min_points,
+                       fs_block=args.fs_block, outlier_alpha=_level_or_off(args.outlier_alpha),
                        gof_alpha=_level_or_off(args.gof_alpha))
 
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from .._shared._choices import Weight
 from . import _options as opt
-from ._common import add_noise
-from ._app import Output, check_plan, progress, write_summary_json
-
+from ._app import Output, check_plan, progress, resolve_sensor, write_summary_json
+from ._common import add_alpha, add_neighbourhood, add_noise, add_run_outputs
 
 #: Fewest neighbours of a degree-4 jet: its 15 coefficients and one degree of freedom.
 JET_NEIGHBORS = 16
@@ -29,6 +29,7 @@ def cmd_ridges(args):
                Output("--lines", lines_path, "lines", default=not args.lines),
                Output("--summary-json", args.summary_json, "json"))
     cloud = read(args.input)
+    args.sensor = resolve_sensor(args.sensor, args.input, args.quiet)
     t0 = time.perf_counter()
     res = ridges(cloud.xyz, radius=args.radius, k=args.k, sigma=args.sigma, alpha=args.alpha,
                  weight=args.weight, sensor=args.sensor, noise=args.noise, ratio=args.ratio,
@@ -41,7 +42,6 @@ def cmd_ridges(args):
         print(res.summary())
         print(f"  lines: {lines_path}")
     if args.summary_json:
-
         r = res.fields["ridge"]
         meta = {"input": str(args.input), "output": str(out), "lines": str(lines_path),
                 "seconds": elapsed, "sigma": res.jets.sigma,
@@ -54,7 +54,7 @@ def cmd_ridges(args):
 
 def add_jet_arguments(s):
     """Options shared by ``ridges`` and ``segment --method ridges``."""
-    s.add_argument("--weight", choices=("tricube", "none"), default="tricube",
+    s.add_argument("--weight", choices=Weight.values(), default=Weight.TRICUBE.value,
                    help="tricube weights or CGAL's unweighted jet fit")
     s.add_argument("--ratio", type=opt.real(1, closed="left"), default=2.0,
                    help="a ridge's curvature must exceed RATIO times the other")
@@ -71,18 +71,15 @@ def register(sub):
         "the jet, the ridge class (1 crest, 2 ravine) and umbilics, and trace ridge lines.")
     s.add_argument("input")
     s.add_argument("output", help="output file; format from the suffix")
-    g = s.add_mutually_exclusive_group(required=True)
-    g.add_argument("--radius", type=opt.positive_float, default=None,
-                   help="sphere radius (bandwidth)")
-    g.add_argument("--k", type=opt.int_at_least(JET_NEIGHBORS), default=None,
-                   help=f"k nearest neighbours (at least {JET_NEIGHBORS}, a degree-4 jet)")
+    g = add_neighbourhood(s, k_min=JET_NEIGHBORS,
+                          k_help=f"k nearest neighbours (at least {JET_NEIGHBORS}, a degree-4 "
+                          "jet)", radius_help="sphere radius of the jets (bandwidth)")
+    g.required = True
     add_noise(s)
-    s.add_argument("--alpha", type=opt.probability, default=0.01,
-                   help="level of the jet, curvature and k'' tests")
+    add_alpha(s, 0.01, help="level of the jet, curvature and k'' tests")
     add_jet_arguments(s)
     s.add_argument("--lines", default=None,
                    help="ridge lines (.geojson, .csv, .las/.laz; default OUT stem + "
                    ".ridges.geojson)")
-    s.add_argument("--summary-json", default=None, help="write a run summary as JSON here")
-    s.add_argument("-q", "--quiet", action="store_true")
+    add_run_outputs(s)
     s.set_defaults(func=cmd_ridges)

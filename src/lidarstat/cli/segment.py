@@ -129,8 +129,9 @@ def register(sub):
 
     shared.add_argument("--k", type=opt.int_at_least(3), default=None,
                         help=f"neighbours per point (kNN; {users('k')})")
-    shared.add_argument("--radius", type=opt.positive_float, default=None,
-                        help=f"neighbourhood radius ({users('radius')})")
+    shared.add_argument("--radius", "--jet-radius", type=opt.positive_float, default=None,
+                        dest="radius", help=f"neighbourhood radius ({users('radius')})")
+    deprecated_alias(s, "--jet-radius", "--radius")
     shared.add_argument("--min-points", "--min-size", type=opt.int_at_least(1), default=None,
                         dest="min_points",
                         help="smallest segment kept, in points (method default if omitted)")

@@ -1,7 +1,9 @@
 """Local models per point: weighted quadric (Taylor) fits, tested curvature, jets and Monge forms."""
 
-from ._curvature import (FIELDS, CurvatureResult, curvature, curvature_tests, estimate_sigma,
-                         height_variance)
+from .._shared._choices import Frame, Noise, Test, Weight
+from ._curvature import curvature, curvature_tests, estimate_sigma
+from ._curvature_result import FIELDS, CurvatureResult
+from ._noise import height_variance
 from ._covariance import FIELDS as COVARIANCE_FIELDS
 from ._covariance import (CovarianceResult, EigenMode, PointClass, covariance_features,
                           eigen_features)
@@ -9,18 +11,20 @@ from ._cylinder import cylinder_test
 from ._hk import SurfaceType, hk_surface_types
 from ._bandwidth import BandwidthResult, optimal_bandwidth
 from ._curvature_formulas import curvature_jacobian, curvatures, principal_jacobian
-from ._jets import (JET_FIELDS, MONGE_NAMES, JetFit, JetResult, PrincipalDirections, fit_jets,
-                    jet_tests, jets, principal_directions)
+from ._jet_fit import MONGE_NAMES, JetFit, PrincipalDirections, fit_jets, principal_directions
+from ._jets import JET_FIELDS, JetResult, jet_tests, jets
 from ._quadric import FitStatus, QuadricFit, fit_quadrics
-from ._plane_regression import (PLANE_FIELDS, BandwidthSelection, LocalPlaneFit,
-                                geary_bandwidths, local_planes, select_plane_bandwidth)
+from ._plane_regression import (PLANE_FIELDS, AdaptiveBandwidth, LocalPlaneFit,
+                                geary_bandwidths, local_planes)
+from ._plane_bandwidth import BandwidthCriterion, BandwidthSelection, select_plane_bandwidth
 
 __all__ = ["COVARIANCE_FIELDS", "CovarianceResult", "covariance_features", "eigen_features",
            "BandwidthResult", "optimal_bandwidth", "FIELDS", "CurvatureResult", "FitStatus", "QuadricFit", "curvature",
            "curvature_jacobian", "curvature_tests", "curvatures", "estimate_sigma",
            "fit_quadrics", "height_variance", "principal_jacobian",
-           "PLANE_FIELDS", "BandwidthSelection", "LocalPlaneFit", "geary_bandwidths",
+           "PLANE_FIELDS", "AdaptiveBandwidth", "BandwidthCriterion", "BandwidthSelection", "LocalPlaneFit", "geary_bandwidths",
            "local_planes", "select_plane_bandwidth", "JET_FIELDS", "MONGE_NAMES",
            "JetFit", "JetResult",
            "PrincipalDirections", "fit_jets", "jet_tests", "jets", "principal_directions",
-           "SurfaceType", "hk_surface_types", "cylinder_test", "PointClass", "EigenMode"]
+           "SurfaceType", "hk_surface_types", "cylinder_test", "PointClass", "EigenMode",
+           "Noise", "Test", "Frame", "Weight"]

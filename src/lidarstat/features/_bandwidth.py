@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats as _st
 
-from .._shared.validation import check_option, check_scalar
+from .._shared._choices import Test
+from .._shared.validation import check_scalar
 from ..errors import InvalidParameterError
+from ..stats import normal_quantile, z_critical
 from ._curvature_formulas import curvature_jacobian, curvatures, principal_jacobian
 from ._quadric import _run_kernel
 
@@ -24,6 +25,8 @@ class BandwidthResult:
     radii, neighbors, K_min, H_min : ndarray
         Every radius tried, the expected number of neighbours, and the minimal detectable
         |K| and |H| there (eq. 19 with the chosen test's covariance).
+    params : dict
+        The design inputs (K0, H0, sigma, density, alpha, power, test) and the radius.
     """
 
     radius: float
@@ -31,6 +34,21 @@ class BandwidthResult:
     neighbors: np.ndarray
     K_min: np.ndarray
     H_min: np.ndarray
+    params: dict = field(default_factory=dict)
+
+    def to_fields(self) -> dict:
+        """No per-point arrays: the design works on an ideal neighbourhood, not a cloud."""
+        return {}
+
+    def summary(self) -> str:
+        """The table of radii and the chosen one (what the CLI prints)."""
+        p = self.params
+        if self.radius == self.radius:
+            last = (f"smallest radius detecting K0={p.get('K0')}, H0={p.get('H0')}: "
+                    f"{self.radius:.6g}")
+        else:
+            last = "no radius tried detects these curvatures; lower the noise or raise the density"
+        return self.table() + "\n" + last
 
     def table(self) -> str:
         rows = [f"{'radius':>12s} {'neighbours':>10s} {'K_min':>12s} {'H_min':>12s}"]
@@ -64,7 +82,7 @@ def optimal_bandwidth(*, K0, H0, sigma, density, alpha=0.05, power=0.5, test="ca
         Global significance level (each of K, H at alpha/2).
     power : float
         Required detection probability, in [0.5, 1).
-    test : {'calibrated', 'paper'}
+    test : {'calibrated', 'paper'} or Test
         Covariance used: sandwich (calibrated) or ``(X'WX)^-1`` (paper).
     radii : sequence of float, optional
         Candidate radii; default 40 values from 3 to 60 point spacings.
@@ -80,7 +98,7 @@ def optimal_bandwidth(*, K0, H0, sigma, density, alpha=0.05, power=0.5, test="ca
     density = check_scalar(density, "density", func=func, low=0.0)
     alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0)
     power = check_scalar(power, "power", func=func, low=0.5, high=1.0, closed="left")
-    check_option(test, "test", ("calibrated", "paper"), func=func)
+    test = Test.parse(test, "test", func=func)
     if H0 == 0 or H0 * H0 < K0:
         raise InvalidParameterError(f"{func}: need H0 != 0 and H0^2 >= K0 (got K0={K0}, H0={H0})")
     spacing = 1.0 / np.sqrt(density)
@@ -89,8 +107,8 @@ def optimal_bandwidth(*, K0, H0, sigma, density, alpha=0.05, power=0.5, test="ca
     radii = np.sort(np.asarray(radii, dtype=np.float64))
     disc = np.sqrt(H0 * H0 - K0)
     k1, k2 = H0 - disc, H0 + disc
-    z = _st.norm.isf(alpha / 4) + _st.norm.ppf(power)
-    cov_mode = "paper" if test == "paper" else "sandwich"
+    z = z_critical(alpha / 2) + normal_quantile(power)  # each of K, H two-sided at alpha/2
+    cov_mode = "paper" if test == Test.PAPER else "sandwich"
     n_nb, kmin_det, hmin_det = [], [], []
     ok = np.zeros(radii.size, dtype=bool)
     for t, r in enumerate(radii):
@@ -120,7 +138,7 @@ def optimal_bandwidth(*, K0, H0, sigma, density, alpha=0.05, power=0.5, test="ca
         det_h = abs(H0) >= z * sdH
         if K0 == 0:
             det_k = True
-        elif test == "paper":
+        elif test == Test.PAPER:
             det_k = abs(K0) >= z * sdK
         else:
             K, H, _, _ = curvatures(a)
@@ -129,4 +147,7 @@ def optimal_bandwidth(*, K0, H0, sigma, density, alpha=0.05, power=0.5, test="ca
             det_k = abs(k1) >= z * np.sqrt(Cp[0, 0, 0]) and abs(k2) >= z * np.sqrt(Cp[0, 1, 1])
         ok[t] = det_h and det_k
     best = float(radii[np.argmax(ok)]) if ok.any() else float("nan")
-    return BandwidthResult(best, radii, np.array(n_nb), np.array(kmin_det), np.array(hmin_det))
+    params = {"K0": K0, "H0": H0, "sigma": sigma, "density": density, "alpha": alpha,
+              "power": power, "test": test, "radius": best}
+    return BandwidthResult(best, radii, np.array(n_nb), np.array(kmin_det), np.array(hmin_det),
+                           params=params)

@@ -3,131 +3,23 @@
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
-from scipy import special as _sp
-from scipy import stats as _st
 
-from .._shared.validation import check_option, check_points, check_scalar
+from .._shared._choices import Frame, Noise, Test
+from .._shared.validation import check_points, check_scalar
 from ..errors import InsufficientNeighborsError, InvalidParameterError
-from ..io import register_field_descriptions
-from ..neighbors import CellIndex
-from ..neighbors import copies_degenerate, find_duplicates, run_on_unique
+from ..neighbors import CellIndex, copies_degenerate, find_duplicates, run_on_unique
+from ..stats import chi2_test, z_critical
 from . import _curvature_kernels as _ck
 from . import _quadric_kernels as _k
-from ._hk import SurfaceType, hk_surface_types
+from ._curvature_result import CurvatureResult
+from ._hk import hk_surface_types
+from ._noise import height_variance, resolve_noise
 from ._quadric import FitStatus, _run_cells, _run_kernel, check_fit_options, unfitted_reason
 
 logger = logging.getLogger(__name__)
-
-TESTS = ("calibrated", "paper")
-NOISE = ("z", "range", "normal")
-
-#: Per-point output fields, name -> (dtype, description). The first eleven are the contract
-#: of ARCHITECTURE.md; the rest extend it.
-FIELDS = {
-    "neighbors": ("int32", "points in the neighbourhood (positive weight)"),
-    "z0": ("float64", "z of the fitted surface point at the point"),
-    "sigma0_sq": ("float64", "a-posteriori variance factor"),
-    "chi2_pass": ("uint8", "1 where the chi-square test accepts the quadric"),
-    "K": ("float64", "Gaussian curvature"),
-    "H": ("float64", "mean curvature (H<0 convex)"),
-    "kmin": ("float64", "smaller principal curvature"),
-    "kmax": ("float64", "larger principal curvature"),
-    "K_sig": ("uint8", "1 where K differs significantly from 0"),
-    "H_sig": ("uint8", "1 where H differs significantly from 0"),
-    "surface_type": ("uint8", "HK surface type code"),
-    "status": ("uint8", "0 ok,1 few nbrs,2 degenerate,3 rejected"),
-    "dz0": ("float64", "fitted minus observed height (local)"),
-    "chi2_p": ("float64", "p-value of the chi-square test"),
-    "planar_p": ("float64", "p-value of the planarity/F test"),
-    "K_p": ("float64", "p-value of the K test"),
-    "H_p": ("float64", "p-value of the H test"),
-    "NormalX": ("float64", "surface normal x"),
-    "NormalY": ("float64", "surface normal y"),
-    "NormalZ": ("float64", "surface normal z"),
-}
-register_field_descriptions(FIELDS)
-OPTIONAL_FIELDS = {
-    "K_min": ("float64", "minimal detectable |K| (eq. 19)"),
-    "H_min": ("float64", "minimal detectable |H| (eq. 19)"),
-    "radius": ("float64", "bandwidth chosen (multi-scale)"),
-}
-register_field_descriptions(OPTIONAL_FIELDS)
-
-
-@dataclass(frozen=True)
-class CurvatureResult:
-    """Per-point curvature, tests and surface types, plus what produced them.
-
-    Attributes
-    ----------
-    fields : dict of str -> (N,) ndarray
-        Per-point outputs, in input order, named as written to files (see ``FIELDS``).
-    radius : float or tuple of float
-        Bandwidth(s) used.
-    sigma : float
-        Measurement standard deviation used by the tests (given or estimated).
-    sigma_estimated : bool
-        True when `sigma` was estimated from the data.
-    alpha : float
-        Significance level.
-    test : str
-        ``'calibrated'`` or ``'paper'``.
-    frame : str
-        Local frame.
-    """
-
-    fields: dict
-    radius: float | tuple
-    sigma: float
-    sigma_estimated: bool
-    alpha: float
-    test: str
-    frame: str
-    meta: dict = field(default_factory=dict)
-
-    def __getitem__(self, name):
-        return self.fields[name]
-
-    def __len__(self):
-        return self.fields["surface_type"].size
-
-    def to_fields(self):
-        """The per-point arrays with their file dtypes, ready for :func:`lidarstat.io.write`."""
-        spec = {**FIELDS, **OPTIONAL_FIELDS}
-        return {k: np.asarray(v, dtype=spec[k][0]) for k, v in self.fields.items()}
-
-    def counts(self):
-        """Counts per surface type and per status reason."""
-        st = self.fields["surface_type"]
-        status = self.fields["status"]
-        types = {t.name.lower(): int(np.count_nonzero(st == t)) for t in SurfaceType}
-        reasons = {s.name.lower(): int(np.count_nonzero(status == s)) for s in FitStatus}
-        return {"surface_type": types, "status": reasons}
-
-    def summary(self) -> str:
-        """A one-screen text summary (what the CLI prints)."""
-        n = len(self)
-        c = self.counts()
-        rad = self.radius if isinstance(self.radius, float) else ", ".join(map(str, self.radius))
-        lines = [
-            f"{n} points, radius {rad}, frame {self.frame}, test {self.test}, alpha {self.alpha}",
-            f"sigma {self.sigma:.6g}" + (" (estimated from the data)" if self.sigma_estimated else ""),
-            f"median neighbours {np.median(self.fields['neighbors']):.0f}",
-            "surface types:",
-        ]
-        for t in SurfaceType:
-            k = c["surface_type"][t.name.lower()]
-            lines.append(f"  {int(t)} {t.name.lower():<17s} {k:>10d} {100.0 * k / max(n, 1):6.2f}%")
-        lines.append("not classified, by reason:")
-        for s in FitStatus:
-            if s == FitStatus.OK:
-                continue
-            k = c["status"][s.name.lower()]
-            lines.append(f"  {s.name.lower():<20s} {k:>10d} {100.0 * k / max(n, 1):6.2f}%")
-        return "\n".join(lines)
 
 
 def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False):
@@ -141,7 +33,7 @@ def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False):
         Variance of the heights (see :func:`height_variance`).
     alpha : float
         Significance level.
-    test : {'calibrated', 'paper'}
+    test : {'calibrated', 'paper'} or Test
         Which family of tests (see docs/methods/curvature.md).
     minimal_detectable : bool
         Also return ``K_min`` and ``H_min`` (eq. 19).
@@ -153,7 +45,8 @@ def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False):
     m = out["status"].size
     sigma2 = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma2, dtype=np.float64), (m,)))
     st = np.empty((m, _ck.NCOL))
-    mode = _ck.TEST_PAPER if test == "paper" else _ck.TEST_CALIBRATED
+    test = Test.parse(test, "test", func="curvature_tests")
+    mode = _ck.TEST_PAPER if test == Test.PAPER else _ck.TEST_CALIBRATED
     _ck.curvature_statistics(out["status"], out["npts"], out["beta"], out["cof"], out["stats"],
                              out["frames"], sigma2, mode, st)
     col = {name: st[:, getattr(_ck, "C_" + name)] for name in
@@ -161,8 +54,9 @@ def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False):
             "HP")}
     K, H = col["K"], col["H"]
     fitted = out["status"] == _k.OK
-    with np.errstate(invalid="ignore"):
-        chi2_p = _sp.chdtrc(np.where(col["CHI2DF"] > 0, col["CHI2DF"], np.nan), col["CHI2"])
+    # v'Wv against its (Satterthwaite) chi-square; the kernel writes the statistic per point
+    chi2_p = chi2_test(col["CHI2"], np.where(col["CHI2DF"] > 0, col["CHI2DF"], np.nan),
+                       alpha=alpha).pvalue
     planar_p, K_p, H_p = col["PLANP"], col["KP"], col["HP"]
     half = alpha / 2
     chi2_pass = fitted & np.isfinite(chi2_p) & ~(chi2_p < alpha)
@@ -189,45 +83,10 @@ def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False):
         "NormalX": st[:, _ck.C_NX], "NormalY": st[:, _ck.C_NY], "NormalZ": st[:, _ck.C_NZ],
     }
     if minimal_detectable:
-        zc = _st.norm.isf(alpha / 4)  # two-sided at alpha/2 (Bonferroni), eq. 19
+        zc = z_critical(alpha / 2)  # two-sided at alpha/2 (Bonferroni), eq. 19
         res["K_min"] = zc * col["SDK"]
         res["H_min"] = zc * col["SDH"]
     return res
-
-
-def height_variance(frames, sigma, *, noise="z", points=None, sensor=None):
-    """Variance of the local heights implied by measurement noise of std `sigma`.
-
-    The local model's heights run along the frame axis n, while the instrument's noise runs
-    along a direction d: z for range images and airborne data (``noise='z'``), the
-    sensor-to-point ray for terrestrial scans (``'range'``), or n itself (``'normal'``,
-    isotropic noise). The height noise then has variance ``sigma^2 (n . d)^2``; in the
-    ``'z'`` frame with ``noise='z'`` this is sigma^2, as in the paper.
-
-    Parameters
-    ----------
-    frames : (M, 3, 3) ndarray
-        Local frames (rows e1, e2, n).
-    sigma : float
-    noise : {'z', 'range', 'normal'}
-    points, sensor : ndarray, optional
-        Point coordinates (M, 3) and sensor position, needed for ``'range'``.
-
-    Returns
-    -------
-    (M,) ndarray
-    """
-    n = frames[:, 2, :]
-    if noise == "normal":
-        f = np.ones(n.shape[0])
-    elif noise == "z":
-        f = n[:, 2] ** 2
-    else:
-        d = points - np.asarray(sensor, dtype=np.float64)
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        f = np.einsum("ij,ij->i", n, d) ** 2
-    return sigma * sigma * np.maximum(f, 1e-12)
-
 
 def estimate_sigma(points, radius, *, frame="z", sensor=None, min_neighbors=7, sample=20000,
                    rng=0):
@@ -281,7 +140,7 @@ def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neigh
     n = index.n_points
     sorted_fields = None
     done = 0
-    covariance = "paper" if test == "paper" else "sandwich"
+    covariance = "paper" if test == Test.PAPER else "sandwich"
     for c0, c1 in index.cell_blocks(block_size):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
         out = _run_cells(index, c0, c1, bandwidth=radius, frame=frame, sensor=sensor_local,
@@ -330,16 +189,16 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
         points whose local variance exceeds the typical one.
     alpha : float
         Significance level of every test (individual K, H tests use alpha/2, Bonferroni).
-    test : {'calibrated', 'paper'}
+    test : {'calibrated', 'paper'} or Test
         ``'paper'``: eq. 6, 7, 16-18 as printed. ``'calibrated'`` (default): the sandwich
         covariance of the WLS estimator, a Satterthwaite chi-square for v'Wv, an exact
         chi2(3) test of the second-order terms for planarity, and tests of the principal
         curvatures for K (see docs/methods/curvature.md).
-    frame : {'z', 'auto', 'pca'}
+    frame : {'z', 'auto', 'pca'} or Frame
         Local height axis (see :func:`fit_quadrics`).
     sensor : (3,) array_like, optional
         Scanner position to orient normals (and the sign of H) toward.
-    noise : {'z', 'range', 'normal'}, optional
+    noise : {'z', 'range', 'normal'} or Noise, optional
         Direction of the measurement noise `sigma`: along z (airborne, range images),
         along the sensor ray (terrestrial; needs `sensor`) or isotropic. Default
         ``'range'`` when `sensor` is given, else ``'z'``. See :func:`height_variance`.
@@ -373,12 +232,9 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
     if not radii:
         raise InvalidParameterError(f"The 'radius' parameter of {func} must not be empty.")
     alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0)
-    check_option(test, "test", TESTS, func=func)
-    if noise is None:
-        noise = "z" if sensor is None else "range"
-    check_option(noise, "noise", NOISE, func=func)
-    if noise == "range" and sensor is None:
-        raise InvalidParameterError(f"{func}: noise='range' needs the `sensor` position")
+    test = Test.parse(test, "test", func=func)
+    frame = Frame.parse(frame, "frame", func=func)
+    noise = resolve_noise(noise, sensor, func=func)
     check_fit_options(func, frame=frame, covariance="sandwich", min_neighbors=min_neighbors,
                       sensor=sensor)
     block_size = check_scalar(block_size, "block_size", func=func, low=1, closed="left",
@@ -399,7 +255,7 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
     estimated = sigma is None
     if estimated:
         # estimated on the local heights, so the noise is "normal" to the frame by construction
-        noise = "normal"
+        noise = Noise.NORMAL.value
         sigma = _estimate_sigma(index, frame=frame, sensor=sensor, min_neighbors=min_neighbors,
                                 sample=20000, rng=0)
         logger.info("estimated sigma = %g", sigma)
@@ -429,4 +285,5 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
         fields["radius"] = chosen
     return CurvatureResult(fields=fields, radius=radii[0] if len(radii) == 1 else radii,
                            sigma=float(sigma), sigma_estimated=estimated, alpha=alpha, test=test,
-                           frame=frame)
+                           frame=frame, noise=noise, min_neighbors=int(min_neighbors),
+                           minimal_detectable=bool(minimal_detectable))

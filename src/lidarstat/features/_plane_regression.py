@@ -1,30 +1,41 @@
 """Local plane regression with a tricube kernel over planimetric distances (seed 002, eq. 6-7).
 
 Public pieces: :func:`local_planes` (z0 and the two slopes per point with standard
-errors and a planarity test), :func:`select_plane_bandwidth` (PRESS through the hat-matrix
-diagonal and penalised selectors of Haerdle 1990) and :func:`geary_bandwidths` (the
-adaptive bandwidth of section 4.1 from Geary's local indicator).
+errors and a planarity test) and :func:`geary_bandwidths` (the adaptive bandwidth of
+section 4.1 from Geary's local indicator); the bandwidth itself is chosen by
+:func:`lidarstat.features.select_plane_bandwidth` (``_plane_bandwidth.py``).
 """
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._shared._geometry import mean_spacing as _mean_spacing
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import Neighborhoods, radius_neighbors
-from ..stats import variance_test_satterthwaite
+from ..stats import chi2_quantile, variance_test_satterthwaite
 from . import _plane_kernels as _k
 
-#: Bandwidth selectors: name -> penalty Xi(u) applied to the mean resubstitution error
-#: (u = mean leverage of the points themselves); 'press' uses leave-one-out residuals.
-CRITERIA = ("press", "gcv", "rice")
 
-#: Per-point bandwidth choices of :func:`local_planes` (``adaptive``).
-ADAPTIVE_MODES = ("none", "geary", "multiscale")
+class AdaptiveBandwidth(str, enum.Enum):
+    """Per-point bandwidths of :func:`local_planes` (``adaptive``; CLI ``--adaptive``)."""
+
+    #: The largest of b, 0.75 b, 0.5 b whose local plane passes the planarity test.
+    MULTISCALE = "multiscale"
+    #: From Geary's local indicator (seed 002, section 4.1).
+    GEARY = "geary"
+    #: One bandwidth b for the whole cloud.
+    NONE = "none"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+#: Values of :class:`AdaptiveBandwidth`.
+ADAPTIVE_MODES = tuple(m.value for m in AdaptiveBandwidth)
 #: Bandwidth ratios tried by the multi-scale choice, largest first.
 MULTISCALE = (1.0, 0.75, 0.5)
 
@@ -181,13 +192,11 @@ def _robust_sigma2(local_sigma2, nu, q=SIGMA_QUANTILE):
     when up to three quarters of the points are not on planes (trees, walls, ridges, cars),
     where the median (or the mean) is pulled up by the clutter.
     """
-    from scipy import stats as _st
-
     good = np.isfinite(local_sigma2) & np.isfinite(nu) & (nu > 0)
     if not good.any():
         return np.nan
     med_nu = float(np.median(nu[good]))
-    return float(np.quantile(local_sigma2[good], q) / (_st.chi2.ppf(q, med_nu) / med_nu))
+    return float(np.quantile(local_sigma2[good], q) / (chi2_quantile(q, med_nu) / med_nu))
 
 
 def _check_neighborhoods(nbh, n, radius, func):
@@ -218,7 +227,7 @@ def local_planes(points, bandwidth, *, sigma=None, alpha=0.05, adaptive=False,
         the local variances (:data:`SIGMA_QUANTILE`), corrected by the chi-square quantile.
     alpha : float, optional
         Level of the planarity test.
-    adaptive : bool or {'none', 'geary', 'multiscale'}, optional
+    adaptive : bool, AdaptiveBandwidth or {'none', 'geary', 'multiscale'}, optional
         Per-point bandwidths. ``True`` or ``'geary'``: from Geary's local indicator
         (:func:`geary_bandwidths`). ``'multiscale'``: the largest ``b * scale`` (over
         `scales`) whose local plane passes the planarity test, so that windows near roof
@@ -305,7 +314,7 @@ def _adaptive_mode(adaptive, func):
     if adaptive is True:
         return "geary"
     check_option(adaptive, "adaptive", ADAPTIVE_MODES, func=func)
-    return adaptive
+    return AdaptiveBandwidth(adaptive).value
 
 
 def _local_variances(st):
@@ -447,114 +456,3 @@ def geary_bandwidths(points, bandwidth, *, neighborhoods=None, bounds=(0.5, 2.0)
     with np.errstate(divide="ignore"):
         ratio = np.where(gamma > 0, 1.0 / gamma, hi)
     return b * np.clip(ratio, lo, hi)
-
-
-@dataclass(frozen=True)
-class BandwidthSelection:
-    """Outcome of :func:`select_plane_bandwidth`.
-
-    Attributes
-    ----------
-    bandwidth : float
-        The selected bandwidth (smallest score).
-    candidates : (K,) ndarray
-        Bandwidths tried.
-    scores : (K,) ndarray
-        Criterion per candidate (mean squared error scale).
-    press : (K,) ndarray
-        Plain PRESS / n per candidate (leave-one-out through the hat diagonal).
-    criterion : str
-        Selector used.
-    """
-
-    bandwidth: float
-    candidates: np.ndarray
-    scores: np.ndarray
-    press: np.ndarray
-    criterion: str
-
-
-def select_plane_bandwidth(points, candidates=None, *, criterion="rice", trim=0.25,
-                           sample=20000, min_neighbors=6, rng=None):
-    """Choose the plane-regression bandwidth by PRESS or a penalised selector.
-
-    Parameters
-    ----------
-    points : (N, 3) array_like
-        Coordinates.
-    candidates : array_like, optional
-        Bandwidths to try. Default: 8 values from 1.5 to 8 times the mean point spacing.
-    criterion : {'rice', 'gcv', 'press'}
-        ``press``: ``n^-1 sum ((z_i - z0_i) / (1 - h_ii))^2`` (Allen 1974), the
-        leave-one-out error without refitting. It "tends to overfit by selecting a
-        bandwidth too small" (Haerdle 1990), so the default penalises the resubstitution
-        error ``p = n^-1 sum (z_i - z0_i)^2`` with ``Xi(u)``, ``u`` the mean leverage:
-        ``gcv``: ``(1 - u)^-2``; ``rice``: ``(1 - 2u)^-1`` (the strongest; infinite when
-        ``u >= 1/2``, i.e. for bandwidths holding about two points or fewer).
-    trim : float
-        Fraction of the largest squared residuals left out of every mean (a trimmed,
-        least-trimmed-squares-like loss): vegetation, walls and wires are not surfaces,
-        and without trimming they, not the surfaces, set the bandwidth. 0: the plain
-        criteria.
-    sample : int
-        Points used for the score (a seeded random subset of larger clouds).
-    min_neighbors : int
-        Fewest neighbours for a fit; candidates fitting under half the points score inf.
-    rng : Generator or int, optional
-        Seed of the subset.
-
-    Returns
-    -------
-    BandwidthSelection
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from lidarstat.features import select_plane_bandwidth
-    >>> rng = np.random.default_rng(0)
-    >>> xy = rng.uniform(0, 20, (2000, 2))
-    >>> z = np.sin(xy[:, 0] / 3) + rng.normal(0, 0.05, 2000)
-    >>> sel = select_plane_bandwidth(np.c_[xy, z], [0.5, 1.0, 2.0, 4.0, 8.0])
-    >>> sel.bandwidth in (1.0, 2.0)
-    True
-    """
-    func = "select_plane_bandwidth"
-    points = check_points(points, min_points=3)
-    check_option(criterion, "criterion", CRITERIA, func=func)
-    sample = check_scalar(sample, "sample", func=func, low=1, closed="left", integer=True)
-    if candidates is None:
-        s = _mean_spacing(points)
-        candidates = s * np.geomspace(1.5, 8.0, 8)
-    cand = np.sort(np.asarray(candidates, dtype=np.float64).ravel())
-    if cand.size == 0 or not np.all(np.isfinite(cand)) or cand[0] <= 0:
-        raise InvalidParameterError(f"The 'candidates' parameter of {func} must hold "
-                                    f"positive bandwidths. Got {candidates!r} instead.")
-    n = points.shape[0]
-    gen = np.random.default_rng(rng)
-    query = np.sort(gen.choice(n, sample, replace=False)) if n > sample else None
-    nbh = radius_neighbors(points, float(cand[-1]), dim=2, query=query)
-    scores = np.full(cand.size, np.inf)
-    press = np.full(cand.size, np.inf)
-    for k, b in enumerate(cand):
-        _, _, st, status = _run_kernel(points, nbh, np.full(len(nbh), b), min_neighbors)
-        ok = status == _k.STATUS_OK
-        if ok.sum() < 0.5 * len(nbh):
-            continue
-        h = st[ok, 3]
-        r = st[ok, 4]
-        loo = (r / (1.0 - h)) ** 2
-        keep = loo <= np.quantile(loo, 1.0 - trim) if trim > 0 else np.ones(loo.size, bool)
-        u = float(h[keep].mean())
-        p = float(np.mean(r[keep] ** 2))
-        press[k] = float(np.mean(loo[keep]))
-        if criterion == "press":
-            scores[k] = press[k]
-        elif criterion == "gcv":
-            scores[k] = p / (1.0 - u) ** 2
-        else:
-            scores[k] = p / (1.0 - 2.0 * u) if u < 0.5 else np.inf
-    if not np.isfinite(scores).any():
-        raise InvalidParameterError(f"{func}: no candidate bandwidth fits planes at half of "
-                                    f"the points (candidates {cand.tolist()})")
-    best = int(np.argmin(scores))
-    return BandwidthSelection(float(cand[best]), cand, scores, press, criterion)

@@ -7,12 +7,14 @@ from enum import IntEnum
 
 import numpy as np
 
+from .._shared._choices import Frame
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import Neighborhoods
+from . import _frame_kernels as _fk
 from . import _quadric_kernels as _k
 
-FRAMES = {"z": _k.FRAME_Z, "auto": _k.FRAME_AUTO, "pca": _k.FRAME_PCA}
+FRAMES = {"z": _fk.FRAME_Z, "auto": _fk.FRAME_AUTO, "pca": _fk.FRAME_PCA}
 COVARIANCES = {"paper": _k.COV_PAPER, "sandwich": _k.COV_SANDWICH}
 
 
@@ -98,7 +100,7 @@ def _run_kernel(pts, query, indptr, idx, dist, *, bandwidth, frame, sensor, min_
     sensor_arr = np.zeros(3) if sensor is None else np.asarray(sensor, dtype=np.float64)
     _k.fit_quadrics_block(
         pts, np.ascontiguousarray(query, dtype=np.int64), indptr, idx, dist,
-        (-1.0 if bandwidth is None else float(bandwidth), FRAMES[frame], sensor_arr, has_sensor,
+        (-1.0 if bandwidth is None else float(bandwidth), FRAMES[Frame(frame).value], sensor_arr, has_sensor,
          int(min_neighbors), COVARIANCES[covariance]), _outs(out),
     )
     return _mark_unfitted(out)
@@ -127,7 +129,7 @@ def _run_cells(index, c0, c1, *, bandwidth, frame, sensor, min_neighbors, covari
     _k.fit_quadrics_cells(
         c0, c1, index.sorted_points, index.cell_keys, index.cell_start, index.dims,
         float(index.radius), active,
-        (float(bandwidth), FRAMES[frame], sensor_arr, has_sensor, int(min_neighbors),
+        (float(bandwidth), FRAMES[Frame(frame).value], sensor_arr, has_sensor, int(min_neighbors),
          COVARIANCES[covariance]), _outs(out),
     )
     return _mark_unfitted(out)
@@ -155,7 +157,7 @@ def check_neighborhoods(func, pts, neighborhoods):
 
 def check_fit_options(func, *, frame, covariance, min_neighbors, sensor):
     """Validate the options shared by the quadric-based functions."""
-    check_option(frame, "frame", tuple(FRAMES), func=func)
+    Frame.parse(frame, "frame", func=func)
     check_option(covariance, "covariance", tuple(COVARIANCES), func=func)
     check_scalar(min_neighbors, "min_neighbors", func=func, low=7, closed="left", integer=True)
     if sensor is not None:

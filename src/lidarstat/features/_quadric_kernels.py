@@ -21,18 +21,15 @@ from __future__ import annotations
 import numpy as np
 
 from .._shared._jit import njit
-from .._shared._kernels import eigh3 as _eigh3
+from .._shared._kernels import eigh3 as _eigh3  # noqa: F401 (the covariance kernels' import)
 from ..neighbors import make_drivers
+from ._frame_kernels import _local_frame, _tricube, cholesky_inverse_n
 
 # status codes (mirrored by FitStatus in _results.py)
 OK = 0
 TOO_FEW = 1
 SINGULAR = 2
 SKIPPED = 255  # not asked for (inactive in the fused driver); rows are discarded by callers
-
-FRAME_Z = 0
-FRAME_AUTO = 1
-FRAME_PCA = 2
 
 COV_PAPER = 0
 COV_SANDWICH = 1
@@ -51,167 +48,6 @@ _COEF = (1.0, 1.0, 1.0, 0.5, 1.0, 0.5,
          0.5, 0.5, 0.5, 0.25, 0.5, 0.25,
          1.0, 1.0, 1.0, 0.5, 1.0, 0.5,
          0.5, 0.5, 0.5, 0.25, 0.5, 0.25)
-
-
-@njit
-def _tricube(d, b):
-    if d >= b:
-        return 0.0
-    t = d / b
-    t = 1.0 - t * t * t
-    return t * t * t
-
-
-@njit
-def _local_frame(i, pts, idx, dist, s, e, b, frame, sensor, has_sensor, R, cov, evals, evecs):
-    """Fill R (3x3, rows e1, e2, n) for point i. Returns False if the frame is degenerate."""
-    if frame == FRAME_Z:
-        for a in range(3):
-            for c in range(3):
-                R[a, c] = 1.0 if a == c else 0.0
-        return True
-    sw = 0.0
-    m0 = 0.0
-    m1 = 0.0
-    m2 = 0.0
-    for t in range(s, e):
-        w = _tricube(dist[t], b)
-        if w <= 0.0:
-            continue
-        j = idx[t]
-        sw += w
-        m0 += w * (pts[j, 0] - pts[i, 0])
-        m1 += w * (pts[j, 1] - pts[i, 1])
-        m2 += w * (pts[j, 2] - pts[i, 2])
-    if sw <= 0.0:
-        return False
-    m0 /= sw
-    m1 /= sw
-    m2 /= sw
-    for a in range(3):
-        for c in range(3):
-            cov[a, c] = 0.0
-    for t in range(s, e):
-        w = _tricube(dist[t], b)
-        if w <= 0.0:
-            continue
-        j = idx[t]
-        d0 = pts[j, 0] - pts[i, 0] - m0
-        d1 = pts[j, 1] - pts[i, 1] - m1
-        d2 = pts[j, 2] - pts[i, 2] - m2
-        cov[0, 0] += w * d0 * d0
-        cov[0, 1] += w * d0 * d1
-        cov[0, 2] += w * d0 * d2
-        cov[1, 1] += w * d1 * d1
-        cov[1, 2] += w * d1 * d2
-        cov[2, 2] += w * d2 * d2
-    cov[1, 0] = cov[0, 1]
-    cov[2, 0] = cov[0, 2]
-    cov[2, 1] = cov[1, 2]
-    _eigh3(cov, evals, evecs)
-    if evals[1] <= 0.0:
-        return False
-    n0 = evecs[0, 0]
-    n1 = evecs[1, 0]
-    n2 = evecs[2, 0]
-    if frame == FRAME_AUTO:
-        k = 0
-        if abs(n1) > abs(n0):
-            k = 1
-        if abs(n2) > abs(n0) and abs(n2) > abs(n1):
-            k = 2
-        sign = 1.0
-        if has_sensor and sensor[k] - pts[i, k] < 0.0:
-            sign = -1.0
-        for a in range(3):
-            for c in range(3):
-                R[a, c] = 0.0
-        k1 = (k + 1) % 3
-        k2 = (k + 2) % 3
-        if sign > 0:
-            R[0, k1] = 1.0
-            R[1, k2] = 1.0
-            R[2, k] = 1.0
-        else:
-            R[0, k2] = 1.0
-            R[1, k1] = 1.0
-            R[2, k] = -1.0
-        return True
-    # PCA frame: n = smallest eigenvector, oriented to the sensor or up
-    flip = False
-    if has_sensor:
-        dot = n0 * (sensor[0] - pts[i, 0]) + n1 * (sensor[1] - pts[i, 1]) + n2 * (sensor[2] - pts[i, 2])
-        flip = dot < 0.0
-    else:
-        flip = n2 < 0.0
-    if flip:
-        n0 = -n0
-        n1 = -n1
-        n2 = -n2
-    e0 = evecs[0, 2]
-    e1 = evecs[1, 2]
-    e2 = evecs[2, 2]
-    R[0, 0] = e0
-    R[0, 1] = e1
-    R[0, 2] = e2
-    # e2 = n x e1
-    R[1, 0] = n1 * e2 - n2 * e1
-    R[1, 1] = n2 * e0 - n0 * e2
-    R[1, 2] = n0 * e1 - n1 * e0
-    R[2, 0] = n0
-    R[2, 1] = n1
-    R[2, 2] = n2
-    return True
-
-
-@njit
-def cholesky_inverse_n(a, m, rel_tol, L, inv):
-    """Inverse of the SPD leading m x m block of `a` via Cholesky (shared by the quadric
-    and jet kernels); False if a pivot is not above `rel_tol` times the largest diagonal.
-
-    `L` (m x m at least) is scratch; the inverse is written to `inv`.
-    """
-    scale = 0.0
-    for k in range(m):
-        if a[k, k] > scale:
-            scale = a[k, k]
-    if not scale > 0.0:
-        return False
-    tol = rel_tol * scale
-    for j in range(m):
-        sjj = a[j, j]
-        for k in range(j):
-            sjj -= L[j, k] * L[j, k]
-        if not sjj > tol:
-            return False
-        L[j, j] = np.sqrt(sjj)
-        for r in range(j + 1, m):
-            s = a[r, j]
-            for k in range(j):
-                s -= L[r, k] * L[j, k]
-            L[r, j] = s / L[j, j]
-    # inv(L) (lower) into `inv`, then N^-1 = inv(L)' inv(L) via L's upper triangle
-    for j in range(m):
-        for r in range(m):
-            inv[r, j] = 0.0
-    for j in range(m):
-        inv[j, j] = 1.0 / L[j, j]
-        for r in range(j + 1, m):
-            acc = 0.0
-            for k in range(j, r):
-                acc -= L[r, k] * inv[k, j]
-            inv[r, j] = acc / L[r, r]
-    for r in range(m):
-        for c in range(r, m):
-            acc = 0.0
-            for k in range(c, m):
-                acc += inv[k, r] * inv[k, c]
-            L[r, c] = acc
-    for r in range(m):
-        for c in range(r, m):
-            inv[r, c] = L[r, c]
-            inv[c, r] = L[r, c]
-    return True
 
 
 @njit

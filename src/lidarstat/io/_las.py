@@ -87,9 +87,21 @@ def crs_of(header) -> str | None:
     return None
 
 
+def _format_only(record) -> bool:
+    """True for a VLR describing the file's encoding (LASzip, COPC), not its content."""
+    return isinstance(record, LasZipVlr) or getattr(record, "user_id", "") == "copc"
+
+
 def _strip_laszip(header):
+    """A copy of `header` without the records of the input's encoding.
+
+    The LASzip VLR is rewritten by the writer; the COPC info VLR and hierarchy EVLR
+    describe an octree layout that a plain LAS/LAZ output does not have.
+    """
     header = copy.deepcopy(header)
-    header.vlrs = type(header.vlrs)([v for v in header.vlrs if not isinstance(v, LasZipVlr)])
+    header.vlrs = type(header.vlrs)([v for v in header.vlrs if not _format_only(v)])
+    if getattr(header, "evlrs", None):
+        header.evlrs = type(header.evlrs)([v for v in header.evlrs if not _format_only(v)])
     return header
 
 

@@ -1,9 +1,14 @@
-"""Pictures and reports a person can open (PNG views of per-point fields)."""
+"""Pictures and reports a person can open: PNG views and maps, and one HTML page per run."""
 
 from ._demo import DEMO_FILES, run_demo
 from ._fs_plots import plot_forward_search, plot_forward_search_units
+from ._maps import ASPRS_COLOURS, class_grid, hillshade, plot_class_map, plot_flag_map, plot_hillshade
 from ._moments import write_moments_report
+from ._page import ReportPage
+from ._run import map_resolution, write_run_report
 from ._views import plot_field, plot_surface_types
 
 __all__ = ["plot_field", "plot_surface_types", "plot_forward_search", "plot_forward_search_units",
-           "write_moments_report", "run_demo", "DEMO_FILES"]
+           "write_moments_report", "run_demo", "DEMO_FILES", "ReportPage", "write_run_report",
+           "map_resolution", "ASPRS_COLOURS", "class_grid", "hillshade", "plot_class_map",
+           "plot_flag_map", "plot_hillshade"]

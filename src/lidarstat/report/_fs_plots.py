@@ -10,7 +10,7 @@ from .._shared._atomic import atomic_path
 
 
 def plot_forward_search(res, path, *, title=None):
-    """Two panels: smallest deletion residual with its envelope, and the F test p-value.
+    """Two panels: smallest deletion residual with its envelope, and the F statistics.
 
     Parameters
     ----------

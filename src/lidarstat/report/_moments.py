@@ -6,13 +6,13 @@ import html
 import json
 from pathlib import Path
 
-
 from .._shared._atomic import atomic_path
-from ._views import _save
+from ._views import _save, locked
 
 __all__ = ["write_moments_report"]
 
 
+@locked
 def _step_png(path, rec):
     import matplotlib
 
@@ -37,7 +37,7 @@ def _step_png(path, rec):
     a1.set_yscale("symlog")
     a1.legend(loc="upper right", fontsize=8)
     dips = ", ".join(f"{k}: dip {v['dip']:.4f}, p {v['pvalue']:.3g}" for k, v in rec.dip.items())
-    a1.set_title(f"tile {rec.tile} step {rec.step}: {rec.population} (n = {rec.n})\n{dips}",
+    a1.set_title(f"window {rec.window} step {rec.step}: {rec.population} (n = {rec.n})\n{dips}",
                  fontsize=9)
     fig.tight_layout()
     _save(fig, plt, path)
@@ -64,7 +64,7 @@ def write_moments_report(folder, result, *, input_path=None, output_path=None, s
     folder.mkdir(parents=True, exist_ok=True)
     meta = {"input": str(input_path) if input_path else None,
             "output": str(output_path) if output_path else None, "seconds": seconds,
-            "params": result.params, "counts": result.counts(), "tiles": result.tiles,
+            "params": result.params, "counts": result.counts(), "windows": result.windows,
             "steps": [s.to_dict() for s in result.steps]}
     with atomic_path(folder / "report.json") as tmp:
         tmp.write_text(json.dumps(meta, indent=1, default=float))
@@ -74,7 +74,7 @@ def write_moments_report(folder, result, *, input_path=None, output_path=None, s
         _step_png(folder / name, rec)
         ch = rec.choice
         rows.append(
-            f"<h3>tile {html.escape(str(rec.tile))}, step {rec.step}: "
+            f"<h3>window {html.escape(str(rec.window))}, step {rec.step}: "
             f"{html.escape(rec.population)} by {rec.category}</h3>"
             f"<p>n = {rec.n}; dip tests: {html.escape(json.dumps(rec.dip))}<br>"
             f"cycle {ch.cycle} ({ch.rule}), threshold {ch.threshold:.4g}; evidence: "
@@ -88,7 +88,7 @@ def write_moments_report(folder, result, *, input_path=None, output_path=None, s
             f"{html.escape(str(output_path))}<br>parameters: "
             f"{html.escape(json.dumps(result.params, default=str))}</p>"
             f"<table border=1><tr><th>class</th><th>points</th></tr>{counts}</table>"
-            f"<p>{len(result.steps)} analyses; {len(result.tiles)} tiles (report.json has "
+            f"<p>{len(result.steps)} analyses; {len(result.windows)} analysis windows (report.json has "
             "all of them)</p>" + "".join(rows) + "</body></html>")
     out = folder / "index.html"
     with atomic_path(out) as tmp:

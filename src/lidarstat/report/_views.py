@@ -4,7 +4,25 @@ from __future__ import annotations
 
 import numpy as np
 
+import functools
+import threading
+
 from .._shared._atomic import atomic_path
+
+#: pyplot and matplotlib's text layout are not thread-safe: every figure of the package is
+#: drawn under this lock, so that tiles processed in threads can write their pictures.
+PLOT_LOCK = threading.RLock()
+
+
+def locked(func):
+    """Decorator: `func` draws under :data:`PLOT_LOCK`."""
+
+    @functools.wraps(func)
+    def call(*args, **kwargs):
+        with PLOT_LOCK:
+            return func(*args, **kwargs)
+
+    return call
 
 #: Colours of the HK surface types 0..8 (0 grey).
 TYPE_COLORS = ["#bdbdbd", "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b",
@@ -38,6 +56,7 @@ def _save(fig, plt, path):
     plt.close(fig)
 
 
+@locked
 def plot_field(path, xyz, values, *, title, cmap="viridis", symmetric=False, clip=(2, 98)):
     """Write a top view of `values` (per point) coloured by `cmap` to PNG `path`.
 
@@ -63,6 +82,7 @@ def plot_field(path, xyz, values, *, title, cmap="viridis", symmetric=False, cli
     _save(fig, plt, path)
 
 
+@locked
 def plot_surface_types(path, xyz, surface_type, *, title="surface type"):
     """Write a top view of HK surface types (codes 0-8) with a legend to PNG `path`."""
     fig, ax, plt, order, size = _figure(xyz, title)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._shared._deprecate import renamed_parameters
 from .._shared.validation import check_points, check_scalar
 from ..neighbors import radius_neighbors
 from ..neighbors import check_copies
@@ -20,7 +21,8 @@ from ._grow import components, relabel
 from ._result import Segmentation, segment_table
 
 
-def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_size=30):
+@renamed_parameters(min_size="min_points")
+def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_points=30):
     """Raw clusters of one HK type with agreeing normals.
 
     Parameters
@@ -33,7 +35,7 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_size=30):
         Radius (3-D) of the growth graph.
     max_angle : float
         Largest angle between the normals of two neighbours, degrees.
-    min_size : int
+    min_points : int
         Smallest cluster kept.
 
     Returns
@@ -52,7 +54,7 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_size=30):
     cosang = np.abs(np.einsum("ij,ij->i", nrm[src], nrm[dst]))
     edge_ok = (st[src] == st[dst]) & (cosang >= np.cos(np.radians(max_angle)))
     labels = components(nbh, edge_ok=edge_ok, mask=ok)
-    labels = relabel(labels, max(int(min_size), 1))
+    labels = relabel(labels, max(int(min_points), 1))
     c = int(labels.max()) if labels.size else 0
     types = np.zeros(c, dtype=np.uint8)
     if c:
@@ -62,8 +64,9 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_size=30):
     return labels, types
 
 
+@renamed_parameters(min_size="min_points", threshold="search")
 def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
-                      grow_radius=None, min_size=30, refine=False, threshold=None,
+                      grow_radius=None, min_points=30, refine=False, search=None,
                       w_radius=None, fs_alpha=0.001, curv=None,
                       frame="z", noise=None, sensor=None):
     """Segment by tested curvature classes, optionally refined by SAR-FS (seed 000).
@@ -82,12 +85,12 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
         Normal agreement for region growing, degrees.
     grow_radius : float, optional
         Growth graph radius (default radius / 2).
-    min_size : int
+    min_points : int
         Smallest unit.
     refine : bool
         Refine the raw clusters by SAR-FS (polynomial order 1 for planar units, 2 for
         the others) and intersect adjacent surfaces.
-    threshold, w_radius, fs_alpha
+    search, w_radius, fs_alpha
         Refinement settings (:func:`refine_raw_clusters`); defaults radius and radius / 2.
     curv : CurvatureResult, optional
         Precomputed curvature of `points`.
@@ -130,34 +133,43 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
                          noise=noise, sensor=sensor)
     max_angle = check_scalar(max_angle, "max_angle", func=func, low=0.0, high=180.0,
                              closed="right")
-    min_size = check_scalar(min_size, "min_size", func=func, low=1, closed="left", integer=True)
+    min_points = check_scalar(min_points, "min_points", func=func, low=1, closed="left",
+                              integer=True)
     grow_radius = (radius / 2.0 if grow_radius is None else
                    check_scalar(grow_radius, "grow_radius", func=func, low=0.0))
-    if threshold is not None:
-        threshold = check_scalar(threshold, "threshold", func=func, low=0.0)
+    if search is not None:
+        search = check_scalar(search, "search", func=func, low=0.0)
     if w_radius is not None:
         w_radius = check_scalar(w_radius, "w_radius", func=func, low=0.0)
     labels, types = curvature_units(points, curv, grow_radius=grow_radius, max_angle=max_angle,
-                                    min_size=min_size)
+                                    min_points=min_points)
     st = np.asarray(curv.fields["surface_type"]).astype(np.uint8)
     if not refine:
         table = segment_table(labels, points)
         table["surface_type"] = types
         return Segmentation(labels, table, None, {"surface_type": st}, "curvature",
                             {"radius": radius, "max_angle": max_angle,
-                             "grow_radius": grow_radius, "alpha": alpha})
-    from ._sar import refine_raw_clusters
+                             "grow_radius": grow_radius, "alpha": alpha,
+                             "min_points": min_points, **_curvature_params(curv)})
+    from ._sar_units import refine_raw_clusters
 
     degrees = np.where(types == 1, 1, 2)
     seg = refine_raw_clusters(points, labels,
-                              threshold=radius if threshold is None else threshold,
+                              search=radius if search is None else search,
                               w_radius=radius / 2.0 if w_radius is None else w_radius,
-                              degrees=degrees, alpha=fs_alpha,
-                              min_size=min_size)
+                              degrees=degrees, fs_alpha=fs_alpha,
+                              min_points=min_points)
     # type of each refined unit = type of its raw cluster
     raw_of = np.array([int(np.bincount(labels[u.raw]).argmax()) for u in seg.units], dtype=int)
     seg.table["surface_type"] = types[raw_of - 1] if raw_of.size else np.zeros(0, np.uint8)
     seg.fields["surface_type"] = st
     seg.method = "curvature+sar"
-    seg.params.update({"radius": radius, "max_angle": max_angle, "grow_radius": grow_radius})
+    seg.params.update({"radius": radius, "max_angle": max_angle, "grow_radius": grow_radius,
+                       **_curvature_params(curv)})
     return seg
+
+
+def _curvature_params(curv) -> dict:
+    """What the curvature step used (its estimate of sigma included)."""
+    p = getattr(curv, "params", {})
+    return {k: p[k] for k in ("sigma", "sigma_estimated", "noise", "frame", "test") if k in p}

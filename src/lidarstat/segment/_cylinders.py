@@ -28,9 +28,9 @@ two surfaces.
 from __future__ import annotations
 
 import numpy as np
-from scipy import special as _sp
 
 from ..features import cylinder_test
+from ..stats import f_pvalue
 
 
 def group_outer(vectors, groups, m):
@@ -162,7 +162,7 @@ def segment_cylinders(points, labels, normals, sigma, *, sensor=None, alpha=0.00
                                                      sensor, point_axes)
     with np.errstate(invalid="ignore", divide="ignore"):
         f = (lstat - stat) / (stat / np.maximum(n - 3, 1))
-        p = _sp.fdtrc(1.0, np.maximum(n - 3, 1), np.maximum(f, 0.0))
+        p = f_pvalue(np.maximum(f, 0.0), 1.0, np.maximum(n - 3, 1))  # F(1, n - 3), upper tail
     ext = np.array([np.ptp(points[sub_idx[a:b]], axis=0).max() for a, b in
                     zip(sub_ptr[:-1], sub_ptr[1:])])
     # significant and large: with thousands of points the F test alone calls a plane with

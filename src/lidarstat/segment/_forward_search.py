@@ -7,17 +7,33 @@ rank-one update of an ordinary least-squares fit.
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special
-from scipy import stats as _st
 
+from .._shared._deprecate import renamed_parameters
 from .._shared.validation import check_option, check_scalar
 from ..errors import InvalidParameterError
+from ..stats import deletion_residual_envelope, f_pvalue, truncated_normal_variance
 from . import _forward_search_kernels as _k
 
-STOP_RULES = ("both", "f", "residual")
+
+class StopRule(str, enum.Enum):
+    """When the Forward Search stops (``stop``; CLI ``--fs-stop``)."""
+
+    #: At the smaller of the two sizes below.
+    BOTH = "both"
+    #: At the first step whose F test of ``theta(m) = theta(m0)`` rejects (the paper's rule).
+    F = "f"
+    #: At the size m* found by superimposing deletion-residual envelopes.
+    RESIDUAL = "residual"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+STOP_RULES = tuple(m.value for m in StopRule)
 
 
 @dataclass(frozen=True)
@@ -41,7 +57,7 @@ class ForwardSearchResult:
         for the truncation of the subset variance (consistency factor for a subset of m
         of the m* good observations, Riani and Atkinson 2007).
     envelope : (T,) ndarray
-        Its ``1 - alpha_residual`` envelope for m* observations: the quantile of the
+        Its ``1 - envelope_alpha`` envelope for m* observations: the quantile of the
         (m+1)-th order statistic of m* absolute normal deviates, ``Phi^-1((1 + B)/2)``,
         ``B ~ Beta(m + 1, m* - m)`` (NaN for m >= m*).
     fstat, fpvalue, frank : (T,) ndarray
@@ -74,22 +90,6 @@ class ForwardSearchResult:
     theta: np.ndarray
 
 
-def _truncation_factor(p):
-    """Variance of a standard normal truncated to its central fraction p."""
-    p = np.clip(p, 1e-9, 1 - 1e-12)
-    q = _st.norm.ppf((1 + p) / 2)
-    return 1.0 - 2.0 * q * _st.norm.pdf(q) / p
-
-
-def _envelope(m, n, alpha):
-    """``1 - alpha`` quantile of the (m+1)-th smallest of n absolute standard normals."""
-    m = np.asarray(m, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
-        bq = special.betaincinv(m + 1, np.maximum(n - m, 1e-9), 1 - alpha)
-    env = _st.norm.ppf((1 + bq) / 2)
-    return np.where(m < n, env, np.nan)
-
-
 def _first_signal(rmin, m_before, n, alpha, persistence):
     """First step whose truncation-corrected deletion residual leaves the envelope for n
     observations for `persistence` consecutive steps (steps with m < n only); -1: none."""
@@ -97,8 +97,8 @@ def _first_signal(rmin, m_before, n, alpha, persistence):
     if sel.size == 0:
         return -1
     mb = m_before[sel]
-    rc = rmin[sel] * np.sqrt(_truncation_factor(mb / n))
-    exceed = (rc > _envelope(mb, n, alpha)).astype(int)
+    rc = rmin[sel] * np.sqrt(truncated_normal_variance(mb / n))
+    exceed = (rc > deletion_residual_envelope(mb, n, alpha)).astype(int)
     if persistence > 1:
         run = np.convolve(exceed, np.ones(persistence, int), "full")[:exceed.size]
         hits = np.flatnonzero(run >= persistence) - (persistence - 1)
@@ -139,7 +139,8 @@ def _resuperimpose(rmin, m_before, m0, n, alpha, persistence):
     return max(ok, m0)
 
 
-def forward_search(A, y, initial, *, block=1, alpha=0.01, alpha_residual=0.001, stop="both",
+@renamed_parameters(alpha_residual="envelope_alpha")
+def forward_search(A, y, initial, *, block=1, alpha=0.01, envelope_alpha=0.001, stop="both",
                    persistence=2, max_steps=None, refresh=256):
     """Forward Search from an initial subset, monitoring the F test and deletion residuals.
 
@@ -155,9 +156,9 @@ def forward_search(A, y, initial, *, block=1, alpha=0.01, alpha_residual=0.001, 
         Points added per step (1: unitary Forward Search; >1: block Forward Search).
     alpha : float
         Level of the F test of ``theta(m) = theta(m0)`` (the paper's stopping rule).
-    alpha_residual : float
+    envelope_alpha : float
         Level of the deletion-residual envelope.
-    stop : {'both', 'f', 'residual'}
+    stop : StopRule or {'both', 'f', 'residual'}
         Stop at the first step where the F test rejects, at the size m* found by
         superimposing deletion-residual envelopes (a signal: the curve leaves the
         envelope for `persistence` consecutive steps), or at the smaller of the two.
@@ -193,10 +194,10 @@ def forward_search(A, y, initial, *, block=1, alpha=0.01, alpha_residual=0.001, 
     if y.size != n or init.size != n:
         raise InvalidParameterError(f"{func}: `A` ({A.shape}), `y` ({y.size}) and `initial` "
                                     f"({init.size}) must have the same number of rows")
-    check_option(stop, "stop", STOP_RULES, func=func)
+    stop = StopRule(check_option(stop, "stop", STOP_RULES, func=func)).value
     block = check_scalar(block, "block", func=func, low=1, closed="left", integer=True)
     alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0)
-    alpha_residual = check_scalar(alpha_residual, "alpha_residual", func=func, low=0.0,
+    envelope_alpha = check_scalar(envelope_alpha, "envelope_alpha", func=func, low=0.0,
                                   high=1.0)
     m0 = int(init.sum())
     if m0 < r + 1:
@@ -215,13 +216,13 @@ def forward_search(A, y, initial, *, block=1, alpha=0.01, alpha_residual=0.001, 
                           s2, order)
     m_before = np.concatenate(([m0], msize[:-1])) if steps else msize
     with np.errstate(invalid="ignore"):
-        fp = _st.f.sf(fstat, np.maximum(frank, 1), m0 - r)
+        fp = np.asarray(f_pvalue(fstat, np.maximum(frank, 1), m0 - r), dtype=np.float64)
     fp[frank == 0] = 1.0
     f_rej = np.flatnonzero(fp < alpha)
     m_f = int(m_before[f_rej[0]]) if (stop in ("both", "f") and f_rej.size) else n
     m_res = n
     if stop in ("both", "residual") and steps:
-        m_res = _resuperimpose(rmin, m_before, m0, n, alpha_residual, persistence)
+        m_res = _resuperimpose(rmin, m_before, m0, n, envelope_alpha, persistence)
     m_star = min(m_f, m_res)
     if m_star >= n:
         stop_step, reason = -1, "exhausted"
@@ -229,8 +230,8 @@ def forward_search(A, y, initial, *, block=1, alpha=0.01, alpha_residual=0.001, 
         stop_step = int(np.searchsorted(m_before, m_star, side="left"))
         reason = "f" if m_f <= m_res else "residual"
     added = m_star - m0
-    rmin_c = rmin * np.sqrt(_truncation_factor(m_before / max(m_star, 1)))
-    envelope = _envelope(m_before, max(m_star, m0 + 1), alpha_residual)
+    rmin_c = rmin * np.sqrt(truncated_normal_variance(m_before / max(m_star, 1)))
+    envelope = deletion_residual_envelope(m_before, max(m_star, m0 + 1), envelope_alpha)
     accepted = init.copy()
     accepted[order[:added]] = True
     theta = np.linalg.lstsq(A[accepted], y[accepted], rcond=None)[0]

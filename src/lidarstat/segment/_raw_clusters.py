@@ -15,11 +15,12 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from scipy import stats as _st
 
+from .._shared._deprecate import renamed_parameters
 from .._shared._jit import njit_parallel
 from .._shared.validation import check_scalar
 from ..errors import InvalidParameterError
+from ..stats import chi2_critical, z_critical
 
 
 @njit_parallel
@@ -111,8 +112,8 @@ def plane_edges(points, fit, neighborhoods, *, alpha=0.01, max_slope_diff=np.inf
     if require_planar:
         ok &= ~fit.planarity.reject
     ok &= np.isfinite(fit.beta).all(axis=1)
-    crit_slope = float(_st.chi2.isf(alpha, 2))
-    crit_height = float(_st.norm.isf(alpha / 2))
+    crit_slope = chi2_critical(alpha, 2)
+    crit_height = z_critical(alpha)
     xy = np.ascontiguousarray(points[:, :2] - points[:, :2].min(axis=0))
     beta = np.ascontiguousarray(fit.beta.copy())
     beta[:, 0] -= np.nanmin(beta[:, 0]) if np.isfinite(beta[:, 0]).any() else 0.0
@@ -123,13 +124,14 @@ def plane_edges(points, fit, neighborhoods, *, alpha=0.01, max_slope_diff=np.inf
     return edge_ok, ok
 
 
-def raw_clusters(points, fit, neighborhoods, *, alpha=0.01, min_size=10, core=None,
+@renamed_parameters(min_size="min_points")
+def raw_clusters(points, fit, neighborhoods, *, alpha=0.01, min_points=10, core=None,
                  **kwargs):
     """Region growing of raw clusters on the tested plane agreement (section 5.2).
 
     Connected components of the accepted edges among growable points (union-find,
     deterministic ids by decreasing size, the :func:`components` kernel);
-    clusters smaller than `min_size` are dropped (label 0).
+    clusters smaller than `min_points` are dropped (label 0).
 
     With `core` (e.g. the points whose plane passed at the full bandwidth of a
     multi-scale fit), only core points expand a cluster; other growable points are
@@ -149,5 +151,5 @@ def raw_clusters(points, fit, neighborhoods, *, alpha=0.01, min_size=10, core=No
     else:
         core = np.asarray(core, dtype=bool)
         labels = grow_regions(neighborhoods, edge_ok=edge_ok, can_grow=ok & core, mask=ok)
-    labels = relabel(labels, min_size)
+    labels = relabel(labels, min_points)
     return RawClusters(np.asarray(labels, dtype=np.int32), edge_ok, ok)

@@ -24,10 +24,10 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from scipy import special as _sp
 
 from .._shared._jit import njit_parallel
 from .._shared._kernels import eigh3 as _eigh3
+from ..stats import chi2_critical, chi2_test
 
 _CHUNK = 256  # points per parallel task (scratch arrays allocated once per task)
 
@@ -164,7 +164,7 @@ def planar_scales(points, nbh, sigma, *, sensor=None, alpha=0.05, scales=SCALES)
     origin = pts.mean(axis=0)
     local = np.ascontiguousarray(pts - origin)
     sizes = np.asarray(sorted(int(m) for m in scales), dtype=np.int64)
-    crit = _sp.chdtri(sizes - 3.0, alpha)  # upper critical values of chi2(m - 3)
+    crit = np.asarray(chi2_critical(alpha, sizes - 3.0), dtype=np.float64)  # chi2(m - 3)
     n = pts.shape[0]
     sig = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma, dtype=np.float64), (n,)))
     sens = (np.asarray(sensor, dtype=np.float64) - origin) if sensor is not None \
@@ -176,7 +176,8 @@ def planar_scales(points, nbh, sigma, *, sensor=None, alpha=0.05, scales=SCALES)
                    np.ascontiguousarray(nbh.indices), sizes, crit, sig, sens,
                    sensor is not None, kstar, stat, normal)
     with np.errstate(invalid="ignore"):
-        p = np.where(kstar > 0, _sp.chdtrc(np.maximum(kstar - 3.0, 1.0), stat), np.nan)
+        p = np.where(kstar > 0, chi2_test(stat, np.maximum(kstar - 3.0, 1.0), alpha=alpha).pvalue,
+                     np.nan)
     return kstar, p, normal
 
 

@@ -3,22 +3,24 @@
 The whole cloud is triangulated in plan (SciPy/Qhull). The search area of a raw cluster
 is the cluster itself plus every point that belongs to no raw cluster and is reachable
 from the cluster along triangulation edges, through unclustered points only, within a
-path length `threshold`. A point may lie in several search areas (roof ridges do, as in the
+path length `search`. A point may lie in several search areas (roof ridges do, as in the
 paper); points of another raw cluster never do.
 """
 
 from __future__ import annotations
 
 import heapq
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import Delaunay, QhullError
 
+from .._shared._deprecate import renamed_parameters
 from .._shared._jit import njit
 from .._shared.validation import check_points, check_scalar
-from ..errors import InvalidPointsError
+from ..errors import InvalidPointsError, LidarstatDeprecationWarning
 
 
 def delaunay_graph(points):
@@ -114,13 +116,20 @@ class SearchAreas:
         Row c - 1 holds the unclustered points of the search area of cluster c.
     indices : ndarray of int64
         Point indices.
-    threshold : float
+    search : float
         Path length used.
     """
 
     indptr: np.ndarray
     indices: np.ndarray
-    threshold: float
+    search: float
+
+    @property
+    def threshold(self) -> float:
+        """Deprecated name of :attr:`search`."""
+        warnings.warn("SearchAreas.threshold is deprecated; use search",
+                      LidarstatDeprecationWarning, stacklevel=2)
+        return self.search
 
     def area(self, labels, c):
         """All points (cluster c and its extra points) of the search area of cluster c."""
@@ -133,8 +142,9 @@ class SearchAreas:
         return np.diff(self.indptr)
 
 
-def search_areas(points, labels, threshold, *, graph=None):
-    """Search areas of raw clusters (labels 1..C, 0 unclustered) within a path `threshold`.
+@renamed_parameters(threshold="search")
+def search_areas(points, labels, search, *, graph=None):
+    """Search areas of raw clusters (labels 1..C, 0 unclustered) within a path `search`.
 
     Parameters
     ----------
@@ -142,8 +152,9 @@ def search_areas(points, labels, threshold, *, graph=None):
         Coordinates.
     labels : (N,) array_like of int
         Raw cluster labels.
-    threshold : float
-        Largest planimetric path length, along Delaunay edges, from the cluster.
+    search : float
+        Largest planimetric path length, along Delaunay edges, from the cluster (CLI
+        ``--search``).
     graph : tuple, optional
         Precomputed :func:`delaunay_graph` output.
 
@@ -163,8 +174,7 @@ def search_areas(points, labels, threshold, *, graph=None):
     [3.0]
     """
     points = check_points(points, min_points=3)
-    threshold = check_scalar(threshold, "threshold", func="search_areas", low=0.0,
-                             closed="left")
+    search = check_scalar(search, "search", func="search_areas", low=0.0, closed="left")
     labels = np.ascontiguousarray(labels, dtype=np.int64)
     indptr, idx, lengths = graph if graph is not None else delaunay_graph(points)
     c_max = int(labels.max()) if labels.size else 0
@@ -173,10 +183,10 @@ def search_areas(points, labels, threshold, *, graph=None):
     members_ptr = np.concatenate(([0], np.cumsum(counts[1:]))).astype(np.int64)
     members = np.ascontiguousarray(order[counts[0]:], dtype=np.int64)
     out_ptr = np.zeros(c_max + 1, dtype=np.int64)
-    _bounded_areas(indptr, idx, lengths, labels, members_ptr, members, threshold, out_ptr,
+    _bounded_areas(indptr, idx, lengths, labels, members_ptr, members, search, out_ptr,
                    np.empty(0, dtype=np.int64), False)
     np.cumsum(out_ptr, out=out_ptr)
     out = np.empty(out_ptr[-1], dtype=np.int64)
-    _bounded_areas(indptr, idx, lengths, labels, members_ptr, members, threshold, out_ptr, out,
+    _bounded_areas(indptr, idx, lengths, labels, members_ptr, members, search, out_ptr, out,
                    True)
-    return SearchAreas(out_ptr, out, threshold)
+    return SearchAreas(out_ptr, out, search)

@@ -21,10 +21,10 @@ from ._csg import (
     FaceRegistry,
     Polyhedron,
     difference,
-    scan_orthographic,
     union,
 )
 from ._edges import crease_lines, distance_to_creases
+from ._orthographic import scan_orthographic
 from ._scenes import SCENES, make_agpart, make_column
 from ._surfaces import (
     SURFACE_KINDS,
@@ -35,7 +35,8 @@ from ._surfaces import (
     make_sphere_cap,
     make_surface,
 )
-from ._tls import make_tls_building, make_tls_plant, scan_spherical
+from ._tls import scan_spherical
+from ._tls_scenes import make_tls_building, make_tls_plant
 from ._truth import (
     SURFACE_TYPE_NAMES,
     SyntheticCloud,

@@ -16,10 +16,11 @@ import numpy as np
 from .._shared.validation import check_scalar
 from ..errors import InvalidParameterError
 from ._als import make_als_town, make_hip_roof_scene
-from ._csg import Box, Cylinder, FaceRegistry, difference, scan_orthographic, union
+from ._csg import Box, Cylinder, FaceRegistry, difference, union
 from ._edges import crease_lines
+from ._orthographic import scan_orthographic
 from ._surfaces import SURFACE_KINDS, make_surface
-from ._tls import make_tls_building, make_tls_plant
+from ._tls_scenes import make_tls_building, make_tls_plant
 from ._truth import SyntheticCloud, _build
 
 __all__ = ["make_agpart", "make_column", "SCENES"]

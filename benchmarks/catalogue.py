@@ -1,0 +1,198 @@
+"""Tile catalogues: agreement with the whole-area run, and memory and time at scale.
+
+Two measurements, each a ``lidarstat`` process as a user runs it:
+
+* ``--agreement``: the AHN3 Delft crop (``../shared/data``, 640k points, 192 x 228 m) cut
+  into 3 x 3 tiles; ``moments`` on the catalogue with several buffers against
+  ``moments`` on the whole file: the share of points with the same class, and with the
+  same ground (2, 11) / object decision. ``curvature`` likewise, whose answer is local
+  (its share must be 1 with the default buffer, the radius).
+* ``--points N``: a synthetic airborne catalogue of N points in tiles of
+  ``--tile-points`` points (10 points/m2: the cloud of ``bench_moments.py``), classified
+  by ``lidarstat moments tiles/ out/ --dtm dtm/``: wall time, seconds per million
+  points, and the peak memory of the process (GNU time), which must not grow with N.
+
+Usage::
+
+    python benchmarks/catalogue.py --agreement --out benchmarks/results_catalogue.json
+    python benchmarks/catalogue.py --points 50000000 --out benchmarks/results_catalogue.json
+
+Results are merged into the JSON file (one key per measurement).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "src"))
+sys.path.insert(0, str(HERE))
+
+from lidarstat.io import PointCloud, read, write  # noqa: E402
+
+DELFT = HERE.parent.parent / "shared" / "data" / "ahn3_delft_3dfier" / "ahn3_cropped_1.laz"
+
+
+def cut(cloud: PointCloud, folder: Path, n: int = 3) -> list[Path]:
+    """Write `cloud` as an n x n grid of tiles, every field kept."""
+    x, y = cloud.xyz[:, 0], cloud.xyz[:, 1]
+    xs = np.linspace(x.min(), x.max(), n + 1)
+    ys = np.linspace(y.min(), y.max(), n + 1)
+    ix = np.clip(np.searchsorted(xs, x, side="right") - 1, 0, n - 1)
+    iy = np.clip(np.searchsorted(ys, y, side="right") - 1, 0, n - 1)
+    folder.mkdir(parents=True, exist_ok=True)
+    out = []
+    for a in range(n):
+        for b in range(n):
+            keep = (ix == a) & (iy == b)
+            sub = PointCloud(cloud.xyz[keep], {k: np.asarray(v)[keep]
+                                               for k, v in cloud.attributes.items()},
+                             crs=cloud.crs)
+            out.append(write(folder / f"tile_{a}_{b}.laz", sub))
+    return out
+
+
+def lidarstat(*args) -> tuple[float, float]:
+    """Run ``lidarstat ARGS`` under GNU time: (seconds, peak RSS in MiB)."""
+    cmd = ["/usr/bin/time", "-f", "%e %M", sys.executable, "-m", "lidarstat", *map(str, args)]
+    env = {**os.environ, "PYTHONPATH": str(HERE.parent / "src")}
+    run = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    if run.returncode != 0:
+        raise SystemExit(f"lidarstat {' '.join(map(str, args))} failed:\n{run.stderr}")
+    seconds, kib = re.findall(r"([\d.]+) (\d+)\s*$", run.stderr)[-1]
+    return float(seconds), int(kib) / 1024
+
+
+def _keyed(xyz):
+    return np.round(xyz * 1000).astype(np.int64)
+
+
+def _classes(paths, field):
+    xyz, cls = [], []
+    for p in paths:
+        c = read(p, fields=[field])
+        xyz.append(_keyed(c.xyz))
+        cls.append(np.asarray(c.attributes[field]))
+    xyz, cls = np.concatenate(xyz), np.concatenate(cls)
+    order = np.lexsort(xyz.T[::-1])
+    return xyz[order], cls[order]
+
+
+def agreement(tmp: Path) -> dict:
+    if not DELFT.is_file():
+        raise SystemExit(f"real data not found: {DELFT}")
+    src = read(DELFT)
+    cut(src, tmp / "tiles")
+    rows = {}
+    secs, mem = lidarstat("moments", DELFT, tmp / "whole.laz", "--no-report", "-q")
+    wx, wc = _classes([tmp / "whole.laz"], "classification")
+    rows["moments whole file"] = {"seconds": secs, "peak_mib": mem}
+    for buffer in (0, 32, 64, 128):
+        out = tmp / f"moments_{buffer}"
+        secs, mem = lidarstat("moments", tmp / "tiles", out, "--buffer", buffer,
+                              "--no-report", "-q")
+        tx, tc = _classes(sorted(out.glob("*.laz")), "classification")
+        assert np.array_equal(tx, wx)
+        ground = np.isin(tc, (2, 11)) == np.isin(wc, (2, 11))
+        rows[f"moments buffer {buffer} m"] = {
+            "seconds": secs, "peak_mib": mem, "same_class": float((tc == wc).mean()),
+            "same_ground_object": float(ground.mean()),
+            "same_class_road_as_ground": float((np.where(tc == 11, 2, tc)
+                                                == np.where(wc == 11, 2, wc)).mean())}
+    secs, mem = lidarstat("curvature", DELFT, tmp / "whole_c.laz", "--radius", "1.5", "-q")
+    wx, wc = _classes([tmp / "whole_c.laz"], "surface_type")
+    rows["curvature whole file"] = {"seconds": secs, "peak_mib": mem}
+    # one sigma for the area: the whole file's estimate, given to both runs
+    secs, mem = lidarstat("curvature", DELFT, tmp / "whole_c.laz", "--radius", "1.5",
+                          "--sigma", "0.03", "-q")
+    wx, wc = _classes([tmp / "whole_c.laz"], "surface_type")
+    secs, mem = lidarstat("curvature", tmp / "tiles", tmp / "curv", "--radius", "1.5",
+                          "--sigma", "0.03", "-q")
+    tx, tc = _classes(sorted((tmp / "curv").glob("*.laz")), "surface_type")
+    rows["curvature buffer = radius"] = {"seconds": secs, "peak_mib": mem,
+                                         "same_class": float((tc == wc).mean())}
+    return {"data": str(DELFT.relative_to(DELFT.parents[2])), "tiles": 9,
+            "points": len(src.xyz), "runs": rows}
+
+
+def tile_cloud(x0, y0, side, n, seed):
+    """One tile of a continuous synthetic town (10 points/m2): the terrain, buildings,
+    trees and road bands of ``bench_moments.make_cloud`` in the area's coordinates."""
+    g = np.random.default_rng(seed)
+    xy = g.uniform(0, side, (n, 2)) + [x0, y0]
+    z = 5 * np.sin(xy[:, 0] / 150) + 3 * np.cos(xy[:, 1] / 110) + 0.02 * xy[:, 0]
+    z += g.normal(0, 0.03, n)
+    inten = g.normal(150, 12, n)
+    road = np.abs((xy[:, 1] % 200) - 100) < 5
+    inten[road] = g.normal(60, 8, road.sum())
+    cx = (xy[:, 0] // 60) * 60 + 30
+    cy = (xy[:, 1] // 60) * 60 + 30
+    bld = (np.abs(xy[:, 0] - cx) < 12) & (np.abs(xy[:, 1] - cy) < 9) & ~road
+    z[bld] += 8 + (cx[bld] % 7)
+    tree = (np.hypot(xy[:, 0] - cx - 22, xy[:, 1] - cy + 20) < 4) & ~bld & ~road
+    first = tree & (g.uniform(size=n) < 0.6)
+    z[first] += g.uniform(3, 10, first.sum())
+    nret = np.where(tree, 2, 1)
+    rnum = np.where(first, 1, nret)
+    return PointCloud(np.c_[xy + 5e5, z + 100], {
+        "intensity": np.clip(inten, 0, 65535).astype(np.uint16),
+        "number_of_returns": nret.astype(np.uint8), "return_number": rnum.astype(np.uint8)})
+
+
+def scale(tmp: Path, n: int, tile_points: int) -> dict:
+    n_tiles = max(1, round(n / tile_points))
+    side_tiles = math.ceil(math.sqrt(n_tiles))
+    tile_side = math.sqrt(tile_points / 10.0)
+    folder = tmp / "tiles"
+    folder.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    for k in range(n_tiles):  # each tile generated and written alone: memory of one tile
+        a, b = divmod(k, side_tiles)
+        write(folder / f"t_{a:03d}_{b:03d}.laz",
+              tile_cloud(a * tile_side, b * tile_side, tile_side, tile_points, 20261122 + k))
+    made = time.perf_counter() - t0
+    secs, mem = lidarstat("moments", folder, tmp / "out", "--dtm", tmp / "dtm", "-q")
+    total = n_tiles * tile_points
+    return {"points": total, "tiles": n_tiles, "tile_points": tile_points,
+            "seconds": secs, "seconds_per_million": secs / (total / 1e6), "peak_mib": mem,
+            "generation_seconds": made, "cores": os.cpu_count()}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--agreement", action="store_true")
+    ap.add_argument("--points", type=int, default=None)
+    ap.add_argument("--tile-points", type=int, default=1_000_000)
+    ap.add_argument("--out", default=None)
+    ap.add_argument("--tmp", default=None, help="work folder (kept when given)")
+    args = ap.parse_args(argv)
+    results = {}
+    with tempfile.TemporaryDirectory(dir=args.tmp) as tmp:
+        tmp = Path(tmp)
+        if args.agreement:
+            results["agreement"] = agreement(tmp / "agreement")
+            print(json.dumps(results["agreement"], indent=1))
+        if args.points:
+            key = f"scale_{args.points}"
+            results[key] = scale(tmp / "scale", args.points, args.tile_points)
+            print(json.dumps(results[key], indent=1))
+    if args.out:
+        path = Path(args.out)
+        old = json.loads(path.read_text()) if path.exists() else {}
+        old.update(results)
+        path.write_text(json.dumps(old, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,178 @@
+"""The moment analysis of one window: the elevation cut and the paper's clustering steps.
+
+Crosilla et al. (2011), per window:
+
+1. density estimates and dip tests of elevation and intensity; the category with the more
+   clearly multimodal distribution (smaller dip-test p-value) is analysed first;
+2. the sequential skewness/kurtosis analysis of that category gives a separating cycle:
+   the values left form the first cluster, the removed ones stay unclassified;
+3. the cluster is analysed by the complementary category and split again when that is
+   multimodal;
+4. steps 2-3 are repeated on the unclassified values until nothing separates.
+
+The ground cut of a window is step 2 on heights above the ground model; the progressive
+method of the paper's section 4 splits a window into four while its ground cluster stays
+multimodal by the dip test.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..stats import density_estimate, dip_test, sequential_moments
+from ._cycle import choose_cycle, skewness_balance_cycle
+from ._moments_options import MomentsMethod, MomentsOptions
+from ._moments_result import MomentsStep, thin_curves
+from ._surface import cell_keys
+
+__all__ = ["analyse", "dip_tests", "paper_clusters", "progressive_cut"]
+
+
+def analyse(values, category, p: MomentsOptions, *, window, step, population, dips,
+            record=True):
+    """Sequential moments of one population and the cycle choice; (choice, MomentsStep)."""
+    sm = sequential_moments(values, min_points=max(2, min(4, values.size)))
+    if p.method is MomentsMethod.SKEWNESS_BALANCING:
+        ch = skewness_balance_cycle(sm)
+    else:
+        ch = choose_cycle(sm, category, min_points=p.min_points, smoothing=p.smoothing,
+                          cycle=p.cycle if step == 1 else None,
+                          elevation_rule=p.elevation_rule)
+    rec = None
+    if record:
+        de = density_estimate(values, bandwidth=p.bandwidth, gridsize=256)
+        rec = MomentsStep(window=window, step=step, population=population, category=category,
+                          n=int(values.size), dip=dips, choice=ch, curves=thin_curves(sm),
+                          density=de)
+    return ch, rec
+
+
+def dip_tests(cats: dict, p: MomentsOptions) -> dict:
+    """Dip test of every category: statistic, p-value and decision at level ``alpha``."""
+    out = {}
+    for name, v in cats.items():
+        t = dip_test(v, alpha=p.alpha, rng=p.seed)
+        out[name] = {"dip": float(t.statistic), "pvalue": float(t.pvalue),
+                     "multimodal": bool(t.reject)}
+    return out
+
+
+def _quadrants(xy, size, origin):
+    """Indices of the points in each ``size`` square from `origin` (occupied ones only)."""
+    key = cell_keys(xy, size, origin=origin)
+    o = np.argsort(key, kind="stable")
+    ks = key[o]
+    b = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1], True])
+    return [o[a:e] for a, e in zip(b[:-1], b[1:])]
+
+
+def _cluster_bound(kept, z):
+    """``median + z x 1.4826 MAD`` of the kept heights (-inf for fewer than 8 values).
+
+    The sequential cut stops where what is left is symmetric; on ground that the surface
+    follows only roughly (sparse or steep terrain) that stop lies inside the ground's own
+    upper tail. The cut is never placed closer to the ground cluster's centre than `z`
+    robust standard deviations of that cluster.
+    """
+    if kept.size < 8:
+        return -np.inf
+    med = np.median(kept)
+    return float(med + z * 1.4826 * np.median(np.abs(kept - med)))
+
+
+def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, steps,
+                    windows, record):
+    """Cut of one window on heights; split into four while its ground stays multimodal.
+
+    Returns ``[(indices, threshold), ...]``. A window whose heights do not separate keeps
+    its parent's threshold (a window lying on one large roof is unimodal too, so "nothing
+    separates" must not mean "everything is ground"). Appends the window's description
+    to `windows` and its analysis to `steps`.
+    """
+    v = h[idx]
+    thr = parent_thr
+    rec = None
+    if idx.size >= 2 * p.min_points + 4:
+        dips = dip_tests({"elevation": v}, p) if record else {}
+        ch, rec = analyse(v, "elevation", p, window=window_id, step=1,
+                          population="heights above the ground model", dips=dips,
+                          record=record)
+        if ch.cycle is not None:
+            thr = min(ch.threshold, parent_thr)
+            if p.ground_spread > 0 and p.method is MomentsMethod.MOMENTS:
+                thr = max(thr, _cluster_bound(v[v <= thr], p.ground_spread))
+    info = {"window": window_id, "size": size, "n": int(idx.size),
+            "x0": float(xy[idx, 0].min()) if idx.size else None,
+            "y0": float(xy[idx, 1].min()) if idx.size else None,
+            "threshold": float(thr) if np.isfinite(thr) else None, "split": False}
+    kept = v <= thr
+    if (size / 2 >= p.min_window and idx.size >= 4 * p.min_window_points
+            and kept.sum() >= 8):
+        d = dip_test(v[kept], alpha=p.alpha, rng=p.seed)
+        info["ground_dip_pvalue"] = float(d.pvalue)
+        if d.reject:
+            info["split"] = True
+            windows.append(info)
+            if rec is not None:
+                steps.append(rec)
+            out = []
+            origin = (xy[idx, 0].min(), xy[idx, 1].min())
+            for j, child in enumerate(_quadrants(xy[idx], size / 2, origin)):
+                out.extend(progressive_cut(xy, h, idx[child], size / 2, thr, p,
+                                           f"{window_id}.{j}", steps, windows, record))
+            return out
+    windows.append(info)
+    if rec is not None:
+        steps.append(rec)
+    return [(idx, thr)]
+
+
+def paper_clusters(cats: dict, p: MomentsOptions, window, steps: list, first_cluster: int):
+    """The paper's steps 1-4 on one window's values; (cluster label per point, next id)."""
+    n = next(iter(cats.values())).size
+    labels = np.zeros(n, np.int32)
+    todo = np.arange(n)
+    next_id = first_cluster
+    step = 1
+    while todo.size >= 2 * p.min_points and step <= p.max_steps:
+        sub = {k: v[todo] for k, v in cats.items()}
+        dips = dip_tests(sub, p)
+        multi = {k: d for k, d in dips.items() if d["multimodal"]}
+        if not multi and step > 1:
+            break
+        pool = multi or dips
+        cat = min(pool, key=lambda k: (pool[k]["pvalue"], -pool[k]["dip"]))
+        ch, rec = analyse(sub[cat], cat, p, window=window, step=step,
+                          population="window" if step == 1 else "unclassified", dips=dips)
+        steps.append(rec)
+        if ch.cycle is None:
+            break
+        low = sub[cat] <= ch.threshold
+        cluster = todo[low]
+        rest = todo[~low]
+        # step 3: the cluster by the complementary category
+        comp = [k for k in cats if k != cat]
+        split = False
+        if comp and cluster.size >= 2 * p.min_points:
+            c2 = comp[0]
+            v2 = cats[c2][cluster]
+            d2 = dip_tests({c2: v2}, p)
+            if d2[c2]["multimodal"]:
+                ch2, rec2 = analyse(v2, c2, p, window=window, step=step,
+                                    population=f"cluster {next_id}", dips=d2)
+                steps.append(rec2)
+                if ch2.cycle is not None:
+                    lo2 = v2 <= ch2.threshold
+                    labels[cluster[lo2]] = next_id
+                    labels[cluster[~lo2]] = next_id + 1
+                    next_id += 2
+                    split = True
+        if not split:
+            labels[cluster] = next_id
+            next_id += 1
+        todo = rest
+        step += 1
+    if todo.size:
+        labels[todo] = next_id
+        next_id += 1
+    return labels, next_id

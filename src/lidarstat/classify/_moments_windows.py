@@ -1,0 +1,133 @@
+"""Analysis windows of the moments classification: the root windows and one pass over them.
+
+The paper's analysis tiles are called windows here (a window of the analysis, not a
+processing tile). The root windows are a regular grid of side ``window``; every pass runs
+them through :func:`lidarstat._shared._tiles.map_tiles` (threads, sync or Dask: the same
+result). The points are worked in root-window order, so each window is a contiguous block
+and a pass copies slices; inside a window the input order is kept.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .._shared._tiles import map_tiles, tile_grid
+from ._moments_analysis import paper_clusters, progressive_cut
+from ._moments_options import MomentsOptions
+
+__all__ = ["root_windows", "window_order", "window_pass"]
+
+
+class _WindowOut:
+    """What one root window gives back: per-point fields plus its report records."""
+
+    def __init__(self, fields, ground_steps, infos, steps=(), n_ids=0):
+        self.fields = fields
+        self.ground_steps = ground_steps
+        self.infos = infos
+        self.steps = list(steps)
+        self.n_ids = n_ids
+
+    def to_fields(self):
+        return self.fields
+
+
+def window_order(roots):
+    """Order of the points window by window (input order inside a window), and the root
+    windows in that order: each window's points become the block of positions it
+    occupies."""
+    perm = np.concatenate([t.points for t in roots])
+    out, start = [], 0
+    for t in roots:
+        m = t.points.size
+        out.append(replace(t, points=np.arange(start, start + m)))
+        start += m
+    return perm, out
+
+
+def root_windows(xy, size):
+    """Root windows of side `size` over local planimetric coordinates `xy`, on the grid
+    of multiples of `size` (the caller's origin is one, so all tiles of an area share it).
+
+    Returns ``(perm, roots)``: the point order that makes every root window a contiguous
+    block, and the windows (``Tile`` records, points as positions in that order).
+    """
+    xyh = np.zeros((len(xy), 3))
+    xyh[:, :2] = xy
+    return window_order(tile_grid(xyh, size, anchor=(0.0, 0.0)))
+
+
+def _cut_window(xyh, p, record):
+    """Progressive cuts of one root window on heights (column 2 of `xyh`): ground mask and
+    each point's (sub-)window cut (inf where the root window found none)."""
+    xy, h = xyh[:, :2], xyh[:, 2]
+    steps, infos = [], []
+    parts = progressive_cut(xy, h, np.arange(h.size), p.window, np.inf, p, "", steps, infos,
+                            record)
+    ground = np.zeros(h.size, bool)
+    cut = np.empty(h.size)
+    for idx, thr in parts:
+        ground[idx] = h[idx] <= thr
+        cut[idx] = thr
+    return ground, cut, steps, infos
+
+
+def _classify_window(xyh, attrs, p, record, final):
+    """One root window: its ground cut, and on the final pass also the paper's clustering
+    steps (cluster ids local, from 1)."""
+    ground, cut, gsteps, infos = _cut_window(xyh, p, record)
+    if not final:
+        return _WindowOut({"ground": ground, "cut": cut}, gsteps, infos)
+    h = xyh[:, 2]
+    inten = attrs.get("intensity")
+    n = h.size
+    steps = []
+    if n < 2 * p.min_points:
+        return _WindowOut({"ground": ground, "cut": cut, "cluster_id": np.ones(n, np.int32)},
+                          gsteps, infos, steps, 1)
+    cats = {"elevation": h}
+    if inten is not None:
+        cats["intensity"] = inten
+    lab, next_id = paper_clusters(cats, p, -1, steps, 1)
+    return _WindowOut({"ground": ground, "cut": cut, "cluster_id": lab}, gsteps, infos,
+                      steps, next_id - 1)
+
+
+def window_pass(xyh, roots, p: MomentsOptions, inten, scheduler, workers, *, final):
+    """Every root window's ground cut (and on the `final` pass its clusters and records).
+
+    Returns
+    -------
+    fields : dict
+        ``ground``, ``cut`` (and ``cluster_id``, unique over windows, on the final pass)
+        per point, in the order of `xyh`.
+    steps : list of MomentsStep
+        The ground cuts' analyses, then the clustering analyses (final pass only).
+    windows : list of dict
+        Every window's box, size, cut and split decision (final pass only).
+    """
+    index = {t.key: i for i, t in enumerate(roots)}
+    outs = [None] * len(roots)
+
+    def keep(tile, res):
+        outs[index[tile.key]] = res
+
+    attrs = {} if inten is None else {"intensity": inten}
+    fields = map_tiles(lambda pts, a: _classify_window(pts, a, p, final, final), xyh,
+                       tiles=roots, attributes=attrs, scheduler=scheduler, workers=workers,
+                       collect=keep)
+    steps, infos = [], []
+    for i, o in enumerate(outs):
+        o.fields = None  # assembled in `fields`; keep only the ids and records
+        steps.extend(replace(s, window=f"{i}{s.window}") for s in o.ground_steps)
+        infos.extend({**t, "window": f"{i}{t['window']}"} for t in o.infos)
+    if final:  # cluster ids unique in window order, records in window order
+        first = 0
+        for t, o in zip(roots, outs):
+            fields["cluster_id"][t.points] += first
+            first += o.n_ids
+        for i, o in enumerate(outs):
+            steps.extend(replace(rec, window=i) for rec in o.steps)
+    return fields, steps, infos
