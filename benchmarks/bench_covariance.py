@@ -18,7 +18,7 @@ Usage::
 
     python benchmarks/bench_covariance.py                 # 2M points, 3 repeats, JSON + table
     python benchmarks/bench_covariance.py --quick         # 100k points, 1 repeat, no JSON
-    mkdir -p /tmp/s5 && git archive 8ddf3ad src | tar -x -C /tmp/s5   # an earlier version
+    mkdir -p /tmp/s5 && git archive REV src | tar -x -C /tmp/s5   # another version
     python benchmarks/bench_covariance.py --skip-peers --baseline /tmp/s5/src
                                                           # both versions in one run, alternating
 
@@ -70,13 +70,13 @@ def child_pieces(args, pts):
     from lidarstat._shared import _memory as _mem
     from lidarstat.features import _covariance as C
     from lidarstat.features import _covariance_kernels as ck
-    from lidarstat.neighbors import CellIndex
+    from lidarstat.neighbors import CellIndex, knn_cell_size
 
     k, n = args.k, pts.shape[0]
     C.covariance_features(pts[:5000], k=k)  # load every kernel from the cache (untimed)
     out = {}
     t0 = time.perf_counter()
-    cell, tau0 = C._knn_cell_size(pts, k)
+    cell, tau0 = knn_cell_size(pts, k)
     out["cell_size"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     index = CellIndex(pts, cell)
@@ -88,8 +88,8 @@ def child_pieces(args, pts):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
         ck.knn_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
                      index.dims, float(index.cell), k, tau0, False, table[s0:s1],
-                     # the library's argument types (an int64 empty array here compiled
-                     # a second specialisation inside the timing: 13.5 s in session 5)
+                     # the library's argument types (an int64 empty array here would
+                     # compile a second specialisation inside the timing)
                      index.order, np.empty(0, np.int32), np.empty(0), np.zeros(3), False,
                      raw[s0:s1])
     out["knn_covariance_eigen"] = time.perf_counter() - t0

@@ -8,18 +8,16 @@ noise 0.002 + 5e-5 r, seed 0; ``--quick``: step 0.004). Parameters: k = 50, ever
 automatic (range noise estimated along the rays from the scanner position). Printed:
 
 * edge and boundary precision / recall / F1 against three truths (boundary test: the
-  default ``'grid'`` one, with its boundary errors by cause; session 5's ``'visible'``
-  and session 4's ``'scan'`` tests against the support truth beside it) (docs/methods/
-  covariance.md argues which is sound): ``support`` - a point is an edge when its own
+  default ``'grid'`` one, with its boundary errors by cause; the paper's ``'centroid'``
+  test on the same features beside it): ``support`` - a point is an edge when its own
   k-neighbourhood holds a point of another face (:func:`neighborhood_class_truth`),
   a boundary when the end of the visible surface is within 0.5 of its own neighbourhood
   radius; ``band r_i`` - :func:`point_class_truth` zones of 0.7 (edge) / 0.5 (boundary)
   times the point's own neighbourhood radius; ``band median`` - the same with one
-  radius, the median over the cloud (the figures of session 2);
+  radius, the median over the cloud;
 * the edge errors against the support truth by cause (:func:`edge_errors`);
-* Hoover et al. (1996) counts at T = 0.8 over faces of more than 200 points;
-* Hoover without the segment-level refinement (``refine=False``, session 3) and without
-  the adaptive scale; the number of distinct scan rows on every face;
+* Hoover et al. (1996) counts at T = 0.8 over faces of more than 200 points; the number
+  of distinct scan rows on every face;
 * the straight intersection lines with at least 50 supporting points and longer than
   1 m: the largest distance at 20, 50 and 80 % of their length from the nearest listed
   crease and from the crease of their own two faces; the curved lines (polylines of a
@@ -97,7 +95,7 @@ def _face_plane(cloud, f):
 
 def line_scores(cloud, seg, two_sigma):
     """Straight lines (n >= 50, longer than 1 m) at 20/50/80 % of their length, against two
-    truths: the nearest crease of ``meta['edges']`` (session 3's figure) and the crease of
+    truths: the nearest crease of ``meta['edges']`` and the crease of
     the line's own two faces (the intersection of the planes fitted to the true faces'
     points; the dominant face of each segment); curved lines (a cylinder segment on one
     side) sampled at their vertices and edge midpoints against the true arcs of their two
@@ -163,11 +161,6 @@ def tls(name, step):
     missed = [names[i - 1] for i in h.missed_ids] + \
         [names[i - 1] for i in h.over_segmented] + \
         [names[i - 1] for m in h.under_segmented.values() for i in m]
-    seg0 = segment_covariance(cloud.xyz, res,
-                              adaptive_scale=False)
-    h0 = hoover(seg0.labels, cloud.face + 1, 0.8, min_size=200)
-    seg1 = segment_covariance(cloud.xyz, res, refine=False)
-    h1 = hoover(seg1.labels, cloud.face + 1, 0.8, min_size=200)
     # scan rows across each face: per azimuth column of the scan grid, the number of
     # distinct elevation rows on the face (median and 90 % quantile over its columns)
     d = cloud.xyz - cloud.scanner
@@ -181,24 +174,19 @@ def tls(name, step):
         per_col = np.unique(key[:, 0], return_counts=True)[1]
         nrows[names[f]] = [float(np.median(per_col)), float(np.quantile(per_col, 0.9))]
     fields = seg.fields["reintegrated"]
-    # the session-4 boundary test (complete disc of the kNN table) on the same features
+    # the paper's centroid test on the same features
     from lidarstat.classify import classify_covariance
     from lidarstat.synth import neighborhood_class_truth
 
-    old = classify_covariance(res.features, points=cloud.xyz, boundary="scan")
     sup = neighborhood_class_truth(cloud, res.features.neighborhoods)
-    vis = classify_covariance(res.features, points=cloud.xyz, boundary="visible")
+    cen = classify_covariance(res.features, points=cloud.xyz, boundary="centroid")
     out = {"points": len(cloud), "seconds": round(dt, 1), "classes": class_scores(cloud, res),
            "boundary errors by cause (grid test, the default)": grid_errors(
                cloud, res, res.classes, sup),
-           "boundary, scan test (session 4), support truth": prf(old.point_class == 3,
-                                                                 sup == 3),
-           "visible test (session 5's default), support truth": {
-               "edge": prf(vis.point_class == 2, sup == 2),
-               "boundary": prf(vis.point_class == 3, sup == 3)},
+           "centroid test (the paper's), support truth": {
+               "edge": prf(cen.point_class == 2, sup == 2),
+               "boundary": prf(cen.point_class == 3, sup == 3)},
            "hoover": h.as_dict(), "not correct": missed,
-           "hoover without refinement (session 3)": h1.as_dict(),
-           "hoover without adaptive scale": h0.as_dict(),
            "scan rows across faces > 200 points (median, 90 %)": nrows,
            "points moved by the border refinement": int(np.sum(fields == 2)),
            "points in strip segments": int(np.sum(fields == 3)),
@@ -214,25 +202,25 @@ def grid_errors(cloud, res, grid, sup):
     between them received no grid sample although the truth's bisection between the two
     rays finds it visible, so the truth sees two creases and the grid a jump) and
     misplaced ones (a true border node, its border estimated too near)."""
-    from lidarstat.classify import _visible as V
+    from lidarstat.classify import _grid_borders as V
+    from lidarstat.classify._grid_boundary import grid_boundary
+    from lidarstat.classify._scan_grid import grid_edges
 
     f = res.features
     a, b = grid.meta["range_noise"]
     along = a + b * f.ray_range
-    sb = f.scan_boundary
-    vis = V.visible_boundary(cloud.xyz, cloud.scanner, f.normals, f.major, along,
-                             sb[:, 2] * sb[:, 3], jump_alpha=grid.meta["jump_alpha"])
     cyl = None
     if "curvature_centre" in grid.meta:  # borders of curved-surface nodes on their cylinder
-        from lidarstat.classify._covariance import grid_cylinders
+        from lidarstat.classify._covariance_tests import grid_cylinders
 
         with np.errstate(invalid="ignore"):
             on = ((grid.fields["plane_p"] < grid.alpha)
                   & (grid.fields["variation_p"] >= grid.meta["curved_alpha"]))
         cyl = grid_cylinders(grid.meta, on)
-    gb = V.grid_boundary(cloud.xyz, cloud.scanner, f.normals, along, vis=vis,
-                         jump_alpha=grid.meta["jump_alpha"], cylinders=cyl,
-                         return_borders=True)
+    gb = grid_boundary(cloud.xyz, cloud.scanner, f.normals, along,
+                       grid=grid_edges(cloud.xyz, cloud.scanner, along),
+                       jump_alpha=grid.meta["jump_alpha"], cylinders=cyl,
+                       return_borders=True)
     _, node, kind, _ = gb["borders"]
     j = gb["nearest"]
     false_node = cloud.fields["boundary"][node[j]] == 0

@@ -11,7 +11,7 @@ A speed change that claims identical results must print ``ALL IDENTICAL``.
 
 Usage::
 
-    mkdir -p /tmp/s5 && git archive 8ddf3ad src | tar -x -C /tmp/s5
+    mkdir -p /tmp/s5 && git archive REV src | tar -x -C /tmp/s5
     PYTHONPATH=/tmp/s5/src NUMBA_CACHE_DIR=/tmp/s5/numba \\
         python benchmarks/covariance_identity.py dump /tmp/ident_old
     PYTHONPATH=src python benchmarks/covariance_identity.py dump /tmp/ident_new

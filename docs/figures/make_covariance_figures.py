@@ -1,8 +1,8 @@
-"""Pictures of the covariance classes and segments in docs/ (seed 003).
+"""Pictures of the covariance classes and segments in docs/figures/ (seed 003).
 
     PYTHONPATH=src python docs/figures/make_covariance_figures.py [--only pump|building|plant]
 
-Writes ``docs/covariance_{pump,tls_building,tls_plant}_{classes,segments}.png``: oblique
+Writes ``docs/figures/covariance_{pump,tls_building,tls_plant}_{classes,segments}.png``: oblique
 3-D views (matplotlib, Agg) of ``point_class`` (surface grey-blue, edge red, boundary
 orange) and of the segments of ``segment --method covariance`` at the default parameters,
 with the intersection lines in black. The pump scan is the real terrestrial scan in
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-DOCS = Path(__file__).resolve().parents[1]
+DOCS = Path(__file__).resolve().parent
 PUMP = DOCS.parent / ".." / "shared" / "data" / "e57_pump_tls" / "pump_scan.laz"
 CLASS_COLORS = np.array(["#bdbdbd", "#7f9fbf", "#d62728", "#ff7f0e"])
 CLASS_NAMES = ["undetermined", "surface", "edge", "boundary"]

@@ -5,11 +5,9 @@ import pytest
 from scipy.spatial import cKDTree
 
 from lidarstat.classify import PointClass, classify_covariance, covariance
-from lidarstat.classify._covariance import (
-    curved_surface_test,
-    estimate_range_noise,
-    estimate_smooth_range_noise,
-)
+from lidarstat.classify._covariance_noise import (estimate_range_noise,
+                                                  estimate_smooth_range_noise)
+from lidarstat.classify._covariance_tests import curved_surface_test
 from lidarstat.errors import InvalidParameterError
 from lidarstat.features import covariance_features
 from lidarstat.synth import make_tls_building, make_tls_plant
@@ -170,8 +168,7 @@ def test_smooth_range_noise_is_not_inflated_by_pipes_and_tanks():
     """The range noise of tls_plant (default step; truth 0.002 + 5e-5 r) from the
     residuals of the best smooth model (cylinder, the plane its limit) is within 10 % of
     the truth at 8, 15 and 22 m; the medians of the plane residuals, where pipes and tanks
-    fill a range bin, are more than 1.5 times too large at 15 and 22 m (session 4's
-    estimate, b = 2.9e-4). (At step 0.004 the k = 50 neighbourhoods of the pipe rack
+    fill a range bin, are more than 1.5 times too large at 15 and 22 m (b = 2.9e-4). (At step 0.004 the k = 50 neighbourhoods of the pipe rack
     straddle two pipes and a support, most of its range bin is edges, and the smooth
     estimate is 1.3-1.7 times too large there: docs/methods/covariance.md.)"""
     sc = make_tls_plant(rng=0)
@@ -183,7 +180,9 @@ def test_smooth_range_noise_is_not_inflated_by_pipes_and_tanks():
     a0, b0 = estimate_range_noise(f.eigenvalues, f.fields["neighbors"], f.ray_range, f.ray_cos)
     assert np.all((a0 + b0 * r)[1:] / truth[1:] > 1.5), (a0, b0)
     cl = classify_covariance(f, points=sc.xyz)
-    assert cl.meta["noise_estimate"] == "smooth" and cl.meta["range_noise"] == (a, b)
+    assert cl.meta["range_noise"] == (a, b) and cl.params["range_noise"] == [a, b]
+    with pytest.raises(InvalidParameterError, match="estimated from the `points`"):
+        classify_covariance(f, boundary="centroid")
 
 
 @pytest.mark.parametrize("make", [make_tls_building, make_tls_plant])
@@ -214,8 +213,34 @@ def test_bad_parameters(rng):
         classify_covariance(feats, alpha=1.5)
     with pytest.raises(InvalidParameterError, match="'sigma' parameter"):
         classify_covariance(feats, sigma=np.ones(3))
-    with pytest.raises(InvalidParameterError, match="'noise_estimate' parameter"):
-        classify_covariance(feats, noise_estimate="mean")
+    with pytest.raises(TypeError, match="noise_estimate"):
+        classify_covariance(feats, noise_estimate="median")
+    with pytest.raises(InvalidParameterError, match="'curved' parameter"):
+        classify_covariance(feats, curved="sphere")
     exact = np.c_[rng.uniform(0, 1, (200, 2)), np.zeros(200)]
     with pytest.raises(InvalidParameterError, match="estimated noise is 0"):
         classify_covariance(covariance_features(exact, k=10))
+
+
+def test_enums_strings_and_params(rng):
+    """The choices take the enums or their strings; ``params`` records what was used; the
+    replay options of earlier versions are gone."""
+    from lidarstat.classify import BoundaryTest, CurvedTest
+    from lidarstat.features import EigenMode
+
+    pts = _plane(rng, n=1500)
+    a = covariance(pts, k=20, boundary=BoundaryTest.CENTROID, curved=CurvedTest.VARIATION,
+                   eigen_mode=EigenMode.SQRT)
+    b = covariance(pts, k=20, boundary="centroid", curved="variation", eigen_mode="sqrt")
+    assert np.array_equal(a.point_class, b.point_class)
+    assert np.array_equal(a["Linearity"], b["Linearity"], equal_nan=True)
+    p = a.params
+    assert (p["boundary"], p["curved"], p["eigen_mode"]) == ("centroid", "variation", "sqrt")
+    assert p["k"] == 20 and p["sensor"] is None and p["sigma_estimated"]
+    assert p["boundary_alpha"] == 0.001 and p["curved_alpha"] == p["alpha"] == 0.05
+    assert "centroid test at 0.001" in a.summary()
+    for gone in ("noise_estimate", "edge_boundary_alpha"):
+        with pytest.raises(TypeError, match=gone):
+            covariance(pts, k=20, **{gone: None})
+    with pytest.raises(InvalidParameterError, match="'eigen_mode' parameter"):
+        covariance(pts, k=20, eigen_mode="log")

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 from test_covariance_classes import _f1
-from test_scan_boundary import _scans
-from test_visible_boundary import _edges, _ledge_scan, _pillar_scan
+from test_scan_grid import _edges, _ledge_scan, _pillar_scan, _scans
 
 from lidarstat.classify import PointClass, covariance
-from lidarstat.classify._visible import BORDER_JUMP, BORDER_MISSING, BORDER_WINDOW, border_edges
+from lidarstat.classify._grid_borders import BORDER_JUMP, BORDER_MISSING, BORDER_WINDOW
+from lidarstat.classify._scan_grid_kernels import border_edges
 from lidarstat.errors import InvalidParameterError
 from lidarstat.synth import neighborhood_class_truth, scan_spherical
 from lidarstat.synth._csg import Box, FaceRegistry
@@ -80,11 +80,9 @@ def test_border_edges_at_an_occlusion_but_not_at_a_face_narrower_than_the_grid()
 @pytest.mark.parametrize("scene, edge_floor, boundary_floor", [
     ("tls_building", 0.88, 0.86), ("tls_plant", 0.9, 0.9)])
 def test_grid_test_on_the_synthetic_scans(scene, edge_floor, boundary_floor):
-    """Support-truth F1 at step 0.004 (k = 50, automatic). With 'grid' the plant reaches
-    edge 0.918 / boundary 0.907 (the 'visible' test: 0.791 / 0.833): the truth's
-    boundary corners are boundaries and the Hotelling reach is gone. The building: edge
-    0.897 / boundary 0.871 (visible: 0.902 / 0.831; without the jamb rule 0.826 / 0.821,
-    its window recesses' unsampled sills and jambs read as borders)."""
+    """Support-truth F1 at step 0.004 (k = 50, automatic): the plant reaches edge 0.918 /
+    boundary 0.907, the building edge 0.897 / boundary 0.871 (without the jamb rule
+    0.826 / 0.821: its window recesses' unsampled sills and jambs read as borders)."""
     from lidarstat.synth import make_tls_building, make_tls_plant
 
     make = {"tls_building": make_tls_building, "tls_plant": make_tls_plant}[scene]
@@ -140,7 +138,7 @@ def test_jamb_rule_takes_visible_unsampled_jambs_but_keeps_occlusions():
     sc = _recess_scan()
     rates = []
     for reach in (0.0, 1.0):
-        import lidarstat.classify._visible as V
+        import lidarstat.classify._grid_boundary as V
 
         old = V.JAMB_REACH
         V.JAMB_REACH = reach
@@ -231,7 +229,7 @@ def test_dropouts_need_a_continuous_range():
     on every such direction."""
     from scipy.special import ndtri
 
-    from lidarstat.classify._visible import direction_coverage
+    from lidarstat.classify._grid_borders import direction_coverage
 
     rng = np.random.default_rng(11)
     x, y = np.meshgrid(np.arange(90.0), np.arange(90.0), indexing="ij")

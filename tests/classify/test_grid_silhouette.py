@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from lidarstat.classify import PointClass, covariance
-from lidarstat.classify._visible import (BORDER_JUMP, BORDER_MISSING, _grid_rays,
-                                        cylinder_border, shadow_border)
+from lidarstat.classify._grid_borders import (BORDER_JUMP, BORDER_MISSING, cylinder_border,
+                                              shadow_border)
+from lidarstat.classify._scan_grid import _grid_rays
 from lidarstat.synth import scan_spherical
 from lidarstat.synth._csg import Box, Cylinder, FaceRegistry, union
 
@@ -145,7 +146,8 @@ def test_silhouette_distance_against_the_analytic_truth(pipes):
     within one spacing for 90 % of the points (measured 0.14 and 0.35); the tangent-plane
     estimate (no cylinder) is biased short by about a spacing there (-1.36 and -1.05).
     On the wall behind the low pipe the shadow's border is on the pipe's silhouette ray."""
-    from lidarstat.classify._visible import grid_boundary
+    from lidarstat.classify._grid_boundary import grid_boundary
+    from lidarstat.classify._scan_grid import grid_edges
 
     sc, res = pipes
     nbh = res.features.neighborhoods
@@ -166,13 +168,9 @@ def test_silhouette_distance_against_the_analytic_truth(pipes):
     cl = res.classes
     f = res.features
     a, b = cl.meta["range_noise"]
-    from lidarstat.classify._visible import visible_boundary
-
     along = a + b * f.ray_range
-    sb = f.scan_boundary
-    vis = visible_boundary(sc.xyz, f.sensor, f.normals, f.major, along, sb[:, 2] * sb[:, 3],
-                           jump_alpha=cl.meta["jump_alpha"], linear_alpha=cl.alpha)
-    plane = grid_boundary(sc.xyz, f.sensor, f.normals, along, vis=vis,
+    plane = grid_boundary(sc.xyz, f.sensor, f.normals, along,
+                          grid=grid_edges(sc.xyz, f.sensor, along),
                           jump_alpha=cl.meta["jump_alpha"], smooth_alpha=cl.alpha)
     m = pipe & (bd < rk) & (plane["border_kind"] == BORDER_MISSING)
     assert np.median((plane["border_distance"][m] - bd[m]) / spacing[m]) < -0.5

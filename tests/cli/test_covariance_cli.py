@@ -38,7 +38,11 @@ def test_covariance_writes_fields(box_las, tmp_path, capsys, suffix):
     pc = np.asarray(res["point_class"])
     assert set(np.unique(pc)) <= {0, 1, 2, 3} and (pc == 1).mean() > 0.6 and (pc == 2).any()
     assert np.array_equal(np.asarray(res["intensity"]), np.asarray(read(box_las)["intensity"]))
-    assert summary.exists()
+    import json
+
+    meta = json.loads(summary.read_text())
+    assert meta["k"] == 30 and meta["boundary"] == "centroid" and meta["boundary_alpha"] == 0.001
+    assert meta["sigma_estimated"] and meta["point_class"]["surface"] == (pc == 1).sum()
 
 
 def test_covariance_radius_and_paper_thresholds(box_las, tmp_path, capsys):
@@ -67,7 +71,7 @@ def test_segment_method_covariance(box_las, tmp_path, capsys):
     out = tmp_path / "seg.npz"
     lines = tmp_path / "seg.lines.geojson"
     code = main(["segment", str(box_las), str(out), "--method", "covariance", "--k", "30",
-                 "--min-size", "100", "--lines", str(lines)])
+                 "--min-points", "100", "--lines", str(lines)])
     stdout = capsys.readouterr().out
     assert code == 0 and "covariance: 2 segments" in stdout
     res = read(out)
@@ -78,3 +82,65 @@ def test_segment_method_covariance(box_las, tmp_path, capsys):
 
     feats = json.loads(lines.read_text())["features"]
     assert len(feats) == 1 and feats[0]["properties"]["segment_a"] == 1
+
+
+def test_segment_covariance_min_size_is_a_deprecated_spelling(box_las, tmp_path, capsys):
+    out = tmp_path / "seg.npz"
+    code = main(["segment", str(box_las), str(out), "--method", "covariance", "--k", "30",
+                 "--min-size", "100", "-q"])
+    err = capsys.readouterr().err
+    assert code == 0 and "--min-size is deprecated; use --min-points" in err
+
+
+@pytest.mark.parametrize("argv, message", [
+    # options that replayed earlier defaults are gone
+    (["covariance", "IN", "out.laz", "--noise-estimate", "median"], "--noise-estimate"),
+    (["covariance", "IN", "out.laz", "--boundary", "visible"], "--boundary"),
+    (["covariance", "IN", "out.laz", "--boundary", "scan"], "--boundary"),
+    (["segment", "IN", "out.laz", "--method", "covariance", "--no-refine"], "--no-refine"),
+    (["segment", "IN", "out.laz", "--method", "covariance", "--no-adaptive-scale"],
+     "--no-adaptive-scale"),
+    # options the run cannot use are refused, not ignored
+    (["segment", "IN", "out.laz", "--method", "covariance", "--eigen-mode", "sqrt"],
+     "--eigen-mode"),
+    (["segment", "IN", "out.laz", "--method", "covariance", "--noise", "range"],
+     "argument --noise: --method covariance does not use it"),
+    (["covariance", "IN", "out.laz", "--sensor", "0", "0", "10", "--boundary-alpha", "0.01"],
+     "argument --boundary-alpha: the 'grid' boundary test"),
+    (["covariance", "IN", "out.laz", "--border-band", "0.4"],
+     "argument --border-band: only the 'grid' boundary test"),
+    (["covariance", "IN", "out.laz", "--boundary", "centroid", "--jump-alpha", "0.01"],
+     "argument --jump-alpha: only the 'grid' boundary test"),
+])
+def test_covariance_refuses_removed_and_unusable_options(box_las, tmp_path, capsys, argv,
+                                                          message):
+    argv = [str(box_las) if a == "IN" else (str(tmp_path / a) if a.startswith("out") else a)
+            for a in argv]
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2 and message in err, err
+    assert not (tmp_path / "out.laz").exists()
+
+
+def test_covariance_grid_test_with_a_sensor(tmp_path, capsys):
+    """With a sensor the 'grid' boundary test runs and its fields are written; the
+    summary JSON records its band and jump level."""
+    import json
+
+    from lidarstat.synth import scan_spherical
+    from lidarstat.synth._csg import Box, FaceRegistry
+
+    reg = FaceRegistry()
+    wall = Box(reg, "wall", (12.0, 0.0, 3.0), np.eye(3), (0.2, 3.0, 1.5))
+    sc = scan_spherical(wall, scanner=(0.0, 0.0, 1.5), azimuth=(-0.2, 0.2),
+                        elevation=(0.0, 0.2), step=0.006, range_sigma=(0.002, 5e-5), rng=0)
+    src = tmp_path / "wall.npz"
+    write(src, PointCloud(xyz=sc.xyz))
+    out, summary = tmp_path / "out.npz", tmp_path / "s.json"
+    code = main(["covariance", str(src), str(out), "--sensor", *map(str, sc.scanner),
+                 "--border-band", "0.4", "--summary-json", str(summary), "-q"])
+    assert code == 0, capsys.readouterr().err
+    assert {"border_distance", "border_kind", "jump_p"} <= set(read(out).field_names)
+    meta = json.loads(summary.read_text())
+    assert meta["boundary"] == "grid" and meta["border_band"] == 0.4
+    assert meta["boundary_alpha"] is None and len(meta["range_noise"]) == 2

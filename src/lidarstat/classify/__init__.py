@@ -2,9 +2,10 @@
 moments classification and filter scores (seed 004)."""
 
 from ..features import PointClass, SurfaceType, hk_surface_types
-from ._covariance import FIELDS as COVARIANCE_CLASS_FIELDS
-from ._covariance import (CovarianceClasses, CovarianceClassification,
-                          classify_covariance, covariance, estimate_plane_sigma)
+from ._covariance import BoundaryTest, CurvedTest, classify_covariance, covariance
+from ._covariance_noise import estimate_plane_sigma
+from ._covariance_result import FIELDS as COVARIANCE_CLASS_FIELDS
+from ._covariance_result import CovarianceClasses, CovarianceClassification
 from ._cycle import CycleChoice, ElevationRule, choose_cycle, skewness_balance_cycle
 from ._outliers import low_outliers
 from ._moments import classify_moments, moments
@@ -15,6 +16,7 @@ from ._scores import GROUND_CODES, ClassScores, FilterErrors, class_scores, filt
 
 __all__ = ["SurfaceType", "hk_surface_types", "COVARIANCE_CLASS_FIELDS", "CovarianceClasses",
            "CovarianceClassification", "PointClass", "classify_covariance", "covariance",
+           "BoundaryTest", "CurvedTest",
            "estimate_plane_sigma", "ASPRS", "MomentsClassification", "MomentsStep",
            "moments", "classify_moments", "MomentsMethod", "ElevationRule", "RoadRule",
            "low_outliers", "CycleChoice", "choose_cycle", "skewness_balance_cycle",

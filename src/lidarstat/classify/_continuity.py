@@ -25,7 +25,7 @@ import numpy as np
 from numba import prange
 
 from .._shared._columns import column_max, column_min
-from .._shared._grid_knn import _CELL_CHUNK, _block_ranges, _count, _knn_point, _scratch
+from ..neighbors import GRID_CELL_CHUNK as _CELL_CHUNK, grid_block_ranges as _block_ranges, grid_candidate_count as _count, grid_knn_point as _knn_point, grid_knn_scratch as _scratch  # noqa: E501
 from .._shared._jit import njit, njit_parallel
 from ..neighbors import find_duplicates
 from ._surface import cell_keys, cell_order

@@ -5,7 +5,8 @@ from ._curvature import curvature, curvature_tests, estimate_sigma
 from ._curvature_result import FIELDS, CurvatureResult
 from ._noise import height_variance
 from ._covariance import FIELDS as COVARIANCE_FIELDS
-from ._covariance import CovarianceResult, PointClass, covariance_features, eigen_features
+from ._covariance import (CovarianceResult, EigenMode, PointClass, covariance_features,
+                          eigen_features)
 from ._cylinder import cylinder_test
 from ._hk import SurfaceType, hk_surface_types
 from ._bandwidth import BandwidthResult, optimal_bandwidth
@@ -25,5 +26,5 @@ __all__ = ["COVARIANCE_FIELDS", "CovarianceResult", "covariance_features", "eige
            "local_planes", "select_plane_bandwidth", "JET_FIELDS", "MONGE_NAMES",
            "JetFit", "JetResult",
            "PrincipalDirections", "fit_jets", "jet_tests", "jets", "principal_directions",
-           "SurfaceType", "hk_surface_types", "cylinder_test", "PointClass",
+           "SurfaceType", "hk_surface_types", "cylinder_test", "PointClass", "EigenMode",
            "Noise", "Test", "Frame", "Weight"]

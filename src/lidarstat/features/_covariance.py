@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import enum
 import logging
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -12,13 +13,30 @@ from .._shared import _memory as _mem
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..io import register_field_descriptions
-from ..neighbors import CellIndex, Neighborhoods
+from ..neighbors import CellIndex, Neighborhoods, knn_cell_size
 from . import _covariance_kernels as _ck
 from . import _scan_kernels as _sk
 
 logger = logging.getLogger(__name__)
 
-EIGEN_MODES = ("raw", "sqrt", "normalized")
+
+
+class EigenMode(str, enum.Enum):
+    """What the eigen features' ratios are computed from (PDAL's ``mode``,
+    ``--eigen-mode``)."""
+
+    #: The eigenvalues (jakteristics, CloudCompare).
+    RAW = "raw"
+    #: Their square roots (PDAL's default, pgeof).
+    SQRT = "sqrt"
+    #: The eigenvalues divided by their sum.
+    NORMALIZED = "normalized"
+
+    def __str__(self):
+        return self.value
+
+
+EIGEN_MODES = tuple(m.value for m in EigenMode)
 
 #: Per-point output fields, name -> (dtype, description). Names follow PDAL's
 #: ``filters.covariancefeatures`` / ``filters.normal`` / ``filters.eigenvalues``.
@@ -87,8 +105,8 @@ class CovarianceResult:
     scan_boundary : (N, 4) ndarray or None
         With a sensor: Hotelling T2 of the complete-disc centroid in linearised scan
         coordinates, the disc's point count m, its radius over the neighbourhood's and the
-        neighbourhood's reach (:mod:`lidarstat.features._scan_kernels`; the ``'scan'`` and
-        ``'visible'`` boundary tests).
+        neighbourhood's reach (:mod:`lidarstat.features._scan_kernels`; the reach is the
+        scale of the ``'grid'`` boundary test).
     """
 
     fields: dict
@@ -143,7 +161,7 @@ def eigen_features(evals, normal, major, *, mode="raw"):
         Eigenvalues in ascending order ``l0 <= l1 <= l2`` (``l0`` is the paper's lambda0).
     normal, major : (N, 3) ndarray
         Eigenvectors of ``l0`` and ``l2`` (the middle one is their cross product).
-    mode : {'raw', 'sqrt', 'normalized'}
+    mode : EigenMode or {'raw', 'sqrt', 'normalized'}
         What the ratios are computed from, as PDAL's ``mode`` option: the eigenvalues
         (jakteristics, CloudCompare), their square roots (PDAL's default, pgeof,
         Guinard and Landrieu 2017) or the eigenvalues divided by their sum.
@@ -153,7 +171,7 @@ def eigen_features(evals, normal, major, *, mode="raw"):
     -------
     dict of str -> (N,) ndarray
     """
-    check_option(mode, "mode", EIGEN_MODES, func="eigen_features")
+    mode = EigenMode(check_option(mode, "mode", EIGEN_MODES, func="eigen_features")).value
     raw = np.asarray(evals, dtype=np.float64)
     total = raw.sum(axis=1)
     if mode == "sqrt":
@@ -188,43 +206,6 @@ def _xlogx(x):
         return np.where(x > 0, x * np.log(np.where(x > 0, x, 1.0)), 0.0)
 
 
-def _knn_cell_size(points, k, rng=0, sample=4000, min_k=12, min_tree=200_000):
-    """Grid cell for the kNN kernel: the 0.9 quantile of k-th neighbour distances of a sample.
-
-    With the cell at least the k-th neighbour distance, the 27 cells around a point hold its
-    k neighbours for most points (the rest are searched in a wider block). On large clouds
-    the distances come from a random thinning to a fraction f of the points (at least
-    `min_tree` points, and f (k - 1) >= `min_k` - 1): its ``1 + f (k - 1)``-th neighbour
-    distance estimates the k-th of the whole cloud. The cell only sets the speed of the
-    exact search, never its result. Returns the cell and 1.15 times the median distance.
-
-    The thinning's tree is most of this function's time: at 2M points and k = 50, ``min_k``
-    24 / ``min_tree`` 400k (a 940k-point tree) took 0.38-0.43 s, 12 / 200k (450k points)
-    0.16 s, with a 4 % larger cell, the same kNN time within its run-to-run spread and
-    bit-identical features and neighbourhoods.
-    """
-    from scipy.spatial import cKDTree
-
-    n = points.shape[0]
-    rng = np.random.default_rng(rng)
-    f = min(1.0, max((min_k - 1) / max(k - 1, 1), min_tree / n))
-    if f < 1.0:
-        sub = points[rng.random(n) < f]
-        kk = min(sub.shape[0], max(1, int(round(1 + f * (k - 1)))))
-    else:
-        sub, kk = points, k
-    origin = sub.min(axis=0)
-    local = sub - origin
-    pos = rng.choice(local.shape[0], size=min(sample, local.shape[0]), replace=False)
-    tree = cKDTree(local, balanced_tree=False, compact_nodes=False)
-    d, _ = tree.query(local[pos], k=kk, workers=-1)
-    d = np.asarray(d).reshape(pos.size, kk)[:, -1]
-    cell = float(np.quantile(d, 0.9))
-    if not cell > 0:  # duplicates: any positive size works
-        cell = float(np.ptp(points, axis=0).max()) or 1.0
-    return cell, float(np.median(d)) * 1.15
-
-
 def _knn_table(points, k, *, block_size, sort=True, sensor=None, progress=None, rng=0):
     """Exact kNN of every point with the grid kernel, in the grid's sorted order.
 
@@ -235,7 +216,7 @@ def _knn_table(points, k, *, block_size, sort=True, sensor=None, progress=None, 
     written by the kernel directly, else None. ``raw`` holds the covariance kernel's
     output per sorted position (computed in the same pass); `sensor` in file coordinates.
     """
-    cell, tau0 = _knn_cell_size(points, k, rng=rng)
+    cell, tau0 = knn_cell_size(points, k, rng=rng)
     index = CellIndex(points, cell)
     n = index.n_points
     dtype = np.int32 if n < 2**31 - 1 else np.int64
@@ -296,7 +277,7 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
         Precomputed neighbourhoods (one row per point) instead of either.
     sensor : (3,) array_like, optional
         Scanner position; normals point toward it. Default: normals point up (+z).
-    eigen_mode : {'raw', 'sqrt', 'normalized'}
+    eigen_mode : EigenMode or {'raw', 'sqrt', 'normalized'}
         See :func:`eigen_features`.
     keep_neighbors : bool
         Keep the neighbourhoods in the result (for segmentation); kNN rows are sorted by
@@ -329,7 +310,8 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
     pts = check_points(points)
     n = pts.shape[0]
     sensor = _check_sensor(sensor, func)
-    check_option(eigen_mode, "eigen_mode", EIGEN_MODES, func=func)
+    eigen_mode = EigenMode(check_option(eigen_mode, "eigen_mode", EIGEN_MODES,
+                                        func=func)).value
     block_size = check_scalar(block_size, "block_size", func=func, low=1, closed="left",
                               integer=True)
     if neighborhoods is not None:

@@ -3,7 +3,9 @@
 Two kernels do the work:
 
 * :func:`knn_cells` - exact k nearest neighbours on the uniform grid of a
-  :class:`lidarstat.neighbors.CellIndex`. The candidates of all points of one cell are the
+  :class:`lidarstat.neighbors.CellIndex` (the search kernels of
+  :mod:`lidarstat.neighbors`, driven here so that each point's covariance is computed
+  while its neighbours are in cache). The candidates of all points of one cell are the
   points of the (2R+1)^3 cells around it (R = 1 first); a point whose k-th candidate is
   farther than the distance from the point to the faces of that block is searched again
   with R + 1, so the result is exact. A quickselect keeps the k best, insertion-sorted
@@ -25,7 +27,11 @@ from __future__ import annotations
 import numpy as np
 from numba import prange
 
-from .._shared._grid_knn import _CELL_CHUNK, _block_ranges, _count, _knn_point, _scratch
+from ..neighbors import GRID_CELL_CHUNK as _CELL_CHUNK
+from ..neighbors import grid_block_ranges as _block_ranges
+from ..neighbors import grid_candidate_count as _count
+from ..neighbors import grid_knn_point as _knn_point
+from ..neighbors import grid_knn_scratch as _scratch
 from .._shared._jit import njit, njit_parallel
 from ._quadric_kernels import _eigh3
 

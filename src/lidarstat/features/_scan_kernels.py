@@ -1,4 +1,4 @@
-"""Boundary statistic of a terrestrial scan on its angular grid (the ``'scan'`` boundary test).
+"""Centroid statistic of a terrestrial scan's neighbourhoods on its angular grid.
 
 A terrestrial scanner samples the directions of a regular (azimuth, elevation) grid, and
 its range noise moves a point along its own ray only: the *directions* of the points are
@@ -32,8 +32,8 @@ nodes beyond it are missing and the centroid moves away from the border.
 
 Output per point: Hotelling's ``T2 = m c' S^-1 c`` of the complete disc's centroid c
 (m points, S their covariance) against the index point, m, ``rho / r`` and the reach r
-(the farthest neighbour, which the ``'visible'`` boundary test of
-:mod:`lidarstat.classify._visible` uses as its disc radius).
+(the farthest neighbour, the scale of the ``'grid'`` boundary test of
+:mod:`lidarstat.classify._grid_boundary`).
 """
 
 from __future__ import annotations

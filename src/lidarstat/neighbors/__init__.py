@@ -1,5 +1,11 @@
 """CSR neighbourhoods from fixed-radius (3-D sphere, 2-D disc) and kNN queries.
 
+Every neighbour search of the package lives here: the radius and kNN queries returning
+:class:`Neighborhoods`, and the Numba kernels of the exact grid kNN search
+(``grid_knn_point`` and its helpers, cell size :func:`knn_cell_size`) that the drivers
+of the covariance features and of the moments classification's patch graph call inside
+their own kernels, fused with the per-point model.
+
 Every query is sized before it allocates (:func:`max_pairs`); points sharing a location
 are found by :func:`find_duplicates` (the policy of the local models is in
 ``lidarstat.neighbors._duplicates``).
@@ -11,7 +17,15 @@ from ._drivers import Drivers, make_drivers
 from ._duplicates import (Duplicates, check_copies, copies_degenerate, find_duplicates,
                           map_rows, refuse_dominated, run_on_unique)
 from ._query import CellIndex, knn_neighbors, radius_neighbors
+from ._grid_knn import knn_cell_size
+from ._grid_kernels import _CELL_CHUNK as GRID_CELL_CHUNK
+from ._grid_kernels import _block_ranges as grid_block_ranges
+from ._grid_kernels import _count as grid_candidate_count
+from ._grid_kernels import _knn_point as grid_knn_point
+from ._grid_kernels import _scratch as grid_knn_scratch
 
 __all__ = ["Neighborhoods", "CellIndex", "radius_neighbors", "knn_neighbors",
            "Duplicates", "find_duplicates", "check_copies", "copies_degenerate", "map_rows",
-           "refuse_dominated", "run_on_unique", "max_pairs", "Drivers", "make_drivers"]
+           "refuse_dominated", "run_on_unique", "max_pairs", "Drivers", "make_drivers",
+           "knn_cell_size", "GRID_CELL_CHUNK", "grid_block_ranges", "grid_candidate_count",
+           "grid_knn_point", "grid_knn_scratch"]

@@ -17,8 +17,8 @@ from ._intersect import intersection_lines
 from ._sar import segment_sar
 from ._sar_units import refine_raw_clusters
 from ._curvature_units import curvature_units, segment_curvature
-from ._covariance_segments import (fit_lines, local_intersections, reintegrate, segment_covariance,
-                                   segment_planes)
+from ._covariance_lines import fit_lines, local_intersections
+from ._covariance_segments import SeedOrder, reintegrate, segment_covariance, segment_planes
 from ._ridges import RIDGE_FIELDS, RidgeResult, ridges
 from ._ridge_segments import ridge_segments
 
@@ -28,6 +28,6 @@ __all__ = ["Segmentation", "Polylines", "segment_table", "components", "grow_reg
            "ForwardSearchResult", "StopRule", "forward_search", "SearchAreas", "delaunay_graph",
            "search_areas", "RawClusters", "plane_edges", "raw_clusters", "SurfaceUnit",
            "refine_cluster", "intersection_lines", "refine_raw_clusters", "segment_sar",
-           "curvature_units", "segment_curvature", "segment_covariance", "segment_planes",
+           "curvature_units", "segment_curvature", "segment_covariance", "SeedOrder", "segment_planes",
            "local_intersections", "fit_lines", "reintegrate", "ridges", "ridge_segments",
            "RidgeResult", "RIDGE_FIELDS"]

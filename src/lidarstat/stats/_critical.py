@@ -22,7 +22,8 @@ from ._results import TestResult
 from ._tests import _finish
 
 __all__ = ["z_critical", "t_critical", "chi2_critical", "chi2_quantile", "normal_quantile",
-           "f_pvalue", "f_test", "chi2_test", "z_test_statistic"]
+           "f_pvalue", "chi2_pvalue", "normal_pvalue", "f_test", "chi2_test",
+           "z_test_statistic"]
 
 
 def _level(alpha, name="alpha"):
@@ -80,6 +81,21 @@ def normal_quantile(q):
 def f_pvalue(statistic, df1, df2):
     """Upper-tail p-value of F(`df1`, `df2`) at `statistic` (vectorised)."""
     p = _st.f.sf(statistic, df1, df2)
+    return float(p) if np.ndim(p) == 0 else p
+
+
+def chi2_pvalue(statistic, df):
+    """Upper-tail p-value of chi2(`df`) at `statistic` (vectorised; NaN where df is NaN)."""
+    with np.errstate(invalid="ignore"):
+        p = _st.chi2.sf(statistic, df)
+    return float(p) if np.ndim(p) == 0 else p
+
+
+def normal_pvalue(statistic, *, sides: int = 2):
+    """p-value of a standard normal statistic: ``P(|Z| > |z|)`` (``sides=2``) or
+    ``P(Z > z)`` (``sides=1``), vectorised."""
+    z = np.asarray(statistic, dtype=np.float64)
+    p = np.minimum(2.0 * _st.norm.sf(np.abs(z)), 1.0) if sides == 2 else _st.norm.sf(z)
     return float(p) if np.ndim(p) == 0 else p
 
 

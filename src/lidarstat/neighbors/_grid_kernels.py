@@ -1,18 +1,21 @@
 """Numba kernels of the exact k-nearest-neighbour search on a uniform grid.
 
-The search of :func:`lidarstat.features._covariance_kernels.knn_cells` (3-D) and of the
-planimetric patch graph in :mod:`lidarstat.classify._continuity` (2-D): per point, the
-candidates are the points of the (2R+1)^3 cells of a :class:`lidarstat.neighbors.CellIndex`
+Per point, the candidates are the points of the (2R+1)^3 cells of a :class:`CellIndex`
 around its cell (:func:`_block_ranges`), binned by distance and selected
 (:func:`_knn_point`), with R grown until the k-th candidate is closer than the faces of
-the block, so the result is exact.
+the block, so the result is exact. Exported from :mod:`lidarstat.neighbors` as
+``grid_knn_point``, ``grid_block_ranges``, ``grid_candidate_count``, ``grid_knn_scratch``
+and ``GRID_CELL_CHUNK``, for the drivers that fuse the search with a per-point model
+while the neighbours are in cache: the covariance features (3-D,
+:func:`lidarstat.features._covariance_kernels.knn_cells`) and the planimetric patch
+graph of the moments classification (2-D, :mod:`lidarstat.classify._continuity`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ._jit import njit
+from .._shared._jit import njit
 
 _CELL_CHUNK = 32  # grid cells per parallel task of the drivers of this search
 
