@@ -162,7 +162,7 @@ def bench_segment(cloud, radius=None):
     dt = time.perf_counter() - t
     rp = cloud.fields["roof_plane"].astype(int)
     h_all = hoover(seg.labels, rp, 0.8)
-    h30 = hoover(seg.labels, rp, 0.8, min_size=30)
+    h30 = hoover(seg.labels, rp, 0.8, min_points=30)
     err, se, t2 = _normal_errors(cloud, seg)
     return {"points": int(cloud.xyz.shape[0]), "seconds": round(dt, 2),
             "bandwidth": seg.params["radius"], "adaptive": seg.params["adaptive"],

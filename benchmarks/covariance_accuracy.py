@@ -156,7 +156,7 @@ def tls(name, step):
     res = covariance(cloud.xyz, sensor=cloud.scanner, k=50, keep_neighbors=True)
     seg = segment_covariance(cloud.xyz, res)
     dt = time.perf_counter() - t0
-    h = hoover(seg.labels, cloud.face + 1, 0.8, min_size=200)
+    h = hoover(seg.labels, cloud.face + 1, 0.8, min_points=200)
     names = cloud.meta["face_names"]
     missed = [names[i - 1] for i in h.missed_ids] + \
         [names[i - 1] for i in h.over_segmented] + \

@@ -66,7 +66,7 @@ def connected_parts(xyz, face, k=8):
 
 
 def score(labels, truth, min_size):
-    h = hoover(labels, truth, 0.8, min_size=min_size)
+    h = hoover(labels, truth, 0.8, min_points=min_size)
     return dict(correct=h.correct, n_truth=h.n_truth, over=h.over, under=h.under,
                 missed=h.missed, noise=h.noise)
 

@@ -120,7 +120,7 @@ def _recess_scan():
     hole = Box(reg, "win", (1.0, 9.75, 2.0), np.eye(3), (1.0, 0.15, 0.8))
     from lidarstat.synth._csg import difference
 
-    return scan_spherical(difference(wall, hole), scanner=(-9.0, -8.0, 1.6),
+    return scan_spherical(difference(wall, hole), sensor=(-9.0, -8.0, 1.6),
                           azimuth=(0.9, 1.35), elevation=(-0.06, 0.1), step=0.0025,
                           range_sigma=(0.002, 5e-5), rng=4)
 

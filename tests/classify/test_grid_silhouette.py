@@ -25,7 +25,7 @@ def _pipes_scan(rng=0):
     # a post at the side reaching above the scan window (the grid's top row is the scan
     # window there, not the pipe's silhouette)
     post = Box(reg, "post", (10.0, -2.4, 3.0), np.eye(3), (0.15, 0.15, 3.0))
-    return scan_spherical(union(union(union(wall, low), high), post), scanner=(0.0, 0.0, 1.5),
+    return scan_spherical(union(union(union(wall, low), high), post), sensor=(0.0, 0.0, 1.5),
                           azimuth=(-0.25, 0.25), elevation=(-0.1, 0.25), step=0.004,
                           range_sigma=(0.002, 5e-5), rng=rng)
 

@@ -23,7 +23,7 @@ def _scans():
     ground = Box(reg, "ground", (10.0, 0.0, -0.5), np.eye(3), (12.0, 12.0, 0.5))
     wall = Box(reg, "wall", (12.0, 0.0, 3.0), np.eye(3), (0.2, 8.0, 3.0))
     for solid, elevation in ((ground, (-0.6, -0.08)), (wall, (-0.05, 0.35))):
-        yield scan_spherical(solid, scanner=(0.0, 0.0, 1.5), azimuth=(-0.5, 0.5),
+        yield scan_spherical(solid, sensor=(0.0, 0.0, 1.5), azimuth=(-0.5, 0.5),
                              elevation=elevation, step=0.004, range_sigma=(0.002, 5e-5), rng=0)
 
 
@@ -47,7 +47,7 @@ def _corner_scan():
     rot = np.array([[np.cos(np.pi / 4), -np.sin(np.pi / 4), 0.0],
                     [np.sin(np.pi / 4), np.cos(np.pi / 4), 0.0], [0.0, 0.0, 1.0]])
     box = Box(reg, "box", (12.0, 0.0, 2.0), rot, (3.0, 3.0, 4.0))
-    return scan_spherical(box, scanner=(0.0, 0.0, 1.5), azimuth=(-0.3, 0.3),
+    return scan_spherical(box, sensor=(0.0, 0.0, 1.5), azimuth=(-0.3, 0.3),
                           elevation=(-0.08, 0.15), step=0.004, range_sigma=(0.002, 5e-5),
                           rng=1)
 
@@ -114,7 +114,7 @@ def _pillar_scan():
     reg = FaceRegistry()
     wall = Box(reg, "wall", (14.0, 0.0, 3.0), np.eye(3), (0.2, 8.0, 3.0))
     pillar = Box(reg, "pillar", (12.0, 0.5, 1.5), np.eye(3), (0.3, 0.3, 1.5))
-    return scan_spherical(union(wall, pillar), scanner=(0.0, 0.0, 1.5),
+    return scan_spherical(union(wall, pillar), sensor=(0.0, 0.0, 1.5),
                           azimuth=(-0.3, 0.3), elevation=(-0.05, 0.25), step=0.004,
                           range_sigma=(0.002, 5e-5), rng=2)
 
@@ -125,7 +125,7 @@ def _ledge_scan():
     reg = FaceRegistry()
     wall = Box(reg, "wall", (14.0, 0.0, 3.0), np.eye(3), (0.2, 8.0, 3.0))
     ledge = Box(reg, "ledge", (13.75, 0.0, 2.5), np.eye(3), (0.3, 3.0, 0.01))
-    return scan_spherical(union(wall, ledge), scanner=(0.0, 0.0, 1.5), azimuth=(-0.3, 0.3),
+    return scan_spherical(union(wall, ledge), sensor=(0.0, 0.0, 1.5), azimuth=(-0.3, 0.3),
                           elevation=(-0.05, 0.25), step=0.004, range_sigma=(0.002, 5e-5),
                           rng=3)
 

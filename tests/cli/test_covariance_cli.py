@@ -132,7 +132,7 @@ def test_covariance_grid_test_with_a_sensor(tmp_path, capsys):
 
     reg = FaceRegistry()
     wall = Box(reg, "wall", (12.0, 0.0, 3.0), np.eye(3), (0.2, 3.0, 1.5))
-    sc = scan_spherical(wall, scanner=(0.0, 0.0, 1.5), azimuth=(-0.2, 0.2),
+    sc = scan_spherical(wall, sensor=(0.0, 0.0, 1.5), azimuth=(-0.2, 0.2),
                         elevation=(0.0, 0.2), step=0.006, range_sigma=(0.002, 5e-5), rng=0)
     src = tmp_path / "wall.npz"
     write(src, PointCloud(xyz=sc.xyz))

@@ -24,7 +24,7 @@ def run(args, cloud):
     from lidarstat.neighbors import radius_neighbors
     from lidarstat.segment import Polylines, Segmentation, components, segment_table
 
-    lab = components(radius_neighbors(cloud.xyz, args.gap), min_size=args.min_points or 1)
+    lab = components(radius_neighbors(cloud.xyz, args.gap), min_points=args.min_points or 1)
     lines = Polylines.from_segments([[0, 0, 0]], [[1, 0, 0]])
     return Segmentation(lab, segment_table(lab, cloud.xyz), lines=lines, method="fake",
                         params={"gap": args.gap})

@@ -111,7 +111,7 @@ def test_tls_building_hoover_and_lines():
     """
     sc = make_tls_building(rng=0)
     seg = segment_covariance(sc.xyz, covariance(sc.xyz, sensor=sc.scanner, keep_neighbors=True))
-    h = hoover(seg.labels, sc.face + 1, 0.8, min_size=200)
+    h = hoover(seg.labels, sc.face + 1, 0.8, min_points=200)
     assert h.correct == h.n_truth == 14 and h.noise == 0
     assert seg.fields["scale_k"].max() == 50 and (seg.fields["scale_k"] < 50).any()
     assert (seg.fields["reintegrated"] == 2).any() and (seg.fields["reintegrated"] == 3).any()
@@ -154,7 +154,7 @@ def test_tls_plant_pipes_and_tanks_one_cylinder_segment_each():
     sc = make_tls_plant(step=0.004, rng=0)
     res = covariance(sc.xyz, sensor=sc.scanner, k=50, keep_neighbors=True)
     seg = segment_covariance(sc.xyz, res)
-    h = hoover(seg.labels, sc.face + 1, 0.8, min_size=200)
+    h = hoover(seg.labels, sc.face + 1, 0.8, min_points=200)
     assert h.correct == h.n_truth >= 10
     names = sc.meta["face_names"]
     t = seg.table
@@ -179,7 +179,7 @@ def test_curved_creases_are_polylines_on_the_true_circles():
 
     sc = make_tls_plant(rng=0)
     seg = segment_covariance(sc.xyz, covariance(sc.xyz, sensor=sc.scanner, keep_neighbors=True))
-    h = hoover(seg.labels, sc.face + 1, 0.8, min_size=200)
+    h = hoover(seg.labels, sc.face + 1, 0.8, min_points=200)
     assert h.correct == h.n_truth == 11
     cyl = seg.table["model"] == 2
     two_sigma = 2 * (0.002 + 5e-5 * 25)

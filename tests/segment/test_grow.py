@@ -39,12 +39,12 @@ def test_components_match_scipy(cloud, rng):
 
 def test_components_min_size_and_determinism(cloud):
     pts, nbh = cloud
-    lab = components(nbh, min_size=5)
+    lab = components(nbh, min_points=5)
     sizes = np.bincount(lab)[1:]
     assert sizes.min() >= 5
     # The same partition given through permuted points gives the same sizes per id.
     perm = np.random.default_rng(1).permutation(len(pts))
-    lab2 = components(radius_neighbors(pts[perm], 0.35), min_size=5)
+    lab2 = components(radius_neighbors(pts[perm], 0.35), min_points=5)
     assert np.array_equal(np.bincount(lab2)[1:], sizes)
 
 
@@ -91,7 +91,7 @@ def test_relabel_is_independent_of_input_ids():
     a = np.array([4, 4, 4, 9, 9, 0, 2, 2, 2])
     b = np.array([1, 1, 1, 3, 3, 0, 7, 7, 7])
     assert relabel(a).tolist() == relabel(b).tolist() == [1, 1, 1, 3, 3, 0, 2, 2, 2]
-    assert relabel(a, min_size=3).tolist() == [1, 1, 1, 0, 0, 0, 2, 2, 2]
+    assert relabel(a, min_points=3).tolist() == [1, 1, 1, 0, 0, 0, 2, 2, 2]
 
 
 def test_adjacency_matches_brute_force(cloud, rng):

@@ -36,7 +36,7 @@ def test_missed_and_tolerance():
 def test_min_size_leaves_small_regions_out():
     truth = np.repeat([1, 2], [300, 50])
     pred = np.repeat([1, 2], [300, 50])
-    s = hoover(pred, truth, min_size=200)
+    s = hoover(pred, truth, min_points=200)
     assert s.n_truth == 1 and s.correct == 1 and s.noise == 0 and s.n_pred == 1
 
 

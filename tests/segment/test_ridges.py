@@ -179,7 +179,7 @@ def test_scan_scenes_cut_along_their_true_edges(scene):
     nb = knn_neighbors(sc.xyz, 8)
     src = np.repeat(np.arange(len(sc.xyz)), np.diff(nb.indptr))
     parts = components(nb, edge_ok=sc.face[src] == sc.face[nb.indices])
-    h = hoover(seg.labels, parts, min_size=50)
+    h = hoover(seg.labels, parts, min_points=50)
     assert h.correct == h.n_truth == (6 if scene == "agpart" else 5)
     crease = seg.fields["crease"] > 0
     cov = crease_coverage(sc.meta["creases"], sc.xyz[crease], 0.02,

@@ -176,7 +176,7 @@ def test_density_falls_as_inverse_square_of_range():
     reg = FaceRegistry()
     ground = Box(reg, "g", (0, 0, -0.5), np.eye(3), (100, 100, 0.5))
     h, step, daz = 5.0, 0.0008, 0.15
-    c = scan_spherical(ground, scanner=(0, 0, h), azimuth=(0.0, daz),
+    c = scan_spherical(ground, sensor=(0, 0, h), azimuth=(0.0, daz),
                        elevation=(-1.0, -0.07), step=step, range_sigma=(0, 0))
     rho = np.hypot(c.xyz[:, 0], c.xyz[:, 1])
     dens = []
@@ -197,7 +197,7 @@ def test_density_falls_as_inverse_square_of_range():
     for dist in (10.0, 30.0):
         reg = FaceRegistry()
         wall = Box(reg, "w", (dist + 0.5, 0, 0), np.eye(3), (0.5, 5, 5))
-        w = scan_spherical(wall, scanner=(0, 0, 0), azimuth=(-0.1, 0.1),
+        w = scan_spherical(wall, sensor=(0, 0, 0), azimuth=(-0.1, 0.1),
                            elevation=(-0.1, 0.1), step=0.002, range_sigma=(0, 0))
         m = (np.abs(w.xyz[:, 1]) < 0.5) & (np.abs(w.xyz[:, 2]) < 0.5)
         assert abs(m.sum() / (1 / (dist**2 * 0.002**2)) - 1) < 0.1
@@ -207,7 +207,7 @@ def test_range_noise_statistics(rng):
     reg = FaceRegistry()
     wall = Box(reg, "w", (20, 0, 5), np.eye(3), (0.5, 30, 5))
     a, b = 0.003, 2e-4
-    c = scan_spherical(wall, scanner=(0, 0, 1.5), azimuth=(-0.8, 0.8), elevation=(-0.05, 0.2),
+    c = scan_spherical(wall, sensor=(0, 0, 1.5), azimuth=(-0.8, 0.8), elevation=(-0.05, 0.2),
                        step=0.004, range_sigma=(a, b), rng=rng)
     d = c.xyz - c.scanner
     r_obs = np.linalg.norm(d, axis=1)
@@ -254,14 +254,14 @@ def test_crease_lines_of_a_box_on_a_cylinder():
 def test_invalid_parameters():
     reg = FaceRegistry()
     box = Box(reg, "b", (5, 0, 0), np.eye(3), (1, 1, 1))
-    with pytest.raises(InvalidParameterError, match="scanner"):
-        scan_spherical(box, scanner=(0, np.nan, 0))
+    with pytest.raises(InvalidParameterError, match="sensor"):
+        scan_spherical(box, sensor=(0, np.nan, 0))
     with pytest.raises(InvalidParameterError, match="range_sigma"):
-        scan_spherical(box, scanner=(0, 0, 0), range_sigma=(-1, 0))
+        scan_spherical(box, sensor=(0, 0, 0), range_sigma=(-1, 0))
     with pytest.raises(InvalidParameterError, match="elevation"):
-        scan_spherical(box, scanner=(0, 0, 0), elevation=(0.5, 0.1))
+        scan_spherical(box, sensor=(0, 0, 0), elevation=(0.5, 0.1))
     with pytest.raises(InvalidParameterError, match="step"):
-        scan_spherical(box, scanner=(0, 0, 0), step=0)
+        scan_spherical(box, sensor=(0, 0, 0), step=0)
 
 
 def test_registered_scenes():

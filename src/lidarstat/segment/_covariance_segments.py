@@ -340,13 +340,13 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
                            int(grow_k), float(np.cos(np.radians(min_angle / 2))), edge_ok)
         labels = grow_regions(nbh, edge_ok, order=order, can_grow=surface | boundary | (kstar > 0),
                               mask=pc != PointClass.UNDETERMINED, merge=True,
-                              min_size=min_points)
+                              min_points=min_points)
     else:
         # boundary points end a surface, they do not separate two: they may be joined (and
         # do not grow), only edge and undetermined points cut the rows (Fig. 4)
         edge_ok = surface_prefix_edges(grow_nbh, surface | boundary)
         labels = grow_regions(grow_nbh, edge_ok, order=order, can_grow=surface,
-                              mask=surface | boundary, merge=True, min_size=min_points)
+                              mask=surface | boundary, merge=True, min_points=min_points)
     normals = feats.normals  # one (N, 3) stack for every step below (read only)
     centroids = feats.centroid
     across = seg_sigma
@@ -373,7 +373,7 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
         before = labels
         free = ((labels == 0) & (pc != PointClass.UNDETERMINED)) | models.outliers()
         labels = strip_segments(pts, labels, nbh, seg_sigma, sensor=rsensor,
-                                candidates=free, alpha=classes.alpha, min_size=min_points)
+                                candidates=free, alpha=classes.alpha, min_points=min_points)
         new = labels > before.max()
         reint[new] = 3
         if new.any():  # the new planes take their border points too

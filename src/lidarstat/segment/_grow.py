@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._shared._deprecate import renamed_parameters
 from ..errors import InvalidParameterError
 from ..neighbors import Neighborhoods
 from . import _kernels
+
 
 
 def _prepare(nbh, edge_ok, mask):
@@ -42,8 +44,9 @@ def _point_mask(mask, n, name):
     return m
 
 
-def relabel(labels, min_size: int = 1) -> np.ndarray:
-    """Renumber segments 1..n by decreasing size; segments below `min_size` become 0.
+@renamed_parameters(min_size="min_points")
+def relabel(labels, min_points: int = 1) -> np.ndarray:
+    """Renumber segments 1..n by decreasing size; segments below `min_points` become 0.
 
     Ties in size are broken by the smallest point index of the segment, so the result is
     a deterministic function of the partition, not of the ids that came in.
@@ -52,7 +55,7 @@ def relabel(labels, min_size: int = 1) -> np.ndarray:
     ----------
     labels : (N,) array of int
         Segment id per point, 0 (or negative) for none.
-    min_size : int, default 1
+    min_points : int, default 1
         Smallest segment kept.
 
     Returns
@@ -61,7 +64,7 @@ def relabel(labels, min_size: int = 1) -> np.ndarray:
 
     Examples
     --------
-    >>> relabel(np.array([7, 7, 0, 3, 3, 3, 9]), min_size=2).tolist()
+    >>> relabel(np.array([7, 7, 0, 3, 3, 3, 9]), min_points=2).tolist()
     [2, 2, 0, 1, 1, 1, 0]
     """
     labels = np.asarray(labels)
@@ -74,7 +77,7 @@ def relabel(labels, min_size: int = 1) -> np.ndarray:
     ids, first, inverse, sizes = np.unique(labels[valid], return_index=True,
                                            return_inverse=True, return_counts=True)
     first = np.flatnonzero(valid)[first]
-    keep = sizes >= int(min_size)
+    keep = sizes >= int(min_points)
     rank = np.lexsort((first, -sizes))  # by size descending, then first member
     new_id = np.zeros(ids.size, dtype=np.int32)
     kept = rank[keep[rank]]
@@ -83,7 +86,8 @@ def relabel(labels, min_size: int = 1) -> np.ndarray:
     return out
 
 
-def components(nbh: Neighborhoods, edge_ok=None, mask=None, *, min_size: int = 1):
+@renamed_parameters(min_size="min_points")
+def components(nbh: Neighborhoods, edge_ok=None, mask=None, *, min_points: int = 1):
     """Connected components of the neighbourhood graph restricted to accepted edges.
 
     Two points are connected when one lists the other as a neighbour through an edge with
@@ -99,7 +103,7 @@ def components(nbh: Neighborhoods, edge_ok=None, mask=None, *, min_size: int = 1
         One entry per CSR entry (aligned with ``nbh.indices``); default all True.
     mask : (N,) array of bool, optional
         Points that may belong to a segment; the others get 0.
-    min_size : int, default 1
+    min_points : int, default 1
         Components smaller than this get 0.
 
     Returns
@@ -117,11 +121,12 @@ def components(nbh: Neighborhoods, edge_ok=None, mask=None, *, min_size: int = 1
     n, ok, use_ok, m = _prepare(nbh, edge_ok, mask)
     roots = _kernels.union_find_roots(nbh.indptr, nbh.indices, nbh.query_indices(), ok,
                                       use_ok, m, n)
-    return relabel(roots + 1, min_size)
+    return relabel(roots + 1, min_points)
 
 
+@renamed_parameters(min_size="min_points")
 def grow_regions(nbh: Neighborhoods, edge_ok=None, order=None, can_grow=None, mask=None, *,
-                 merge: bool = False, min_size: int = 1):
+                 merge: bool = False, min_points: int = 1):
     """Seeded region growing over accepted edges.
 
     Seeds are visited in `order` (for instance by increasing curvature or residual); an
@@ -143,7 +148,7 @@ def grow_regions(nbh: Neighborhoods, edge_ok=None, order=None, can_grow=None, ma
     mask : (N,) array of bool, optional
         Points that may be labelled at all.
     merge : bool, default False
-    min_size : int, default 1
+    min_points : int, default 1
         Regions smaller than this get 0.
 
     Returns
@@ -171,7 +176,7 @@ def grow_regions(nbh: Neighborhoods, edge_ok=None, order=None, can_grow=None, ma
     row_of[nbh.query_indices()] = np.arange(len(nbh), dtype=np.int64)
     labels = _kernels.grow_kernel(nbh.indptr, nbh.indices, row_of, ok, use_ok, seeds, grow,
                                   m, bool(merge), n)
-    return relabel(labels, min_size)
+    return relabel(labels, min_points)
 
 
 def adjacency(nbh: Neighborhoods, labels, *, min_edges: int = 1):

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._shared._deprecate import renamed_parameters
 from ..errors import InvalidParameterError
 
 
@@ -18,7 +19,7 @@ class HooverScore:
     tolerance : float
         The overlap tolerance T (0.5 < T <= 1).
     n_truth, n_pred : int
-        Truth regions scored (at least `min_size` points) and machine segments.
+        Truth regions scored (at least `min_points` points) and machine segments.
     correct, over, under, missed, noise : int
         Truth regions correctly detected, over-segmented, under-segmented (counted as
         truth regions), missed, and machine segments that are noise.
@@ -62,7 +63,8 @@ class HooverScore:
                 f"{self.missed} missed, {self.noise} noise ({self.n_pred} segments)")
 
 
-def hoover(pred, truth, tolerance: float = 0.8, *, min_size: int = 0) -> HooverScore:
+@renamed_parameters(min_size="min_points")
+def hoover(pred, truth, tolerance: float = 0.8, *, min_points: int = 0) -> HooverScore:
     """Compare a segmentation with the truth by Hoover et al.'s five region classes.
 
     With M_m points in truth region m, N_n in machine segment n and O_mn in both:
@@ -84,7 +86,7 @@ def hoover(pred, truth, tolerance: float = 0.8, *, min_size: int = 0) -> HooverS
         Machine segment and true region per point.
     tolerance : float, default 0.8
         T, in (0.5, 1].
-    min_size : int, default 0
+    min_points : int, default 0
         Truth regions with fewer points are not scored (and machine segments lying mainly
         on them are neither noise nor scored).
 
@@ -116,7 +118,7 @@ def hoover(pred, truth, tolerance: float = 0.8, *, min_size: int = 0) -> HooverS
     pm, pn = k // p_ids.size, k % p_ids.size  # indices into t_ids, p_ids
     M = t_size[pm].astype(float)
     N = p_size[pn].astype(float)
-    scored_t = (t_ids > 0) & (t_size >= min_size)
+    scored_t = (t_ids > 0) & (t_size >= min_points)
     # Machine segments whose largest overlap is with an unscored truth region are left out.
     best_t = np.full(p_ids.size, -1)
     best_o = np.zeros(p_ids.size)

@@ -358,8 +358,8 @@ def _link_groups(points, free, nbh, reach):
     return out, (g, pos)
 
 
-def _pieces(link, members, min_size):
-    """Connected pieces (ids 1.., by size; 0 below `min_size`) of `members` in `link`."""
+def _pieces(link, members, min_points):
+    """Connected pieces (ids 1.., by size; 0 below `min_points`) of `members` in `link`."""
     from scipy.sparse.csgraph import connected_components
 
     from ._grow import relabel
@@ -367,11 +367,11 @@ def _pieces(link, members, min_size):
     g, pos = link
     p = pos[members]
     _, c = connected_components(g[p][:, p], directed=False)
-    return relabel(c + 1, min_size=min_size)
+    return relabel(c + 1, min_points=min_points)
 
 
 def strip_segments(points, labels, nbh, sigma, *, candidates, sensor=None, alpha=0.05,
-                   nsigma=3.0, min_size=50, max_planes=4, reach=2.0, seed=0):
+                   nsigma=3.0, min_points=50, max_planes=4, reach=2.0, seed=0):
     """Segments of narrow faces: planes through connected strips of unlabelled points.
 
     On a face narrower than the smallest planar neighbourhood (the soffit under the eaves,
@@ -382,7 +382,7 @@ def strip_segments(points, labels, nbh, sigma, *, candidates, sensor=None, alpha
     arc on a horizontal face). So the `candidates` (the points no segment explains:
     unlabelled, or outliers of their segment's plane, :func:`plane_outliers`) are linked
     to the candidates of their neighbourhood rows; in every connected group of at
-    least `min_size` points, planes are sought by RANSAC (three points, inliers within
+    least `min_points` points, planes are sought by RANSAC (three points, inliers within
     `nsigma` noise units across the hypothesis; deterministic with `seed`), refined by
     total least squares on their inliers, and each becomes a segment when
 
@@ -392,7 +392,7 @@ def strip_segments(points, labels, nbh, sigma, *, candidates, sensor=None, alpha
        ``s_i(e1)`` the noise std along e1 as for a normal; under "the strip is a straight
        line" that sum is about chi2(m - 2)), and
     2. the plane passes the plane test on its m inliers: ``sum r_i^2 <=
-       chi2_{1-alpha}(m - 3)`` (r in noise units), with ``m >= min_size``.
+       chi2_{1-alpha}(m - 3)`` (r in noise units), with ``m >= min_points``.
 
     The inliers of an accepted plane leave the group and the search goes on (at most
     `max_planes` per group).
@@ -409,10 +409,10 @@ def strip_segments(points, labels, nbh, sigma, *, candidates, sensor=None, alpha
     sig = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma, dtype=np.float64),
                                                labels.shape))
     free = np.asarray(candidates, dtype=bool)
-    if free.sum() < min_size:
+    if free.sum() < min_points:
         return labels
     comp, link = _link_groups(pts, free, nbh, reach)
-    comp = relabel(comp, min_size=min_size)
+    comp = relabel(comp, min_points=min_points)
     if not comp.any():
         return labels
     rays = _rays(pts, sensor)
@@ -423,7 +423,7 @@ def strip_segments(points, labels, nbh, sigma, *, candidates, sensor=None, alpha
     for g in range(comp.max()):  # groups of unlabelled points, not points
         rest = order[bounds[g]:bounds[g + 1]]
         for _ in range(max_planes):
-            if rest.size < min_size:
+            if rest.size < min_points:
                 break
             org = pts[rest].mean(axis=0)
             hyp = _ransac_plane(pts[rest] - org, sig, rays, rest, rng, nsigma)
@@ -442,7 +442,7 @@ def strip_segments(points, labels, nbh, sigma, *, candidates, sensor=None, alpha
                 p0 = q.mean(axis=0)
                 ev, evec = np.linalg.eigh(np.cov(q.T))
                 nrm = evec[:, 0]
-            if inl is None or inl.sum() < min_size:
+            if inl is None or inl.sum() < min_points:
                 break
             m = int(inl.sum())
             q = pts[rest[inl]] - org - p0
@@ -456,7 +456,7 @@ def strip_segments(points, labels, nbh, sigma, *, candidates, sensor=None, alpha
             if not (identified and passes):
                 break
             # an accepted plane is a segment per connected piece of its inliers
-            piece = _pieces(link, rest[inl], min_size)
+            piece = _pieces(link, rest[inl], min_points)
             for k in range(1, piece.max() + 1):
                 labels[rest[inl][piece == k]] = nxt
                 nxt += 1

@@ -127,7 +127,7 @@ def ridge_segments(points, ridge_result: RidgeResult, *, grow_k=8, width=None, m
     edge_ok = np.empty(nb.indices.size, np.bool_)
     _rk.jet_consistent_edges(local, nb.indptr, nb.indices, monge, frames, offset,
                              np.sqrt(2.0) * tol, edge_ok)
-    labels = components(nb, edge_ok=edge_ok, mask=~band, min_size=min_points)
+    labels = components(nb, edge_ok=edge_ok, mask=~band, min_points=min_points)
     labels = _assign_by_jets(local, labels, ~ridge_band, fit, ridge_result)
     # the ridge band (a line, smooth or not) is split by the nearest unit point
     todo = np.flatnonzero(labels == 0)

@@ -28,6 +28,7 @@ import math
 
 import numpy as np
 
+from .._shared._deprecate import renamed_parameters
 from .._shared.validation import check_scalar
 from ..errors import InvalidParameterError
 from ._csg import _face_truth
@@ -194,7 +195,8 @@ def _pair_arg(value, name, func):
     return float(v[0]), float(v[1])
 
 
-def scan_spherical(solid, *, scanner, azimuth=(-np.pi, np.pi), elevation=(-0.6, 0.6),
+@renamed_parameters(scanner="sensor")
+def scan_spherical(solid, *, sensor, azimuth=(-np.pi, np.pi), elevation=(-0.6, 0.6),
                    step=0.003, range_sigma=(0.002, 0.0), max_range=150.0, rng=None,
                    reflectance=None, name="tls_scan", meta=None) -> SyntheticCloud:
     """Terrestrial laser scan of a CSG solid from one or several scanner stations.
@@ -203,7 +205,7 @@ def scan_spherical(solid, *, scanner, azimuth=(-np.pi, np.pi), elevation=(-0.6, 
     ----------
     solid : Box, Cylinder, Polyhedron or a union / difference of them
         The scene; all its primitives must share one :class:`FaceRegistry`.
-    scanner : array_like, shape (3,) or (S, 3)
+    sensor : array_like, shape (3,) or (S, 3)
         Scanner position(s).  With several stations the scans are concatenated and
         ``fields["station"]`` tells them apart.
     azimuth : (float, float) or sequence of them
@@ -230,7 +232,7 @@ def scan_spherical(solid, *, scanner, azimuth=(-np.pi, np.pi), elevation=(-0.6, 
     Returns
     -------
     SyntheticCloud
-        Coordinates with range noise and the truth of the module docstring.  ``scanner``
+        Coordinates with range noise and the truth of the module docstring.  ``sensor``
         is the station position with one station, None with several (positions in
         ``meta["scanners"]``, per point in ``fields["station"]``).  ``sigma`` is ``a``.
         ``fields``: ``boundary_distance``, ``boundary`` (uint8: 1 for grid nodes next to
@@ -266,7 +268,7 @@ def scan_spherical(solid, *, scanner, azimuth=(-np.pi, np.pi), elevation=(-0.6, 
     >>> from lidarstat.synth import Box, FaceRegistry
     >>> reg = FaceRegistry()
     >>> box = Box(reg, "box", (5.0, 0.0, 0.0), np.eye(3), (1.0, 1.0, 1.0))
-    >>> c = scan_spherical(box, scanner=(0.0, 0.0, 0.0), azimuth=(-0.3, 0.3),
+    >>> c = scan_spherical(box, sensor=(0.0, 0.0, 0.0), azimuth=(-0.3, 0.3),
     ...                    elevation=(-0.3, 0.3), step=0.02, range_sigma=(0.0, 0.0))
     >>> sorted({c.meta["face_names"][f] for f in c.face})
     ['box_-x']
@@ -276,12 +278,12 @@ def scan_spherical(solid, *, scanner, azimuth=(-np.pi, np.pi), elevation=(-0.6, 
     func = "scan_spherical"
     rng = np.random.default_rng(rng)
     faces = solid.registry
-    sc = np.asarray(scanner, dtype=np.float64)
+    sc = np.asarray(sensor, dtype=np.float64)
     if sc.ndim == 1:
         sc = sc[None, :]
     if sc.ndim != 2 or sc.shape[1] != 3 or not np.all(np.isfinite(sc)) or sc.shape[0] < 1:
-        raise InvalidParameterError(f"The 'scanner' parameter of {func} must be a finite "
-                                    f"3-vector or (S, 3) array. Got {scanner!r} instead.")
+        raise InvalidParameterError(f"The 'sensor' parameter of {func} must be a finite "
+                                    f"3-vector or (S, 3) array. Got {sensor!r} instead.")
     S = sc.shape[0]
 
     def per_station(value, pname):

@@ -126,7 +126,7 @@ def make_tls_building(*, step=0.0025, stations=1, range_sigma=(0.002, 5e-5), sig
             "openings": {o[0]: (o[1], o[2]) for o in ops}}
     refl = {"ground": 0.25, "house_wall": 0.55, "house_room": 0.6, "house_roof": 0.2,
             "house_door": 0.35, "garage": 0.45, **{f"house_win{k}": 0.1 for k in range(1, 7)}}
-    return scan_spherical(solid, scanner=sc, azimuth=az, elevation=el, step=step,
+    return scan_spherical(solid, sensor=sc, azimuth=az, elevation=el, step=step,
                           range_sigma=range_sigma, max_range=max_range, rng=rng,
                           reflectance=refl, name="tls_building", meta=meta)
 
@@ -187,6 +187,6 @@ def make_tls_plant(*, step=0.0025, stations=1, range_sigma=(0.002, 5e-5), sigma=
                                    "radius": c.radius, "length": c.length}
                           for c in (tank1, tank2, pipe_a, pipe_b, pipe_c, pipe_d)}}
     refl = {"ground": 0.25, "tank": 0.65, "pipe": 0.5, "pump": 0.3, "support": 0.35}
-    return scan_spherical(solid, scanner=sc, azimuth=az, elevation=el, step=step,
+    return scan_spherical(solid, sensor=sc, azimuth=az, elevation=el, step=step,
                           range_sigma=range_sigma, max_range=max_range, rng=rng,
                           reflectance=refl, name="tls_plant", meta=meta)
