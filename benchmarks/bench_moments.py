@@ -37,10 +37,13 @@ from lidarstat.classify import (_moments, _moments_ground, _moments_objects,  # 
 FULL_SIZES = (1_000_000, 10_000_000)
 
 
-def make_cloud(n, seed=20261122):
+def make_cloud(n, seed=20261122, origin=(0.0, 0.0)):
+    """`n` points over a square at 10 points/m2 with its lower corner at `origin` (the
+    terrain, buildings, trees and roads are functions of the position, so squares with
+    other origins are tiles of one town)."""
     g = np.random.default_rng(seed)
     side = np.sqrt(n / 10.0)  # 10 pts/m2
-    xy = g.uniform(0, side, (n, 2))
+    xy = g.uniform(0, side, (n, 2)) + np.asarray(origin, float)
     z = 5 * np.sin(xy[:, 0] / 150) + 3 * np.cos(xy[:, 1] / 110) + 0.02 * xy[:, 0]
     z += g.normal(0, 0.03, n)
     ground = np.ones(n, bool)

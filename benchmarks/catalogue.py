@@ -3,7 +3,7 @@
 Two measurements, each a ``lidarstat`` process as a user runs it:
 
 * ``--agreement``: the AHN3 Delft crop (``../shared/data``, 640k points, 192 x 228 m) cut
-  into 3 x 3 tiles; ``moments`` on the catalogue with several buffers against
+  into tiles of 80 m (``lidarstat.pipeline.write_tiles``); ``moments`` on the catalogue with several buffers against
   ``moments`` on the whole file: the share of points with the same class, and with the
   same ground (2, 11) / object decision. ``curvature`` likewise, whose answer is local
   (its share must be 1 with the default buffer, the radius).
@@ -39,28 +39,10 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
 sys.path.insert(0, str(HERE))
 
-from lidarstat.io import PointCloud, read, write  # noqa: E402
+from lidarstat.io import PointCloud, read, write
+from lidarstat.pipeline import write_tiles
 
 DELFT = HERE.parent.parent / "shared" / "data" / "ahn3_delft_3dfier" / "ahn3_cropped_1.laz"
-
-
-def cut(cloud: PointCloud, folder: Path, n: int = 3) -> list[Path]:
-    """Write `cloud` as an n x n grid of tiles, every field kept."""
-    x, y = cloud.xyz[:, 0], cloud.xyz[:, 1]
-    xs = np.linspace(x.min(), x.max(), n + 1)
-    ys = np.linspace(y.min(), y.max(), n + 1)
-    ix = np.clip(np.searchsorted(xs, x, side="right") - 1, 0, n - 1)
-    iy = np.clip(np.searchsorted(ys, y, side="right") - 1, 0, n - 1)
-    folder.mkdir(parents=True, exist_ok=True)
-    out = []
-    for a in range(n):
-        for b in range(n):
-            keep = (ix == a) & (iy == b)
-            sub = PointCloud(cloud.xyz[keep], {k: np.asarray(v)[keep]
-                                               for k, v in cloud.attributes.items()},
-                             crs=cloud.crs)
-            out.append(write(folder / f"tile_{a}_{b}.laz", sub))
-    return out
 
 
 def lidarstat(*args) -> tuple[float, float]:
@@ -93,7 +75,7 @@ def agreement(tmp: Path) -> dict:
     if not DELFT.is_file():
         raise SystemExit(f"real data not found: {DELFT}")
     src = read(DELFT)
-    cut(src, tmp / "tiles")
+    write_tiles(src, tmp / "tiles", size=80.0)  # 3 x 3 tiles of 80 m
     rows = {}
     secs, mem = lidarstat("moments", DELFT, tmp / "whole.laz", "--no-report", "-q")
     wx, wc = _classes([tmp / "whole.laz"], "classification")
@@ -122,32 +104,19 @@ def agreement(tmp: Path) -> dict:
     tx, tc = _classes(sorted((tmp / "curv").glob("*.laz")), "surface_type")
     rows["curvature buffer = radius"] = {"seconds": secs, "peak_mib": mem,
                                          "same_class": float((tc == wc).mean())}
-    return {"data": str(DELFT.relative_to(DELFT.parents[2])), "tiles": 9,
+    return {"data": str(DELFT.relative_to(DELFT.parents[2])),
+            "tiles": len(list((tmp / "tiles").glob("*.laz"))),
             "points": len(src.xyz), "runs": rows}
 
 
-def tile_cloud(x0, y0, side, n, seed):
-    """One tile of a continuous synthetic town (10 points/m2): the terrain, buildings,
-    trees and road bands of ``bench_moments.make_cloud`` in the area's coordinates."""
-    g = np.random.default_rng(seed)
-    xy = g.uniform(0, side, (n, 2)) + [x0, y0]
-    z = 5 * np.sin(xy[:, 0] / 150) + 3 * np.cos(xy[:, 1] / 110) + 0.02 * xy[:, 0]
-    z += g.normal(0, 0.03, n)
-    inten = g.normal(150, 12, n)
-    road = np.abs((xy[:, 1] % 200) - 100) < 5
-    inten[road] = g.normal(60, 8, road.sum())
-    cx = (xy[:, 0] // 60) * 60 + 30
-    cy = (xy[:, 1] // 60) * 60 + 30
-    bld = (np.abs(xy[:, 0] - cx) < 12) & (np.abs(xy[:, 1] - cy) < 9) & ~road
-    z[bld] += 8 + (cx[bld] % 7)
-    tree = (np.hypot(xy[:, 0] - cx - 22, xy[:, 1] - cy + 20) < 4) & ~bld & ~road
-    first = tree & (g.uniform(size=n) < 0.6)
-    z[first] += g.uniform(3, 10, first.sum())
-    nret = np.where(tree, 2, 1)
-    rnum = np.where(first, 1, nret)
-    return PointCloud(np.c_[xy + 5e5, z + 100], {
-        "intensity": np.clip(inten, 0, 65535).astype(np.uint16),
-        "number_of_returns": nret.astype(np.uint8), "return_number": rnum.astype(np.uint8)})
+def tile_cloud(x0, y0, n, seed):
+    """One tile of a continuous synthetic town (``bench_moments.make_cloud`` at an origin)."""
+    from bench_moments import make_cloud
+
+    xyz, inten, nret, rnum, _ = make_cloud(n, seed=seed, origin=(x0, y0))
+    return PointCloud(xyz, {"intensity": np.clip(inten, 0, 65535).astype(np.uint16),
+                            "number_of_returns": nret.astype(np.uint8),
+                            "return_number": rnum.astype(np.uint8)})
 
 
 def scale(tmp: Path, n: int, tile_points: int) -> dict:
@@ -160,7 +129,7 @@ def scale(tmp: Path, n: int, tile_points: int) -> dict:
     for k in range(n_tiles):  # each tile generated and written alone: memory of one tile
         a, b = divmod(k, side_tiles)
         write(folder / f"t_{a:03d}_{b:03d}.laz",
-              tile_cloud(a * tile_side, b * tile_side, tile_side, tile_points, 20261122 + k))
+              tile_cloud(a * tile_side, b * tile_side, tile_points, 20261122 + k))
     made = time.perf_counter() - t0
     secs, mem = lidarstat("moments", folder, tmp / "out", "--dtm", tmp / "dtm", "-q")
     total = n_tiles * tile_points

@@ -1,6 +1,6 @@
 """The screenshot of a catalogue's report in docs/pipeline.md.
 
-Cuts the AHN3 Delft crop of ``../shared/data`` into 3 x 3 tiles, runs ``lidarstat
+Cuts the AHN3 Delft crop of ``../shared/data`` into tiles of 80 m, runs ``lidarstat
 moments tiles/ out/ --dtm dtm/`` and photographs ``out/report/index.html`` in headless
 Chromium::
 
@@ -19,9 +19,10 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from catalogue import DELFT, cut  # noqa: E402
+from catalogue import DELFT  # noqa: E402
 
 from lidarstat.io import read  # noqa: E402
+from lidarstat.pipeline import write_tiles  # noqa: E402
 
 
 def main():
@@ -30,7 +31,7 @@ def main():
         raise SystemExit("chromium is needed (apt-get install chromium)")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        cut(read(DELFT), tmp / "tiles")
+        write_tiles(read(DELFT), tmp / "tiles", size=80.0)
         subprocess.run([sys.executable, "-m", "lidarstat", "moments", tmp / "tiles",
                         tmp / "out", "--dtm", tmp / "dtm", "-q"], check=True)
         shot = HERE / "catalogue_report_ahn3.png"

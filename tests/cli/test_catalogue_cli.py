@@ -13,10 +13,10 @@ import pytest
 
 from lidarstat.cli import main
 from lidarstat.features import curvature
-from lidarstat.io import PointCloud, read, write
+from lidarstat.io import read, write
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pipeline"))
-from test_catalogue import _assert_same_fields, _cut, _synthetic  # noqa: E402
+from test_catalogue import _assert_same_fields, _cut, _synthetic
 
 
 def _tiles(tmp_path, seed=0, n=9000):

@@ -7,8 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lidarstat.errors import (InvalidParameterError, PointCloudReadError,
-                              PointCloudWriteError)
+from lidarstat.errors import InvalidParameterError, PointCloudReadError, PointCloudWriteError
 from lidarstat.features import curvature
 from lidarstat.io import PointCloud, read, write
 from lidarstat.pipeline import Catalogue, process_catalogue

@@ -8,7 +8,6 @@ import subprocess
 import numpy as np
 import pytest
 
-from lidarstat.io import Raster
 from lidarstat.pipeline import terrain_model
 from lidarstat.report import class_grid, hillshade, write_run_report
 from lidarstat.synth import make_als_town

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from . import _options as opt
 
-__all__ = ["install", "TILE_METHODS", "CATALOGUE_OPTIONS"]
+__all__ = ["CATALOGUE_OPTIONS", "TILE_METHODS", "install"]
 
 #: Options that only make sense with a catalogue (destinations).
 CATALOGUE_OPTIONS = ("template", "buffer", "address", "overwrite")

@@ -20,7 +20,7 @@ import numpy as np
 from .._shared._atomic import atomic_path
 from ..errors import PointCloudWriteError
 
-__all__ = ["Raster", "write_geotiff", "write_vrt", "read_geotiff"]
+__all__ = ["Raster", "read_geotiff", "write_geotiff", "write_vrt"]
 
 
 @dataclass(frozen=True)

@@ -2,13 +2,34 @@
 or with Dask (local or a ``distributed`` cluster)."""
 
 from .._shared._tiles import Tile, TileGrid, map_tiles, tile_grid
-from ._catalogue import (DEFAULT_TEMPLATE, BufferedTile, Catalogue, TileRun,
-                         process_catalogue)
+from ._catalogue import (
+                         DEFAULT_TEMPLATE,
+                         BufferedTile,
+                         Catalogue,
+                         TileRun,
+                         process_catalogue,
+                         write_tiles,
+)
 from ._methods import METHODS, SEGMENTATIONS, method_function, segmentation
 from ._stream import process_file
 from ._terrain import GROUND_CODES_DTM, terrain_model
 
-__all__ = ["Tile", "TileGrid", "tile_grid", "map_tiles", "process_file", "Catalogue",
-           "BufferedTile", "TileRun", "process_catalogue", "DEFAULT_TEMPLATE",
-           "terrain_model", "GROUND_CODES_DTM",
-           "METHODS", "SEGMENTATIONS", "method_function", "segmentation"]
+__all__ = [
+                         "DEFAULT_TEMPLATE",
+                         "GROUND_CODES_DTM",
+                         "METHODS",
+                         "SEGMENTATIONS",
+                         "BufferedTile",
+                         "Catalogue",
+                         "Tile",
+                         "TileGrid",
+                         "TileRun",
+                         "map_tiles",
+                         "method_function",
+                         "process_catalogue",
+                         "process_file",
+                         "segmentation",
+                         "terrain_model",
+                         "tile_grid",
+                         "write_tiles",
+]

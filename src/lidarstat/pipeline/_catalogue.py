@@ -32,7 +32,7 @@ from .._shared.validation import check_option, check_scalar
 from ..errors import InvalidParameterError, PointCloudReadError, PointCloudWriteError
 from ..io import FileExtent, PointCloud, file_extent, read, read_window, write
 
-__all__ = ["Catalogue", "BufferedTile", "TileRun", "process_catalogue", "DEFAULT_TEMPLATE"]
+__all__ = ["DEFAULT_TEMPLATE", "BufferedTile", "Catalogue", "TileRun", "process_catalogue"]
 
 #: Output name of a tile: ``{stem}`` (the input's name without ``.las``, ``.laz`` or
 #: ``.copc.laz``), ``{name}`` (with them), ``{index}`` (its place in the catalogue).
@@ -367,3 +367,35 @@ def _execute_dask(func, cat, paths, todo, buffer, points_per_chunk, workers, add
                                  pure=False) for i in todo]
         for fut in as_completed(futures):
             yield fut.result()
+
+
+def write_tiles(cloud: PointCloud, folder, *, size: float,
+                template: str = "tile_{col}_{row}.laz") -> list[Path]:
+    """Cut a cloud into square tiles of side `size` on multiples of `size`: a catalogue.
+
+    Every field is kept; tiles without points are not written. The files appear
+    atomically. (Cutting a file larger than memory is :func:`process_file`'s work; this
+    makes catalogues of clouds that fit.)
+
+    Returns
+    -------
+    list of Path
+        The tiles written, in (column, row) order.
+    """
+    size = check_scalar(size, "size", func="write_tiles", low=0)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    key = np.floor(cloud.xyz[:, :2] / size).astype(np.int64)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    key = key[order]
+    starts = np.flatnonzero(np.r_[True, np.any(key[1:] != key[:-1], axis=1)])
+    ends = np.r_[starts[1:], len(order)]
+    paths = []
+    for s, e in zip(starts, ends):
+        rows = np.sort(order[s:e])
+        sub = PointCloud(cloud.xyz[rows], {k: np.asarray(v)[rows]
+                                           for k, v in cloud.attributes.items()},
+                         crs=cloud.crs)
+        col, row = (int(v) for v in key[s])
+        paths.append(write(folder / template.format(col=col, row=row), sub))
+    return paths

@@ -27,7 +27,7 @@ from importlib import import_module
 
 from ..errors import InvalidParameterError
 
-__all__ = ["METHODS", "SEGMENTATIONS", "segmentation", "method_function"]
+__all__ = ["METHODS", "SEGMENTATIONS", "method_function", "segmentation"]
 
 #: method name -> "module:function" of its end-to-end entry.
 METHODS = {

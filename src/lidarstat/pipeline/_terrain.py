@@ -24,7 +24,7 @@ from ..errors import InvalidPointsError
 from ..io import Raster
 from ._terrain_kernels import rasterize_tin
 
-__all__ = ["terrain_model", "GROUND_CODES_DTM"]
+__all__ = ["GROUND_CODES_DTM", "terrain_model"]
 
 #: ASPRS classes taken as ground: bare earth (2) and road surface (11).
 GROUND_CODES_DTM = (2, 11)

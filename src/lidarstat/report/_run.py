@@ -10,7 +10,7 @@ import numpy as np
 from ._maps import ASPRS_COLOURS, plot_class_map, plot_flag_map, plot_hillshade
 from ._page import ReportPage
 
-__all__ = ["write_run_report", "map_resolution"]
+__all__ = ["map_resolution", "write_run_report"]
 
 
 def map_resolution(xyz, *, cells: int = 600) -> float:

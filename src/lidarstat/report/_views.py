@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 import functools
 import threading
+
+import numpy as np
 
 from .._shared._atomic import atomic_path
 
