@@ -244,3 +244,25 @@ def test_copc_tiles_are_read_by_bounds_queries(tmp_path):
         np.testing.assert_allclose(b.xyz[ib], a.xyz[ia], atol=1e-9)
         np.testing.assert_array_equal(b.attributes["surface_type"][ib],
                                       a.attributes["surface_type"][ia])
+
+
+@pytest.mark.parametrize("size", [7.0, 20.0, 25.5])
+def test_write_tiles_partitions_the_cloud_on_a_fixed_grid(tmp_path, size):
+    from lidarstat.pipeline import write_tiles
+
+    cloud = _synthetic(9, n=3000)
+    paths = write_tiles(cloud, tmp_path / "t", size=size)
+    parts = [read(p) for p in paths]
+    assert sum(len(p.xyz) for p in parts) == len(cloud.xyz)
+    q = 1e-4  # the files' coordinate step
+    for p, part in zip(paths, parts):
+        col, row = (int(v) for v in p.stem.split("_")[1:])
+        for axis, k in ((0, col), (1, row)):
+            assert np.all((part.xyz[:, axis] >= k * size - q)
+                          & (part.xyz[:, axis] < (k + 1) * size + q))
+    every = np.round(np.concatenate([p.xyz for p in parts]) / q).astype(np.int64)
+    truth = np.round(cloud.xyz / q).astype(np.int64)
+    np.testing.assert_array_equal(every[np.lexsort(every.T[::-1])],
+                                  truth[np.lexsort(truth.T[::-1])])
+    got = np.concatenate([np.asarray(p.attributes["intensity"]) for p in parts])
+    assert sorted(got.tolist()) == sorted(np.asarray(cloud.attributes["intensity"]).tolist())
