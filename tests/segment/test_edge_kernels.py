@@ -8,7 +8,8 @@ from scipy import special
 
 from lidarstat.neighbors import knn_neighbors, radius_neighbors
 from lidarstat.segment import _edge_kernels as ek
-from lidarstat.segment._covariance_segments import clean_plane_points, surface_prefix_edges
+from lidarstat.segment._covariance_lines import clean_plane_points
+from lidarstat.segment._covariance_segments import surface_prefix_edges
 from lidarstat.segment._grow import adjacency
 from lidarstat.segment._scales import SCALES, planar_scales, prefix_edges
 
