@@ -11,7 +11,10 @@ a kernel compiled for two argument types shows up with two.
 
 To measure another version of the package, point ``PYTHONPATH`` at its ``src``; the child
 processes inherit it. ``--label`` names the entry in the results file (entries of other
-labels are kept, so ``before`` and ``after`` sit side by side).
+labels are kept, so ``before`` and ``after`` sit side by side). ``--warmup`` runs
+``lidarstat warmup`` once in a fresh cache dir first (its wall time is recorded) and then
+every command's first run on that cache: what a user who follows the install
+instructions waits.
 """
 
 from __future__ import annotations
@@ -79,8 +82,8 @@ def run(argv, cache_dir, tmp):
     return data
 
 
-def measure(name, argv, tmp):
-    cache = Path(tempfile.mkdtemp(prefix="numba-", dir=tmp))
+def measure(name, argv, tmp, cache=None):
+    cache = cache or Path(tempfile.mkdtemp(prefix="numba-", dir=tmp))
     first = run(argv, cache, tmp)
     cached = run(argv, cache, tmp)
     kernels = first["kernels"]
@@ -98,20 +101,30 @@ def main():
     ap.add_argument("--out", default=str(HERE / "results_first_run.json"))
     ap.add_argument("--label", default="current")
     ap.add_argument("--only", nargs="*", help="command names to run")
+    ap.add_argument("--warmup", action="store_true",
+                    help="run `lidarstat warmup` on the fresh cache before the commands")
     args = ap.parse_args()
     import lidarstat
 
     results = {"package": str(Path(lidarstat.__file__).parent), "commands": {}}
     with tempfile.TemporaryDirectory() as tmp:
+        shared = None
+        if args.warmup:
+            shared = Path(tempfile.mkdtemp(prefix="numba-", dir=tmp))
+            t0 = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "lidarstat", "warmup", "-q"], check=True,
+                           env=dict(os.environ, NUMBA_CACHE_DIR=str(shared)))
+            results["warmup_s"] = round(time.perf_counter() - t0, 1)
+            print(f"warmup {results['warmup_s']:.0f} s", flush=True)
         x = Path(tmp) / "x.laz"
         synth = ["synth", "hip_roof", str(x)]
-        results["commands"]["synth"] = measure("synth", synth, tmp)
+        results["commands"]["synth"] = measure("synth", synth, tmp, shared)
         for name, argv in COMMANDS:
             if args.only and name not in args.only:
                 continue
             o = Path(tmp) / name
             argv = [a.format(x=x, o=o) for a in argv]
-            results["commands"][name] = r = measure(name, argv, tmp)
+            results["commands"][name] = r = measure(name, argv, tmp, shared)
             print(f"{name:20s} first {r['first_s']:6.1f} s  cached {r['cached_s']:5.1f} s  "
                   f"kernels {r['kernels']:3d}  specialisations {r['specialisations']:3d}",
                   flush=True)
