@@ -85,3 +85,26 @@ def test_the_notice_stays_off_stderr_that_is_not_a_terminal(tmp_path, capsys):
 
     assert main(["synth", "plane", str(tmp_path / "p.laz")]) == 0
     assert "compiling" not in capsys.readouterr().err
+
+
+def test_every_warmup_step_is_a_valid_command_line(tmp_path):
+    from lidarstat.cli._app import build_parser
+    from lidarstat.cli.warmup import STEPS
+
+    parser = build_parser()
+    for label, argv in STEPS:
+        args = parser.parse_args([a.format(x=tmp_path / "x.laz", o=tmp_path / "o")
+                                  for a in argv])
+        assert callable(args.func), label
+    commands = {argv[0] for _, argv in STEPS}
+    assert {"curvature", "covariance", "ridges", "moments", "segment"} <= commands
+
+
+def test_a_failing_warmup_step_is_one_error_line(monkeypatch, capsys):
+    from lidarstat.cli import main
+    from lidarstat.cli import warmup
+
+    monkeypatch.setattr(warmup, "STEPS", (("bad", ("info", "no-such-file.las")),))
+    assert main(["warmup"]) == 2
+    err = capsys.readouterr().err
+    assert "warmup step 'bad' failed" in err and err.count("error") == 1

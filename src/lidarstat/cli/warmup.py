@@ -48,6 +48,7 @@ def _run(args):
                 if not quiet:
                     print(" failed", file=sys.stderr)
                 last = (proc.stderr.strip().splitlines() or ["no message"])[-1]
+                last = last.removeprefix("lidarstat: ").removeprefix("error: ")
                 raise LidarstatError(f"warmup step '{label}' failed: {last}")
             if not quiet:
                 print(f" {time.perf_counter() - t0:5.1f} s", file=sys.stderr, flush=True)
