@@ -8,6 +8,8 @@ statistics rely on IEEE semantics (NaN propagation, no reassociation of the mome
 
 from __future__ import annotations
 
+import contextlib
+
 import numba
 
 _DEFAULTS = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -24,7 +26,6 @@ def njit(*args, **kwargs):
 def njit_parallel(func):
     """``numba.njit(parallel=True)`` with lidarstat's defaults."""
     return numba.njit(parallel=True, **_DEFAULTS)(func)
-
 
 
 def closure_cache(driver, functions):
@@ -62,3 +63,30 @@ def closure_cache(driver, functions):
 
     driver._cache = _KeyedCache(driver.py_func)
     return driver
+
+
+@contextlib.contextmanager
+def on_first_compile(callback):
+    """Call ``callback()`` once, the first time a lidarstat kernel is compiled in the block.
+
+    Numba signals ``numba:compile`` only on a cache miss (after looking in the disk cache),
+    so this tells a run that waits for the compiler from one that loads cached code.
+    """
+    from numba.core import event
+
+    class _Once(event.Listener):
+        done = False
+
+        def on_start(self, ev):
+            if self.done:
+                return
+            py = getattr(ev.data.get("dispatcher"), "py_func", None)
+            if getattr(py, "__module__", "").startswith("lidarstat"):
+                self.done = True
+                callback()
+
+        def on_end(self, ev):
+            pass
+
+    with event.install_listener("numba:compile", _Once()):
+        yield

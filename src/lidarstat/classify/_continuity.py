@@ -269,7 +269,7 @@ def _join_smooth(parent, zs, nbr, smooth, start):  # pragma: no cover - compiled
         for c in range(k):
             if smooth[r, c]:
                 a = _find(parent, i)
-                b = _find(parent, nbr[r, c])
+                b = _find(parent, np.int64(nbr[r, c]))  # one _find: i is int64
                 if a != b:
                     if a < b:
                         parent[b] = a

@@ -27,7 +27,8 @@ logger = logging.getLogger("lidarstat")
 
 #: Subcommands that live in a module of their own (``cli/<name>.py``), each with a
 #: ``register(subparsers)`` function. Add a command by adding its module here.
-COMMAND_MODULES: tuple[str, ...] = ("segment", "covariance", "ridges", "moments", "evaluate")
+COMMAND_MODULES: tuple[str, ...] = ("segment", "covariance", "ridges", "moments", "evaluate",
+                                     "warmup")
 
 
 def check_output(path: str, src: str | None = None) -> Path:
@@ -324,6 +325,20 @@ def _fail(text: str) -> None:
     print(f"lidarstat: {text}", file=sys.stderr, flush=True)
 
 
+def _compile_notice():
+    """One stderr line, on a terminal, when the run has to compile kernels (a cold cache)."""
+    if not sys.stderr.isatty():
+        return contextlib.nullcontext()
+    from .._shared._jit import on_first_compile
+
+    def notice():
+        print("lidarstat: compiling this command's kernels for this installation, once "
+              "(up to a minute); `lidarstat warmup` compiles all of them ahead",
+              file=sys.stderr, flush=True)
+
+    return on_first_compile(notice)
+
+
 def main(argv=None) -> int:
     """Entry point of the ``lidarstat`` console script; returns the exit status.
 
@@ -342,7 +357,7 @@ def main(argv=None) -> int:
                 return exc.code
             verbose = args.verbose
             # all of a command's outputs appear, or none; its warnings follow a success
-            with held_warnings(verbose), output_group():
+            with held_warnings(verbose), output_group(), _compile_notice():
                 for text in getattr(args, "_deprecations", ()):
                     logger.warning(text)
                 return args.func(args)

@@ -51,7 +51,8 @@ def cylinder_test(points, query, indptr, idx, axes, sigma, *, sensor=None,
     sig = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma, dtype=np.float64),
                                                (pts.shape[0],)))
     cylinder_rows(local, np.ascontiguousarray(query, dtype=np.int64),
-                  np.ascontiguousarray(indptr, dtype=np.int64), np.ascontiguousarray(idx),
+                  np.ascontiguousarray(indptr, dtype=np.int64),
+                  np.ascontiguousarray(idx, dtype=np.int64),  # one compiled variant
                   np.ascontiguousarray(axes, dtype=np.float64), sens, has_sensor, sig, stat,
                   dof, radius, centre, bool(refine_axis))
     if return_centre:

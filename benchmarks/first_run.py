@@ -1,0 +1,148 @@
+"""First-run (cold Numba cache) and cached-run wall time of each command, and the number of
+compiled specialisations per kernel.
+
+Every command runs in a fresh process with its own empty ``NUMBA_CACHE_DIR`` (the first
+run, which compiles the kernels it uses), then again in a fresh process on the same cache
+dir (the cached run). The process runs the command in-process through ``lidarstat.cli.main``
+and then lists every Numba dispatcher of the ``lidarstat`` modules with its signatures, so
+a kernel compiled for two argument types shows up with two.
+
+    PYTHONPATH=src python benchmarks/first_run.py [--out FILE] [--label NAME]
+
+To measure another version of the package, point ``PYTHONPATH`` at its ``src``; the child
+processes inherit it. ``--label`` names the entry in the results file (entries of other
+labels are kept, so ``before`` and ``after`` sit side by side). ``--warmup`` runs
+``lidarstat warmup`` once in a fresh cache dir first (its wall time is recorded) and then
+every command's first run on that cache: what a user who follows the install
+instructions waits.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+# (name, argv after "lidarstat"; {x} is the input, {o} an output dir/file prefix)
+COMMANDS = [
+    ("curvature", ["curvature", "{x}", "{o}.laz", "--radius", "1"]),
+    ("covariance", ["covariance", "{x}", "{o}.laz"]),
+    ("ridges", ["ridges", "{x}", "{o}.laz", "--radius", "2"]),
+    ("moments", ["moments", "{x}", "{o}.laz"]),
+    ("segment-sar", ["segment", "{x}", "{o}.laz", "--method", "sar", "--radius", "1"]),
+    ("segment-covariance", ["segment", "{x}", "{o}.laz", "--method", "covariance"]),
+    ("segment-curvature", ["segment", "{x}", "{o}.laz", "--method", "curvature", "--radius", "1"]),
+]
+
+CHILD = r"""
+import json, sys, time
+t0 = time.perf_counter()
+from lidarstat.cli import main
+rc = main(sys.argv[2:])
+wall = time.perf_counter() - t0
+from numba.core.registry import CPUDispatcher
+seen, kernels = set(), {}
+for name, mod in list(sys.modules.items()):
+    if not name.startswith("lidarstat"):
+        continue
+    for attr, obj in list(vars(mod).items()):
+        if isinstance(obj, CPUDispatcher) and id(obj) not in seen:
+            seen.add(id(obj))
+            if obj.signatures:
+                key = f"{obj.py_func.__module__}.{obj.py_func.__qualname__}"
+                kernels[key] = [str(s) for s in obj.signatures]
+with open(sys.argv[1], "w") as fh:
+    json.dump({"rc": rc, "inprocess_s": wall, "kernels": kernels}, fh)
+"""
+
+
+def run(argv, cache_dir, tmp):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir))
+    report = Path(tmp) / "report.json"
+    t0 = time.perf_counter()
+    proc = subprocess.run(
+        [sys.executable, "-c", CHILD, str(report), *argv],
+        env=env, capture_output=True, text=True,
+    )
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"{argv}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
+    data = json.loads(report.read_text())
+    if data["rc"] != 0:
+        raise SystemExit(f"{argv}: command exit {data['rc']}\n{proc.stderr[-2000:]}")
+    data["wall_s"] = round(wall, 2)
+    data["inprocess_s"] = round(data["inprocess_s"], 2)
+    return data
+
+
+def measure(name, argv, tmp, cache=None):
+    cache = cache or Path(tempfile.mkdtemp(prefix="numba-", dir=tmp))
+    first = run(argv, cache, tmp)
+    cached = run(argv, cache, tmp)
+    kernels = first["kernels"]
+    return {
+        "first_s": first["wall_s"],
+        "cached_s": cached["wall_s"],
+        "kernels": len(kernels),
+        "specialisations": sum(len(v) for v in kernels.values()),
+        "signatures": kernels,
+    }
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=str(HERE / "results_first_run.json"))
+    ap.add_argument("--label", default="current")
+    ap.add_argument("--only", nargs="*", help="command names to run")
+    ap.add_argument("--warmup", action="store_true",
+                    help="run `lidarstat warmup` on the fresh cache before the commands")
+    args = ap.parse_args()
+    import lidarstat
+
+    results = {"package": str(Path(lidarstat.__file__).parent), "commands": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        shared = None
+        if args.warmup:
+            shared = Path(tempfile.mkdtemp(prefix="numba-", dir=tmp))
+            t0 = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "lidarstat", "warmup", "-q"], check=True,
+                           env=dict(os.environ, NUMBA_CACHE_DIR=str(shared)))
+            results["warmup_s"] = round(time.perf_counter() - t0, 1)
+            print(f"warmup {results['warmup_s']:.0f} s", flush=True)
+        x = Path(tmp) / "x.laz"
+        synth = ["synth", "hip_roof", str(x)]
+        results["commands"]["synth"] = measure("synth", synth, tmp, shared)
+        for name, argv in COMMANDS:
+            if args.only and name not in args.only:
+                continue
+            o = Path(tmp) / name
+            argv = [a.format(x=x, o=o) for a in argv]
+            results["commands"][name] = r = measure(name, argv, tmp, shared)
+            print(f"{name:20s} first {r['first_s']:6.1f} s  cached {r['cached_s']:5.1f} s  "
+                  f"kernels {r['kernels']:3d}  specialisations {r['specialisations']:3d}",
+                  flush=True)
+    union = {}
+    for r in results["commands"].values():
+        for k, sigs in r["signatures"].items():
+            union.setdefault(k, set()).update(sigs)
+    results["total_kernels"] = len(union)
+    results["total_specialisations"] = sum(len(v) for v in union.values())
+    results["multi"] = {k: sorted(v) for k, v in union.items() if len(v) > 1}
+    print(f"all commands: {results['total_kernels']} kernels, "
+          f"{results['total_specialisations']} specialisations; "
+          f"{len(results['multi'])} kernels with more than one")
+    out = Path(args.out)
+    store = json.loads(out.read_text()) if out.exists() else {}
+    store[args.label] = results
+    out.write_text(json.dumps(store, indent=1, sort_keys=True) + "\n")
+
+
+if __name__ == "__main__":
+    main()
