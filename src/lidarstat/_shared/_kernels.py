@@ -67,3 +67,23 @@ def eigh3(a, evals, evecs):
                 evecs[k, j - 1] = evecs[k, j]
                 evecs[k, j] = tv
             j -= 1
+
+
+@njit
+def add_outer3(cov, w, d0, d1, d2):  # pragma: no cover - compiled
+    """Add ``w d d'`` to the upper triangle of the 3 x 3 `cov` (weighted covariance sums;
+    :func:`mirror3` fills the lower triangle once the sums are complete)."""
+    cov[0, 0] += w * d0 * d0
+    cov[0, 1] += w * d0 * d1
+    cov[0, 2] += w * d0 * d2
+    cov[1, 1] += w * d1 * d1
+    cov[1, 2] += w * d1 * d2
+    cov[2, 2] += w * d2 * d2
+
+
+@njit
+def mirror3(cov):  # pragma: no cover - compiled
+    """Copy the upper triangle of the 3 x 3 `cov` to its lower triangle."""
+    cov[1, 0] = cov[0, 1]
+    cov[2, 0] = cov[0, 2]
+    cov[2, 1] = cov[1, 2]

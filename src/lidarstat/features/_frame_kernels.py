@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._shared._jit import njit
+from .._shared._kernels import add_outer3, mirror3
 from .._shared._kernels import eigh3 as _eigh3
 
 FRAME_Z = 0
@@ -60,15 +61,8 @@ def _local_frame(i, pts, idx, dist, s, e, b, frame, sensor, has_sensor, R, cov, 
         d0 = pts[j, 0] - pts[i, 0] - m0
         d1 = pts[j, 1] - pts[i, 1] - m1
         d2 = pts[j, 2] - pts[i, 2] - m2
-        cov[0, 0] += w * d0 * d0
-        cov[0, 1] += w * d0 * d1
-        cov[0, 2] += w * d0 * d2
-        cov[1, 1] += w * d1 * d1
-        cov[1, 2] += w * d1 * d2
-        cov[2, 2] += w * d2 * d2
-    cov[1, 0] = cov[0, 1]
-    cov[2, 0] = cov[0, 2]
-    cov[2, 1] = cov[1, 2]
+        add_outer3(cov, w, d0, d1, d2)
+    mirror3(cov)
     _eigh3(cov, evals, evecs)
     if evals[1] <= 0.0:
         return False

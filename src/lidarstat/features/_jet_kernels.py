@@ -31,6 +31,7 @@ import math
 import numpy as np
 
 from .._shared._jit import njit
+from .._shared._kernels import add_outer3, mirror3
 from .._shared._kernels import eigh3 as _eigh3
 from ..neighbors import make_drivers
 from ._frame_kernels import cholesky_inverse_n
@@ -156,15 +157,8 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
         dx = buf[t, 0] - mx
         dy = buf[t, 1] - my
         dz = buf[t, 2] - mz
-        cov[0, 0] += w * dx * dx
-        cov[0, 1] += w * dx * dy
-        cov[0, 2] += w * dx * dz
-        cov[1, 1] += w * dy * dy
-        cov[1, 2] += w * dy * dz
-        cov[2, 2] += w * dz * dz
-    cov[1, 0] = cov[0, 1]
-    cov[2, 0] = cov[0, 2]
-    cov[2, 1] = cov[1, 2]
+        add_outer3(cov, w, dx, dy, dz)
+    mirror3(cov)
     _eigh3(cov, ev, evec)
     if not ev[1] > 0.0:
         return SINGULAR, p
