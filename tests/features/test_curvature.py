@@ -184,9 +184,10 @@ def test_result_shape_params_summary_fields():
     import json
 
     cloud = make_surface("peak", sigma=0.002, rng=4)
-    res = curvature(cloud.xyz, radius=0.25)  # sigma estimated
+    res = curvature(cloud.xyz, radius=0.25)  # sigma estimated, along the noise direction
     p = res.params
-    assert p["sigma_estimated"] and p["sigma"] == res.sigma and p["noise"] == "normal"
+    assert p["sigma_estimated"] and p["sigma"] == res.sigma and p["noise"] == "z"
+    assert res.sigma == pytest.approx(0.002, rel=0.1)
     assert p["radius"] == 0.25 and p["min_neighbors"] == 7 and p["test"] == "calibrated"
     json.dumps(p)
     assert "surface types" in res.summary()
