@@ -1,8 +1,8 @@
 """The command line, tested in-process: outputs, one-line errors, no partial output."""
 
 import hashlib
-import re
 import os
+import re
 
 import laspy
 import numpy as np
