@@ -34,11 +34,11 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests" / "independent"))
 
-from bench_curvature import make_cloud, write_ply  # noqa: E402
-from indep_surfaces import KINDS, make_surface  # noqa: E402
+from bench_curvature import make_cloud, write_ply
+from indep_surfaces import KINDS, make_surface
 
-from lidarstat.features import curvature, point_spacing  # noqa: E402
-from lidarstat.synth import make_agpart  # noqa: E402
+from lidarstat.features import curvature, point_spacing
+from lidarstat.synth import make_agpart
 
 FIXED_SPACINGS = 6.0  # the fixed radius compared, in point spacings (a mid-ladder rung)
 

@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from lidarstat.classify import SurfaceType
 from lidarstat.errors import InvalidParameterError
-from lidarstat.features import curvature, fit_quadrics, curvatures, optimal_bandwidth
+from lidarstat.features import curvature, curvatures, fit_quadrics, optimal_bandwidth
 from lidarstat.neighbors import radius_neighbors
 from lidarstat.report._demo import face_radius_table
 from lidarstat.synth import SURFACE_KINDS, make_agpart, make_cylinder, make_surface

@@ -3,8 +3,8 @@
 from .._shared._choices import Frame, Noise, Test, Weight
 from ._curvature import curvature, curvature_tests, estimate_sigma
 from ._curvature_result import FIELDS, CurvatureResult
-from ._noise import (fit_factor, fit_height_variance, fit_normals, height_variance, noise_directions, noise_factor,
-                     resolve_noise, sigma_from_fits)
+from ._noise import (fit_factor, fit_height_variance, fit_normals, height_variance,
+                     noise_directions, noise_factor, resolve_noise, sigma_from_fits)
 from ._curvature_scale import point_spacing, scale_ladder
 from ._covariance import FIELDS as COVARIANCE_FIELDS
 from ._covariance import (CovarianceResult, EigenMode, PointClass, covariance_features,

@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .._shared._choices import Frame, Noise, Test
+from .._shared._choices import Frame, Test
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import CellIndex, copies_degenerate, find_duplicates, run_on_unique
@@ -17,8 +17,8 @@ from ..stats import chi2_test, z_critical
 from . import _curvature_kernels as _ck
 from . import _quadric_kernels as _k
 from ._curvature_result import CurvatureResult
-from ._hk import hk_surface_types
 from ._curvature_scale import scale_ladder, walk_ladder
+from ._hk import hk_surface_types
 from ._noise import estimate_sigma, estimate_sigma_index, fit_height_variance, resolve_noise
 from ._quadric import FitStatus, _run_cells, check_fit_options
 

@@ -22,9 +22,19 @@ from .._shared._choices import Noise
 from ..errors import InsufficientNeighborsError, InvalidParameterError
 from ..stats import chi2_quantile
 
-__all__ = ["Noise", "resolve_noise", "noise_directions", "noise_factor", "height_variance",
-           "fit_factor", "fit_height_variance", "fit_normals", "sigma_from_fits", "estimate_sigma",
-           "FACTOR_FLOOR"]
+__all__ = [
+    "FACTOR_FLOOR",
+    "Noise",
+    "estimate_sigma",
+    "fit_factor",
+    "fit_height_variance",
+    "fit_normals",
+    "height_variance",
+    "noise_directions",
+    "noise_factor",
+    "resolve_noise",
+    "sigma_from_fits",
+]
 
 #: Tricube-weighted mean of u^2 (per planar axis) over a uniformly sampled disc of radius
 #: b, in units of b^2: ``(1/2) int (1-t^3)^3 t^3 dt / int (1-t^3)^3 t dt = 11/91``.

@@ -21,7 +21,6 @@ from . import _unit_merge_kernels as _mk
 from ._grow import relabel
 from ._result import Segmentation, segment_table
 
-
 #: Smallest unit whose merges are tested (a plane test needs degrees of freedom).
 MERGE_MIN_POINTS = 10
 
