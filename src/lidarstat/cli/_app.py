@@ -160,7 +160,8 @@ def _curvature_tiled(args, out, radius, opts):
     noise = resolve_noise(opts["noise"], args.sensor, func="curvature")
     if sigma is None:
         first = first or next(iter_chunks(args.input, args.chunk_points))
-        sigma = estimate_sigma(first.xyz, min(radii), noise=noise, frame=args.frame,
+        est_radius = sorted(radii)[len(radii) // 2] if radius is None else min(radii)
+        sigma = estimate_sigma(first.xyz, est_radius, noise=noise, frame=args.frame,
                                sensor=args.sensor, min_neighbors=args.min_neighbors)
         estimated = True
     # The summary streams back a few small fields from the output, so the output appears

@@ -75,8 +75,10 @@ def _curvature_prepare(args, cat):
     from ..io import read
 
     first = max(range(len(cat)), key=lambda i: cat.files[i].n_points)
-    sigma = estimate_sigma(read(cat.files[first].path).xyz, min(_curvature_scales(args, cat)),
-                           noise=args.noise, frame=args.frame, sensor=args.sensor)
+    radii = sorted(_curvature_scales(args, cat))
+    est_radius = radii[len(radii) // 2] if args.radius is None else radii[0]
+    sigma = estimate_sigma(read(cat.files[first].path).xyz, est_radius, noise=args.noise,
+                           frame=args.frame, sensor=args.sensor)
     if not args.quiet:
         print(f"  sigma {sigma:.4g} estimated on {cat.files[first].path.name}, used for "
               "every tile")

@@ -240,7 +240,11 @@ def curvature(points, *, radius=None, sigma=None, alpha=0.05, test="calibrated",
     index = CellIndex(pts, radii[0])
     estimated = sigma is None
     if estimated:
-        sigma = estimate_sigma_index(index, noise=noise, frame=frame, sensor=sensor,
+        # at the middle rung of the automatic ladder: the 3-D sphere censors the largest
+        # residuals when the noise is a sizeable part of the radius
+        est_radius = radii[len(radii) // 2] if automatic else radii[0]
+        est_index = index if est_radius == radii[0] else CellIndex(pts, est_radius)
+        sigma = estimate_sigma_index(est_index, noise=noise, frame=frame, sensor=sensor,
                                      min_neighbors=min_neighbors)
         logger.info("estimated sigma = %g", sigma)
         if not sigma > 0:
