@@ -2,6 +2,7 @@
 
 import hashlib
 import os
+import re
 
 import laspy
 import numpy as np
@@ -67,7 +68,10 @@ def test_demo_writes_las_and_pngs(tmp_path, capsys):
     assert code == 0
     for name in ("agpart_curvature.las", "K.png", "H.png", "chi2.png", "surface_type.png"):
         assert (tmp_path / "demo" / name).stat().st_size > 1000
-    assert "shaft_side" in stdout
+    assert "shaft_side" in stdout and "automatic radius" in stdout
+    agree = float(re.search(r"surface type equals the truth on ([0-9.]+)% of interior points",
+                            stdout).group(1))
+    assert agree >= 90.0
 
 
 def _bad_inputs(tmp_path):

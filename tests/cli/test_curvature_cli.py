@@ -93,3 +93,29 @@ def test_ridges_needs_a_neighbourhood(cylinder, tmp_path, capsys):
     with pytest.raises(SystemExit):
         build_parser().parse_args(["ridges", str(cylinder), str(tmp_path / "o.npz")])
     assert "--k" in capsys.readouterr().err
+
+
+def test_curvature_runs_at_the_automatic_scale_and_prints_it(cylinder, tmp_path, capsys):
+    out, js = tmp_path / "auto.npz", tmp_path / "auto.json"
+    assert main(["curvature", str(cylinder), str(out), "--summary-json", str(js)]) == 0
+    stdout = capsys.readouterr().out
+    assert "radius automatic" in stdout and "ladder" in stdout
+    meta = json.loads(js.read_text())
+    assert meta["params"]["radius"] == "auto" and meta["params"]["frame"] == "pca"
+    assert len(meta["params"]["scales"]) >= 3 and meta["params"]["sigma_estimated"]
+    assert meta["params"]["radius_p10"] <= meta["params"]["radius_median"]
+    radius = np.asarray(read(out).attributes["radius"])
+    scales = np.asarray(meta["params"]["scales"])
+    assert np.abs(radius[:, None] - scales[None, :]).min(axis=1).max() < 1e-9
+    assert meta["surface_type"]["parabolic_ridge"] > 0.9 * radius.size
+
+
+def test_curvature_automatic_scale_tiled_equals_whole(cylinder, tmp_path):
+    whole, tiled = tmp_path / "whole.npz", tmp_path / "tiled.npz"
+    assert main(["curvature", str(cylinder), str(whole), "--sigma", "0.001", "-q"]) == 0
+    # the ladder comes from the first chunk; on this uniform grid it is the whole cloud's
+    assert main(["curvature", str(cylinder), str(tiled), "--sigma", "0.001", "-q", "--tile",
+                 "1.0", "--chunk-points", "100000"]) == 0
+    a, b = read(whole).attributes, read(tiled).attributes
+    np.testing.assert_allclose(b["radius"], a["radius"])
+    assert np.mean(np.asarray(a["surface_type"]) == np.asarray(b["surface_type"])) > 0.999

@@ -72,11 +72,17 @@ def test_sar_refuses_options_it_cannot_use(rng, tmp_path, capsys):
         assert "--method sar does not use it" in capsys.readouterr().err
 
 
-def test_curvature_method_needs_a_radius(rng, tmp_path, capsys):
+def test_curvature_method_runs_at_the_automatic_scale(rng, tmp_path, capsys):
     src = _gable(rng, tmp_path)
     out = tmp_path / "c.las"
-    assert main(["segment", str(src), str(out), "--method", "curvature"]) == 2
-    assert "--radius" in capsys.readouterr().err
+    assert main(["segment", str(src), str(out), "--method", "curvature", "-q"]) == 0
+    ids = np.asarray(read(out).attributes["segment_id"])
+    y = read(out).xyz[:, 1] - 445000
+    # the two largest units are the two roof faces, one each side of the ridge at y = 8
+    assert np.all(y[ids == 1] > 7) or np.all(y[ids == 1] < 9)
+    assert np.median(y[ids == 1]) * np.median(y[ids == 2]) > 0
+    assert (np.median(y[ids == 1]) - 8) * (np.median(y[ids == 2]) - 8) < 0
+    assert np.sum(ids == 1) + np.sum(ids == 2) > 0.85 * ids.size
     assert main(["segment", str(src), str(out), "--method", "curvature", "--radius", "1.0",
                  "--sigma", "0.03", "-q"]) == 0
     assert "surface_type" in read(out).attributes

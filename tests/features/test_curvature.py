@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from lidarstat.classify import SurfaceType
 from lidarstat.errors import InvalidParameterError
-from lidarstat.features import curvature, fit_quadrics, curvatures, optimal_bandwidth
+from lidarstat.features import curvature, curvatures, fit_quadrics, optimal_bandwidth
 from lidarstat.neighbors import radius_neighbors
 from lidarstat.report._demo import face_radius_table
 from lidarstat.synth import SURFACE_KINDS, make_agpart, make_cylinder, make_surface
@@ -184,9 +184,10 @@ def test_result_shape_params_summary_fields():
     import json
 
     cloud = make_surface("peak", sigma=0.002, rng=4)
-    res = curvature(cloud.xyz, radius=0.25)  # sigma estimated
+    res = curvature(cloud.xyz, radius=0.25)  # sigma estimated, along the noise direction
     p = res.params
-    assert p["sigma_estimated"] and p["sigma"] == res.sigma and p["noise"] == "normal"
+    assert p["sigma_estimated"] and p["sigma"] == res.sigma and p["noise"] == "z"
+    assert res.sigma == pytest.approx(0.002, rel=0.1)
     assert p["radius"] == 0.25 and p["min_neighbors"] == 7 and p["test"] == "calibrated"
     json.dumps(p)
     assert "surface types" in res.summary()
@@ -200,3 +201,63 @@ def test_bandwidth_result_shape():
     assert res.to_fields() == {}
     assert res.params["radius"] == res.radius and res.params["test"] == "calibrated"
     assert "smallest radius" in res.summary() and res.table() in res.summary()
+
+
+# ----------------------------------------------------------------- noise model, automatic scale
+def test_noise_factor_is_the_variance_along_the_height_axis():
+    from lidarstat.features import noise_factor
+
+    t = np.radians(70.0)
+    n = np.array([[np.sin(t), 0.0, np.cos(t)]])  # a plane tilted 70 degrees
+    # z noise, heights along the normal: (d.n)^2 = cos^2 t
+    assert noise_factor(n, n, "z")[0] == pytest.approx(np.cos(t) ** 2)
+    # z noise, heights along x (the auto frame's choice here): cos^2 t / sin^2 t, not 0
+    e = np.array([[1.0, 0.0, 0.0]])
+    assert noise_factor(e, n, "z")[0] == pytest.approx((np.cos(t) / np.sin(t)) ** 2)
+    # z noise, heights along z (the paper's frame): 1
+    assert noise_factor(np.array([[0.0, 0.0, 1.0]]), n, "z")[0] == pytest.approx(1.0)
+    # noise along the normal, heights along z: 1 / cos^2 t
+    assert noise_factor(np.array([[0.0, 0.0, 1.0]]), n, "normal")[0] == pytest.approx(
+        1 / np.cos(t) ** 2)
+
+
+def test_fit_factor_adds_the_tangential_part_on_curved_faces():
+    from lidarstat.features import fit_factor, height_variance
+
+    frames = np.eye(3)[None]
+    flat = np.array([[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]])
+    curved = np.array([[0.0, 0.0, 0.0, 0.5, 0.0, 0.0]])
+    pts = np.array([[0.0, 0.0, 0.0]])
+    sensor = np.array([[-10.0, 0.0, 0.0]])[0]  # a ray along +x: inside the tangent plane
+    assert fit_factor(flat, frames, "range", radius=1.0, points=pts, sensor=sensor)[0] \
+        == pytest.approx(1e-6)
+    f = fit_factor(curved, frames, "range", radius=1.0, points=pts, sensor=sensor)[0]
+    assert f == pytest.approx(11 / 91 * 0.25)  # m2 b^2 |G d_t|^2
+    # the frame-axis form used by the other methods is unchanged
+    assert height_variance(frames, 2.0, noise="z")[0] == pytest.approx(4.0)
+
+
+def test_automatic_scale_chooses_small_radii_on_strong_curvature_and_the_top_on_planes():
+    g = (np.arange(61) - 30) * 0.05
+    x, y = (a.ravel() for a in np.meshgrid(g, g, indexing="ij"))
+    rng = np.random.default_rng(3)
+    plane = np.c_[x, y, 0.2 * x + rng.normal(0, 0.002, x.size)]
+    bowl = np.c_[x, y, 0.5 * (x * x + y * y) + rng.normal(0, 0.002, x.size)]
+    rp = curvature(plane, sigma=0.002)
+    rb = curvature(bowl, sigma=0.002)
+    centre = (np.abs(x) < 0.5) & (np.abs(y) < 0.5)
+    assert np.median(rp["radius"][centre]) == pytest.approx(max(rp.radius))
+    assert np.median(rb["radius"][centre]) == pytest.approx(min(rb.radius))
+    assert (rb["surface_type"][centre] == 5).mean() > 0.95  # elliptic pit (normal up)
+    assert (rp["surface_type"][centre] == 1).mean() > 0.9
+    assert rp.params["radius"] == "auto" and "radius automatic" in rp.summary()
+
+
+def test_automatic_scale_options_are_checked():
+    pts = make_surface("plane", sigma=0.001, rng=0).xyz
+    with pytest.raises(InvalidParameterError, match="power"):
+        curvature(pts, power=0.3)
+    with pytest.raises(InvalidParameterError, match="scales"):
+        curvature(pts, scales=[])
+    res = curvature(pts, sigma=0.001, scales=[0.2, 0.1])
+    assert res.radius == (0.1, 0.2) and set(np.unique(res["radius"])) <= {0.1, 0.2}

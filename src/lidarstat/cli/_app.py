@@ -106,11 +106,11 @@ def cmd_curvature(args):
 
     out, _ = check_plan([args.input], Output("output", args.output),
                         Output("--summary-json", args.summary_json, "json"))
-    radius = args.radius if len(args.radius) > 1 else args.radius[0]
+    radius = _radius_arg(args.radius)
     args.sensor = resolve_sensor(args.sensor, args.input, args.quiet)
     opts = dict(alpha=args.alpha, test=args.test, frame=args.frame, sensor=args.sensor,
                 noise=args.noise, min_neighbors=args.min_neighbors,
-                minimal_detectable=args.minimal_detectable)
+                minimal_detectable=args.minimal_detectable, power=args.power)
     t0 = time.perf_counter()
     if args.tile is not None:
         res = _curvature_tiled(args, out, radius, opts)
@@ -132,40 +132,55 @@ def cmd_curvature(args):
     return 0
 
 
+def _radius_arg(radius):
+    """``--radius`` as the library takes it: None (automatic), one radius or a list."""
+    if radius is None:
+        return None
+    return radius if len(radius) > 1 else radius[0]
+
+
 def _curvature_tiled(args, out, radius, opts):
-    """Out-of-core curvature: noise from the first chunk, then tiles with a radius halo."""
+    """Out-of-core curvature: noise (and the automatic ladder) from the first chunk, then
+    tiles with a halo of the largest radius."""
     import numpy as np
 
-    from ..features import CurvatureResult, curvature, estimate_sigma
+    from ..features import CurvatureResult, curvature, estimate_sigma, resolve_noise, scale_ladder
     from ..io import iter_chunks
     from ..pipeline import process_file
 
     sigma, estimated = args.sigma, False
-    r_max = max(radius) if isinstance(radius, list) else radius
-    if sigma is None:
+    first = None
+    scales = None
+    if radius is None:
         first = next(iter_chunks(args.input, args.chunk_points))
-        sigma = estimate_sigma(first.xyz, r_max, frame=args.frame, sensor=args.sensor,
-                               min_neighbors=args.min_neighbors)
+        scales = scale_ladder(first.xyz)
+        opts = {**opts, "scales": scales}
+    radii = scales if radius is None else (radius if isinstance(radius, list) else [radius])
+    r_max = max(radii)
+    noise = resolve_noise(opts["noise"], args.sensor, func="curvature")
+    if sigma is None:
+        first = first or next(iter_chunks(args.input, args.chunk_points))
+        est_radius = sorted(radii)[len(radii) // 2] if radius is None else min(radii)
+        sigma = estimate_sigma(first.xyz, est_radius, noise=noise, frame=args.frame,
+                               sensor=args.sensor, min_neighbors=args.min_neighbors)
         estimated = True
-    # The summary streams back three small fields (7 bytes a point) from the output, so
-    # the output appears at once, not with the command's other outputs.
+    # The summary streams back a few small fields from the output, so the output appears
+    # at once, not with the command's other outputs.
     with output_group(defer=False):
         process_file(lambda p: curvature(p, radius=radius, sigma=sigma, **opts), args.input,
                      out, size=args.tile, halo=r_max, scheduler=args.scheduler,
                      workers=args.workers, points_per_chunk=args.chunk_points,
                      progress=progress(args.quiet))
-    names = ("status", "surface_type", "neighbors")
+    names = ("status", "surface_type", "neighbors") + (("radius",) if radius is None else ())
     parts = [[c.attributes[k] for k in names] for c in iter_chunks(out, args.chunk_points)]
     fields = {k: np.concatenate([p[j] for p in parts]) for j, k in enumerate(names)}
-    noise = opts["noise"]
-    if estimated:  # estimated on the local heights, as curvature() does
-        noise = "normal"
-    elif noise is None:
-        noise = "z" if args.sensor is None else "range"
-    return CurvatureResult(fields=fields, radius=radius, sigma=sigma,
-                           sigma_estimated=estimated, alpha=args.alpha, test=args.test,
-                           frame=args.frame, noise=noise, min_neighbors=args.min_neighbors,
-                           minimal_detectable=args.minimal_detectable)
+    return CurvatureResult(fields=fields, radius=tuple(scales) if radius is None else radius,
+                           sigma=sigma, sigma_estimated=estimated, alpha=args.alpha,
+                           test=args.test, frame=args.frame, noise=str(noise),
+                           min_neighbors=args.min_neighbors,
+                           minimal_detectable=args.minimal_detectable,
+                           automatic=radius is None,
+                           power=args.power if radius is None else None)
 
 
 def cmd_bandwidth(args):
@@ -207,7 +222,7 @@ def cmd_demo(args):
 # --------------------------------------------------------------------------- parser
 def _tile_exceeds_radius(args):
     """``--tile`` must exceed the largest ``--radius``, the halo every tile carries."""
-    if args.tile is not None and args.tile <= max(args.radius):
+    if args.tile is not None and args.radius is not None and args.tile <= max(args.radius):
         return "--tile", (f"invalid value '{args.tile:g}': must be larger than the largest "
                           f"--radius ({max(args.radius):g}), the halo of every tile")
     return None
@@ -234,17 +249,25 @@ def build_parser() -> argparse.ArgumentParser:
                        "point, test it, and write K, H, their tests and the surface type.")
     s.add_argument("input")
     s.add_argument("output", help="output file; format from the suffix")
-    s.add_argument("--radius", type=opt.positive_float, nargs="+", required=True,
-                   help="sphere radius (bandwidth); several radii = multi-scale")
+    s.add_argument("--radius", type=opt.positive_float, nargs="+", default=None,
+                   help="sphere radius (bandwidth); several radii = multi-scale (default: "
+                   "automatic, per point the smallest radius of a ladder of 3 to 8.5 point "
+                   "spacings whose tests detect the curvature seen, written to the field "
+                   "'radius')")
     add_noise(s)
     add_alpha(s)
     s.add_argument("--test", choices=Test.values(), default=Test.CALIBRATED.value,
                    help="family of tests: calibrated to the weighted fit, or the paper's as "
                    "printed (default calibrated)")
-    s.add_argument("--frame", choices=Frame.values(), default=Frame.Z.value,
-                   help="height axis of the local quadric (default z)")
+    s.add_argument("--frame", choices=Frame.values(), default=Frame.PCA.value,
+                   help="height axis of the local quadric: the neighbourhood's principal "
+                   "axes (pca, any orientation), the coordinate axis closest to them (auto) "
+                   "or z, the paper's (default pca)")
     s.add_argument("--min-neighbors", type=opt.int_at_least(7), default=7,
                    help="smallest neighbourhood a quadric is fitted on [7]")
+    s.add_argument("--power", type=opt.real(0.5, 1, "left", what="probability"), default=0.9,
+                   help="automatic scale: probability with which the chosen radius detects "
+                   "the curvature seen [0.9]")
     s.add_argument("--minimal-detectable", action="store_true",
                    help="also write K_min and H_min (eq. 19)")
     add_run_outputs(s)
@@ -282,7 +305,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("outdir", nargs="?", default="lidarstat_demo")
     s.add_argument("--sigma", type=opt.nonnegative_float, default=0.015,
                    help="noise added (dm)")
-    s.add_argument("--radius", type=opt.positive_float, default=0.2)
+    s.add_argument("--radius", type=opt.positive_float, default=None,
+                   help="fixed curvature radius (dm) (default: the automatic scale)")
     s.add_argument("--seed", type=opt.seed, default=0)
     s.set_defaults(func=cmd_demo)
 

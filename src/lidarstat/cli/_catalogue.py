@@ -47,34 +47,54 @@ def _progress(quiet):
 
 
 # ----------------------------------------------------------------- per-command methods
+def _curvature_scales(args, cat):
+    """The radii of the run: ``--radius``, or the automatic ladder measured on the largest
+    tile (one ladder for the whole area)."""
+    if args.radius is not None:
+        return list(args.radius)
+    if getattr(args, "_scales", None) is None:
+        from ..features import scale_ladder
+        from ..io import read
+
+        first = max(range(len(cat)), key=lambda i: cat.files[i].n_points)
+        args._scales = list(scale_ladder(read(cat.files[first].path).xyz))
+    return args._scales
+
+
 def _curvature_buffer(args, cat):
-    return max(args.radius)
+    return max(_curvature_scales(args, cat))
 
 
 def _curvature_prepare(args, cat):
-    """One noise estimate for the whole area, so that no tile's answer depends on its own."""
+    """One noise estimate (and automatic ladder) for the whole area, so that no tile's
+    answer depends on its own."""
+    extra = {} if args.radius is not None else {"scales": _curvature_scales(args, cat)}
     if args.sigma is not None:
-        return {}
+        return extra
     from ..features import estimate_sigma
     from ..io import read
 
     first = max(range(len(cat)), key=lambda i: cat.files[i].n_points)
-    sigma = estimate_sigma(read(cat.files[first].path).xyz, min(args.radius),
+    radii = sorted(_curvature_scales(args, cat))
+    est_radius = radii[len(radii) // 2] if args.radius is None else radii[0]
+    sigma = estimate_sigma(read(cat.files[first].path).xyz, est_radius, noise=args.noise,
                            frame=args.frame, sensor=args.sensor)
     if not args.quiet:
         print(f"  sigma {sigma:.4g} estimated on {cat.files[first].path.name}, used for "
               "every tile")
-    return {"sigma": sigma}
+    return {**extra, "sigma": sigma}
 
 
 def _curvature_fields(args, extra):
     from ..features import curvature
 
-    radius = args.radius if len(args.radius) > 1 else args.radius[0]
+    radius = None if args.radius is None else (
+        args.radius if len(args.radius) > 1 else args.radius[0])
     sigma = extra.get("sigma", args.sigma)
     opts = dict(alpha=args.alpha, test=args.test, frame=args.frame, sensor=args.sensor,
                 noise=args.noise, min_neighbors=args.min_neighbors,
-                minimal_detectable=args.minimal_detectable)
+                minimal_detectable=args.minimal_detectable, power=args.power,
+                scales=extra.get("scales"))
 
     def fields(tile):
         return curvature(tile.xyz, radius=radius, sigma=sigma, **opts).to_fields(), {}

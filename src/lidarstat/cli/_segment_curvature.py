@@ -1,6 +1,6 @@
 """``lidarstat segment IN OUT --method curvature``: units from tested HK classes (seed 000).
 
-Shared options used: ``--radius`` (curvature bandwidth, required), ``--sigma``,
+Shared options used: ``--radius`` (curvature bandwidth; default the automatic scale), ``--sigma``,
 ``--noise``, ``--sensor``, ``--alpha``, ``--min-points``.
 """
 
@@ -26,11 +26,15 @@ def add_arguments(group):
                        default=10.0, dest="max_angle",
                        help="largest angle between the normals of neighbours in one unit "
                        "(degrees) [10]")
-    group.add_argument("--frame", "--curvature-frame", default=Frame.Z.value,
+    group.add_argument("--frame", "--curvature-frame", default=Frame.PCA.value,
                        choices=Frame.values(), dest="frame",
-                       help="local frame of the curvature quadrics (default z; 'auto' or "
-                       "'pca' with --noise normal also find walls, which --refine "
-                       "models in their own plane)")
+                       help="local frame of the curvature quadrics (default pca, any "
+                       "orientation; z is the paper's); --refine models walls in their own "
+                       "plane")
+    group.add_argument("--merge-alpha", type=opt.probability, default=0.001,
+                       dest="merge_alpha",
+                       help="level of the plane test that refuses to merge two planar units "
+                       "whose union is no plane [0.001]")
     group.add_argument("--refine", action="store_true",
                        help="refine the units by SAR-FS (order 1 planar, 2 curved) and "
                        "intersect adjacent surfaces")
@@ -38,15 +42,11 @@ def add_arguments(group):
 
 def run(args, cloud):
     """Segment `cloud` by :func:`lidarstat.segment.segment_curvature`."""
-    from ..errors import InvalidParameterError
     from ..segment import segment_curvature
 
-    if args.radius is None:
-        raise InvalidParameterError("--method curvature needs --radius (the curvature "
-                                    "bandwidth)")
     return segment_curvature(cloud.xyz, radius=args.radius, sigma=args.sigma,
                              alpha=args.alpha, max_angle=args.max_angle,
                              min_points=DEFAULT_MIN_POINTS if args.min_points is None
                              else args.min_points, refine=args.refine,
                              frame=args.frame, noise=args.noise,
-                             sensor=args.sensor)
+                             sensor=args.sensor, merge_alpha=args.merge_alpha)

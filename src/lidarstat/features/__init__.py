@@ -3,7 +3,9 @@
 from .._shared._choices import Frame, Noise, Test, Weight
 from ._curvature import curvature, curvature_tests, estimate_sigma
 from ._curvature_result import FIELDS, CurvatureResult
-from ._noise import height_variance
+from ._noise import (fit_factor, fit_height_variance, fit_normals, height_variance,
+                     noise_directions, noise_factor, resolve_noise, sigma_from_fits)
+from ._curvature_scale import point_spacing, scale_ladder
 from ._covariance import FIELDS as COVARIANCE_FIELDS
 from ._covariance import (CovarianceResult, EigenMode, PointClass, covariance_features,
                           eigen_features)
@@ -21,7 +23,9 @@ from ._plane_bandwidth import BandwidthCriterion, BandwidthSelection, select_pla
 __all__ = ["COVARIANCE_FIELDS", "CovarianceResult", "covariance_features", "eigen_features",
            "BandwidthResult", "optimal_bandwidth", "FIELDS", "CurvatureResult", "FitStatus", "QuadricFit", "curvature",
            "curvature_jacobian", "curvature_tests", "curvatures", "estimate_sigma",
-           "fit_quadrics", "height_variance", "principal_jacobian",
+           "fit_quadrics", "height_variance", "principal_jacobian", "fit_factor",
+           "fit_height_variance", "fit_normals", "noise_directions", "noise_factor", "resolve_noise",
+           "sigma_from_fits", "point_spacing", "scale_ladder",
            "PLANE_FIELDS", "AdaptiveBandwidth", "BandwidthCriterion", "BandwidthSelection", "LocalPlaneFit", "geary_bandwidths",
            "local_planes", "select_plane_bandwidth", "JET_FIELDS", "MONGE_NAMES",
            "JetFit", "JetResult",

@@ -7,17 +7,20 @@ from dataclasses import replace
 
 import numpy as np
 
-from .._shared._choices import Frame, Noise, Test
+from .._shared._choices import Frame, Test
 from .._shared.validation import check_points, check_scalar
-from ..errors import InsufficientNeighborsError, InvalidParameterError
+from ..errors import InvalidParameterError
 from ..neighbors import CellIndex, copies_degenerate, find_duplicates, run_on_unique
+
+__all__ = ["curvature", "curvature_tests", "estimate_sigma"]
 from ..stats import chi2_test, z_critical
 from . import _curvature_kernels as _ck
 from . import _quadric_kernels as _k
 from ._curvature_result import CurvatureResult
+from ._curvature_scale import scale_ladder, walk_ladder
 from ._hk import hk_surface_types
-from ._noise import height_variance, resolve_noise
-from ._quadric import FitStatus, _run_cells, _run_kernel, check_fit_options, unfitted_reason
+from ._noise import estimate_sigma, estimate_sigma_index, fit_height_variance, resolve_noise
+from ._quadric import FitStatus, _run_cells, check_fit_options
 
 logger = logging.getLogger(__name__)
 
@@ -88,47 +91,8 @@ def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False):
         res["H_min"] = zc * col["SDH"]
     return res
 
-def estimate_sigma(points, radius, *, frame="z", sensor=None, min_neighbors=7, sample=20000,
-                   rng=0):
-    """Robust global noise estimate: median of the local unbiased variance estimates.
-
-    ``sigma^2 = median_i( v'Wv / tr(B) )`` over up to `sample` random points, where
-    ``v'Wv / tr(B)`` is unbiased for sigma^2 wherever the quadric holds; the median
-    ignores the minority of points on edges where it does not.
-
-    Returns
-    -------
-    float
-        Estimated sigma (not squared).
-    """
-    pts = check_points(points)
-    pts = pts[find_duplicates(pts).first]  # a copy is no new observation of the noise
-    return _estimate_sigma(CellIndex(pts, radius), frame=frame, sensor=sensor,
-                           min_neighbors=min_neighbors, sample=sample, rng=rng)
-
-
-def _estimate_sigma(index, *, frame, sensor, min_neighbors, sample, rng):
-    """:func:`estimate_sigma` on an existing index (shared with the curvature driver)."""
-    radius = index.radius
-    rng = np.random.default_rng(rng)
-    n = index.n_points
-    pos = np.sort(rng.choice(n, size=min(sample, n), replace=False))
-    indptr, idx, dist = index._query_local(index.sorted_points[pos])
-    sensor_local = None if sensor is None else np.asarray(sensor, float) - index.origin
-    out = _run_kernel(index.sorted_points, pos, indptr, idx, dist, bandwidth=radius, frame=frame,
-                      sensor=sensor_local, min_neighbors=min_neighbors, covariance="sandwich")
-    ok = out["status"] == _k.OK
-    if not ok.any():
-        why = unfitted_reason(out["status"], out["npts"], min_neighbors)
-        raise InsufficientNeighborsError(
-            f"cannot estimate sigma: no quadric could be fitted within radius {radius:g}: "
-            f"{why}; enlarge the radius or give sigma")
-    s2 = out["stats"][ok, 0] / out["stats"][ok, 2]
-    return float(np.sqrt(np.median(s2)))
-
-
 def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neighbors,
-                   minimal_detectable, block_size, progress, active=None):
+                   minimal_detectable, block_size, progress=None, active=None):
     """The curvature pipeline at the index's radius, block by block; fields in input order.
 
     `active` (bool per input point) restricts the work to some points (multi-scale); the
@@ -146,8 +110,9 @@ def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neigh
         out = _run_cells(index, c0, c1, bandwidth=radius, frame=frame, sensor=sensor_local,
                          min_neighbors=min_neighbors, covariance=covariance,
                          active=active_sorted)
-        sigma2 = height_variance(out["frames"], sigma, noise=noise,
-                                 points=index.sorted_points[s0:s1], sensor=sensor_local)
+        sigma2 = fit_height_variance(out["beta"], out["frames"], sigma, noise=noise,
+                                     radius=radius, points=index.sorted_points[s0:s1],
+                                     sensor=sensor_local)
         res = curvature_tests(out, sigma2=sigma2, alpha=alpha, test=test,
                               minimal_detectable=minimal_detectable)
         res["z0"] = res["z0"] + index.sorted_points[s0:s1, 2] + index.origin[2]
@@ -165,28 +130,30 @@ def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neigh
     return fields
 
 
-def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", frame="z",
-              sensor=None, noise=None, min_neighbors=7, minimal_detectable=False, block_size=131072,
-              progress=None) -> CurvatureResult:
+def curvature(points, *, radius=None, sigma=None, alpha=0.05, test="calibrated", frame="pca",
+              sensor=None, noise=None, min_neighbors=7, minimal_detectable=False, power=0.9,
+              scales=None, block_size=131072, progress=None) -> CurvatureResult:
     """Statistically tested curvature and HK surface type of every point.
 
-    Fits the weighted quadric of Crosilla et al. (2009) in a 3-D sphere of radius
-    `radius` around every point, tests it against the measurement noise, computes K, H and
-    the principal curvatures, tests their significance and assigns HK surface types.
-    Works block by block in a spatially sorted order, so memory does not grow with the
-    number of neighbour pairs of the whole cloud.
+    Fits the weighted quadric of Crosilla et al. (2009) in a 3-D sphere around every
+    point, tests it against the measurement noise, computes K, H and the principal
+    curvatures, tests their significance and assigns HK surface types. Works block by
+    block in a spatially sorted order, so memory does not grow with the number of
+    neighbour pairs of the whole cloud.
 
     Parameters
     ----------
     points : (N, 3) array_like
         Coordinates (any magnitude: a local origin is subtracted).
-    radius : float or sequence of float
+    radius : float or sequence of float, optional
         Bandwidth b (sphere radius, > 0). Several radii give the paper's multi-scale
-        strategy: per point, the smallest radius whose model is accepted.
+        strategy: per point, the smallest radius whose model is accepted. Default: the
+        automatic scale, per point the smallest radius of a ladder (`scales`) whose tests
+        detect the curvature seen with probability `power`, else the largest one whose
+        model is accepted (field ``radius``; docs/methods/curvature.md).
     sigma : float, optional
-        Measurement standard deviation sigma_ls along the height axis. If None it is
-        estimated (:func:`estimate_sigma`) and the chi-square test then only flags
-        points whose local variance exceeds the typical one.
+        Measurement standard deviation along the noise direction. If None it is
+        estimated (:func:`estimate_sigma`, at the smallest radius).
     alpha : float
         Significance level of every test (individual K, H tests use alpha/2, Bonferroni).
     test : {'calibrated', 'paper'} or Test
@@ -194,8 +161,9 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
         covariance of the WLS estimator, a Satterthwaite chi-square for v'Wv, an exact
         chi2(3) test of the second-order terms for planarity, and tests of the principal
         curvatures for K (see docs/methods/curvature.md).
-    frame : {'z', 'auto', 'pca'} or Frame
-        Local height axis (see :func:`fit_quadrics`).
+    frame : {'pca', 'auto', 'z'} or Frame
+        Local height axis (see :func:`fit_quadrics`); ``'pca'`` (default) follows the
+        surface at any orientation, ``'z'`` is the paper's.
     sensor : (3,) array_like, optional
         Scanner position to orient normals (and the sign of H) toward.
     noise : {'z', 'range', 'normal'} or Noise, optional
@@ -206,6 +174,12 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
         Minimum neighbours (>= 7 so that the chi-square test has a degree of freedom).
     minimal_detectable : bool
         Also return ``K_min`` and ``H_min`` (eq. 19).
+    power : float
+        Automatic scale: detection probability the chosen radius must give the curvature
+        seen (eq. 19-21 per point), in [0.5, 1).
+    scales : sequence of float, optional
+        Automatic scale: the ladder of radii (default :func:`scale_ladder`, 3 to 8.5 point
+        spacings).
     block_size : int
         Approximate points per processing block.
     progress : callable(done, total), optional
@@ -220,17 +194,27 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
     >>> from lidarstat.synth import make_surface
     >>> from lidarstat.features import curvature
     >>> cloud = make_surface("cylinder", sigma=0.001, rng=0)
-    >>> res = curvature(cloud.xyz, radius=0.25, sigma=0.001, frame="pca", alpha=0.01)
+    >>> res = curvature(cloud.xyz, sigma=0.001, alpha=0.01)
     >>> interior = cloud.edge_distance > 0.25
     >>> bool((res["surface_type"][interior] == 2).mean() > 0.95)   # parabolic ridge
     True
     """
     func = "curvature"
     pts = check_points(points)
-    radii = np.atleast_1d(np.asarray(radius, dtype=object))
-    radii = tuple(sorted(check_scalar(r, "radius", func=func, low=0.0) for r in radii))
-    if not radii:
-        raise InvalidParameterError(f"The 'radius' parameter of {func} must not be empty.")
+    automatic = radius is None
+    if automatic:
+        power = check_scalar(power, "power", func=func, low=0.5, high=1.0, closed="left")
+        if scales is not None:
+            scales = np.atleast_1d(np.asarray(scales, dtype=object))
+            scales = tuple(sorted(check_scalar(r, "scales", func=func, low=0.0)
+                                  for r in scales))
+            if not scales:
+                raise InvalidParameterError(f"The 'scales' parameter of {func} must not be empty.")
+    else:
+        radii = np.atleast_1d(np.asarray(radius, dtype=object))
+        radii = tuple(sorted(check_scalar(r, "radius", func=func, low=0.0) for r in radii))
+        if not radii:
+            raise InvalidParameterError(f"The 'radius' parameter of {func} must not be empty.")
     alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0)
     test = Test.parse(test, "test", func=func)
     frame = Frame.parse(frame, "frame", func=func)
@@ -244,20 +228,24 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
         res = run_on_unique(dup, lambda: curvature(
             pts[dup.first], radius=radius, sigma=sigma, alpha=alpha, test=test, frame=frame,
             sensor=sensor, noise=noise, min_neighbors=min_neighbors,
-            minimal_detectable=minimal_detectable, block_size=block_size,
-            progress=progress), what=func)
+            minimal_detectable=minimal_detectable, power=power, scales=scales,
+            block_size=block_size, progress=progress), what=func)
         fields = dict(res.fields)
         fields["status"] = copies_degenerate(
             dup, fields["status"], too_few=FitStatus.TOO_FEW_NEIGHBORS,
             degenerate=FitStatus.DEGENERATE, min_neighbors=min_neighbors)
         return replace(res, fields={k: dup.broadcast(v) for k, v in fields.items()})
+    if automatic:
+        radii = scales if scales is not None else scale_ladder(pts)
     index = CellIndex(pts, radii[0])
     estimated = sigma is None
     if estimated:
-        # estimated on the local heights, so the noise is "normal" to the frame by construction
-        noise = Noise.NORMAL.value
-        sigma = _estimate_sigma(index, frame=frame, sensor=sensor, min_neighbors=min_neighbors,
-                                sample=20000, rng=0)
+        # at the middle rung of the automatic ladder: the 3-D sphere censors the largest
+        # residuals when the noise is a sizeable part of the radius
+        est_radius = radii[len(radii) // 2] if automatic else radii[0]
+        est_index = index if est_radius == radii[0] else CellIndex(pts, est_radius)
+        sigma = estimate_sigma_index(est_index, noise=noise, frame=frame, sensor=sensor,
+                                     min_neighbors=min_neighbors)
         logger.info("estimated sigma = %g", sigma)
         if not sigma > 0:
             raise InvalidParameterError(
@@ -268,22 +256,40 @@ def curvature(points, *, radius, sigma=None, alpha=0.05, test="calibrated", fram
         sigma = check_scalar(sigma, "sigma", func=func, low=0.0)
     kw = dict(sigma=sigma, noise=noise, alpha=alpha, test=test, frame=frame, sensor=sensor,
               min_neighbors=min_neighbors, minimal_detectable=minimal_detectable,
-              block_size=block_size, progress=progress)
-    fields = _single_radius(index, **kw)
-    if len(radii) > 1:
-        chosen = np.full(pts.shape[0], radii[0])
-        pending = fields["chi2_pass"] == 0
-        for r in radii[1:]:
-            if not pending.any():
-                break
-            nxt = _single_radius(CellIndex(pts, r), active=pending, **kw)
-            take = pending & (nxt["chi2_pass"] == 1)
-            for k in fields:
-                fields[k][take] = nxt[k][take]
-            chosen[take] = r
-            pending &= ~take
+              block_size=block_size)
+    n = pts.shape[0]
+    if automatic:
+        steps = len(radii)
+
+        def run(r, active):
+            k = radii.index(r)
+            prog = None if progress is None else (
+                lambda done, total: progress(k * total + done, steps * total))
+            idx = index if k == 0 else CellIndex(pts, r)
+            return _single_radius(idx, active=active, progress=prog, **kw)
+
+        fields, chosen = walk_ladder(run, radii, n=n, alpha=alpha, power=power)
         fields["radius"] = chosen
-    return CurvatureResult(fields=fields, radius=radii[0] if len(radii) == 1 else radii,
-                           sigma=float(sigma), sigma_estimated=estimated, alpha=alpha, test=test,
-                           frame=frame, noise=noise, min_neighbors=int(min_neighbors),
-                           minimal_detectable=bool(minimal_detectable))
+        if progress is not None:
+            progress(n, n)
+    else:
+        fields = _single_radius(index, progress=progress, **kw)
+        if len(radii) > 1:
+            chosen = np.full(n, radii[0])
+            pending = fields["chi2_pass"] == 0
+            for r in radii[1:]:
+                if not pending.any():
+                    break
+                nxt = _single_radius(CellIndex(pts, r), active=pending, **kw)
+                take = pending & (nxt["chi2_pass"] == 1)
+                for k in fields:
+                    fields[k][take] = nxt[k][take]
+                chosen[take] = r
+                pending &= ~take
+            fields["radius"] = chosen
+    return CurvatureResult(fields=fields, radius=radii[0] if len(radii) == 1 and not automatic
+                           else radii, sigma=float(sigma), sigma_estimated=estimated,
+                           alpha=alpha, test=test, frame=frame, noise=noise,
+                           min_neighbors=int(min_neighbors),
+                           minimal_detectable=bool(minimal_detectable),
+                           automatic=automatic, power=float(power) if automatic else None)

@@ -38,7 +38,7 @@ register_field_descriptions(FIELDS)
 OPTIONAL_FIELDS = {
     "K_min": ("float64", "minimal detectable |K| (eq. 19)"),
     "H_min": ("float64", "minimal detectable |H| (eq. 19)"),
-    "radius": ("float64", "bandwidth chosen (multi-scale)"),
+    "radius": ("float64", "radius chosen per point (automatic scale, multi-scale)"),
 }
 register_field_descriptions(OPTIONAL_FIELDS)
 
@@ -71,6 +71,10 @@ class CurvatureResult:
         Smallest neighbourhood a quadric was fitted on.
     minimal_detectable : bool
         Whether ``K_min`` and ``H_min`` were computed.
+    automatic : bool
+        True when the radius was chosen per point (`radius` is then the ladder).
+    power : float or None
+        Detection probability of the automatic scale.
     """
 
     fields: dict
@@ -84,12 +88,19 @@ class CurvatureResult:
     noise: str = "z"
     min_neighbors: int = 7
     minimal_detectable: bool = False
+    automatic: bool = False
+    power: float | None = None
 
     @property
     def params(self) -> dict:
         """The parameters actually used (estimates included): what ``--summary-json`` writes."""
         radius = self.radius if isinstance(self.radius, float) else list(self.radius)
-        return {"radius": radius, "sigma": self.sigma, "sigma_estimated": self.sigma_estimated,
+        scale = {}
+        if self.automatic:
+            scale = {"radius": "auto", "scales": radius, "power": self.power,
+                     **self.radius_stats()}
+            radius = "auto"
+        return {**scale, "radius": radius, "sigma": self.sigma, "sigma_estimated": self.sigma_estimated,
                 "alpha": self.alpha, "test": str(self.test), "frame": str(self.frame),
                 "noise": str(self.noise), "min_neighbors": self.min_neighbors,
                 "minimal_detectable": self.minimal_detectable}
@@ -105,6 +116,19 @@ class CurvatureResult:
         spec = {**FIELDS, **OPTIONAL_FIELDS}
         return {k: np.asarray(v, dtype=spec[k][0]) for k, v in self.fields.items()}
 
+    def radius_stats(self) -> dict:
+        """Median, 10 % and 90 % quantiles of the chosen radius over the fitted points (empty
+        without a per-point radius)."""
+        r = self.fields.get("radius")
+        if r is None:
+            return {}
+        ok = np.asarray(self.fields["status"]) != FitStatus.TOO_FEW_NEIGHBORS
+        r = np.asarray(r)[ok] if ok.any() else np.asarray(r)
+        if r.size == 0:
+            return {}
+        q10, q50, q90 = np.quantile(r, [0.1, 0.5, 0.9])
+        return {"radius_median": float(q50), "radius_p10": float(q10), "radius_p90": float(q90)}
+
     def counts(self):
         """Counts per surface type and per status reason."""
         st = self.fields["surface_type"]
@@ -117,10 +141,17 @@ class CurvatureResult:
         """A one-screen text summary (what the CLI prints)."""
         n = len(self)
         c = self.counts()
-        rad = self.radius if isinstance(self.radius, float) else ", ".join(map(str, self.radius))
+        rad = (f"{self.radius:.6g}" if isinstance(self.radius, float)
+               else ", ".join(f"{r:.6g}" for r in self.radius))
+        if self.automatic:
+            st = self.radius_stats()
+            rad = (f"automatic {st.get('radius_median', float('nan')):.6g} (median; 10-90 %: "
+                   f"{st.get('radius_p10', float('nan')):.6g}-{st.get('radius_p90', float('nan')):.6g}"
+                   f"; ladder {rad})")
         lines = [
             f"{n} points, radius {rad}, frame {self.frame}, test {self.test}, alpha {self.alpha}",
-            f"sigma {self.sigma:.6g}" + (" (estimated from the data)" if self.sigma_estimated else ""),
+            f"sigma {self.sigma:.6g} along {self.noise}"
+            + (" (estimated from the data)" if self.sigma_estimated else ""),
             f"median neighbours {np.median(self.fields['neighbors']):.0f}",
             "surface types:",
         ]

@@ -18,8 +18,7 @@ def face_radius_table(scene, result):
     ``(face name, true radius, recovered radius, points used)``.
     """
     rows = []
-    radius = result.radius if isinstance(result.radius, float) else result.radius[0]
-    interior = (scene.edge_distance > radius) & (result["chi2_pass"] == 1)
+    interior = _interior(scene, result) & (result["chi2_pass"] == 1)
     for fid, info in enumerate(scene.meta["faces"]):
         if info.get("kind") != "cylinder" or not info.get("n_points"):
             continue
@@ -33,8 +32,17 @@ def face_radius_table(scene, result):
     return rows
 
 
-def run_demo(outdir: Path, *, sigma=0.015, radius=0.2, seed=0):
-    """Generate the agpart-like scan, run :func:`lidarstat.features.curvature`, write results."""
+def _interior(scene, result):
+    """Points farther from every edge than their neighbourhood's radius."""
+    if "radius" in result.fields:
+        return scene.edge_distance > result["radius"]
+    radius = result.radius if isinstance(result.radius, float) else result.radius[0]
+    return scene.edge_distance > radius
+
+
+def run_demo(outdir: Path, *, sigma=0.015, radius=None, seed=0):
+    """Generate the agpart-like scan, run :func:`lidarstat.features.curvature` (at the
+    automatic scale unless `radius` is given), write results."""
     from ..features import curvature
     from ..io import PointCloud, write
     from ..synth import make_agpart
@@ -60,13 +68,19 @@ def run_demo(outdir: Path, *, sigma=0.015, radius=0.2, seed=0):
                        title="surface type (tested)")
     plot_surface_types(outdir / "surface_type_truth.png", xyz, scene.surface_type,
                        title="surface type (truth)")
-    print(f"agpart-like range scan: {len(xyz)} points, noise sigma {sigma} dm, radius {radius} dm")
+    if radius is None:
+        st = res.radius_stats()
+        scale = (f"automatic radius {st['radius_median']:.3g} dm (median; 10-90 %: "
+                 f"{st['radius_p10']:.3g}-{st['radius_p90']:.3g} dm)")
+    else:
+        scale = f"radius {radius} dm"
+    print(f"agpart-like range scan: {len(xyz)} points, noise sigma {sigma} dm, {scale}")
     print(res.summary())
     print("cylinder radii from the median H of accepted interior points:")
     for name, true_r, r, n in face_radius_table(scene, res):
         print(f"  {name:<12s} true {true_r:.3f} dm  recovered {r:.3f} dm  ({n} points)")
-    agree = np.mean(res["surface_type"][scene.edge_distance > radius]
-                    == scene.surface_type[scene.edge_distance > radius])
+    inner = _interior(scene, res)
+    agree = np.mean(res["surface_type"][inner] == scene.surface_type[inner])
     print(f"surface type equals the truth on {100 * agree:.1f}% of interior points")
     print(f"wrote {las} and K.png, H.png, chi2.png, surface_type.png, surface_type_truth.png "
           f"in {outdir}")

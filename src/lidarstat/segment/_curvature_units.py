@@ -15,15 +15,29 @@ import numpy as np
 
 from .._shared._deprecate import renamed_parameters
 from .._shared.validation import check_points, check_scalar
-from ..neighbors import radius_neighbors
-from ..neighbors import check_copies
-from ._grow import components, relabel
+from ..features import SurfaceType
+from ..neighbors import check_copies, radius_neighbors
+from . import _unit_merge_kernels as _mk
+from ._grow import relabel
 from ._result import Segmentation, segment_table
+
+#: Smallest unit whose merges are tested (a plane test needs degrees of freedom).
+MERGE_MIN_POINTS = 10
 
 
 @renamed_parameters(min_size="min_points")
-def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_points=30):
-    """Raw clusters of one HK type with agreeing normals.
+def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_points=30,
+                    merge_alpha=0.001, sensor=None):
+    """Raw clusters of one HK type with agreeing normals, merged only where the union
+    passes the model test.
+
+    Region growing is a union-find over the accepted edges of the growth graph, the most
+    similar normals first. The union of two planar units of at least
+    :data:`MERGE_MIN_POINTS` points each is refused when each passes the plane test and
+    their union fails it: the orthogonal-regression residual sum of squares over its
+    expectation, ``lambda_min / (sigma^2 mean_i (d_i . n)^2)``, against chi2(n - 3) at
+    `merge_alpha` (``d_i`` the noise direction of the curvature run). Two faces meeting
+    at a crease flatter than `max_angle` thus stay two units.
 
     Parameters
     ----------
@@ -37,6 +51,10 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_points=30)
         Largest angle between the normals of two neighbours, degrees.
     min_points : int
         Smallest cluster kept.
+    merge_alpha : float
+        Level of the plane test of a merge.
+    sensor : (3,) array_like, optional
+        Scanner position, for range noise.
 
     Returns
     -------
@@ -45,15 +63,44 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_points=30)
     types : (C,) ndarray of uint8
         HK type of each cluster.
     """
+    return _units(points, curv, grow_radius=grow_radius, max_angle=max_angle,
+                  min_points=min_points, merge_alpha=merge_alpha, sensor=sensor)[:2]
+
+
+def _units(points, curv, *, grow_radius, max_angle, min_points, merge_alpha, sensor):
+    """Labels, types and the number of refused merges of :func:`curvature_units`."""
+    from ..features import noise_directions
+    from ..stats import chi2_critical
+
+    pts = np.asarray(points, dtype=np.float64)
     f = curv.fields
     st = np.asarray(f["surface_type"])
     ok = (st > 0) & (np.asarray(f["chi2_pass"]) > 0)
     nrm = np.c_[f["NormalX"], f["NormalY"], f["NormalZ"]]
-    nbh = radius_neighbors(points, grow_radius, dim=3)
+    nbh = radius_neighbors(pts, grow_radius, dim=3)
     src, dst = nbh.edges()
     cosang = np.abs(np.einsum("ij,ij->i", nrm[src], nrm[dst]))
-    edge_ok = (st[src] == st[dst]) & (cosang >= np.cos(np.radians(max_angle)))
-    labels = components(nbh, edge_ok=edge_ok, mask=ok)
+    edge_ok = (ok[src] & ok[dst] & (st[src] == st[dst])
+               & (cosang >= np.cos(np.radians(max_angle))))
+    keep = np.flatnonzero(edge_ok)
+    keep = keep[np.argsort(-cosang[keep], kind="stable")]
+    local = pts - pts.mean(axis=0)
+    noise = str(getattr(curv, "noise", "z"))
+    if noise == "range" and sensor is None:
+        noise = "normal"
+    dirs = noise_directions(noise, pts.shape[0], points=pts, sensor=sensor)
+    noise_normal = dirs is None
+    if noise_normal:
+        dirs = np.zeros((pts.shape[0], 3))
+    n_max = max(int(ok.sum()), 4)
+    crit = np.asarray(chi2_critical(merge_alpha, np.arange(1, n_max + 1)), dtype=np.float64)
+    crit = np.r_[np.inf, crit]  # index = degrees of freedom
+    parent = np.arange(pts.shape[0], dtype=np.int64)
+    refused = _mk.grow_tested(src[keep].astype(np.int64), dst[keep].astype(np.int64), local,
+                              np.ascontiguousarray(dirs), noise_normal,
+                              st == SurfaceType.PLANAR, float(curv.sigma) ** 2, crit,
+                              MERGE_MIN_POINTS, parent)
+    labels = np.where(ok, parent + 1, 0)
     labels = relabel(labels, max(int(min_points), 1))
     c = int(labels.max()) if labels.size else 0
     types = np.zeros(c, dtype=np.uint8)
@@ -61,22 +108,23 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_points=30)
         lab = labels[labels > 0]
         # the common type of each cluster (all members share it by construction)
         types[lab - 1] = st[labels > 0]
-    return labels, types
+    return labels, types, int(refused)
 
 
 @renamed_parameters(min_size="min_points", threshold="search")
-def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
+def segment_curvature(points, *, radius=None, sigma=None, alpha=0.05, max_angle=10.0,
                       grow_radius=None, min_points=30, refine=False, search=None,
                       w_radius=None, fs_alpha=0.001, curv=None,
-                      frame="z", noise=None, sensor=None):
+                      frame="pca", noise=None, sensor=None, merge_alpha=0.001):
     """Segment by tested curvature classes, optionally refined by SAR-FS (seed 000).
 
     Parameters
     ----------
     points : (N, 3) array_like
         Coordinates; heights are z (the SAR refinement models z as a function of E, N).
-    radius : float
-        Curvature bandwidth (3-D sphere).
+    radius : float, optional
+        Curvature bandwidth (3-D sphere); default the automatic scale of
+        :func:`lidarstat.features.curvature` (per point).
     sigma : float, optional
         Noise; estimated when omitted.
     alpha : float
@@ -84,25 +132,28 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
     max_angle : float
         Normal agreement for region growing, degrees.
     grow_radius : float, optional
-        Growth graph radius (default radius / 2).
+        Growth graph radius (default radius / 2; at the automatic scale half the smallest
+        radius of the ladder, 1.5 point spacings).
     min_points : int
         Smallest unit.
     refine : bool
         Refine the raw clusters by SAR-FS (polynomial order 1 for planar units, 2 for
         the others) and intersect adjacent surfaces.
     search, w_radius, fs_alpha
-        Refinement settings (:func:`refine_raw_clusters`); defaults radius and radius / 2.
+        Refinement settings (:func:`refine_raw_clusters`); defaults radius and radius / 2
+        (at the automatic scale, the median chosen radius).
     curv : CurvatureResult, optional
         Precomputed curvature of `points`.
-    frame : {'z', 'auto', 'pca'}
+    frame : {'pca', 'auto', 'z'}
         Local frame of the curvature quadrics (:func:`lidarstat.features.curvature`); with
-        'auto' or 'pca' walls get tested classes too. In the refinement, units more than
+        'pca' or 'auto' walls get tested classes too. In the refinement, units more than
         70 degrees from horizontal are modelled in their own plane's frame (table column
         ``frame`` 1; see :func:`refine_cluster`).
     noise, sensor
-        Direction of the noise and scanner position (:func:`lidarstat.features.curvature`);
-        the default airborne noise along z gives a wall no height noise, so walls need
-        ``noise='normal'`` (isotropic) or a `sensor` ('range').
+        Direction of the noise and scanner position (:func:`lidarstat.features.curvature`).
+    merge_alpha : float
+        Level of the plane test that refuses a merge of two planar units
+        (:func:`curvature_units`).
 
     Returns
     -------
@@ -127,22 +178,34 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
     func = "segment_curvature"
     points = check_points(points, min_points=10)
     check_copies(points, what=func)  # neighbors/_duplicates.py
-    radius = check_scalar(radius, "radius", func=func, low=0.0)
+    if radius is not None:
+        radius = check_scalar(radius, "radius", func=func, low=0.0)
+    merge_alpha = check_scalar(merge_alpha, "merge_alpha", func=func, low=0.0, high=1.0)
     if curv is None:
         curv = curvature(points, radius=radius, sigma=sigma, alpha=alpha, frame=frame,
                          noise=noise, sensor=sensor)
+    if radius is None:  # the scale the curvature run chose
+        scales = curv.radius if isinstance(curv.radius, tuple) else (curv.radius,)
+        if "radius" in curv.fields:
+            radius = float(np.median(curv.fields["radius"]))
+            small = float(min(scales))
+        else:
+            radius = small = float(max(scales) if isinstance(curv.radius, tuple) else curv.radius)
+    else:
+        small = radius
     max_angle = check_scalar(max_angle, "max_angle", func=func, low=0.0, high=180.0,
                              closed="right")
     min_points = check_scalar(min_points, "min_points", func=func, low=1, closed="left",
                               integer=True)
-    grow_radius = (radius / 2.0 if grow_radius is None else
+    grow_radius = (small / 2.0 if grow_radius is None else
                    check_scalar(grow_radius, "grow_radius", func=func, low=0.0))
     if search is not None:
         search = check_scalar(search, "search", func=func, low=0.0)
     if w_radius is not None:
         w_radius = check_scalar(w_radius, "w_radius", func=func, low=0.0)
-    labels, types = curvature_units(points, curv, grow_radius=grow_radius, max_angle=max_angle,
-                                    min_points=min_points)
+    labels, types, refused = _units(points, curv, grow_radius=grow_radius,
+                                    max_angle=max_angle, min_points=min_points,
+                                    merge_alpha=merge_alpha, sensor=sensor)
     st = np.asarray(curv.fields["surface_type"]).astype(np.uint8)
     if not refine:
         table = segment_table(labels, points)
@@ -150,7 +213,8 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
         return Segmentation(labels, table, None, {"surface_type": st}, "curvature",
                             {"radius": radius, "max_angle": max_angle,
                              "grow_radius": grow_radius, "alpha": alpha,
-                             "min_points": min_points, **_curvature_params(curv)})
+                             "min_points": min_points, "merge_alpha": merge_alpha,
+                             "merges_refused": refused, **_curvature_params(curv)})
     from ._sar_units import refine_raw_clusters
 
     degrees = np.where(types == 1, 1, 2)
@@ -165,6 +229,7 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
     seg.fields["surface_type"] = st
     seg.method = "curvature+sar"
     seg.params.update({"radius": radius, "max_angle": max_angle, "grow_radius": grow_radius,
+                       "merge_alpha": merge_alpha, "merges_refused": refused,
                        **_curvature_params(curv)})
     return seg
 
@@ -172,4 +237,8 @@ def segment_curvature(points, *, radius, sigma=None, alpha=0.05, max_angle=10.0,
 def _curvature_params(curv) -> dict:
     """What the curvature step used (its estimate of sigma included)."""
     p = getattr(curv, "params", {})
-    return {k: p[k] for k in ("sigma", "sigma_estimated", "noise", "frame", "test") if k in p}
+    out = {k: p[k] for k in ("sigma", "sigma_estimated", "noise", "frame", "test", "scales",
+                             "radius_median") if k in p}
+    if p.get("radius") == "auto":
+        out["curvature_radius"] = "auto"
+    return out
