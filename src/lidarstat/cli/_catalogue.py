@@ -17,7 +17,9 @@ import sys
 import time
 from pathlib import Path
 
+from . import _catalogue_methods as _methods
 from . import _options as opt
+from ._catalogue_reports import REPORTS, write_area_report, write_report
 
 __all__ = ["CATALOGUE_OPTIONS", "TILE_METHODS", "install"]
 
@@ -141,7 +143,13 @@ def _moments_fields(args, extra):
 TILE_METHODS = {
     "curvature": (_curvature_buffer, _curvature_fields, _curvature_prepare),
     "moments": (_moments_buffer, _moments_fields, _moments_prepare),
+    "covariance": _methods.COVARIANCE,
+    "ridges": _methods.RIDGES,
+    "segment": _methods.SEGMENT,
 }
+
+#: Options of one file's run that a catalogue replaces by files beside each tile's output.
+_ONE_FILE_ONLY = {"ridges": ("lines",), "segment": ("table", "lines", "diagnostics")}
 
 
 # ------------------------------------------------------------------------ the command
@@ -161,6 +169,8 @@ def _run_catalogue(args, command):
 
     _refuse(args, ("tile", "chunk_points"),
             "not with a catalogue of tiles (the catalogue is already tiled)")
+    _refuse(args, _ONE_FILE_ONLY.get(command, ()),
+            "not with a catalogue of tiles (each tile's is written beside its output)")
     cat = Catalogue(args.input)
     out = Path(args.output)
     if out.exists() and not out.is_dir():
@@ -207,8 +217,13 @@ def _run_catalogue(args, command):
             mosaic = write_vrt(dtm / "dtm.vrt", [t for t in tiles if t.exists()])
         if not args.quiet:
             print(f"terrain model: {mosaic}")
+    if report is None and getattr(args, "report", None) and command in REPORTS:
+        report = Path(args.report)
     if report is not None:
-        page = _area_report(report, args, cat, runs, buffer, seconds, mosaic)
+        if command == "moments":
+            page = _area_report(report, args, cat, runs, buffer, seconds, mosaic)
+        else:
+            page = write_area_report(report, args, cat, runs, buffer, seconds)
         if not args.quiet:
             print(f"report: {page}")
     if args.summary_json:
@@ -265,7 +280,27 @@ def _dispatch(run_one, command):
         args.input = inputs[0]
         _refuse(args, CATALOGUE_OPTIONS, "only with a catalogue of tiles (IN a folder, a "
                 "glob or several files)")
-        return run_one(args)
+        folder = getattr(args, "report", None) if command in REPORTS else None
+        if folder is not None:
+            from .._shared._outputs import Output
+
+            from ._app import check_plan
+
+            check_plan([args.input], Output("--report", Path(folder), "folder",
+                                            members=("index.html",)))
+        t0 = time.perf_counter()
+        if folder is None:
+            return run_one(args)
+        from .._shared._atomic import output_group
+
+        with output_group(defer=False):  # the report reads the output back
+            status = run_one(args)
+        if status == 0 and folder is not None:
+            page = write_report(folder, args, Path(args.output),
+                                seconds=time.perf_counter() - t0)
+            if not args.quiet:
+                print(f"report: {page}")
+        return status
 
     return run
 
@@ -294,8 +329,46 @@ def install(sub) -> None:
                        "stopped run goes on where it stopped)")
         if not any(a.dest == "scheduler" for a in s._actions):
             add_workers(g)
+        if command in REPORTS:
+            s.add_argument("--report", default=None, metavar="DIR",
+                           help="write an HTML report into DIR: a plan-view map of the "
+                           "results, their fields and where the tests were not significant "
+                           "(with a catalogue: one page for the area, one per tile)")
         g.add_argument("--address", default=None,
                        help="Dask distributed scheduler to run the tiles on "
                        "(tcp://host:8786; with --scheduler dask); every worker must see "
                        "IN and OUT")
         s.set_defaults(func=_dispatch(s.get_default("func"), command))
+
+
+def run_info(args) -> int:
+    """``lidarstat info`` of a catalogue: tiles, points, extents, CRS consistency, gaps
+    and overlaps; ``--tindex FILE.geojson`` writes the tile index (PDAL's ``tindex``)."""
+    import json
+
+    from ..pipeline import Catalogue
+
+    cat = Catalogue(args.file if len(args.file) > 1 else args.file[0], one_crs=False)
+    d = cat.describe()
+    if args.tindex:
+        d["tindex"] = str(cat.write_tindex(args.tindex))
+    if args.json:
+        print(json.dumps(d, indent=2, default=str))
+        return 0
+    x0, y0, x1, y1 = d["bounds"]
+    crs = ("one CRS" if d["crs_count"] == 1 else "no CRS" if d["crs_count"] == 0 else
+           f"{d['crs_count']} different CRSs: not usable as one catalogue")
+    lines = [f"catalogue: {d['tiles']} tiles, {d['points']} points ({d['copc_tiles']} COPC)",
+             f"  extent x {x0:.3f} .. {x1:.3f}, y {y0:.3f} .. {y1:.3f}, "
+             f"z {d['zmin']:.3f} .. {d['zmax']:.3f}",
+             f"  {crs}",
+             f"  area of the bounding box covered by no tile {100 * d['uncovered_share']:.1f} %, "
+             f"by several {100 * d['overlap_share']:.1f} %"]
+    for f in d["files"]:
+        b = f["bounds"]
+        lines.append(f"  {Path(f['path']).name}: {f['points']} points, x {b[0]:.2f} .. "
+                     f"{b[2]:.2f}, y {b[1]:.2f} .. {b[3]:.2f}")
+    if args.tindex:
+        lines.append(f"tile index: {d['tindex']}")
+    print("\n".join(lines))
+    return 0
