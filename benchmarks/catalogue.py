@@ -6,7 +6,9 @@ Two measurements, each a ``lidarstat`` process as a user runs it:
   into tiles of 80 m (``lidarstat.pipeline.write_tiles``); ``moments`` on the catalogue with several buffers against
   ``moments`` on the whole file: the share of points with the same class, and with the
   same ground (2, 11) / object decision. ``curvature`` likewise, whose answer is local
-  (its share must be 1 with the default buffer, the radius).
+  (its share must be 1 with the default buffer, the radius). ``segment --method
+  covariance`` on the tiles (default buffer) against the whole file: purity and
+  completeness of the segments (the cuts at tile borders lower the completeness).
 * ``--points N``: a synthetic airborne catalogue of N points in tiles of
   ``--tile-points`` points (10 points/m2: the cloud of ``bench_moments.py``), classified
   by ``lidarstat moments tiles/ out/ --dtm dtm/``: wall time, seconds per million
@@ -80,7 +82,7 @@ def agreement(tmp: Path) -> dict:
     secs, mem = lidarstat("moments", DELFT, tmp / "whole.laz", "--no-report", "-q")
     wx, wc = _classes([tmp / "whole.laz"], "classification")
     rows["moments whole file"] = {"seconds": secs, "peak_mib": mem}
-    for buffer in (0, 32, 64, 128):
+    for buffer in (0, 32, 64, 128, 192):
         out = tmp / f"moments_{buffer}"
         secs, mem = lidarstat("moments", tmp / "tiles", out, "--buffer", buffer,
                               "--no-report", "-q")
@@ -104,9 +106,41 @@ def agreement(tmp: Path) -> dict:
     tx, tc = _classes(sorted((tmp / "curv").glob("*.laz")), "surface_type")
     rows["curvature buffer = radius"] = {"seconds": secs, "peak_mib": mem,
                                          "same_class": float((tc == wc).mean())}
+    rows.update(segment_agreement(tmp))
     return {"data": str(DELFT.relative_to(DELFT.parents[2])),
             "tiles": len(list((tmp / "tiles").glob("*.laz"))),
             "points": len(src.xyz), "runs": rows}
+
+
+def _best_overlap(a, b):
+    """Share of points in the segment of `b` that overlaps most with their segment of
+    `a` (points in no segment in both agree)."""
+    pairs, counts = np.unique(np.c_[a, b], axis=0, return_counts=True)
+    best = {}
+    for (x, y), c in zip(pairs.tolist(), counts.tolist()):
+        if x == 0 or y == 0:
+            best[("none", x)] = best.get(("none", x), 0) + (c if x == y else 0)
+        else:
+            best[x] = max(best.get(x, 0), c)
+    return sum(best.values()) / len(a)
+
+
+def segment_agreement(tmp: Path) -> dict:
+    """``segment --method covariance`` on the tiles against the whole file: purity (a
+    tile's segment lies in one whole-file segment) and completeness (a whole-file
+    segment lies in one tile segment; the cuts at tile borders lower it)."""
+    opts = ["--method", "covariance", "--radius", "1.5", "--sigma", "0.03"]
+    secs, mem = lidarstat("segment", DELFT, tmp / "whole_s.laz", *opts, "-q")
+    wx, wc = _classes([tmp / "whole_s.laz"], "segment_id")
+    rows = {"segment whole file": {"seconds": secs, "peak_mib": mem}}
+    secs, mem = lidarstat("segment", tmp / "tiles", tmp / "seg", *opts, "-q")
+    tx, tc = _classes(sorted((tmp / "seg").glob("*.laz")), "segment_id")
+    assert np.array_equal(tx, wx)
+    rows["segment tiles, default buffer"] = {
+        "seconds": secs, "peak_mib": mem, "purity": _best_overlap(tc, wc),
+        "completeness": _best_overlap(wc, tc),
+        "same_in_a_segment": float(((tc > 0) == (wc > 0)).mean())}
+    return rows
 
 
 def tile_cloud(x0, y0, n, seed):

@@ -33,7 +33,6 @@ def _run(args, capsys):
 
 
 @pytest.mark.parametrize("seed, neighbourhood", [(0, ["--radius", "1.5"]),
-                                                 (1, ["--radius", "2"]),
                                                  (2, ["--k", "20"])])
 def test_covariance_on_a_catalogue_equals_the_whole_file(tmp_path, capsys, seed,
                                                          neighbourhood):

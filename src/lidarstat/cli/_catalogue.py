@@ -85,14 +85,66 @@ def _curvature_fields(args, extra):
 
 
 def _moments_prepare(args, cat):
-    """Where each tile's terrain model and report go (named after its output)."""
+    """Where each tile's terrain model and report go (named after its output), and the
+    road cut decided once for the area."""
     outputs = cat.outputs(args.output, args.template)
     if args.dtm:
         Path(args.dtm).mkdir(parents=True, exist_ok=True)
     report = None
     if not args.no_report:
         report = Path(args.report) if args.report else Path(args.output) / "report"
-    return {"outputs": {f.path: p for f, p in zip(cat.files, outputs)}, "report": report}
+    extra = {"outputs": {f.path: p for f, p in zip(cat.files, outputs)}, "report": report}
+    if not args.no_intensity:
+        extra["road_threshold"] = _area_road_cut(args, cat)
+    return extra
+
+
+#: Points of the sample on which a catalogue's road cut is decided (every tile thinned
+#: by one step; the whole area when it holds fewer points).
+ROAD_SAMPLE_POINTS = 2_000_000
+
+
+def _area_road_cut(args, cat):
+    """The road cut of the whole area: ``moments`` on every tile thinned to at most
+    :data:`ROAD_SAMPLE_POINTS` points in all (the whole area when smaller); -inf when
+    the area's ground intensity has no road cluster. Each tile would otherwise cut its
+    own ground's intensity, and a tile with little road finds another cut or none."""
+    import numpy as np
+
+    from ..classify import moments
+    from ..io import linear_units, read
+
+    step = max(1, -(-cat.n_points // ROAD_SAMPLE_POINTS))
+    names = ("intensity", "number_of_returns", "return_number")
+    xyz, attrs = [], {n: [] for n in names}
+    for f in cat.files:
+        c = read(f.path)
+        xyz.append(c.xyz[::step])
+        for n in names:
+            a = c.attributes.get(n)
+            attrs[n].append(None if a is None else np.asarray(a)[::step])
+    attrs = {n: (None if any(a is None for a in v) else np.concatenate(v))
+             for n, v in attrs.items()}
+    if attrs["intensity"] is None:
+        return None
+    units = linear_units(cat.crs, units=args.units, scale=args.scale, source="catalogue")
+    res = moments(np.concatenate(xyz), attrs["intensity"],
+                  number_of_returns=attrs["number_of_returns"],
+                  return_number=attrs["return_number"], method=args.method,
+                  window=args.window, min_window=args.min_window, alpha=args.alpha,
+                  min_points=args.min_points, cycle=args.cycle, bandwidth=args.bandwidth,
+                  surface_cell=args.surface_cell, elevation_rule=args.elevation_rule,
+                  workers=args.workers, scheduler="threads",
+                  opening_window=args.opening_window, iterations=args.iterations,
+                  units=units, low_noise=not args.no_low_noise, road_rule=args.road_rule,
+                  ground_spread=args.ground_spread, continuity=not args.no_continuity,
+                  rng=args.seed, source="catalogue")
+    cut = res.params["road_threshold"]
+    if not args.quiet:
+        where = "the whole area" if step == 1 else f"every {step}th point of the area"
+        print(f"  road cut {'none (no road cluster)' if cut is None else f'{cut:.6g}'} "
+              f"decided on {where}, used for every tile")
+    return float("-inf") if cut is None else cut
 
 
 def _moments_buffer(args, cat):
@@ -122,7 +174,8 @@ def _moments_fields(args, extra):
             workers=1, scheduler="sync", opening_window=args.opening_window,
             iterations=args.iterations, units=units, low_noise=not args.no_low_noise,
             road_rule=args.road_rule, ground_spread=args.ground_spread,
-            continuity=not args.no_continuity, rng=args.seed, source=str(tile.extent.path))
+            continuity=not args.no_continuity, rng=args.seed, source=str(tile.extent.path),
+            road_threshold=extra.get("road_threshold"))
         stem = Path(extra["outputs"][tile.extent.path]).stem
         if args.dtm:  # the tile's extent, from the ground of the tile and its buffer
             e = tile.extent

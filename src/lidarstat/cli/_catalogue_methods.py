@@ -141,7 +141,7 @@ def _ridges_buffer(args, cat):
 
 def _ridges_prepare(args, cat):
     """One noise sigma for the area (the jets' estimate on the largest tile)."""
-    extra = {"outputs": _outputs(args, cat)}
+    extra = {"outputs": _outputs(args, cat), "offsets": _offsets(cat)}
     if args.sigma is not None:
         return extra
     from ..features import jets
@@ -181,9 +181,16 @@ def _ridges_fields(args, extra):
                      ratio=args.ratio, min_length=args.min_length)
         out = Path(extra["outputs"][tile.extent.path])
         lines = _lines_in_tile(res.lines, tile.extent)
+        # line ids unique over the area, in the points' field and the lines alike
+        offset = extra["offsets"][tile.extent.path]
+        if "line_id" in lines.attributes:
+            lines.attributes["line_id"] = lines.attributes["line_id"] + offset
         lines.write(out.with_name(out.name.split(".")[0] + ".ridges.geojson"),
                     crs=tile.core.crs)
-        return res.to_fields(), {"lines": len(lines)}
+        f = res.to_fields()
+        f["ridge_line"] = np.where(f["ridge_line"] > 0, f["ridge_line"] + offset,
+                                   0).astype(f["ridge_line"].dtype)
+        return f, {"lines": len(lines)}
 
     return fields
 
@@ -214,22 +221,13 @@ def _segment_buffer(args, cat):
     return SEGMENT_REACHES * reach
 
 
+def _offsets(cat) -> dict:
+    """Tile path -> points in the tiles before it: per-tile ids made unique."""
+    return dict(zip((f.path for f in cat.files), cat.point_offsets()))
+
+
 def _segment_prepare(args, cat):
-    extra = {"outputs": _outputs(args, cat), "offsets": dict(zip(
-        (f.path for f in cat.files), cat.point_offsets()))}
-    if args.table:
-        raise_option("--table")
-    if args.lines:
-        raise_option("--lines")
-    return extra
-
-
-def raise_option(name):
-    from ..errors import InvalidParameterError
-
-    raise InvalidParameterError(f"{name}: with a catalogue of tiles each tile's table and "
-                                "lines are written beside its output (OUT/<tile>.segments.csv, "
-                                "OUT/<tile>.lines.geojson)")
+    return {"outputs": _outputs(args, cat), "offsets": _offsets(cat)}
 
 
 def _segment_fields(args, extra):
