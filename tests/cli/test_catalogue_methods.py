@@ -153,3 +153,31 @@ def test_info_reports_a_gap_and_mixed_crs(tmp_path, capsys):
     assert "2 different CRSs" in out
     uncovered = float(out.split("covered by no tile ")[1].split(" %")[0])
     assert 30 < uncovered < 36  # 10 m of 30 m of the box's width
+
+
+def test_an_option_the_tile_function_does_not_pass_is_refused(tmp_path, capsys, monkeypatch):
+    """An option of the one-file command that the catalogue's tile function does not pass
+    on is refused, never ignored (here: as if the tile function did not know --eigen-mode)."""
+    from lidarstat.cli import _catalogue_methods
+
+    _tiles(tmp_path, n=900)
+    every = dict(_catalogue_methods.TILE_OPTIONS)
+    every["covariance"] = every["covariance"] - {"eigen_mode"}
+    monkeypatch.setattr(_catalogue_methods, "TILE_OPTIONS", every)
+    rc = main(["covariance", str(tmp_path / "tiles"), str(tmp_path / "out"), "--radius", "2",
+               "--eigen-mode", "sqrt"])
+    assert rc == 2
+    assert "--eigen-mode: not supported with a catalogue of tiles" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("command, options", [
+    ("covariance", ["--radius", "2", "--eigen-mode", "sqrt", "--curved", "variation"]),
+    ("ridges", ["--radius", "6", "--ratio", "3", "--weight", "none"]),
+    ("curvature", ["--radius", "2", "--frame", "pca", "--minimal-detectable"]),
+])
+def test_every_option_of_the_command_reaches_the_tiles(tmp_path, capsys, command, options):
+    _tiles(tmp_path, n=900)
+    _run([command, tmp_path / "tiles", tmp_path / "out", *options, "--sigma", "0.05", "-q"],
+         capsys)
+    assert len(list((tmp_path / "out").glob("*.laz"))) == 9

@@ -201,6 +201,10 @@ TILE_METHODS = {
     "segment": _methods.SEGMENT,
 }
 
+#: Options of every catalogue run (destinations), whatever the command.
+_RUN_OPTIONS = frozenset({*CATALOGUE_OPTIONS, "scheduler", "workers", "summary_json", "quiet",
+                          "report", "verbose", "tile", "chunk_points", "lines"})
+
 #: Options of one file's run that a catalogue replaces by files beside each tile's output.
 _ONE_FILE_ONLY = {"ridges": ("lines",), "segment": ("table", "lines", "diagnostics")}
 
@@ -224,6 +228,10 @@ def _run_catalogue(args, command):
             "not with a catalogue of tiles (the catalogue is already tiled)")
     _refuse(args, _ONE_FILE_ONLY.get(command, ()),
             "not with a catalogue of tiles (each tile's is written beside its output)")
+    if command in _methods.TILE_OPTIONS:
+        passed = _methods.TILE_OPTIONS[command] | _RUN_OPTIONS
+        _refuse(args, sorted(set(getattr(args, "_given", ())) - passed),
+                "not supported with a catalogue of tiles")
     cat = Catalogue(args.input)
     out = Path(args.output)
     if out.exists() and not out.is_dir():

@@ -36,7 +36,21 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["COVARIANCE", "RIDGES", "SEGMENT", "knn_reach"]
+__all__ = ["COVARIANCE", "RIDGES", "SEGMENT", "TILE_OPTIONS", "knn_reach"]
+
+#: The options each command's tile function passes on (destinations). Any other option
+#: given with a catalogue is refused rather than ignored, so an option added to a command
+#: later is refused on catalogues until its tile function passes it on.
+TILE_OPTIONS = {
+    "curvature": frozenset({"radius", "sigma", "noise", "sensor", "alpha", "test", "frame",
+                            "min_neighbors", "minimal_detectable"}),
+    "covariance": frozenset({"k", "radius", "sensor", "sigma", "alpha", "eigen_mode",
+                             "boundary", "boundary_alpha", "curvature_threshold",
+                             "variance_threshold", "curved", "curved_alpha", "border_band",
+                             "jump_alpha"}),
+    "ridges": frozenset({"radius", "k", "sigma", "alpha", "weight", "sensor", "noise",
+                         "ratio", "min_length"}),
+}
 
 #: Margin on the k-th-neighbour reach measured on one tile, for tiles sparser than it.
 KNN_MARGIN = 1.5
