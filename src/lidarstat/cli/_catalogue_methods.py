@@ -112,7 +112,6 @@ def _covariance_prepare(args, cat):
         return extra
     from ..classify import covariance
     from ..io import read
-
     from .covariance import classification_options
 
     i = _largest(cat)
@@ -127,7 +126,6 @@ def _covariance_prepare(args, cat):
 
 def _covariance_fields(args, extra):
     from ..classify import covariance
-
     from .covariance import classification_options
 
     sigma = extra.get("sigma", args.sigma)

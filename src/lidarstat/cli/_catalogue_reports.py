@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["REPORTS", "write_report", "write_area_report"]
+__all__ = ["REPORTS", "write_area_report", "write_report"]
 
 #: At most this many points are drawn on the maps of one page (a regular subsample).
 MAP_POINTS = 1_500_000

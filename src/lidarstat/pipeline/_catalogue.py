@@ -192,7 +192,7 @@ class Catalogue:
         boxes = [(f.xmin, f.ymin, f.xmax, f.ymax) for f in self.files]
         xs = edges([v for b in boxes for v in (b[0], b[2])])
         ys = edges([v for b in boxes for v in (b[1], b[3])])
-        snap = lambda v, e: e[np.argmin(np.abs(e - v))]  # noqa: E731
+        snap = lambda v, e: e[np.argmin(np.abs(e - v))]
         boxes = [(snap(a, xs), snap(b, ys), snap(c, xs), snap(d, ys)) for a, b, c, d in boxes]
         cx, cy = (xs[1:] + xs[:-1]) / 2, (ys[1:] + ys[:-1]) / 2
         cover = np.zeros((len(cy), len(cx)), int)

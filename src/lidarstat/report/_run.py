@@ -7,8 +7,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ._maps import (ASPRS_COLOURS, plot_class_map, plot_flag_map, plot_hillshade,
-                    plot_segment_map, plot_value_map)
+from ._maps import (
+    ASPRS_COLOURS,
+    plot_class_map,
+    plot_flag_map,
+    plot_hillshade,
+    plot_segment_map,
+    plot_value_map,
+)
 from ._page import ReportPage
 
 __all__ = ["map_resolution", "write_run_report"]
