@@ -181,3 +181,13 @@ def test_every_option_of_the_command_reaches_the_tiles(tmp_path, capsys, command
     _run([command, tmp_path / "tiles", tmp_path / "out", *options, "--sigma", "0.05", "-q"],
          capsys)
     assert len(list((tmp_path / "out").glob("*.laz"))) == 9
+
+
+@pytest.mark.parametrize("command, options, words", [
+    ("ridges", ["--radius", "6"], "used for every tile"),  # one sigma for the area
+    ("segment", ["--method", "covariance", "--sigma", "0.05"], "buffer"),  # k-NN reach
+])
+def test_estimated_sigma_and_knn_reach(tmp_path, capsys, command, options, words):
+    _tiles(tmp_path, n=900)
+    out = _run([command, tmp_path / "tiles", tmp_path / "out", *options], capsys)
+    assert words in out and "9 tiles processed" in out

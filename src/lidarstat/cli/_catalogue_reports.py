@@ -125,12 +125,13 @@ def _read(paths, names, step=1):
 
 def write_report(folder, args, output, *, facts=None, seconds=None) -> Path:
     """The report of one output file (a single run, or one tile of a catalogue)."""
-    from ..io import file_extent
     from ..report import write_run_report
 
     names, describe = REPORTS[args.command]
-    n = file_extent(output).n_points
-    xyz, f = _read([output], names, step=max(1, -(-n // MAP_POINTS)))
+    xyz, f = _read([output], names)
+    n = len(xyz)
+    step = max(1, -(-n // MAP_POINTS))
+    xyz, f = xyz[::step], {k: v[::step] for k, v in f.items()}
     facts = facts or {"input": str(args.input), "output": str(output), "points": n}
     if seconds is not None:
         facts["seconds"] = round(seconds, 1)
