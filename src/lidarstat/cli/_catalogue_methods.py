@@ -14,9 +14,9 @@ Reaches (the buffer that makes the result independent of the tiling):
 
 * ``covariance``: two neighbourhoods. A point's features use its neighbours' points;
   ``CurvatureVariance`` and ``NormalVariation`` use its neighbours' features. With
-  ``--radius`` the reach is ``2 x radius``; with ``--k`` it is twice the largest distance
-  to the k-th neighbour measured on the largest tile, times 1.5 for tiles sparser than
-  that one.
+  ``--radius`` the buffer is ``2 x radius``; with ``--k`` twice the k-th-neighbour
+  reach (:func:`knn_reach`: the largest distance to the k-th neighbour on the largest
+  tile, times 1.5 for tiles sparser than that one).
 * ``ridges``: the jets reach one radius; a ridge point compares its neighbours' jets,
   and the ridge lines are traced through them and kept when at least ``--min-length``
   (two radii by default) long: ``3 x radius`` (with ``--k``, the k-th-neighbour reach).
@@ -24,8 +24,9 @@ Reaches (the buffer that makes the result independent of the tiling):
   a line longer than the buffer is traced in pieces, and the line test's Bonferroni
   count (the cloud's independent neighbourhoods) is the tile's with its buffer.
 * ``segment``: segmentations couple points further than any buffer. Each tile is
-  segmented with a buffer (default: the method's neighbourhood reach times 4, at least
-  the region growing's reach) and its points keep the segments of that run; a surface
+  segmented with a buffer (default: the method's neighbourhood reach times 4, so that
+  the segments near a tile's border grow over the neighbours' points as on the whole
+  area) and its points keep the segments of that run; a surface
   crossing a tile border is cut there into one segment per tile. Segment ids are unique
   over the area: a tile's ids are offset by the points of the tiles before it.
 """
@@ -92,13 +93,27 @@ def _scalar_sigma(sigma, what):
     return float(sigma)
 
 
+def _neighbourhood_reach(args, cat, command):
+    """The reach of ``--radius`` (the largest of several scales) or ``--k``; a scale
+    chosen during the run is not known before it, so a buffer must then be given."""
+    from ..errors import InvalidParameterError
+
+    radius = getattr(args, "radius", None)
+    if isinstance(radius, (list, tuple)):
+        radius = max(radius) if radius else None
+    if isinstance(radius, (int, float)):
+        return float(radius)
+    k = getattr(args, "k", None)
+    if isinstance(k, int):
+        return knn_reach(cat, k)
+    raise InvalidParameterError(f"--buffer: {command} on a catalogue of tiles needs "
+                                "--buffer, --radius or --k (a neighbourhood chosen during "
+                                "the run is not known before the tiles are read)")
+
+
 # -------------------------------------------------------------------------- covariance
-def _covariance_reach(args, cat, extra=None):
-    if args.radius is not None:
-        return args.radius
-    if extra and "knn_reach" in extra:
-        return extra["knn_reach"]
-    return knn_reach(cat, args.k)
+def _covariance_reach(args, cat):
+    return _neighbourhood_reach(args, cat, "covariance")
 
 
 def _covariance_buffer(args, cat):
@@ -144,7 +159,7 @@ COVARIANCE = (_covariance_buffer, _covariance_fields, _covariance_prepare)
 
 # ------------------------------------------------------------------------------ ridges
 def _jet_reach(args, cat):
-    return args.radius if args.radius is not None else knn_reach(cat, args.k)
+    return _neighbourhood_reach(args, cat, "ridges")
 
 
 def _ridges_buffer(args, cat):
