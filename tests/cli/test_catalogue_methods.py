@@ -191,3 +191,13 @@ def test_estimated_sigma_and_knn_reach(tmp_path, capsys, command, options, words
     _tiles(tmp_path, n=900)
     out = _run([command, tmp_path / "tiles", tmp_path / "out", *options], capsys)
     assert words in out and "9 tiles processed" in out
+
+
+def test_a_segmentation_whose_reach_is_chosen_in_the_run_needs_a_buffer(tmp_path, capsys):
+    """SAR picks its bandwidth during the run: its buffer cannot follow it, so a catalogue
+    asks for --radius or --buffer before any work."""
+    _tiles(tmp_path, n=900)
+    rc = main(["segment", str(tmp_path / "tiles"), str(tmp_path / "out"), "--method", "sar"])
+    assert rc == 2
+    assert "needs --radius or --buffer" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
