@@ -6,7 +6,11 @@ Two measurements, each a ``lidarstat`` process as a user runs it:
   into tiles of 80 m (``lidarstat.pipeline.write_tiles``); ``moments`` on the catalogue with several buffers against
   ``moments`` on the whole file: the share of points with the same class, and with the
   same ground (2, 11) / object decision. ``curvature`` likewise, whose answer is local
-  (its share must be 1 with the default buffer, the radius).
+  (its share must be 1 with the default buffer, the radius). ``segment --method
+  covariance`` on the tiles (default buffer) against the whole file: purity and
+  completeness of the segments (the cuts at tile borders lower the completeness).
+* ``--reach``: how far the refits of the ground surface carry the edge of a buffer: one
+  tile's classes against the whole file's for ``--iterations`` 0, 1 and 4.
 * ``--points N``: a synthetic airborne catalogue of N points in tiles of
   ``--tile-points`` points (10 points/m2: the cloud of ``bench_moments.py``), classified
   by ``lidarstat moments tiles/ out/ --dtm dtm/``: wall time, seconds per million
@@ -15,6 +19,7 @@ Two measurements, each a ``lidarstat`` process as a user runs it:
 Usage::
 
     python benchmarks/catalogue.py --agreement --out benchmarks/results_catalogue.json
+    python benchmarks/catalogue.py --reach --out benchmarks/results_catalogue.json
     python benchmarks/catalogue.py --points 50000000 --out benchmarks/results_catalogue.json
 
 Results are merged into the JSON file (one key per measurement).
@@ -80,7 +85,7 @@ def agreement(tmp: Path) -> dict:
     secs, mem = lidarstat("moments", DELFT, tmp / "whole.laz", "--no-report", "-q")
     wx, wc = _classes([tmp / "whole.laz"], "classification")
     rows["moments whole file"] = {"seconds": secs, "peak_mib": mem}
-    for buffer in (0, 32, 64, 128):
+    for buffer in (0, 32, 64, 128, 192):
         out = tmp / f"moments_{buffer}"
         secs, mem = lidarstat("moments", tmp / "tiles", out, "--buffer", buffer,
                               "--no-report", "-q")
@@ -104,9 +109,74 @@ def agreement(tmp: Path) -> dict:
     tx, tc = _classes(sorted((tmp / "curv").glob("*.laz")), "surface_type")
     rows["curvature buffer = radius"] = {"seconds": secs, "peak_mib": mem,
                                          "same_class": float((tc == wc).mean())}
+    rows.update(segment_agreement(tmp))
     return {"data": str(DELFT.relative_to(DELFT.parents[2])),
             "tiles": len(list((tmp / "tiles").glob("*.laz"))),
             "points": len(src.xyz), "runs": rows}
+
+
+def _best_overlap(a, b):
+    """Share of points in the segment of `b` that overlaps most with their segment of
+    `a` (points in no segment in both agree)."""
+    pairs, counts = np.unique(np.c_[a, b], axis=0, return_counts=True)
+    best = {}
+    for (x, y), c in zip(pairs.tolist(), counts.tolist()):
+        if x == 0 or y == 0:
+            best[("none", x)] = best.get(("none", x), 0) + (c if x == y else 0)
+        else:
+            best[x] = max(best.get(x, 0), c)
+    return sum(best.values()) / len(a)
+
+
+def segment_agreement(tmp: Path) -> dict:
+    """``segment --method covariance`` on the tiles against the whole file: purity (a
+    tile's segment lies in one whole-file segment) and completeness (a whole-file
+    segment lies in one tile segment; the cuts at tile borders lower it)."""
+    opts = ["--method", "covariance", "--radius", "1.5", "--sigma", "0.03"]
+    secs, mem = lidarstat("segment", DELFT, tmp / "whole_s.laz", *opts, "-q")
+    wx, wc = _classes([tmp / "whole_s.laz"], "segment_id")
+    rows = {"segment whole file": {"seconds": secs, "peak_mib": mem}}
+    secs, mem = lidarstat("segment", tmp / "tiles", tmp / "seg", *opts, "-q")
+    tx, tc = _classes(sorted((tmp / "seg").glob("*.laz")), "segment_id")
+    assert np.array_equal(tx, wx)
+    rows["segment tiles, default buffer"] = {
+        "seconds": secs, "peak_mib": mem, "purity": _best_overlap(tc, wc),
+        "completeness": _best_overlap(wc, tc),
+        "same_in_a_segment": float(((tc > 0) == (wc > 0)).mean())}
+    return rows
+
+
+def iteration_reach(tile=(1061, 5595), size=80.0, buffer=128.0) -> dict:
+    """How far the ground refits carry the buffer's edge: ``moments`` (in this process)
+    on one tile of the Delft crop with its buffer against the whole file, for several
+    ``iterations``; the tile is the one at the crop's north edge that differs most at a
+    128 m buffer. The road cut is switched off in both runs, so that only the ground
+    differs."""
+    from lidarstat.classify import moments
+
+    src = read(DELFT)
+    xyz = src.xyz
+    att = {k: np.asarray(src.attributes[k])
+           for k in ("intensity", "number_of_returns", "return_number")}
+    key = np.floor(xyz[:, :2] / size).astype(np.int64)
+    core = np.all(key == np.asarray(tile), axis=1)
+    lo, hi = np.asarray(tile) * size - buffer, (np.asarray(tile) + 1) * size + buffer
+    win = np.all((xyz[:, :2] >= lo) & (xyz[:, :2] <= hi), axis=1)
+    idx = np.r_[np.flatnonzero(core), np.flatnonzero(win & ~core)]
+    n = int(core.sum())
+    rows = {}
+    for it in (0, 1, 4):
+        runs = []
+        for rows_ in (slice(None), idx):
+            a = {k: v[rows_] for k, v in att.items()}
+            runs.append(moments(xyz[rows_], a.pop("intensity"), iterations=it,
+                                road_threshold=float("-inf"), **a).classification)
+        whole, tiled = runs[0][idx[:n]], runs[1][:n]
+        ground = np.isin(tiled, (2, 11)) == np.isin(whole, (2, 11))
+        rows[f"iterations {it}"] = {"same_class": float((tiled == whole).mean()),
+                                    "same_ground_object": float(ground.mean())}
+    return {"tile": list(tile), "tile_points": n, "buffer": buffer,
+            "points_with_buffer": int(idx.size), "runs": rows}
 
 
 def tile_cloud(x0, y0, n, seed):
@@ -141,6 +211,8 @@ def scale(tmp: Path, n: int, tile_points: int) -> dict:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--agreement", action="store_true")
+    ap.add_argument("--reach", action="store_true",
+                    help="the ground refits' reach on one tile (iterations 0, 1, 4)")
     ap.add_argument("--points", type=int, default=None)
     ap.add_argument("--tile-points", type=int, default=1_000_000)
     ap.add_argument("--out", default=None)
@@ -152,6 +224,9 @@ def main(argv=None):
         if args.agreement:
             results["agreement"] = agreement(tmp / "agreement")
             print(json.dumps(results["agreement"], indent=1))
+        if args.reach:
+            results["agreement_iterations"] = iteration_reach()
+            print(json.dumps(results["agreement_iterations"], indent=1))
         if args.points:
             key = f"scale_{args.points}"
             results[key] = scale(tmp / "scale", args.points, args.tile_points)

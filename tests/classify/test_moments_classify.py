@@ -407,3 +407,24 @@ def test_classes_of_a_real_tile_do_not_depend_on_the_order(shared_data):
     p = np.random.default_rng(0).permutation(len(c.xyz))
     b = moments(c.xyz[p], np.asarray(c["intensity"])[p], **{k: v[p] for k, v in kw.items()})
     np.testing.assert_array_equal(a.classification[p], b.classification)
+
+
+def test_a_given_road_threshold_replaces_the_cut_of_the_cloud(rng):
+    """A catalogue decides the road cut once for the area and gives it to every tile:
+    the run's own cut given back changes nothing, -inf means no road, another value
+    moves the road; params hold the cut used."""
+    xyz, inten, nret, rnum, truth = _scene(rng, n=6000)
+    kw = dict(number_of_returns=nret, return_number=rnum)
+    res = moments(xyz, inten, **kw)
+    cut = res.params["road_threshold"]
+    assert 60 < cut < 160  # between the road's and the land's intensities
+    again = moments(xyz, inten, road_threshold=cut, **kw)
+    np.testing.assert_array_equal(again.classification, res.classification)
+    assert again.params["road_threshold"] == cut
+    none = moments(xyz, inten, road_threshold=float("-inf"), **kw)
+    assert ASPRS["road"] not in none.classification
+    road = res.classification == ASPRS["road"]
+    np.testing.assert_array_equal(none.classification[road], ASPRS["ground"])
+    np.testing.assert_array_equal(none.classification[~road], res.classification[~road])
+    with pytest.raises(InvalidParameterError, match="road_threshold"):
+        moments(xyz, inten, road_threshold=float("nan"), **kw)

@@ -66,6 +66,7 @@ def test_moments_catalogue_report_terrain_and_rerun(tmp_path, capsys):
     assert main(args) == 0
     out = capsys.readouterr().out
     assert "4 tiles processed" in out and "report:" in out
+    assert "decided on the whole area, used for every tile" in out  # one road cut
     page = (tmp_path / "out" / "report" / "index.html").read_text()
     assert "classes.png" in page and "terrain.png" in page and "tile_1_1.laz" in page
     assert "tiles/tile_1_1/index.html" in page

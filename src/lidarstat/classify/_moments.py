@@ -52,7 +52,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
             road_rule: RoadRule | str = "antimode", road_cell_points: float = 8.0,
             ground_spread: float = 3.0, continuity: bool = True, rng=0,
             workers: int | None = None, scheduler: str = "threads", units=1.0,
-            source: str | None = None) -> MomentsClassification:
+            source: str | None = None,
+            road_threshold: float | None = None) -> MomentsClassification:
     """Classify points as ground, road, building, vegetation or unclassified without training.
 
     Parameters
@@ -115,6 +116,12 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         After the last cut, ground points in a patch of the lowest-point grid that stands
         above its surroundings on (almost) every side (a roof the surface ran over) become
         objects.
+    road_threshold : float, optional
+        Cut the ground's cell-median intensity at this value instead of deciding the cut
+        from this cloud's ground (the road is the darker side); ``-inf``: no road. A cut
+        decided once for a whole area, given to each tile of a catalogue
+        (``params["road_threshold"]`` holds the cut a run used, None when it found no
+        road).
     rng : int or numpy.random.Generator
         Seed of the dip tests' subsample (samples above 20,000 values) and dequantisation
         (tied values); a Generator gives one seed for every test.
@@ -255,6 +262,7 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     # 5. roads
     road, road_step = road_points(xy, inten, ground, p, road_rule=road_rule,
                                   road_cell_points=road_cell_points,
+                                  threshold=_road_threshold(road_threshold),
                                   first_step=len(steps) + 1)
     if road_step is not None:
         steps.append(road_step)
@@ -272,6 +280,9 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                   intensity=inten is not None, returns=has_returns, low_noise=low_noise,
                   road_rule=road_rule.value, road_cell_points=road_cell_points,
                   ground_spread=ground_spread, continuity=continuity, rng=seed,
+                  road_threshold=(road_threshold if road_threshold is not None else
+                                  None if road_step is None or road_step.choice.cycle is None
+                                  else float(road_step.choice.threshold)),
                   n_low_noise=int(noise.sum()), units={"horizontal_m": ux, "vertical_m": uz})
     # back to the input order, low noise included
     cls, cluster_id, height, ground, cut = _expand(
@@ -296,6 +307,13 @@ def classify_moments(*args, **kwargs) -> MomentsClassification:
     warnings.warn("classify_moments is deprecated; use moments", LidarstatDeprecationWarning,
                   stacklevel=2)
     return moments(*args, **kwargs)
+
+
+def _road_threshold(value):
+    """A given road cut: a finite number, -inf (no road), or None (decided here)."""
+    if value is None or (isinstance(value, float) and value == -np.inf):
+        return value
+    return check_scalar(value, "road_threshold", func=_FUNC)
 
 
 def _seed(rng) -> int:

@@ -193,7 +193,7 @@ def road_cut(values, *, alpha: float = 0.05, rule: RoadRule | str = "antimode",
 
 
 def road_points(xy, intensity, ground, opts, *, road_rule, road_cell_points: float,
-                first_step: int):
+                first_step: int, threshold: float | None = None):
     """Roads: the darker intensity sub-cluster of the whole ground cluster.
 
     Each ground point takes the median intensity of its cell (about `road_cell_points`
@@ -203,7 +203,8 @@ def road_points(xy, intensity, ground, opts, *, road_rule, road_cell_points: flo
     -------
     road : (N,) ndarray of bool
     step : MomentsStep or None
-        The analysis, for the report (None without intensity or enough ground).
+        The analysis, for the report (None without intensity or enough ground, or with a
+        given `threshold`).
     """
     road = np.zeros(ground.size, bool)
     gi = np.flatnonzero(ground)
@@ -211,6 +212,9 @@ def road_points(xy, intensity, ground, opts, *, road_rule, road_cell_points: flo
         return road, None
     smoothed, cells = cell_median(xy[gi], intensity[gi], points_per_cell=road_cell_points,
                                   return_cells=True)
+    if threshold is not None:  # a cut decided for a whole area (a catalogue's tiles)
+        road[gi[smoothed <= threshold]] = True
+        return road, None
     ch, sm, de, dips = road_cut(cells, alpha=opts.alpha, rule=road_rule,
                                 min_points=opts.min_points, smoothing=opts.smoothing,
                                 bandwidth=opts.bandwidth, rng=opts.seed)

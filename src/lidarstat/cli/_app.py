@@ -94,7 +94,11 @@ def write_summary_json(path, meta: dict) -> None:
 # --------------------------------------------------------------------------- commands
 def cmd_info(args):
     from ..io import describe, format_description
+    from ._catalogue import _is_catalogue, run_info
 
+    if _is_catalogue(args.file) or args.tindex:
+        return run_info(args)
+    args.file = args.file[0]
     d = describe(args.file)
     print(json.dumps(d, indent=2, default=str) if args.json else format_description(d))
     return 0
@@ -239,9 +243,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    s = sub.add_parser("info", help="describe a point-cloud file")
-    s.add_argument("file")
+    s = sub.add_parser("info", help="describe a point-cloud file or a catalogue of tiles")
+    s.add_argument("file", nargs="+", metavar="IN",
+                   help="a file; or a folder, a glob or several LAS/LAZ/COPC files: a "
+                   "catalogue of tiles (its tiles, extents, point counts and CRSs)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
+    s.add_argument("--tindex", default=None, metavar="FILE.geojson",
+                   help="write the tile index (one rectangle per file with its name and "
+                   "point count) as GeoJSON, as PDAL's tindex")
     s.set_defaults(func=cmd_info)
 
     s = sub.add_parser("curvature", help="tested local quadric, K, H and HK surface types",

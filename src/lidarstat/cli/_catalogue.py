@@ -17,7 +17,10 @@ import sys
 import time
 from pathlib import Path
 
+from . import _catalogue_methods as _methods
 from . import _options as opt
+from ._catalogue_moments import MOMENTS, area_report
+from ._catalogue_reports import REPORTS, write_area_report, write_report
 
 __all__ = ["CATALOGUE_OPTIONS", "TILE_METHODS", "install"]
 
@@ -102,66 +105,22 @@ def _curvature_fields(args, extra):
     return fields
 
 
-def _moments_prepare(args, cat):
-    """Where each tile's terrain model and report go (named after its output)."""
-    outputs = cat.outputs(args.output, args.template)
-    if args.dtm:
-        Path(args.dtm).mkdir(parents=True, exist_ok=True)
-    report = None
-    if not args.no_report:
-        report = Path(args.report) if args.report else Path(args.output) / "report"
-    return {"outputs": {f.path: p for f, p in zip(cat.files, outputs)}, "report": report}
-
-
-def _moments_buffer(args, cat):
-    from ..io import linear_units
-
-    units = linear_units(cat.crs, units=args.units, scale=args.scale, source="catalogue")
-    return args.window / units.horizontal
-
-
-def _moments_fields(args, extra):
-    from ..classify import moments
-    from ..io import linear_units, write_geotiff
-    from ..pipeline import terrain_model
-    from ..report import write_moments_report
-
-    def fields(tile):
-        core = tile.core
-        units = linear_units(core.crs, units=args.units, scale=args.scale,
-                             header=core.las_header, source=str(tile.extent.path))
-        res = moments(
-            tile.xyz, None if args.no_intensity else tile.attribute("intensity"),
-            number_of_returns=tile.attribute("number_of_returns"),
-            return_number=tile.attribute("return_number"), method=args.method,
-            window=args.window, min_window=args.min_window, alpha=args.alpha,
-            min_points=args.min_points, cycle=args.cycle, bandwidth=args.bandwidth,
-            surface_cell=args.surface_cell, elevation_rule=args.elevation_rule,
-            workers=1, scheduler="sync", opening_window=args.opening_window,
-            iterations=args.iterations, units=units, low_noise=not args.no_low_noise,
-            road_rule=args.road_rule, ground_spread=args.ground_spread,
-            continuity=not args.no_continuity, rng=args.seed, source=str(tile.extent.path))
-        stem = Path(extra["outputs"][tile.extent.path]).stem
-        if args.dtm:  # the tile's extent, from the ground of the tile and its buffer
-            e = tile.extent
-            dtm = terrain_model(tile.xyz, res.classification,
-                                resolution=args.dtm_resolution / units.horizontal,
-                                bounds=(e.xmin, e.ymin, e.xmax, e.ymax), crs=core.crs)
-            write_geotiff(Path(args.dtm) / f"{stem}.tif", dtm)
-        if extra.get("report") is not None:
-            write_moments_report(extra["report"] / "tiles" / stem, res, max_plots=12,
-                                 input_path=tile.extent.path)
-        return res.to_fields(), {}
-
-    return fields
-
-
 #: command -> (buffer(args, catalogue), fields(args, extra) -> tile function,
 #: prepare(args, catalogue) -> extra). The buffer is the default of ``--buffer``.
 TILE_METHODS = {
     "curvature": (_curvature_buffer, _curvature_fields, _curvature_prepare),
-    "moments": (_moments_buffer, _moments_fields, _moments_prepare),
+    "moments": MOMENTS,
+    "covariance": _methods.COVARIANCE,
+    "ridges": _methods.RIDGES,
+    "segment": _methods.SEGMENT,
 }
+
+#: Options of every catalogue run (destinations), whatever the command.
+_RUN_OPTIONS = frozenset({*CATALOGUE_OPTIONS, "scheduler", "workers", "summary_json", "quiet",
+                          "report", "verbose", "tile", "chunk_points", "lines"})
+
+#: Options of one file's run that a catalogue replaces by files beside each tile's output.
+_ONE_FILE_ONLY = {"ridges": ("lines",), "segment": ("table", "lines", "diagnostics")}
 
 
 # ------------------------------------------------------------------------ the command
@@ -181,6 +140,12 @@ def _run_catalogue(args, command):
 
     _refuse(args, ("tile", "chunk_points"),
             "not with a catalogue of tiles (the catalogue is already tiled)")
+    _refuse(args, _ONE_FILE_ONLY.get(command, ()),
+            "not with a catalogue of tiles (each tile's is written beside its output)")
+    if command in _methods.TILE_OPTIONS:
+        passed = _methods.TILE_OPTIONS[command] | _RUN_OPTIONS
+        _refuse(args, sorted(set(getattr(args, "_given", ())) - passed),
+                "not supported with a catalogue of tiles")
     cat = Catalogue(args.input)
     out = Path(args.output)
     if out.exists() and not out.is_dir():
@@ -227,8 +192,13 @@ def _run_catalogue(args, command):
             mosaic = write_vrt(dtm / "dtm.vrt", [t for t in tiles if t.exists()])
         if not args.quiet:
             print(f"terrain model: {mosaic}")
+    if report is None and getattr(args, "report", None) and command in REPORTS:
+        report = Path(args.report)
     if report is not None:
-        page = _area_report(report, args, cat, runs, buffer, seconds, mosaic)
+        if command == "moments":
+            page = area_report(report, args, cat, runs, buffer, seconds, mosaic)
+        else:
+            page = write_area_report(report, args, cat, runs, buffer, seconds)
         if not args.quiet:
             print(f"report: {page}")
     if args.summary_json:
@@ -243,39 +213,6 @@ def _run_catalogue(args, command):
     return 0
 
 
-def _area_report(folder, args, cat, runs, buffer, seconds, mosaic=None):
-    """One page for the area: the classes of every tile on one map, shares per tile, the
-    terrain model's hillshade, and each tile's moment analyses behind a link."""
-    import numpy as np
-
-    from ..io import read, read_geotiff
-    from ..report import ASPRS_COLOURS, write_run_report
-
-    step = max(1, -(-cat.n_points // 1_500_000))  # at most ~1.5M points on the map
-    xyz, cls, rows, links = [], [], [], {}
-    for r in runs:
-        c = read(r.output, fields=["classification"])
-        k = np.asarray(c.attributes["classification"])
-        xyz.append(c.xyz[::step])
-        cls.append(k[::step])
-        codes, n = np.unique(k, return_counts=True)
-        row = {"tile": r.input.name, "points": len(k)}
-        page = folder / "tiles" / r.output.stem / "index.html"
-        if page.exists():
-            links[f"{r.input.name}: moment analyses"] = f"tiles/{r.output.stem}/index.html"
-        row.update({ASPRS_COLOURS.get(int(v), (str(v),))[0]: f"{100 * m / len(k):.1f} %"
-                    for v, m in zip(codes, n)})
-        rows.append(row)
-    facts = {"input": str(args.input), "output": str(args.output), "tiles": len(cat),
-             "points": cat.n_points, "buffer": buffer, "seconds": round(seconds, 1)}
-    params = {k: v for k, v in vars(args).items()
-              if not k.startswith("_") and k not in ("func", "input", "output")}
-    return write_run_report(folder, title=f"lidarstat {args.command}", facts=facts,
-                            params=params, xyz=np.concatenate(xyz),
-                            classes=np.concatenate(cls), tiles=rows, links=links,
-                            dtm=read_geotiff(mosaic) if mosaic is not None else None)
-
-
 def _dispatch(run_one, command):
     def run(args):
         inputs = args.input
@@ -285,7 +222,26 @@ def _dispatch(run_one, command):
         args.input = inputs[0]
         _refuse(args, CATALOGUE_OPTIONS, "only with a catalogue of tiles (IN a folder, a "
                 "glob or several files)")
-        return run_one(args)
+        folder = getattr(args, "report", None) if command in REPORTS else None
+        if folder is not None:
+            from .._shared._outputs import Output
+            from ._app import check_plan
+
+            check_plan([args.input], Output("--report", Path(folder), "folder",
+                                            members=("index.html",)))
+        t0 = time.perf_counter()
+        if folder is None:
+            return run_one(args)
+        from .._shared._atomic import output_group
+
+        with output_group(defer=False):  # the report reads the output back
+            status = run_one(args)
+        if status == 0 and folder is not None:
+            page = write_report(folder, args, Path(args.output),
+                                seconds=time.perf_counter() - t0)
+            if not args.quiet:
+                print(f"report: {page}")
+        return status
 
     return run
 
@@ -314,8 +270,46 @@ def install(sub) -> None:
                        "stopped run goes on where it stopped)")
         if not any(a.dest == "scheduler" for a in s._actions):
             add_workers(g)
+        if command in REPORTS:
+            s.add_argument("--report", default=None, metavar="DIR",
+                           help="write an HTML report into DIR: a plan-view map of the "
+                           "results, their fields and where the tests were not significant "
+                           "(with a catalogue: one page for the area, one per tile)")
         g.add_argument("--address", default=None,
                        help="Dask distributed scheduler to run the tiles on "
                        "(tcp://host:8786; with --scheduler dask); every worker must see "
                        "IN and OUT")
         s.set_defaults(func=_dispatch(s.get_default("func"), command))
+
+
+def run_info(args) -> int:
+    """``lidarstat info`` of a catalogue: tiles, points, extents, CRS consistency, gaps
+    and overlaps; ``--tindex FILE.geojson`` writes the tile index (PDAL's ``tindex``)."""
+    import json
+
+    from ..pipeline import Catalogue
+
+    cat = Catalogue(args.file if len(args.file) > 1 else args.file[0], one_crs=False)
+    d = cat.describe()
+    if args.tindex:
+        d["tindex"] = str(cat.write_tindex(args.tindex))
+    if args.json:
+        print(json.dumps(d, indent=2, default=str))
+        return 0
+    x0, y0, x1, y1 = d["bounds"]
+    crs = ("one CRS" if d["crs_count"] == 1 else "no CRS" if d["crs_count"] == 0 else
+           f"{d['crs_count']} different CRSs: not usable as one catalogue")
+    extent = (f"  extent x {x0:.3f} .. {x1:.3f}, y {y0:.3f} .. {y1:.3f}, "
+              f"z {d['zmin']:.3f} .. {d['zmax']:.3f}")
+    cover = (f"  area of the bounding box covered by no tile "
+             f"{100 * d['uncovered_share']:.1f} %, by several {100 * d['overlap_share']:.1f} %")
+    lines = [f"catalogue: {d['tiles']} tiles, {d['points']} points ({d['copc_tiles']} COPC)",
+             extent, f"  {crs}", cover]
+    for f in d["files"]:
+        b = f["bounds"]
+        lines.append(f"  {Path(f['path']).name}: {f['points']} points, x {b[0]:.2f} .. "
+                     f"{b[2]:.2f}, y {b[1]:.2f} .. {b[3]:.2f}")
+    if args.tindex:
+        lines.append(f"tile index: {d['tindex']}")
+    print("\n".join(lines))
+    return 0

@@ -260,7 +260,10 @@ _QUOTED = re.compile(r"`(\w+)`")
 
 def _starts_with_path(msg, args):
     head = msg.split(": ", 1)[0] if ": " in msg else ""
-    typed = [getattr(args, a, None) for a in _INPUTS + _PATHS]
+    typed = []
+    for a in _INPUTS + _PATHS:  # a catalogue's IN may be several paths
+        v = getattr(args, a, None)
+        typed += list(v) if isinstance(v, (list, tuple)) else [v]
     for p in typed:
         if p and (msg.startswith(str(p)) or msg.startswith(str(Path(p)))):
             return True
@@ -300,6 +303,8 @@ def error_line(exc, args) -> str:
     msg = _PARAMETER.sub(option, msg, count=1)
     msg = _QUOTED.sub(lambda m: options.get(m.group(1), m.group(0)), msg)
     src = next((getattr(args, a) for a in _INPUTS if getattr(args, a, None)), None)
+    if isinstance(src, (list, tuple)):
+        src = " ".join(map(str, src))
     if src is not None and isinstance(exc, LidarstatError) and not _starts_with_path(msg, args):
         msg = f"{src}: {msg}"
     return msg

@@ -141,14 +141,17 @@ class Catalogue:
     (3, 30, [0, 2])
     """
 
-    def __init__(self, inputs):
+    def __init__(self, inputs, *, one_crs: bool = True):
         self.files: list[FileExtent] = [file_extent(p) for p in _expand(inputs)]
         crs = {f.crs for f in self.files if f.crs}
-        if len(crs) > 1:
+        if len(crs) > 1 and one_crs:
             names = ", ".join(str(f.path) for f in self.files[:2])
             raise PointCloudReadError(f"{names}: the tiles are in different coordinate "
                                       "reference systems; a catalogue needs one")
-        self.crs = crs.pop() if crs else None
+        #: The CRS of the tiles (WKT; None without one, or when they differ).
+        self.crs = crs.pop() if len(crs) == 1 else None
+        #: The distinct CRSs of the tiles (one for a usable catalogue).
+        self.crs_set = frozenset(crs)
 
     def __len__(self) -> int:
         return len(self.files)
@@ -166,6 +169,76 @@ class Catalogue:
         """``(xmin, ymin, xmax, ymax)`` of the area."""
         return (min(f.xmin for f in self.files), min(f.ymin for f in self.files),
                 max(f.xmax for f in self.files), max(f.ymax for f in self.files))
+
+    def point_offsets(self) -> list[int]:
+        """Points in the tiles before each tile: offsets that make per-tile ids unique."""
+        return np.r_[0, np.cumsum([f.n_points for f in self.files])][:-1].astype(int).tolist()
+
+    def gaps_and_overlaps(self) -> tuple[float, float]:
+        """``(uncovered, overlapping)`` shares of the area's bounding box: the area no tile
+        covers, and the area more than one tile covers (both 0 for a clean tiling)."""
+        # header bounds are the points' bounds: strips between tiles narrower than twice
+        # the point spacing (or 1 % of a tile's side) are the spacing, not gaps
+        side = float(np.median([max(f.xmax - f.xmin, f.ymax - f.ymin) for f in self.files]))
+        spacing = float(np.median([np.sqrt((f.xmax - f.xmin) * (f.ymax - f.ymin)
+                                           / max(f.n_points, 1)) for f in self.files]))
+        tol = max(0.01 * side, 2.0 * spacing)
+
+        def edges(values):
+            v = np.unique(values)
+            keep = np.r_[True, np.diff(v) > tol]
+            return v[keep] if len(v) else v
+
+        boxes = [(f.xmin, f.ymin, f.xmax, f.ymax) for f in self.files]
+        xs = edges([v for b in boxes for v in (b[0], b[2])])
+        ys = edges([v for b in boxes for v in (b[1], b[3])])
+        snap = lambda v, e: e[np.argmin(np.abs(e - v))]
+        boxes = [(snap(a, xs), snap(b, ys), snap(c, xs), snap(d, ys)) for a, b, c, d in boxes]
+        cx, cy = (xs[1:] + xs[:-1]) / 2, (ys[1:] + ys[:-1]) / 2
+        cover = np.zeros((len(cy), len(cx)), int)
+        for x0, y0, x1, y1 in boxes:
+            cover += np.outer((cy > y0) & (cy < y1), (cx > x0) & (cx < x1))
+        area = np.outer(np.diff(ys), np.diff(xs))
+        total = max(float(area.sum()), 1e-300)
+        return float(area[cover == 0].sum() / total), float(area[cover > 1].sum() / total)
+
+    def tindex(self) -> dict:
+        """The tile index as a GeoJSON FeatureCollection: one rectangle per tile with its
+        file, point count, heights and COPC flag (PDAL's ``tindex``)."""
+        feats = []
+        for i, f in enumerate(self.files):
+            ring = [[f.xmin, f.ymin], [f.xmax, f.ymin], [f.xmax, f.ymax], [f.xmin, f.ymax],
+                    [f.xmin, f.ymin]]
+            feats.append({"type": "Feature", "geometry": {"type": "Polygon",
+                                                          "coordinates": [ring]},
+                          "properties": {"index": i, "location": str(f.path),
+                                         "points": f.n_points, "zmin": f.zmin,
+                                         "zmax": f.zmax, "copc": f.copc}})
+        return {"type": "FeatureCollection", "features": feats}
+
+    def write_tindex(self, path) -> Path:
+        """Write :meth:`tindex` as a GeoJSON file (atomically); QGIS shows the tiling."""
+        import json
+
+        from .._shared._atomic import atomic_path
+
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(self.tindex(), indent=1))
+        return path
+
+    def describe(self) -> dict:
+        """A summary of the catalogue: tiles, points, bounds, CRSs, gaps and overlaps."""
+        gaps, overlaps = self.gaps_and_overlaps()
+        zmin = min((f.zmin for f in self.files), default=float("nan"))
+        zmax = max((f.zmax for f in self.files), default=float("nan"))
+        return {"tiles": len(self), "points": self.n_points, "bounds": list(self.bounds),
+                "zmin": zmin, "zmax": zmax, "crs_count": len(self.crs_set),
+                "crs_consistent": len(self.crs_set) <= 1, "copc_tiles":
+                sum(f.copc for f in self.files), "uncovered_share": gaps,
+                "overlap_share": overlaps,
+                "files": [{"path": str(f.path), "points": f.n_points,
+                           "bounds": list(f.bounds2d), "copc": f.copc} for f in self.files]}
 
     def window(self, i: int, buffer: float) -> tuple[float, float, float, float]:
         """Tile `i`'s extent grown by `buffer` on every side."""

@@ -9,6 +9,8 @@ from ._maps import (
            plot_class_map,
            plot_flag_map,
            plot_hillshade,
+    plot_segment_map,
+    plot_value_map,
 )
 from ._moments import write_moments_report
 from ._page import ReportPage
@@ -28,7 +30,9 @@ __all__ = [
            "plot_forward_search",
            "plot_forward_search_units",
            "plot_hillshade",
+           "plot_segment_map",
            "plot_surface_types",
+           "plot_value_map",
            "run_demo",
            "write_moments_report",
            "write_run_report",

@@ -13,7 +13,7 @@ import numpy as np
 from ._views import _save, locked
 
 __all__ = ["ASPRS_COLOURS", "class_grid", "hillshade", "plot_class_map", "plot_flag_map",
-           "plot_hillshade"]
+           "plot_hillshade", "plot_segment_map", "plot_value_map"]
 
 #: ASPRS class -> (name, colour) of the maps.
 ASPRS_COLOURS = {
@@ -148,5 +148,54 @@ def plot_hillshade(path, raster, *, title="terrain model"):
     im = ax.imshow(raster.values, extent=extent, cmap="terrain", alpha=0.45,
                    interpolation="bilinear")
     fig.colorbar(im, ax=ax, label="height", shrink=0.8)
+    fig.tight_layout()
+    _save(fig, plt, path)
+
+
+@locked
+def plot_segment_map(path, xyz, labels, *, resolution, title="segments"):
+    """A PNG of the segment of the topmost point per cell, each segment in a colour of
+    its own (a hash of its id, so that neighbours differ); grey: in no segment (id 0)."""
+    from matplotlib.colors import hsv_to_rgb
+
+    grid, extent = class_grid(xyz, np.asarray(labels, dtype=np.int64), resolution)
+    ids = grid.astype(np.uint64)
+    h = ((ids * np.uint64(2654435761)) % np.uint64(1000)).astype(float) / 1000.0
+    s = 0.55 + 0.4 * (((ids * np.uint64(40503)) % np.uint64(7)).astype(float) / 6.0)
+    rgb = hsv_to_rgb(np.dstack([h, s, np.full(h.shape, 0.9)]))
+    rgb[grid == 0] = 0.75
+    rgba = np.dstack([rgb, (grid >= 0).astype(float)])
+    fig, ax, plt = _map_figure(title, extent)
+    ax.imshow(rgba, extent=extent, interpolation="nearest")
+    fig.tight_layout()
+    _save(fig, plt, path)
+
+
+@locked
+def plot_value_map(path, xyz, values, *, resolution, title, symmetric=False):
+    """A PNG of the median of a per-point value per cell (white: no finite value), its
+    colour range the 2nd to 98th percentile (symmetric about 0 with `symmetric`)."""
+    xyz = np.asarray(xyz, dtype=np.float64)
+    v = np.asarray(values, dtype=np.float64)
+    ok = np.isfinite(v)
+    r, c, rows, cols, extent = _cells(xyz[:, :2], resolution)
+    cell = (r * cols + c)[ok]
+    v = v[ok]
+    grid = np.full(rows * cols, np.nan)
+    if v.size:
+        order = np.lexsort((v, cell))
+        cell, v = cell[order], v[order]
+        starts = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
+        ends = np.r_[starts[1:], cell.size]
+        grid[cell[starts]] = 0.5 * (v[(starts + ends - 1) // 2] + v[(starts + ends) // 2])
+    grid = grid.reshape(rows, cols)
+    fin = grid[np.isfinite(grid)]
+    lo, hi = (np.percentile(fin, [2, 98]) if fin.size else (0.0, 1.0))
+    if symmetric:
+        lo, hi = -max(abs(lo), abs(hi), 1e-300), max(abs(lo), abs(hi), 1e-300)
+    fig, ax, plt = _map_figure(title, extent)
+    im = ax.imshow(grid, extent=extent, cmap="RdBu_r" if symmetric else "viridis",
+                   vmin=lo, vmax=hi if hi > lo else lo + 1e-12, interpolation="nearest")
+    fig.colorbar(im, ax=ax, label="median per cell", shrink=0.8)
     fig.tight_layout()
     _save(fig, plt, path)

@@ -7,7 +7,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ._maps import ASPRS_COLOURS, plot_class_map, plot_flag_map, plot_hillshade
+from ._maps import (
+    ASPRS_COLOURS,
+    plot_class_map,
+    plot_flag_map,
+    plot_hillshade,
+    plot_segment_map,
+    plot_value_map,
+)
 from ._page import ReportPage
 
 __all__ = ["map_resolution", "write_run_report"]
@@ -30,7 +37,8 @@ def write_run_report(folder, *, title: str, facts: dict, params: dict, xyz, clas
                      class_names: dict | None = None, class_field: str = "classification",
                      dtm=None, tiles: list[dict] | None = None,
                      flags: dict | None = None, links: dict | None = None,
-                     resolution: float | None = None) -> Path:
+                     resolution: float | None = None, values: dict | None = None,
+                     segments: bool = False, tests: list | None = None) -> Path:
     """Write the HTML report of a run into `folder`; the path of ``index.html``.
 
     Parameters
@@ -61,6 +69,14 @@ def write_run_report(folder, *, title: str, facts: dict, params: dict, xyz, clas
         Text -> relative href (per-tile plots).
     resolution : float, optional
         Cell size of the maps (default: about 600 cells along the longer side).
+    values : dict of str to (N,) ndarray, optional
+        Fields shown on a map as their median per cell (label -> values; a label ending
+        in ``" (signed)"`` gets a colour scale symmetric about 0).
+    segments : bool
+        `classes` are segment ids (0: in no segment): each segment in a colour of its own,
+        the table lists the largest segments.
+    tests : list of (name, rejected, not significant, not tested), optional
+        Outcomes of the method's tests, as a table (point counts).
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -72,15 +88,18 @@ def write_run_report(folder, *, title: str, facts: dict, params: dict, xyz, clas
     page.section("Run")
     page.facts(facts)
     page.parameters(params)
-    page.section("Classes", f"The class of the topmost point in each {res:g} x {res:g} "
-                 "cell, as the area looks from above.")
-    plot_class_map(folder / "classes.png", xyz, classes, resolution=res,
-                   title=f"{class_field} (plan view)", names=names)
-    page.figure("classes.png", f"{class_field}: plan view, cells of {res:g}")
-    values, counts = np.unique(classes, return_counts=True)
-    page.table(["class", "points", "share"],
-               [[f"{int(v)} {names.get(int(v), (str(v),))[0]}", int(c), f"{100 * c / len(classes):.2f} %"]
-                for v, c in zip(values, counts)])
+    if segments:
+        _segments(page, folder, xyz, classes, res, class_field)
+    else:
+        page.section("Classes", f"The class of the topmost point in each {res:g} x {res:g} "
+                     "cell, as the area looks from above.")
+        plot_class_map(folder / "classes.png", xyz, classes, resolution=res,
+                       title=f"{class_field} (plan view)", names=names)
+        page.figure("classes.png", f"{class_field}: plan view, cells of {res:g}")
+        codes, counts = np.unique(classes, return_counts=True)
+        page.table(["class", "points", "share"],
+                   [[f"{int(v)} {names.get(int(v), (str(v),))[0]}", int(c),
+                     f"{100 * c / len(classes):.2f} %"] for v, c in zip(codes, counts)])
     if dtm is not None:
         page.section("Terrain model", f"Hillshade of the ground surface at "
                      f"{dtm.resolution:g} resolution.")
@@ -90,6 +109,17 @@ def write_run_report(folder, *, title: str, facts: dict, params: dict, xyz, clas
         page.section("Tiles", "Share of each class per tile.")
         columns = list(dict.fromkeys(k for row in tiles for k in row))
         page.table(columns, [[row.get(c, "") for c in columns] for row in tiles])
+    for i, (label, v) in enumerate((values or {}).items()):
+        if i == 0:
+            page.section("Fields", "Median of each field per cell.")
+        name = f"field_{i}.png"
+        plot_value_map(folder / name, xyz, v, resolution=res * 2, title=label,
+                       symmetric=label.endswith("(signed)"))
+        page.figure(name, f"{label}: median per {2 * res:g} cell")
+    if tests:
+        page.section("Tests", "Points per outcome of each test.")
+        page.table(["test", "rejected", "not significant", "not tested"],
+                   [list(row) for row in tests])
     for i, (label, mask) in enumerate((flags or {}).items()):
         if i == 0:
             page.section("Where the tests were not significant")
@@ -102,3 +132,24 @@ def write_run_report(folder, *, title: str, facts: dict, params: dict, xyz, clas
         for text, href in links.items():
             page.link(href, text)
     return page.write(folder)
+
+
+def _segments(page, folder, xyz, labels, res, field):
+    """The segments section: a map in colours per segment and the largest segments."""
+    page.section("Segments", f"The segment of the topmost point in each {res:g} x {res:g} "
+                 "cell; grey: in no segment.")
+    plot_segment_map(folder / "classes.png", xyz, labels, resolution=res,
+                     title=f"{field} (plan view)")
+    page.figure("classes.png", f"{field}: plan view, cells of {res:g}")
+    ids, counts = np.unique(np.asarray(labels, dtype=np.int64), return_counts=True)
+    inside = ids > 0
+    n = max(len(labels), 1)
+    rows = [["segments", int(inside.sum()), ""],
+            ["points in a segment", int(counts[inside].sum()),
+             f"{100 * counts[inside].sum() / n:.2f} %"],
+            ["points in none", int(counts[~inside].sum()),
+             f"{100 * counts[~inside].sum() / n:.2f} %"]]
+    top = np.argsort(counts[inside])[::-1][:10]
+    rows += [[f"segment {int(ids[inside][j])}", int(counts[inside][j]),
+              f"{100 * counts[inside][j] / n:.2f} %"] for j in top]
+    page.table(["", "points", "share"], rows)

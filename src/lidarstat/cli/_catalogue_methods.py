@@ -1,0 +1,311 @@
+"""The tile functions of ``covariance``, ``ridges`` and ``segment`` on a catalogue.
+
+Each command has three parts, as in :data:`lidarstat.cli._catalogue.TILE_METHODS`:
+
+* ``buffer(args, catalogue)``: the default ``--buffer``, the method's reach;
+* ``prepare(args, catalogue)``: what must be decided once for the whole area before the
+  tiles run (the noise sigma, which each tile would otherwise estimate on its own
+  points; the k-nearest-neighbour reach);
+* ``fields(args, extra)``: the function computing a tile's fields on a
+  :class:`lidarstat.pipeline.BufferedTile` (core points first, then the buffer), calling
+  the public library functions the single-file command calls.
+
+Reaches (the buffer that makes the result independent of the tiling):
+
+* ``covariance``: two neighbourhoods. A point's features use its neighbours' points;
+  ``CurvatureVariance`` and ``NormalVariation`` use its neighbours' features. With
+  ``--radius`` the buffer is ``2 x radius``; with ``--k`` twice the k-th-neighbour
+  reach (:func:`knn_reach`: the largest distance to the k-th neighbour on the largest
+  tile, times 1.5 for tiles sparser than that one).
+* ``ridges``: the jets reach one radius; a ridge point compares its neighbours' jets,
+  and the ridge lines are traced through them and kept when at least ``--min-length``
+  (two radii by default) long: ``3 x radius`` (with ``--k``, the k-th-neighbour reach).
+  The per-point jets are then independent of the tiling; the ridge lines are not quite:
+  a line longer than the buffer is traced in pieces, and the line test's Bonferroni
+  count (the cloud's independent neighbourhoods) is the tile's with its buffer.
+* ``segment``: segmentations couple points further than any buffer. Each tile is
+  segmented with a buffer (default: the method's neighbourhood reach times 4, so that
+  the segments near a tile's border grow over the neighbours' points as on the whole
+  area) and its points keep the segments of that run; a surface
+  crossing a tile border is cut there into one segment per tile. Segment ids are unique
+  over the area: a tile's ids are offset by the points of the tiles before it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["COVARIANCE", "RIDGES", "SEGMENT", "TILE_OPTIONS", "knn_reach"]
+
+#: The options each command's tile function passes on (destinations). Any other option
+#: given with a catalogue is refused rather than ignored, so an option added to a command
+#: later is refused on catalogues until its tile function passes it on.
+TILE_OPTIONS = {
+    "curvature": frozenset({"radius", "sigma", "noise", "sensor", "alpha", "test", "frame",
+                            "min_neighbors", "minimal_detectable"}),
+    "covariance": frozenset({"k", "radius", "sensor", "sigma", "alpha", "eigen_mode",
+                             "boundary", "boundary_alpha", "curvature_threshold",
+                             "variance_threshold", "curved", "curved_alpha", "border_band",
+                             "jump_alpha"}),
+    "ridges": frozenset({"radius", "k", "sigma", "alpha", "weight", "sensor", "noise",
+                         "ratio", "min_length"}),
+}
+
+#: Margin on the k-th-neighbour reach measured on one tile, for tiles sparser than it.
+KNN_MARGIN = 1.5
+
+
+def _largest(cat) -> int:
+    return max(range(len(cat)), key=lambda i: cat.files[i].n_points)
+
+
+def knn_reach(cat, k: int) -> float:
+    """The largest 3-D distance to the `k`-th neighbour on the catalogue's largest tile,
+    times :data:`KNN_MARGIN`: a conservative reach of k-nearest-neighbour methods."""
+    from scipy.spatial import cKDTree
+
+    from ..io import read
+
+    xyz = read(cat.files[_largest(cat)].path).xyz
+    k = min(int(k), len(xyz))
+    d = cKDTree(xyz).query(xyz, k=k, workers=-1)[0]
+    return KNN_MARGIN * float(np.max(d[:, -1] if d.ndim > 1 else d))
+
+
+def _outputs(args, cat) -> dict:
+    return {f.path: p for f, p in zip(cat.files, cat.outputs(args.output, args.template))}
+
+
+def _say(args, text):
+    if not args.quiet:
+        print(f"  {text}")
+
+
+def _scalar_sigma(sigma, what):
+    from ..errors import InvalidParameterError
+
+    if np.ndim(sigma) != 0:
+        raise InvalidParameterError(f"{what}: the noise estimated on one tile is a model of "
+                                    "the range, not one value for the area; give --sigma "
+                                    "with a catalogue of tiles")
+    return float(sigma)
+
+
+def _neighbourhood_reach(args, cat, command):
+    """The reach of ``--radius`` (the largest of several scales) or ``--k``; a scale
+    chosen during the run is not known before it, so a buffer must then be given."""
+    from ..errors import InvalidParameterError
+
+    radius = getattr(args, "radius", None)
+    if isinstance(radius, (list, tuple)):
+        radius = max(radius) if radius else None
+    if isinstance(radius, (int, float)):
+        return float(radius)
+    k = getattr(args, "k", None)
+    if isinstance(k, int):
+        return knn_reach(cat, k)
+    raise InvalidParameterError(f"--buffer: {command} on a catalogue of tiles needs "
+                                "--buffer, --radius or --k (a neighbourhood chosen during "
+                                "the run is not known before the tiles are read)")
+
+
+# -------------------------------------------------------------------------- covariance
+def _covariance_reach(args, cat):
+    return _neighbourhood_reach(args, cat, "covariance")
+
+
+def _covariance_buffer(args, cat):
+    return 2.0 * _covariance_reach(args, cat)
+
+
+def _covariance_prepare(args, cat):
+    """One noise sigma for the area (estimated on the largest tile when not given)."""
+    extra = {"outputs": _outputs(args, cat)}
+    if args.sigma is not None:
+        return extra
+    from ..classify import covariance
+    from ..io import read
+    from .covariance import classification_options
+
+    i = _largest(cat)
+    res = covariance(read(cat.files[i].path).xyz, k=args.k, radius=args.radius,
+                     sensor=args.sensor, alpha=args.alpha, eigen_mode=args.eigen_mode,
+                     **classification_options(args, args.sensor))
+    extra["sigma"] = _scalar_sigma(res.classes.sigma, "covariance")
+    _say(args, f"sigma {extra['sigma']:.4g} estimated on {cat.files[i].path.name}, used for "
+         "every tile")
+    return extra
+
+
+def _covariance_fields(args, extra):
+    from ..classify import covariance
+    from .covariance import classification_options
+
+    sigma = extra.get("sigma", args.sigma)
+    opts = classification_options(args, args.sensor)
+
+    def fields(tile):
+        res = covariance(tile.xyz, k=args.k, radius=args.radius, sensor=args.sensor,
+                         sigma=sigma, alpha=args.alpha, eigen_mode=args.eigen_mode, **opts)
+        return res.to_fields(), {}
+
+    return fields
+
+
+COVARIANCE = (_covariance_buffer, _covariance_fields, _covariance_prepare)
+
+
+# ------------------------------------------------------------------------------ ridges
+def _jet_reach(args, cat):
+    return _neighbourhood_reach(args, cat, "ridges")
+
+
+def _ridges_buffer(args, cat):
+    return 3.0 * _jet_reach(args, cat)
+
+
+def _ridges_prepare(args, cat):
+    """One noise sigma for the area (the jets' estimate on the largest tile)."""
+    extra = {"outputs": _outputs(args, cat), "offsets": _offsets(cat)}
+    if args.sigma is not None:
+        return extra
+    from ..features import jets
+    from ..io import read
+
+    i = _largest(cat)
+    res = jets(read(cat.files[i].path).xyz, radius=args.radius, k=args.k, alpha=args.alpha,
+               degree=4, weight=args.weight, sensor=args.sensor, noise=args.noise,
+               standard_errors=False)
+    extra["sigma"] = _scalar_sigma(res.sigma, "ridges")
+    _say(args, f"sigma {extra['sigma']:.4g} estimated on {cat.files[i].path.name}, used for "
+         "every tile")
+    return extra
+
+
+def _lines_in_tile(lines, extent):
+    """The lines whose middle vertex lies in the tile (each line written by one tile)."""
+    if lines is None or not len(lines):
+        return lines
+    keep = []
+    for v in lines.vertices:
+        x, y = v[len(v) // 2, :2]
+        keep.append(extent.xmin <= x <= extent.xmax and extent.ymin <= y <= extent.ymax)
+    keep = np.asarray(keep, bool)
+    return type(lines)([v for v, k in zip(lines.vertices, keep) if k],
+                       {n: np.asarray(a)[keep] for n, a in lines.attributes.items()})
+
+
+def _ridges_fields(args, extra):
+    from ..segment import ridges
+
+    sigma = extra.get("sigma", args.sigma)
+
+    def fields(tile):
+        res = ridges(tile.xyz, radius=args.radius, k=args.k, sigma=sigma, alpha=args.alpha,
+                     weight=args.weight, sensor=args.sensor, noise=args.noise,
+                     ratio=args.ratio, min_length=args.min_length)
+        out = Path(extra["outputs"][tile.extent.path])
+        lines = _lines_in_tile(res.lines, tile.extent)
+        # line ids unique over the area, in the points' field and the lines alike
+        offset = extra["offsets"][tile.extent.path]
+        if "line_id" in lines.attributes:
+            lines.attributes["line_id"] = lines.attributes["line_id"] + offset
+        lines.write(out.with_name(out.name.split(".")[0] + ".ridges.geojson"),
+                    crs=tile.core.crs)
+        f = res.to_fields()
+        f["ridge_line"] = np.where(f["ridge_line"] > 0, f["ridge_line"] + offset,
+                                   0).astype(f["ridge_line"].dtype)
+        return f, {"lines": len(lines)}
+
+    return fields
+
+
+RIDGES = (_ridges_buffer, _ridges_fields, _ridges_prepare)
+
+
+# ----------------------------------------------------------------------------- segment
+#: Buffer of a segmentation, in neighbourhood reaches.
+SEGMENT_REACHES = 4.0
+
+
+def _segment_buffer(args, cat):
+    from importlib import import_module
+
+    from ..errors import InvalidParameterError
+    from .segment import SEGMENT_METHODS
+
+    method = import_module(SEGMENT_METHODS[args.method])
+    if args.radius is not None:
+        reach = args.radius
+    elif args.k is not None or hasattr(method, "DEFAULT_K"):
+        reach = knn_reach(cat, args.k if args.k is not None else method.DEFAULT_K)
+    else:
+        raise InvalidParameterError(f"segment --method {args.method} on a catalogue needs "
+                                    "--radius or --buffer (the neighbourhood the tiles' "
+                                    "buffer follows)")
+    return SEGMENT_REACHES * reach
+
+
+def _offsets(cat) -> dict:
+    """Tile path -> points in the tiles before it: per-tile ids made unique."""
+    return dict(zip((f.path for f in cat.files), cat.point_offsets()))
+
+
+def _segment_prepare(args, cat):
+    return {"outputs": _outputs(args, cat), "offsets": _offsets(cat)}
+
+
+def _segment_fields(args, extra):
+    from importlib import import_module
+
+    from ..io import PointCloud
+    from .segment import SEGMENT_METHODS
+
+    method = import_module(SEGMENT_METHODS[args.method])
+
+    def fields(tile):
+        seg = method.run(args, PointCloud(tile.xyz))
+        f = seg.to_fields()
+        n = tile.n_core
+        labels = np.asarray(f["segment_id"]).astype(np.int64)
+        core = labels[:n]
+        # the tile's segments, numbered 1.. in order of first appearance among its points
+        present, first = np.unique(core[core > 0], return_index=True)
+        present = present[np.argsort(first)]
+        renumber = np.zeros(int(labels.max()) + 1 if labels.size else 1, np.int64)
+        offset = extra["offsets"][tile.extent.path]
+        renumber[present] = offset + np.arange(1, present.size + 1)
+        f["segment_id"] = renumber[labels].astype(np.uint32)
+        out = Path(extra["outputs"][tile.extent.path])
+        stem = out.name.split(".")[0]
+        table = {k: np.asarray(v) for k, v in seg.table.items()}
+        ids = np.asarray(table["segment_id"]).astype(np.int64)
+        keep = np.isin(ids, present)
+        table = {k: v[keep] if v.shape[:1] == ids.shape else v for k, v in table.items()}
+        table["segment_id"] = renumber[ids[keep]].astype(np.int64)
+        _write_table(out.with_name(stem + ".segments.csv"), table)
+        if seg.lines is not None:
+            _lines_in_tile(seg.lines, tile.extent).write(
+                out.with_name(stem + ".lines.geojson"), crs=tile.core.crs)
+        return f, {"segments": int(present.size)}
+
+    return fields
+
+
+def _write_table(path, table):
+    """The tile's rows of the segment table as CSV (scalar columns), atomically."""
+    import csv
+
+    from .._shared._atomic import atomic_path
+
+    cols = {k: np.asarray(v) for k, v in table.items() if np.asarray(v).ndim == 1}
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(list(cols))
+        for row in zip(*(c.tolist() for c in cols.values())):
+            w.writerow(row)
+
+
+SEGMENT = (_segment_buffer, _segment_fields, _segment_prepare)

@@ -1,0 +1,203 @@
+"""Every command on a catalogue: covariance and ridges give the whole-file answer with
+their reach as buffer (field by field), segment cuts segments at tile borders with ids
+unique over the area (its difference from the whole-file run measured), and info
+summarises a catalogue and writes its tile index."""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lidarstat.cli import main
+from lidarstat.io import read
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pipeline"))
+from test_catalogue import _assert_same_fields, _by_xyz
+from test_catalogue_cli import _gather, _tiles
+
+
+def _whole_fields(path):
+    c = read(path)
+    names = [k for k in c.attributes if k not in read(path.parent / "whole.laz").attributes]
+    return c.xyz, {k: np.asarray(c.attributes[k]) for k in names}
+
+
+def _run(args, capsys):
+    rc = main([str(a) for a in args])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    return out.out
+
+
+@pytest.mark.parametrize("seed, neighbourhood", [(0, ["--radius", "1.5"]),
+                                                 (2, ["--k", "20"])])
+def test_covariance_on_a_catalogue_equals_the_whole_file(tmp_path, capsys, seed,
+                                                         neighbourhood):
+    _tiles(tmp_path, seed=seed)
+    _run(["covariance", tmp_path / "whole.laz", tmp_path / "w.laz", *neighbourhood,
+          "--sigma", "0.05", "-q"], capsys)
+    xyz, whole = _whole_fields(tmp_path / "w.laz")
+    out = _run(["covariance", tmp_path / "tiles", tmp_path / "out", *neighbourhood,
+                "--sigma", "0.05"], capsys)
+    assert "9 tiles processed" in out
+    _assert_same_fields(_gather(tmp_path / "out", whole), (xyz, whole))
+
+
+def test_covariance_estimates_one_sigma_for_the_area(tmp_path, capsys):
+    _tiles(tmp_path, seed=3)
+    out = _run(["covariance", tmp_path / "tiles", tmp_path / "out", "--radius", "1.5"],
+               capsys)
+    assert "used for every tile" in out
+
+
+def test_ridges_jets_do_not_depend_on_the_tiling(tmp_path, capsys):
+    """The jets (every Monge coefficient, test and sd) are the whole file's; the ridge
+    points agree where the lines are traced the same (measured, not exact)."""
+    _tiles(tmp_path, seed=4)
+    _run(["ridges", tmp_path / "whole.laz", tmp_path / "w.laz", "--radius", "3",
+          "--sigma", "0.05", "-q"], capsys)
+    xyz, whole = _whole_fields(tmp_path / "w.laz")
+    _run(["ridges", tmp_path / "tiles", tmp_path / "out", "--radius", "3", "--sigma",
+          "0.05", "-q"], capsys)
+    ridge_names = {"ridge", "ridge_line", "umbilic", "extremality"}
+    (_, a), (_, b) = (_by_xyz(_gather(tmp_path / "out", whole)), _by_xyz((xyz, whole)))
+    np.testing.assert_array_equal(a["neighbors"], b["neighbors"])
+    # a degree-4 jet has 15 coefficients: fits on fewer than twice that many points are
+    # near-singular (condition numbers of 1e4 and more), their floats compared on the
+    # decisions only, as the quadrics' fits on 7-9 points are
+    posed = b["neighbors"] >= 30
+    for name in set(b) - ridge_names:
+        if np.issubdtype(b[name].dtype, np.floating):
+            scale = np.nanpercentile(np.abs(b[name]), 99) if np.isfinite(b[name]).any() else 1
+            np.testing.assert_allclose(a[name][posed], b[name][posed], rtol=1e-6,
+                                       atol=1e-6 * scale, equal_nan=True, err_msg=name)
+        else:
+            np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    np.testing.assert_array_equal(a["umbilic"], b["umbilic"])
+    assert np.mean(a["ridge"] == b["ridge"]) > 0.99
+    assert len(list((tmp_path / "out").glob("*.ridges.geojson"))) == 9
+
+
+def _agreement(a, b):
+    """Share of points in the best-matching segment of the other labelling: for each
+    segment of `a` its largest overlap with a segment of `b` (points in no segment in
+    both count as agreeing)."""
+    pairs, counts = np.unique(np.c_[a, b], axis=0, return_counts=True)
+    best = {}
+    for (x, y), c in zip(pairs.tolist(), counts.tolist()):
+        if x == 0 or y == 0:
+            best.setdefault(("none", x), 0)
+            if x == 0 and y == 0:
+                best[("none", x)] += c
+            continue
+        best[x] = max(best.get(x, 0), c)
+    return sum(best.values()) / len(a)
+
+
+def test_segment_ids_are_unique_over_the_area(tmp_path, capsys):
+    _tiles(tmp_path, seed=5)
+    _run(["segment", tmp_path / "whole.laz", tmp_path / "w.laz", "--method", "covariance",
+          "--radius", "1.5", "--sigma", "0.05", "-q"], capsys)
+    out = _run(["segment", tmp_path / "tiles", tmp_path / "out", "--method", "covariance",
+                "--radius", "1.5", "--sigma", "0.05"], capsys)
+    assert "9 tiles processed" in out
+    ids_per_tile = [set(np.unique(read(p)["segment_id"]).tolist()) - {0}
+                    for p in sorted((tmp_path / "out").glob("*.laz"))]
+    assert all(ids for ids in ids_per_tile)
+    assert sum(map(len, ids_per_tile)) == len(set().union(*ids_per_tile))  # unique
+    for p in sorted((tmp_path / "out").glob("*.laz")):  # each tile's table: its segments
+        table = (tmp_path / "out" / (p.stem + ".segments.csv")).read_text().splitlines()
+        listed = {int(r.split(",")[0]) for r in table[1:]}
+        assert listed == set(np.unique(read(p)["segment_id"]).tolist()) - {0}
+    xyz, whole = _whole_fields(tmp_path / "w.laz")
+    (_, a), (_, b) = (_by_xyz(_gather(tmp_path / "out", ["segment_id"])),
+                      _by_xyz((xyz, {"segment_id": whole["segment_id"]})))
+    # a tile's segments never mix two whole-file segments (the buffer): only the cuts
+    # at the tile borders separate them
+    assert _agreement(a["segment_id"], b["segment_id"]) > 0.98
+
+
+def test_segment_table_option_is_refused_with_a_catalogue(tmp_path, capsys):
+    _tiles(tmp_path, n=900)
+    rc = main(["segment", str(tmp_path / "tiles"), str(tmp_path / "out"), "--method",
+               "covariance", "--table", str(tmp_path / "t.csv")])
+    assert rc == 2 and "--table: not with a catalogue" in capsys.readouterr().err
+
+
+def test_info_of_a_catalogue_and_its_tile_index(tmp_path, capsys):
+    _tiles(tmp_path, n=900)
+    out = _run(["info", tmp_path / "tiles", "--tindex", tmp_path / "t.geojson"], capsys)
+    assert "catalogue: 9 tiles, 900 points" in out and "no CRS" in out
+    assert "covered by no tile 0.0 %, by several 0.0 %" in out
+    doc = json.loads((tmp_path / "t.geojson").read_text())
+    assert len(doc["features"]) == 9
+    assert sum(f["properties"]["points"] for f in doc["features"]) == 900
+    ring = doc["features"][0]["geometry"]["coordinates"][0]
+    assert ring[0] == ring[-1] and len(ring) == 5
+    d = json.loads(_run(["info", tmp_path / "tiles", "--json"], capsys))
+    assert d["tiles"] == 9 and d["crs_consistent"]
+    # one file stays the single-file description
+    assert "catalogue:" not in _run(["info", tmp_path / "whole.laz"], capsys)
+
+
+def test_info_reports_a_gap_and_mixed_crs(tmp_path, capsys):
+    from lidarstat.io import PointCloud, write
+
+    pts = np.random.default_rng(0).uniform(0, 10, (200, 3))
+    write(tmp_path / "a.laz", PointCloud(pts, crs="EPSG:28992"))
+    write(tmp_path / "b.laz", PointCloud(pts + [20, 0, 0], crs="EPSG:2154"))
+    out = _run(["info", tmp_path / "a.laz", tmp_path / "b.laz"], capsys)
+    assert "2 different CRSs" in out
+    uncovered = float(out.split("covered by no tile ")[1].split(" %")[0])
+    assert 30 < uncovered < 36  # 10 m of 30 m of the box's width
+
+
+def test_an_option_the_tile_function_does_not_pass_is_refused(tmp_path, capsys, monkeypatch):
+    """An option of the one-file command that the catalogue's tile function does not pass
+    on is refused, never ignored (here: as if the tile function did not know --eigen-mode)."""
+    from lidarstat.cli import _catalogue_methods
+
+    _tiles(tmp_path, n=900)
+    every = dict(_catalogue_methods.TILE_OPTIONS)
+    every["covariance"] = every["covariance"] - {"eigen_mode"}
+    monkeypatch.setattr(_catalogue_methods, "TILE_OPTIONS", every)
+    rc = main(["covariance", str(tmp_path / "tiles"), str(tmp_path / "out"), "--radius", "2",
+               "--eigen-mode", "sqrt"])
+    assert rc == 2
+    assert "--eigen-mode: not supported with a catalogue of tiles" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("command, options", [
+    ("covariance", ["--radius", "2", "--eigen-mode", "sqrt", "--curved", "variation"]),
+    ("ridges", ["--radius", "6", "--ratio", "3", "--weight", "none"]),
+    ("curvature", ["--radius", "2", "--frame", "pca", "--minimal-detectable"]),
+])
+def test_every_option_of_the_command_reaches_the_tiles(tmp_path, capsys, command, options):
+    _tiles(tmp_path, n=900)
+    _run([command, tmp_path / "tiles", tmp_path / "out", *options, "--sigma", "0.05", "-q"],
+         capsys)
+    assert len(list((tmp_path / "out").glob("*.laz"))) == 9
+
+
+@pytest.mark.parametrize("command, options, words", [
+    ("ridges", ["--radius", "6"], "used for every tile"),  # one sigma for the area
+    ("segment", ["--method", "covariance", "--sigma", "0.05"], "buffer"),  # k-NN reach
+])
+def test_estimated_sigma_and_knn_reach(tmp_path, capsys, command, options, words):
+    _tiles(tmp_path, n=900)
+    out = _run([command, tmp_path / "tiles", tmp_path / "out", *options], capsys)
+    assert words in out and "9 tiles processed" in out
+
+
+def test_a_segmentation_whose_reach_is_chosen_in_the_run_needs_a_buffer(tmp_path, capsys):
+    """SAR picks its bandwidth during the run: its buffer cannot follow it, so a catalogue
+    asks for --radius or --buffer before any work."""
+    _tiles(tmp_path, n=900)
+    rc = main(["segment", str(tmp_path / "tiles"), str(tmp_path / "out"), "--method", "sar"])
+    assert rc == 2
+    assert "needs --radius or --buffer" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
