@@ -6,7 +6,9 @@ bank narrower than the envelope's opening) is cut away with the objects, and the
 surface refitted to the cut runs under it. This step takes the ground the moments left
 and:
 
-1. **grid**: the lowest point and the lowest ground point of every ``cell`` square;
+1. **grid**: the lowest point and the lowest ground point of every ``cell`` square; a
+   ground cell rising steeply above most of its ground neighbours (a low object the cut
+   kept) leaves the seeds;
 2. **growth**: a cell without ground joins the ground when its lowest point continues a
    neighbouring ground cell smoothly: within ``step`` of the linear extrapolation of two
    ground cells in a row and rising at most ``max_rise`` per unit distance from the
@@ -34,17 +36,18 @@ import numpy as np
 
 from ._terrain_kernels import cell_lowest, grid_bilinear
 
-__all__ = ["TERRAIN_DEFAULTS", "TerrainModel", "TerrainRefinement", "grow_ground",
-           "refine_terrain", "reject_walled", "terrain_step"]
+__all__ = ["TERRAIN_DEFAULTS", "TerrainModel", "TerrainRefinement", "drop_bumps",
+           "grow_ground", "refine_terrain", "reject_walled", "terrain_step"]
 
 #: The terrain step's lengths in metres (slopes are dimensionless): the grid cell, the
 #: tolerance on flat ground and its growth per unit slope (the values of Pingel et al.
 #: 2013's elevation threshold and scaler), the smooth-continuation bounds of the growth
 #: (a step of 0.3 m from the extrapolated terrain, a rise of at most 45 degrees from a
 #: neighbour), the depth allowed under the surface, and the largest share of walls on the
-#: border of a grown region.
-TERRAIN_DEFAULTS = dict(cell=2.0, tolerance=0.5, slope_tolerance=1.25, step=0.3,
-                        max_slope=1.0, below=1.0, wall_fraction=0.2)
+#: border of a grown region, and how many of its 8 neighbours a seed cell must rise
+#: above steeply to be dropped as a bump.
+TERRAIN_DEFAULTS = {"cell": 2.0, "tolerance": 0.5, "slope_tolerance": 1.25, "step": 0.3,
+                    "max_slope": 1.0, "below": 1.0, "wall_fraction": 0.2, "bump_sides": 5}
 
 #: The eight neighbour offsets of a cell.
 _DIRS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
@@ -165,6 +168,35 @@ def grow_ground(lowest, ground_z, *, cell, step, max_rise, max_rounds=200):
     return g
 
 
+def drop_bumps(ground_z, *, cell, step, max_rise, min_sides, rounds=2):
+    """Ground cells standing above most of their ground neighbours become empty.
+
+    A cell is a bump when its lowest ground point is higher than that of at least
+    `min_sides` of its 8 neighbouring ground cells by more than ``step + max_rise *
+    distance`` (a low object the moments cut kept: a car, a hedge, a shed on a slope); a
+    terrace edge rises that steeply above its downhill side only. Repeated `rounds` times
+    (a bump two cells wide loses its rim first).
+
+    Returns
+    -------
+    (nx, ny) ndarray
+        `ground_z` with the bumps set to ``inf``.
+    """
+    g = ground_z.copy()
+    for _ in range(rounds):
+        above = np.zeros(g.shape, np.int8)
+        for di, dj in _DIRS:
+            n1 = _shift(g, di, dj)
+            with np.errstate(invalid="ignore"):
+                above += (np.isfinite(n1)
+                          & (g - n1 > step + max_rise * cell * np.hypot(di, dj)))
+        bump = np.isfinite(g) & (above >= min_sides)
+        if not bump.any():
+            break
+        g[bump] = np.inf
+    return g
+
+
 def reject_walled(grown_z, ground_z, lowest, *, cell, step, max_rise, wall_fraction):
     """Take back the grown regions whose border is mostly walls.
 
@@ -232,7 +264,7 @@ def _fill(grid):
 
 
 def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max_rise,
-                   below, wall_fraction=0.2) -> TerrainRefinement:
+                   below, wall_fraction=0.2, bump_sides=5) -> TerrainRefinement:
     """Grow the ground over smooth continuations, then test every point against it.
 
     Parameters
@@ -257,6 +289,9 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
         the slope term is added as above).
     wall_fraction : float
         Largest share of walls on the border of a grown region (:func:`reject_walled`).
+    bump_sides : int
+        Ground cells rising steeply above at least this many of their 8 ground
+        neighbours leave the seeds first (:func:`drop_bumps`).
 
     Returns
     -------
@@ -281,6 +316,8 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
     lowest, ground_z = cell_lowest(xy, z, ground, float(cell), nx, ny)
     if not np.isfinite(ground_z).any():
         ground_z = lowest
+    ground_z = drop_bumps(ground_z, cell=cell, step=step, max_rise=max_rise,
+                          min_sides=bump_sides)
     grown_z = grow_ground(lowest, ground_z, cell=cell, step=step, max_rise=max_rise)
     surface_z, rejected = reject_walled(grown_z, ground_z, lowest, cell=cell, step=step,
                                         max_rise=max_rise, wall_fraction=wall_fraction)
@@ -310,5 +347,6 @@ def terrain_step(xy, z, ground, *, ux=1.0, uz=1.0):
     t = refine_terrain(xy, z, ground, cell=d["cell"] / ux, tolerance=d["tolerance"] / uz,
                        slope_tolerance=d["slope_tolerance"] * aspect / uz,
                        step=d["step"] / uz, max_rise=d["max_slope"] / aspect,
-                       below=d["below"] / uz, wall_fraction=d["wall_fraction"])
+                       below=d["below"] / uz, wall_fraction=d["wall_fraction"],
+                       bump_sides=d["bump_sides"])
     return t.ground, t.height, t.surface, t.tolerance

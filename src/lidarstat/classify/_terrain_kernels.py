@@ -21,8 +21,7 @@ def cell_lowest(xy, z, ground, cell, nx, ny):  # pragma: no cover - compiled
     for i in range(z.size):
         ix = min(max(np.int64(np.floor(xy[i, 0] / cell)), 0), nx - 1)
         iy = min(max(np.int64(np.floor(xy[i, 1] / cell)), 0), ny - 1)
-        if z[i] < low[ix, iy]:
-            low[ix, iy] = z[i]
+        low[ix, iy] = min(low[ix, iy], z[i])
         if ground[i] and z[i] < low_g[ix, iy]:
             low_g[ix, iy] = z[i]
     return low, low_g
