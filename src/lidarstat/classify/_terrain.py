@@ -239,24 +239,25 @@ def reject_walled(grown_z, ground_z, lowest, *, cell, step, max_rise, wall_fract
 
 
 def _fill(grid):
-    """Empty (``inf``) cells filled by linear interpolation of the others, nearest cell
-    outside their convex hull."""
+    """Empty (``inf``) cells filled by linear interpolation in the Delaunay triangulation
+    of the filled cells on their rims (the only cells a triangle over a hole joins), the
+    nearest filled cell outside the rims' hull."""
     from scipy import ndimage as ndi
     from scipy.interpolate import griddata
 
     empty = ~np.isfinite(grid)
-    if not empty.any():
+    if not empty.any() or empty.all():
         return grid
     out = grid.copy()
-    full = np.argwhere(~empty)
+    rim = ~empty & ndi.binary_dilation(empty, structure=np.ones((3, 3), bool))
+    full = np.argwhere(rim)
     holes = np.argwhere(empty)
+    val = np.full(len(holes), np.nan)
     if len(full) >= 3 and np.ptp(full[:, 0]) > 0 and np.ptp(full[:, 1]) > 0:
         try:
-            val = griddata(full, grid[~empty], holes, method="linear")
-        except Exception:  # noqa: BLE001 - degenerate (collinear) cells: nearest below
-            val = np.full(len(holes), np.nan)
-    else:
-        val = np.full(len(holes), np.nan)
+            val = griddata(full, grid[rim], holes, method="linear")
+        except Exception:  # noqa: BLE001 - degenerate (collinear) rims: nearest below
+            pass
     idx = ndi.distance_transform_edt(empty, return_distances=False, return_indices=True)
     nearest = grid[tuple(idx)][empty]
     out[empty] = np.where(np.isfinite(val), val, nearest)
