@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs the peers the benchmarks compare lidarstat with (not needed by the library or
 # the tests): Debian packages for CloudCompare and CGAL, PyPI packages through the
-# `bench` extra. Run from the repository root as root (CI images and this project's
+# `bench` extra (CSF, pysmrf for SMRF, ...). Run from the repository root as root (CI images and this project's
 # machines are Debian bookworm).
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -53,7 +53,10 @@ def test_no_class_step_at_a_window_border():
     z[hedge] = terrain[hedge] + 0.45 + g.normal(0, 0.03, hedge.sum())
     left = hedge & (xy[:, 0] >= 62) & (xy[:, 0] < 64)
     right = hedge & (xy[:, 0] >= 64) & (xy[:, 0] < 66)
-    smooth = moments(np.c_[xy, z], g.normal(100, 10, n), window=64, min_window=64)
+    # the seams are a property of the window cuts: the terrain step, which re-tests every
+    # point against its own surface, is left out
+    smooth = moments(np.c_[xy, z], g.normal(100, 10, n), window=64, min_window=64,
+                     terrain=False)
     t0, t1 = (t["threshold"] for t in smooth.windows)
     assert t0 < 0.45 < t1 and t1 - t0 > 0.4  # the scene does give two different cuts
     h = smooth.height

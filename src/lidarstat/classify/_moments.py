@@ -10,6 +10,8 @@
    paper's clustering steps (:mod:`._moments_analysis`);
 4. the ground: lower envelope, interpolated window cuts, one TIN refitted to the ground
    of all windows, raised patches (:mod:`._moments_ground`);
+   then the terrain step: the ground grown over smooth continuations and every point
+   tested against it with a slope-dependent tolerance (:mod:`._terrain`);
 5. roads: the darker intensity sub-cluster of the whole ground (:mod:`._roads`);
 6. objects: vegetation, buildings and the ASPRS codes (:mod:`._moments_objects`).
 
@@ -35,6 +37,7 @@ from ._moments_result import ASPRS, MomentsClassification
 from ._moments_windows import root_windows
 from ._outliers import low_outliers
 from ._roads import RoadRule, road_points
+from ._terrain import terrain_step
 
 __all__ = ["classify_moments", "moments"]
 
@@ -53,7 +56,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
             ground_spread: float = 3.0, continuity: bool = True, rng=0,
             workers: int | None = None, scheduler: str = "threads", units=1.0,
             source: str | None = None,
-            road_threshold: float | None = None) -> MomentsClassification:
+            road_threshold: float | None = None,
+            terrain: bool = True) -> MomentsClassification:
     """Classify points as ground, road, building, vegetation or unclassified without training.
 
     Parameters
@@ -138,6 +142,12 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         the same physical windows as one in metres.
     source : str, optional
         File name used in messages.
+    terrain : bool
+        After the moments cut, grow the ground over smooth continuations (embankments,
+        ramps, steep banks the cut left out), take back grown regions walled on most of
+        their border (bridges, roofs), and test every point against the grown surface
+        with a slope-dependent tolerance (:func:`~._terrain.refine_terrain`; the
+        skewness-balancing baseline never uses it).
 
     Returns
     -------
@@ -259,6 +269,9 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         ground, height, surf = drop_raised_patches(xy, z, perm, ground, height, surf,
                                                    surface_cell=surface_cell / ux,
                                                    step=0.3 / uz)
+    tolerance = np.full(len(z), np.inf)
+    if terrain and method is MomentsMethod.MOMENTS:
+        ground, height, surf, tolerance = terrain_step(xy, z, ground, ux=ux, uz=uz)
     # 5. roads
     road, road_step = road_points(xy, inten, ground, p, road_rule=road_rule,
                                   road_cell_points=road_cell_points,
@@ -283,23 +296,25 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                   road_threshold=(road_threshold if road_threshold is not None else
                                   None if road_step is None or road_step.choice.cycle is None
                                   else float(road_step.choice.threshold)),
-                  n_low_noise=int(noise.sum()), units={"horizontal_m": ux, "vertical_m": uz})
+                  n_low_noise=int(noise.sum()), units={"horizontal_m": ux, "vertical_m": uz},
+                  terrain=terrain)
     # back to the input order, low noise included
-    cls, cluster_id, height, ground, cut = _expand(
-        perm, len(perm), cls, fields["cluster_id"], height, ground, cut,
-        fill=(0, 0, 0.0, False, 0.0))
+    cls, cluster_id, height, ground, cut, tolerance = _expand(
+        perm, len(perm), cls, fields["cluster_id"], height, ground, cut, tolerance,
+        fill=(0, 0, 0.0, False, 0.0, 0.0))
     if noise.any():
-        cls, cluster_id, height, ground, cut = _expand(
-            ~noise, noise.size, cls, cluster_id, height, ground, cut,
-            fill=(ASPRS["low_noise"], 0, np.nan, False, np.nan))
+        cls, cluster_id, height, ground, cut, tolerance = _expand(
+            ~noise, noise.size, cls, cluster_id, height, ground, cut, tolerance,
+            fill=(ASPRS["low_noise"], 0, np.nan, False, np.nan, np.nan))
         if surf is not None:  # heights of the low noise under the final ground surface
             q = pts_all[noise] - origin
             height[noise] = heights(q[:, 2], surf(q[:, :2]))
-    cls, cluster_id, height, ground, cut = _expand(
-        canon, n, cls, cluster_id, height, ground, cut, fill=(0, 0, 0.0, False, 0.0))
+    cls, cluster_id, height, ground, cut, tolerance = _expand(
+        canon, n, cls, cluster_id, height, ground, cut, tolerance,
+        fill=(0, 0, 0.0, False, 0.0, 0.0))
     return MomentsClassification(classification=cls, cluster_id=cluster_id, height=height,
                                  ground=ground, steps=steps, windows=windows, params=params,
-                                 cut=cut)
+                                 cut=cut, tolerance=tolerance)
 
 
 def classify_moments(*args, **kwargs) -> MomentsClassification:

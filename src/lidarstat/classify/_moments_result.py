@@ -99,6 +99,10 @@ class MomentsClassification:
         Height cut of the last pass at each point (ground when ``height <= cut``): the
         window cuts interpolated between the centres of the finest windows; inf where a
         root window found no cut, NaN for low noise.
+    tolerance : (N,) ndarray of float64
+        Upper bound of the terrain step's test at each point (ground when
+        ``height <= tolerance``, within the depth bound below); inf where the terrain
+        step did not run, NaN for low noise.
     """
 
     classification: np.ndarray
@@ -109,6 +113,7 @@ class MomentsClassification:
     windows: list = field(default_factory=list)
     params: dict = field(default_factory=dict)
     cut: np.ndarray | None = None
+    tolerance: np.ndarray | None = None
 
     @property
     def tiles(self) -> list:

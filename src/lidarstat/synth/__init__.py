@@ -37,6 +37,7 @@ from ._surfaces import (
 )
 from ._tls import scan_spherical
 from ._tls_scenes import make_tls_building, make_tls_plant
+from ._terrain_scenes import TERRAIN_SCENES, TerrainScene, make_terrain_scene
 from ._truth import (
     SURFACE_TYPE_NAMES,
     SyntheticCloud,
@@ -68,6 +69,9 @@ __all__ = [
     "MATERIALS",
     "ASPRS_CLASSES",
     "make_tls_building",
+    "TERRAIN_SCENES",
+    "TerrainScene",
+    "make_terrain_scene",
     "make_tls_plant",
     "scan_spherical",
     "crease_lines",
