@@ -29,7 +29,8 @@ from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatDeprecationWarning, LidarstatWarning
 from ._cycle import ElevationRule
 from ._moments_ground import drop_raised_patches, ground_cut, heights
-from ._moments_objects import asprs_classes
+from ._buildings import input_order
+from ._moments_objects import asprs_classes, building_step
 from ._moments_options import MomentsMethod, MomentsOptions, unit_factors
 from ._moments_result import ASPRS, MomentsClassification
 from ._moments_windows import root_windows
@@ -52,7 +53,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
             road_rule: RoadRule | str = "antimode", road_cell_points: float = 8.0,
             ground_spread: float = 3.0, continuity: bool = True, rng=0,
             workers: int | None = None, scheduler: str = "threads", units=1.0,
-            source: str | None = None) -> MomentsClassification:
+            source: str | None = None, building_alpha: float = 0.01,
+            sigma: float | None = None) -> MomentsClassification:
     """Classify points as ground, road, building, vegetation or unclassified without training.
 
     Parameters
@@ -131,6 +133,13 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         the same physical windows as one in metres.
     source : str, optional
         File name used in messages.
+    building_alpha : float
+        Level of the building tests: the chi-square test of each object point's local
+        plane, the normal test of its distance to a neighbour's accepted plane, the
+        binomial test of a roof patch's share of non-last returns.
+    sigma : float, optional
+        Noise std (metres) of the building tests; estimated from the local planes of the
+        ground when not given.
 
     Returns
     -------
@@ -203,6 +212,9 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     if cycle is not None:
         cycle = check_scalar(cycle, "cycle", func=_FUNC, low=0, closed="left", integer=True)
     seed = _seed(rng)
+    building_alpha = check_scalar(building_alpha, "building_alpha", func=_FUNC, low=0, high=1)
+    if sigma is not None:
+        sigma = check_scalar(sigma, "sigma", func=_FUNC, low=0)
     inten, nret, rnum = (_attribute(a, name, n, source) for a, name in (
         (intensity, "intensity"), (number_of_returns, "number_of_returns"),
         (return_number, "return_number")))
@@ -230,7 +242,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     p = MomentsOptions(alpha=alpha, min_points=min_points, smoothing=smoothing, cycle=cycle,
                        bandwidth=bandwidth, method=method, elevation_rule=elevation_rule,
                        window=window / ux, min_window=min_window / ux,
-                       ground_spread=float(ground_spread), seed=seed)
+                       ground_spread=float(ground_spread), seed=seed,
+                       building_alpha=building_alpha, sigma=sigma)
     # the windows and rasters lie on multiples of the window side in the file's own
     # coordinates, so that the tiles of a catalogue share the whole area's windows
     origin = column_min(pts)
@@ -258,8 +271,11 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                                   first_step=len(steps) + 1)
     if road_step is not None:
         steps.append(road_step)
-    # 6. objects and classes
-    cls = asprs_classes(xy, height, ground, road, multi,
+    # 6. buildings (tested roof planes), objects and classes
+    blds = building_step(xy, z, height, ground, multi, (ux, uz),
+                         min_object_height=min_object_height / uz,
+                         min_height=vegetation_heights[1], options=p)
+    cls = asprs_classes(xy, height, ground, road, multi, buildings=blds.building,
                         min_object_height=min_object_height / uz,
                         vegetation_heights=tuple(v / uz for v in vegetation_heights),
                         surface_cell=surface_cell / ux, height_spread=4 * surface_cell / uz)
@@ -272,7 +288,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                   intensity=inten is not None, returns=has_returns, low_noise=low_noise,
                   road_rule=road_rule.value, road_cell_points=road_cell_points,
                   ground_spread=ground_spread, continuity=continuity, rng=seed,
-                  n_low_noise=int(noise.sum()), units={"horizontal_m": ux, "vertical_m": uz})
+                  n_low_noise=int(noise.sum()), units={"horizontal_m": ux, "vertical_m": uz},
+                  buildings=blds.params)
     # back to the input order, low noise included
     cls, cluster_id, height, ground, cut = _expand(
         perm, len(perm), cls, fields["cluster_id"], height, ground, cut,
@@ -286,9 +303,11 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
             height[noise] = heights(q[:, 2], surf(q[:, :2]))
     cls, cluster_id, height, ground, cut = _expand(
         canon, n, cls, cluster_id, height, ground, cut, fill=(0, 0, 0.0, False, 0.0))
+    building_fields = input_order(blds.fields, [(perm, len(perm))]
+                                  + [(~noise, noise.size)] * bool(noise.any()) + [(canon, n)])
     return MomentsClassification(classification=cls, cluster_id=cluster_id, height=height,
                                  ground=ground, steps=steps, windows=windows, params=params,
-                                 cut=cut)
+                                 cut=cut, building_fields=building_fields)
 
 
 def classify_moments(*args, **kwargs) -> MomentsClassification:

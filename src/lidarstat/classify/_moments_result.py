@@ -99,6 +99,9 @@ class MomentsClassification:
         Height cut of the last pass at each point (ground when ``height <= cut``): the
         window cuts interpolated between the centres of the finest windows; inf where a
         root window found no cut, NaN for low noise.
+    building_fields : dict
+        The building test's values per point (names in
+        :data:`~lidarstat.classify.BUILDING_FIELDS`).
     """
 
     classification: np.ndarray
@@ -109,6 +112,7 @@ class MomentsClassification:
     windows: list = field(default_factory=list)
     params: dict = field(default_factory=dict)
     cut: np.ndarray | None = None
+    building_fields: dict = field(default_factory=dict)
 
     @property
     def tiles(self) -> list:
@@ -118,8 +122,10 @@ class MomentsClassification:
         return self.windows
 
     def to_fields(self) -> dict:
-        """Per-point output fields: ``classification`` and ``cluster_id``."""
-        return {"classification": self.classification, "cluster_id": self.cluster_id}
+        """Per-point output fields: ``classification``, ``cluster_id`` and the building
+        test's values (:data:`~lidarstat.classify.BUILDING_FIELDS`)."""
+        return {"classification": self.classification, "cluster_id": self.cluster_id,
+                **self.building_fields}
 
     def counts(self) -> dict:
         """Points per ASPRS class name."""
