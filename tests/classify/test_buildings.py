@@ -134,3 +134,26 @@ def test_bad_building_parameters_are_refused():
 def test_fields_page_names_the_building_fields():
     page = (DOCS / "fields.md").read_text(encoding="utf-8")
     assert all(f"`{name}`" in page for name in BUILDING_FIELDS)
+
+
+def test_cli_writes_the_building_fields_and_takes_the_options(tmp_path):
+    import json
+
+    from lidarstat.cli import main
+    from lidarstat.io import PointCloud, read, write
+
+    c = make_roof_scene("steep", density=3.0, rng=2)
+    a = c.attributes
+    src = tmp_path / "scene.las"
+    write(src, PointCloud(c.xyz + (1000.0, 2000.0, 0.0),
+                          {k: a[k] for k in ("intensity", "return_number",
+                                             "number_of_returns", "classification")}))
+    out, js = tmp_path / "out.las", tmp_path / "s.json"
+    assert main(["moments", str(src), str(out), "--sigma", "0.03", "--building-alpha",
+                 "0.05", "--no-report", "-q", "--summary-json", str(js)]) == 0
+    res = read(out)
+    assert all(name in res for name in BUILDING_FIELDS)
+    assert (res["classification"][a["classification"] == 6] == 6).mean() > 0.95
+    params = json.loads(js.read_text())
+    blob = json.dumps(params)
+    assert '"building_alpha": 0.05' in blob and '"sigma": 0.03' in blob

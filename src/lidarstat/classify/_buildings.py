@@ -58,7 +58,7 @@ BUILDING_FIELDS = {
 }
 
 _EVIDENCE = {"none": 0, "roof": 1, "cell": 2, "other": 3}
-_GROUND_QUERIES = 50_000  # ground points whose planes estimate sigma
+_GROUND_QUERIES = 20_000  # ground points whose planes estimate sigma
 _TOL_SINGLE = 1.0  # m: chimneys and roof edges above the highest roof point near
 _TOL_MULTI = 0.2  # m: a non-last return above the roof is foliage over it
 
@@ -85,11 +85,18 @@ class BuildingTests:
 
 def ground_sigma(ground_xyz, k):
     """Noise std from the orthogonal planes of the ground's ``k``-neighbourhoods (None
-    with fewer than ``k + 1`` ground points)."""
+    with fewer than ``k + 1`` ground points); on a large ground, of the points in an even
+    spread of 8 m blocks."""
     m = len(ground_xyz)
     if m <= k:
         return None
-    pts = np.ascontiguousarray(ground_xyz - ground_xyz.mean(axis=0))
+    pts = ground_xyz - ground_xyz.mean(axis=0)
+    if m > 2 * _GROUND_QUERIES:  # whole 8 m blocks, spread evenly: full neighbourhoods
+        ij = np.floor((pts[:, :2] - pts[:, :2].min(axis=0)) / 8.0).astype(np.int64)
+        every = int(np.ceil(m / (2 * _GROUND_QUERIES)))
+        pts = pts[(ij[:, 0] * 7 + ij[:, 1] * 3) % every == 0]
+        m = len(pts)
+    pts = np.ascontiguousarray(pts)
     query = np.arange(0, m, max(1, m // _GROUND_QUERIES))
     nb = knn_neighbors(pts, k, query=query)
     _, _, rss = _planes(pts, nb, query.size)

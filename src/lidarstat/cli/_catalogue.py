@@ -120,7 +120,8 @@ def _moments_fields(args, extra):
             workers=1, scheduler="sync", opening_window=args.opening_window,
             iterations=args.iterations, units=units, low_noise=not args.no_low_noise,
             road_rule=args.road_rule, ground_spread=args.ground_spread,
-            continuity=not args.no_continuity, rng=args.seed, source=str(tile.extent.path))
+            continuity=not args.no_continuity, rng=args.seed, source=str(tile.extent.path),
+            building_alpha=args.building_alpha, sigma=args.sigma)
         stem = Path(extra["outputs"][tile.extent.path]).stem
         if args.dtm:  # the tile's extent, from the ground of the tile and its buffer
             e = tile.extent
