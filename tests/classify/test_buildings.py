@@ -157,3 +157,20 @@ def test_cli_writes_the_building_fields_and_takes_the_options(tmp_path):
     params = json.loads(js.read_text())
     blob = json.dumps(params)
     assert '"building_alpha": 0.05' in blob and '"sigma": 0.03' in blob
+
+
+def test_fields_follow_the_points_through_low_noise_and_reordering():
+    c = make_roof_scene("steep", density=4.0, rng=9, noise_fraction=0.004)
+    perm = np.random.default_rng(0).permutation(len(c.xyz))
+    a = {k: v[perm] for k, v in c.attributes.items()}
+    res = moments(c.xyz[perm], a["intensity"], number_of_returns=a["number_of_returns"],
+                  return_number=a["return_number"])
+    f = res.to_fields()
+    low = res.classification == 7
+    assert low.sum() > 5
+    assert np.all(f["building_evidence"][low] == 0) and np.all(np.isnan(f["building_plane_p"][low]))
+    bld = res.classification == 6
+    assert np.isin(f["building_evidence"][bld], (1, 2)).all()
+    assert np.all(f["building_evidence"][~bld] != 1) and np.all(f["building_evidence"][~bld] != 2)
+    truth = a["classification"] == 6
+    assert _scores(bld, truth)[2] >= 0.97
