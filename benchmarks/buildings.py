@@ -121,7 +121,7 @@ def figure(data, out):
     fig.suptitle("AHN3 Amsterdam 9702, building class: green found, red missed, "
                  "blue false", fontsize=10)
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    fig.savefig(out, dpi=80)
 
 
 def main():

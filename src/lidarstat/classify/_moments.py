@@ -11,7 +11,8 @@
 4. the ground: lower envelope, interpolated window cuts, one TIN refitted to the ground
    of all windows, raised patches (:mod:`._moments_ground`);
 5. roads: the darker intensity sub-cluster of the whole ground (:mod:`._roads`);
-6. objects: vegetation, buildings and the ASPRS codes (:mod:`._moments_objects`).
+6. objects: buildings by tested local planes (:mod:`._buildings`), vegetation and the
+   ASPRS codes (:mod:`._moments_objects`).
 
 Elevation is analysed as the height above a ground model (the paper uses raw elevations,
 which on a slope mixes the terrain trend with the objects; see docs/methods/moments.md).
