@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from conftest import shared_file
 
-from lidarstat.classify import ASPRS, choose_cycle, filter_errors, low_outliers, moments
+from lidarstat.classify import (ASPRS, BUILDING_FIELDS, choose_cycle, filter_errors, low_outliers,
+                                moments)
 from lidarstat.errors import InvalidParameterError, InvalidPointsError, LidarstatWarning
 from lidarstat.stats import sequential_moments
 
@@ -354,7 +355,7 @@ def test_result_shape(rng):
     xyz, inten, nret, rnum, _ = _scene(rng, 4000)
     res = moments(xyz, inten, number_of_returns=nret, return_number=rnum, window=50)
     f = res.to_fields()
-    assert set(f) == {"classification", "cluster_id"}
+    assert set(f) == {"classification", "cluster_id", *BUILDING_FIELDS}
     assert all(v.shape == (len(xyz),) for v in f.values())
     text = res.summary()
     assert text.startswith(f"{len(xyz)} points") and "ground" in text

@@ -13,7 +13,8 @@
    then the terrain step: the ground grown over smooth continuations and every point
    tested against it with a slope-dependent tolerance (:mod:`._terrain`);
 5. roads: the darker intensity sub-cluster of the whole ground (:mod:`._roads`);
-6. objects: vegetation, buildings and the ASPRS codes (:mod:`._moments_objects`).
+6. objects: buildings by tested local planes (:mod:`._buildings`), vegetation and the
+   ASPRS codes (:mod:`._moments_objects`).
 
 Elevation is analysed as the height above a ground model (the paper uses raw elevations,
 which on a slope mixes the terrain trend with the objects; see docs/methods/moments.md).
@@ -31,7 +32,8 @@ from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatDeprecationWarning, LidarstatWarning
 from ._cycle import ElevationRule
 from ._moments_ground import drop_raised_patches, ground_cut, heights
-from ._moments_objects import asprs_classes
+from ._buildings import input_order
+from ._moments_objects import asprs_classes, building_step
 from ._moments_options import MomentsMethod, MomentsOptions, unit_factors
 from ._moments_result import ASPRS, MomentsClassification
 from ._moments_windows import root_windows
@@ -57,7 +59,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
             workers: int | None = None, scheduler: str = "threads", units=1.0,
             source: str | None = None,
             road_threshold: float | None = None,
-            terrain: bool = True) -> MomentsClassification:
+            terrain: bool = True, building_alpha: float = 0.01,
+            sigma: float | None = None) -> MomentsClassification:
     """Classify points as ground, road, building, vegetation or unclassified without training.
 
     Parameters
@@ -148,6 +151,13 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         their border (bridges, roofs), and test every point against the grown surface
         with a slope-dependent tolerance (:func:`~._terrain.refine_terrain`; the
         skewness-balancing baseline never uses it).
+    building_alpha : float
+        Level of the building tests: the chi-square test of each object point's local
+        plane, the normal test of its distance to a neighbour's accepted plane, the
+        binomial test of a roof patch's share of non-last returns.
+    sigma : float, optional
+        Noise std (metres) of the building tests; estimated from the local planes of the
+        ground when not given.
 
     Returns
     -------
@@ -220,6 +230,9 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     if cycle is not None:
         cycle = check_scalar(cycle, "cycle", func=_FUNC, low=0, closed="left", integer=True)
     seed = _seed(rng)
+    building_alpha = check_scalar(building_alpha, "building_alpha", func=_FUNC, low=0, high=1)
+    if sigma is not None:
+        sigma = check_scalar(sigma, "sigma", func=_FUNC, low=0)
     inten, nret, rnum = (_attribute(a, name, n, source) for a, name in (
         (intensity, "intensity"), (number_of_returns, "number_of_returns"),
         (return_number, "return_number")))
@@ -247,7 +260,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     p = MomentsOptions(alpha=alpha, min_points=min_points, smoothing=smoothing, cycle=cycle,
                        bandwidth=bandwidth, method=method, elevation_rule=elevation_rule,
                        window=window / ux, min_window=min_window / ux,
-                       ground_spread=float(ground_spread), seed=seed)
+                       ground_spread=float(ground_spread), seed=seed,
+                       building_alpha=building_alpha, sigma=sigma)
     # the windows and rasters lie on multiples of the window side in the file's own
     # coordinates, so that the tiles of a catalogue share the whole area's windows
     origin = column_min(pts)
@@ -279,8 +293,11 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                                   first_step=len(steps) + 1)
     if road_step is not None:
         steps.append(road_step)
-    # 6. objects and classes
-    cls = asprs_classes(xy, height, ground, road, multi,
+    # 6. buildings (tested roof planes), objects and classes
+    blds = building_step(xy, z, height, ground, multi, (ux, uz),
+                         min_object_height=min_object_height / uz,
+                         min_height=vegetation_heights[1], options=p)
+    cls = asprs_classes(xy, height, ground, road, multi, buildings=blds.building,
                         min_object_height=min_object_height / uz,
                         vegetation_heights=tuple(v / uz for v in vegetation_heights),
                         surface_cell=surface_cell / ux, height_spread=4 * surface_cell / uz)
@@ -297,7 +314,7 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                                   None if road_step is None or road_step.choice.cycle is None
                                   else float(road_step.choice.threshold)),
                   n_low_noise=int(noise.sum()), units={"horizontal_m": ux, "vertical_m": uz},
-                  terrain=terrain)
+                  terrain=terrain, buildings=blds.params)
     # back to the input order, low noise included
     cls, cluster_id, height, ground, cut, tolerance = _expand(
         perm, len(perm), cls, fields["cluster_id"], height, ground, cut, tolerance,
@@ -312,9 +329,11 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     cls, cluster_id, height, ground, cut, tolerance = _expand(
         canon, n, cls, cluster_id, height, ground, cut, tolerance,
         fill=(0, 0, 0.0, False, 0.0, 0.0))
+    building_fields = input_order(blds.fields, [(perm, len(perm))]
+                                  + [(~noise, noise.size)] * bool(noise.any()) + [(canon, n)])
     return MomentsClassification(classification=cls, cluster_id=cluster_id, height=height,
                                  ground=ground, steps=steps, windows=windows, params=params,
-                                 cut=cut, tolerance=tolerance)
+                                 cut=cut, tolerance=tolerance, building_fields=building_fields)
 
 
 def classify_moments(*args, **kwargs) -> MomentsClassification:

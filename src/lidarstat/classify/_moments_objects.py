@@ -1,13 +1,36 @@
-"""Classes of the moments classification: ground, road, buildings, vegetation by height."""
+"""Classes of the moments classification: ground, road, buildings, vegetation by height.
+
+Buildings are decided by the tested local planes of :mod:`._buildings`
+(:func:`building_step`); the cell rule :func:`vegetation_like` decides when no building
+test is given.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
+from ._buildings import building_tests
 from ._moments_result import ASPRS
 from ._surface import cell_keys
 
-__all__ = ["asprs_classes", "vegetation_like"]
+__all__ = ["asprs_classes", "building_step", "vegetation_like"]
+
+
+def building_step(xy, z, height, ground, multi, units, *, min_object_height, min_height,
+                  options):
+    """The building test (:func:`~._buildings.building_tests`) on the moments' objects.
+
+    `xy`, `z`, `height` and `min_object_height` are in coordinate units, `units` the
+    (horizontal, vertical) metres per unit, `min_height` in metres; `options` is the
+    :class:`~._moments_options.MomentsOptions` (``building_alpha``, ``sigma`` in metres,
+    ``min_points``).
+    """
+    ux, uz = units
+    obj = ~ground & (height >= min_object_height)
+    xyz = np.column_stack([xy * ux, z * uz])
+    return building_tests(xyz, obj, ground, multi, height * uz, alpha=options.building_alpha,
+                          sigma=options.sigma, min_points=options.min_points,
+                          min_height=min_height)
 
 
 def vegetation_like(xy, height, obj, multi, cell, spread):
@@ -41,22 +64,27 @@ def vegetation_like(xy, height, obj, multi, cell, spread):
 
 
 def asprs_classes(xy, height, ground, road, multi, *, min_object_height, vegetation_heights,
-                  surface_cell, height_spread):
+                  surface_cell, height_spread, buildings=None):
     """ASPRS code of every point (lengths in coordinate units).
 
     Ground is 2, or 11 where it is road; a non-ground point closer than
     `min_object_height` to the ground surface is unclassified (1); the other objects are
     vegetation where their cell looks like it (:func:`vegetation_like`), low (3), medium
     (4) or high (5) by the `vegetation_heights`, and buildings (6) where they are not
-    vegetation and at least as high as the upper vegetation height.
+    vegetation and at least as high as the upper vegetation height. With `buildings` (the
+    mask of :func:`building_step`) the buildings are those objects and every other object
+    is vegetation by height.
     """
     cls = np.full(height.size, ASPRS["unclassified"], np.uint8)
     cls[ground] = ASPRS["ground"]
     cls[ground & road] = ASPRS["road"]
     obj = ~ground & (height >= min_object_height)
     h0, h1 = vegetation_heights
-    veg = obj & vegetation_like(xy, height, obj, multi, surface_cell, height_spread)
-    bld = obj & ~veg & (height >= h1)
+    if buildings is None:
+        veg = obj & vegetation_like(xy, height, obj, multi, surface_cell, height_spread)
+        bld = obj & ~veg & (height >= h1)
+    else:
+        bld = obj & buildings
     cls[bld] = ASPRS["building"]
     vmask = obj & ~bld
     cls[vmask & (height < h0)] = ASPRS["low_vegetation"]

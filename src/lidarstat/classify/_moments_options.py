@@ -55,6 +55,10 @@ class MomentsOptions:
         Seed of the dip tests' subsample and dequantisation.
     max_steps : int
         Most clustering steps per window (the paper's steps 1-4 repeated).
+    building_alpha : float
+        Level of the building tests (local plane, residual, patch share).
+    sigma : float or None
+        Noise std of the building tests in metres (None: estimated from the ground).
     """
 
     alpha: float
@@ -69,6 +73,8 @@ class MomentsOptions:
     ground_spread: float
     seed: int = 0
     max_steps: int = 6
+    building_alpha: float = 0.01
+    sigma: float | None = None
 
     @property
     def min_window_points(self) -> int:

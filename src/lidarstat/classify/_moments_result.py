@@ -103,6 +103,9 @@ class MomentsClassification:
         Upper bound of the terrain step's test at each point (ground when
         ``height <= tolerance``, within the depth bound below); inf where the terrain
         step did not run, NaN for low noise.
+    building_fields : dict
+        The building test's values per point (names in
+        :data:`~lidarstat.classify.BUILDING_FIELDS`).
     """
 
     classification: np.ndarray
@@ -114,6 +117,7 @@ class MomentsClassification:
     params: dict = field(default_factory=dict)
     cut: np.ndarray | None = None
     tolerance: np.ndarray | None = None
+    building_fields: dict = field(default_factory=dict)
 
     @property
     def tiles(self) -> list:
@@ -123,8 +127,10 @@ class MomentsClassification:
         return self.windows
 
     def to_fields(self) -> dict:
-        """Per-point output fields: ``classification`` and ``cluster_id``."""
-        return {"classification": self.classification, "cluster_id": self.cluster_id}
+        """Per-point output fields: ``classification``, ``cluster_id`` and the building
+        test's values (:data:`~lidarstat.classify.BUILDING_FIELDS`)."""
+        return {"classification": self.classification, "cluster_id": self.cluster_id,
+                **self.building_fields}
 
     def counts(self) -> dict:
         """Points per ASPRS class name."""

@@ -65,7 +65,7 @@ def _area_road_cut(args, cat):
                   opening_window=args.opening_window, iterations=args.iterations,
                   units=units, low_noise=not args.no_low_noise, road_rule=args.road_rule,
                   ground_spread=args.ground_spread, continuity=not args.no_continuity,
-                  rng=args.seed, source="catalogue")
+                  terrain=not args.no_terrain, rng=args.seed, source="catalogue")
     cut = res.params["road_threshold"]
     if not args.quiet:
         where = "the whole area" if step == 1 else f"every {step}th point of the area"
@@ -102,7 +102,8 @@ def _moments_fields(args, extra):
             iterations=args.iterations, units=units, low_noise=not args.no_low_noise,
             road_rule=args.road_rule, ground_spread=args.ground_spread,
             continuity=not args.no_continuity, rng=args.seed, source=str(tile.extent.path),
-            road_threshold=extra.get("road_threshold"))
+            road_threshold=extra.get("road_threshold"), terrain=not args.no_terrain,
+            building_alpha=args.building_alpha, sigma=args.sigma)
         stem = Path(extra["outputs"][tile.extent.path]).stem
         if args.dtm:  # the tile's extent, from the ground of the tile and its buffer
             e = tile.extent

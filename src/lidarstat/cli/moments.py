@@ -7,7 +7,8 @@ from pathlib import Path
 
 from . import _options as opt
 from ._app import Output, check_plan, write_summary_json
-from ._common import add_alpha, add_run_outputs, add_seed, add_workers, deprecated_alias
+from ._common import (add_alpha, add_noise, add_run_outputs, add_seed, add_workers,
+                      deprecated_alias)
 
 
 def _run(args):
@@ -43,7 +44,8 @@ def _run(args):
         opening_window=args.opening_window, iterations=args.iterations, units=units,
         low_noise=not args.no_low_noise, road_rule=args.road_rule,
         ground_spread=args.ground_spread, continuity=not args.no_continuity, rng=args.seed,
-        source=str(args.input))
+        terrain=not args.no_terrain, source=str(args.input),
+        building_alpha=args.building_alpha, sigma=args.sigma)
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
     if args.dtm:
@@ -131,11 +133,19 @@ def register(sub):
                         "centre of the ground cluster it leaves (0: off)")
     s.add_argument("--no-continuity", action="store_true",
                    help="skip the raised-patch check of the ground (faster on large files)")
+    s.add_argument("--no-terrain", action="store_true",
+                   help="skip the terrain step (ground grown over embankments and ramps, "
+                        "every point tested against the grown surface): the paper's cut alone")
     s.add_argument("--road-rule", choices=ROAD_RULES, default="antimode",
                    help="cut of the ground's intensity into road and the rest")
     s.add_argument("--no-intensity", action="store_true", help="analyse elevation only")
     s.add_argument("--no-low-noise", action="store_true",
                    help="do not flag isolated points under the terrain as low noise (7)")
+    s.add_argument("--building-alpha", type=opt.probability, default=0.01,
+                   help="level of the building tests: local plane, distance to a "
+                        "neighbour's plane, share of non-last returns [0.01]")
+    add_noise(s, sigma_help="noise std of the building tests in metres (default: estimated "
+              "from the local planes of the ground)", noise=False, sensor=False)
     add_seed(s)
     add_workers(s, help_what="analysis windows")
     s.add_argument("--dtm", default=None, metavar="FILE.tif",

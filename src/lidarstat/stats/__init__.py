@@ -1,5 +1,6 @@
 """Vectorised hypothesis tests (chi-square, Wald, z, F, dip), sequential moments and densities."""
 
+from ._binomial import binomial_test
 from ._critical import (chi2_critical, chi2_pvalue, chi2_quantile, chi2_test, f_pvalue, f_test,
                         normal_pvalue, normal_quantile, t_critical, z_critical,
                         z_test_statistic)
@@ -14,7 +15,7 @@ from ._forward_search import deletion_residual_envelope, truncated_normal_varian
 from ._tests import (f_test_paper, variance_test_paper, variance_test_satterthwaite, wald_test,
                      z_test)
 
-__all__ = ["TestResult", "z_critical", "t_critical", "chi2_critical", "chi2_quantile",
+__all__ = ["TestResult", "binomial_test", "z_critical", "t_critical", "chi2_critical", "chi2_quantile",
            "normal_quantile", "f_pvalue", "chi2_pvalue", "normal_pvalue", "hotelling_pvalue", "hotelling_test", "f_test", "chi2_test", "z_test_statistic", "variance_test_paper", "variance_test_satterthwaite", "wald_test",
            "z_test", "f_test_paper", "LogDet", "PolynomialBasis", "SARFit", "sar_fit",
            "sar_mean_surface", "sar_trend", "sar_variance_test", "select_degree", "weights_matrix",

@@ -1,0 +1,159 @@
+#!/usr/bin/env python
+"""Buildings of `moments` against the producers' building class (6), with the ground in
+the same run.
+
+For every AHN3 and IGN file: ground total error and kappa against the producer's ground
+(2), and building precision / recall / F1 of
+
+* ``tested``: the classes `moments` writes (tested local planes, roof patches, roof
+  cells: docs/methods/moments.md, "Buildings");
+* ``cells``: the cell rule on the same run's ground and heights (objects at least 2 m
+  high whose 2 m cell is not vegetation-like: more than half non-last returns or heights
+  spread over 16 m; every non-last return vegetation), the rule the tests replace.
+
+Producer noise (7, 18), water (9) and codes above 18 are left out. Producer classes are
+the producers' semi-automatic (AHN3) or human-validated (IGN building) labels, not
+checked truth. All files run with the default parameters (one parameter set).
+
+Usage::
+
+    python benchmarks/buildings.py --out benchmarks/results_buildings.json \\
+        --figure docs/figures/moments_buildings.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "src"))
+
+from lidarstat.classify import _moments_objects, filter_errors, moments  # noqa: E402
+from lidarstat.io import linear_units, read  # noqa: E402
+
+DATA = HERE.parent.parent / "shared" / "data"
+FILES = [
+    "ahn3_amsterdam/ahn_2386_9702.laz",
+    "ahn3_amsterdam/ahn_2397_9705.laz",
+    "ahn3_delft_3dfier/derived/ahn3_cropped_1_bgt.laz",
+    "ahn3_delft_3dfier/derived/ahn3_cropped_2_bgt.laz",
+    "ign_lidarhd_samples/870000_6618000.subset.50mx100m.las",
+    "ign_lidarhd_samples/St_Barth_RGAF09_UTM20N_IGN_1988_SB_subset_100m.laz",
+]
+LEFT_OUT = (7, 9, 18)
+FIGURE_FILE = "ahn3_amsterdam/ahn_2386_9702.laz"
+
+
+def scores(pred, truth):
+    tp = float(np.sum(pred & truth))
+    p = tp / max(float(pred.sum()), 1.0)
+    r = tp / max(float(truth.sum()), 1.0)
+    f1 = 2 * p * r / (p + r) if p + r > 0 else 0.0
+    return {"precision": round(100 * p, 2), "recall": round(100 * r, 2),
+            "f1": round(100 * f1, 2)}
+
+
+def cell_rule(xy, height, ground, multi):
+    """Buildings by the cell rule on the same ground and heights (metres)."""
+    obj = ~ground & (height >= 0.5)
+    veg = obj & _moments_objects.vegetation_like(xy, height, obj, multi, 4.0, 16.0)
+    return obj & ~veg & (height >= 2.0)
+
+
+def run(rel):
+    path = DATA / rel
+    cloud = read(path)
+    a = cloud.attributes
+    ref = np.asarray(a["classification"]).astype(int)
+    nret, rnum = np.asarray(a["number_of_returns"]), np.asarray(a["return_number"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        units = linear_units(cloud.crs, header=cloud.las_header, source=str(path))
+        t = time.perf_counter()
+        res = moments(cloud.xyz, a.get("intensity"), number_of_returns=nret,
+                      return_number=rnum, units=units, source=str(path))
+        seconds = time.perf_counter() - t
+    keep = ~np.isin(ref, LEFT_OUT) & (ref < 19)
+    e = filter_errors(res.ground[keep], ref[keep] == 2)
+    multi = (nret > 1) & (rnum < nret)
+    old = cell_rule(cloud.xyz[:, :2], res.height, res.ground, multi)
+    new = res.classification == 6
+    truth = ref == 6
+    b = res.params["buildings"]
+    row = {"file": rel, "points": int(len(ref)), "scored": int(keep.sum()),
+           "seconds": round(seconds, 2), "ground_total": round(100 * e.total, 2),
+           "ground_kappa": round(e.kappa, 3), "building_points": int(truth[keep].sum()),
+           "tested": scores(new[keep], truth[keep]), "cells": scores(old[keep], truth[keep]),
+           "sigma": round(b["sigma"], 4), "roof_patches": b["n_roof_patches"],
+           "missed_as_ground": int(np.sum(truth & keep & res.ground))}
+    return row, (cloud.xyz, truth, old, new)
+
+
+def figure(data, out):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    xyz, truth, old, new = data
+    xy = xyz[:, :2] - xyz[:, :2].min(axis=0)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5.4), sharey=True)
+    for ax, pred, title in ((axes[0], old, "cell rule"), (axes[1], new, "tested planes")):
+        col = np.full((len(xy), 3), 0.86)
+        col[truth & pred] = (0.15, 0.6, 0.2)
+        col[truth & ~pred] = (0.85, 0.1, 0.1)
+        col[~truth & pred] = (0.1, 0.2, 0.85)
+        o = np.argsort(truth | pred, kind="stable")
+        ax.scatter(xy[o, 0], xy[o, 1], c=col[o], s=0.6, linewidths=0)
+        s = scores(pred, truth)
+        ax.set_title(f"{title}: P {s['precision']:.1f} % R {s['recall']:.1f} % "
+                     f"F1 {s['f1']:.1f} %", fontsize=10)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+    axes[0].set_ylabel("y (m)")
+    fig.suptitle("AHN3 Amsterdam 9702, building class: green found, red missed, "
+                 "blue false", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out, dpi=80)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=None)
+    ap.add_argument("--figure", default=None, help=f"PNG of {FIGURE_FILE} before/after")
+    args = ap.parse_args()
+    rows = []
+    for rel in FILES:
+        if not (DATA / rel).is_file():
+            print(f"skipped (not found): {DATA / rel}")
+            continue
+        row, data = run(rel)
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+        if args.figure and rel == FIGURE_FILE:
+            figure(data, args.figure)
+    print("\n| file | ground total % | building P/R/F1 % tested | cell rule | s |")
+    print("|---|---|---|---|---|")
+    for r in rows:
+        t, c = r["tested"], r["cells"]
+        print(f"| {Path(r['file']).name} | {r['ground_total']} | {t['precision']} / "
+              f"{t['recall']} / {t['f1']} | {c['precision']} / {c['recall']} / {c['f1']} | "
+              f"{r['seconds']} |")
+    if rows:
+        mean = {k: round(float(np.mean([r[k]["f1"] for r in rows])), 2)
+                for k in ("tested", "cells")}
+        print(f"mean F1: tested {mean['tested']}, cell rule {mean['cells']}")
+    if args.out:
+        Path(args.out).write_text(json.dumps({"files": rows, "machine": "shared, 2 cores"},
+                                             indent=2))
+
+
+if __name__ == "__main__":
+    main()
