@@ -303,6 +303,9 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
     # range noise, the plane-median line (noise plus the typical model error of a
     # real scan's surfaces, never below the noise; docs/methods/covariance.md)
     seg_sigma = classes.meta.get("segment_sigma", classes.sigma)
+    # the point the noise runs from (the sensor for 'range', far up for 'z', None for
+    # 'normal'): every model below weights its points by their noise across it
+    nsensor = classes.meta.get("noise_sensor")
     nbh = feats.neighborhoods
     if nbh is None:
         raise InvalidParameterError(f"{func}: `result` must be computed with keep_neighbors=True")
@@ -322,8 +325,7 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
         from ._scales import planar_scales
 
         kstar, kp, pn = planar_scales(pts, nbh, seg_sigma, alpha=classes.alpha,
-                                      sensor=feats.sensor if classes.meta.get("noise") ==
-                                      "range" else None)
+                                      sensor=nsensor)
         extra = {"scale_k": kstar.astype(np.uint8), "scale_plane_p": kp}
         # Fig. 4 on the first grow_k neighbours of surface points, plus every point's
         # largest planar prefix; members of either may be joined, only tested points grow
@@ -350,8 +352,11 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
     normals = feats.normals  # one (N, 3) stack for every step below (read only)
     centroids = feats.centroid
     across = seg_sigma
-    if classes.meta.get("noise") == "range":
-        across = np.maximum(seg_sigma * feats.ray_cos, 1e-12)
+    if nsensor is not None:
+        ray = pts - nsensor
+        cos = np.abs(np.einsum("ij,ij->i", ray, normals)) / np.linalg.norm(ray, axis=1)
+        across = np.maximum(seg_sigma * cos, 1e-12)
+        del ray, cos
     reint = np.zeros(pts.shape[0], dtype=np.uint8)
     if reintegration:
         cand = edge_like | (pc == PointClass.UNDETERMINED)
@@ -365,7 +370,7 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
     # when the plane is identified and passes the plane test)
     from ._refine import refine_borders, strip_segments
 
-    rsensor = feats.sensor if classes.meta.get("noise") == "range" else None
+    rsensor = nsensor
     labels, moved, models = refine_borders(pts, labels, nbh, seg_sigma,
                                            sensor=rsensor)
     reint[moved] = 2
@@ -398,11 +403,10 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
     del pdir, ci_
     labels, cylinders = merge_cylinders(
         pts, labels, normals, seg_sigma, max_angle=min_angle / 4,
-        sensor=feats.sensor if classes.meta.get("noise") == "range" else None,
-        point_axes=pt_axes)
+        sensor=nsensor, point_axes=pt_axes)
     from ._cylinders import absorb_into_cylinders, refine_cylinder_table, segment_cylinders
 
-    csensor = feats.sensor if classes.meta.get("noise") == "range" else None
+    csensor = nsensor
     cylinders = refine_cylinder_table(pts, labels, cylinders, seg_sigma, sensor=csensor)
     labels, absorbed = absorb_into_cylinders(pts, labels, grow_nbh, cylinders, seg_sigma,
                                              sensor=csensor)
