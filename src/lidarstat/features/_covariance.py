@@ -261,7 +261,7 @@ def _check_sensor(sensor, func):
 #: The range of neighbourhood sizes of the automatic scale (``k`` and ``radius`` None):
 #: Weinmann et al.'s lower bound, and the paper's fixed k = 50 as the upper one (the plane
 #: and cylinder tests keep their power; the kNN search is that of the fixed scale).
-OPTIMAL_K_MIN, OPTIMAL_K_MAX = 10, 50
+OPTIMAL_K_MIN, OPTIMAL_K_MAX = 20, 50
 
 
 def covariance_features(points, *, k=None, radius=None, neighborhoods=None, sensor=None,

@@ -150,8 +150,27 @@ def _union_plane_rms(points, labels, a, b):
     return np.sqrt(np.maximum(w, 0.0) / (na + nb))
 
 
+#: Level of the one-plane test of a merge (:func:`merge_coplanar`): the union's plane
+#: against one plane per part. Small, because the parts of one real surface are not
+#: exact planes, and a crease between two faces rejects at any level.
+MERGE_ALPHA = 0.001
+
+
+def one_plane_p(n_a, rss_a, n_b, rss_b, rss_u):
+    """p-value of "segments a and b lie on one plane" (Chow's test): with the residual
+    sums of squares of each part's total-least-squares plane and of the union's,
+    ``F = ((RSS_u - RSS_a - RSS_b) / 3) / ((RSS_a + RSS_b) / (n_a + n_b - 6)) ~ F(3,
+    n_a + n_b - 6)`` (three parameters of the second plane)."""
+    from ..stats import f_pvalue
+
+    df2 = np.maximum(n_a + n_b - 6, 1).astype(np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = ((rss_u - rss_a - rss_b) / 3.0) / ((rss_a + rss_b) / df2)
+    return f_pvalue(np.maximum(f, 0.0), 3.0, df2)
+
+
 def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=None,
-                   centroids=None, tolerance=1.5):
+                   centroids=None, tolerance=1.5, merge_alpha=MERGE_ALPHA):
     """Merge touching segments that are one surface (split by a window, a pipe in front, ...).
 
     Two segments that share neighbour pairs merge when their plane normals differ by less
@@ -162,8 +181,9 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
     plane tolerance): a smooth continuation. Either way the plane fitted to the union
     must have an orthogonal RMS at most `tolerance` times the larger RMS of the two
     (two parallel planes a recess apart are not one surface; pieces of one cylinder are
-    merged by :func:`lidarstat.segment._cylinders.merge_cylinders`). Ids are renumbered
-    by size.
+    merged by :func:`lidarstat.segment._cylinders.merge_cylinders`), and one plane for
+    the union must not be rejected against a plane per part at `merge_alpha`
+    (:func:`one_plane_p`; None: not tested). Ids are renumbered by size.
     """
     from ._grow import adjacency_of_pairs, relabel
 
@@ -212,6 +232,14 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
         union = _union_plane_rms(points, labels, pairs[cand, 0], pairs[cand, 1])
         ok[cand] = union <= tolerance * np.maximum(pooled[cand], np.maximum(
             t["rms"][a[cand]], t["rms"][b[cand]]))
+        if merge_alpha is not None:
+            # the model test each part passes must hold for the union: one plane for both
+            # (a flange's face and its cylindrical rim meet at a crease, where the union's
+            # RMS stays within the tolerance of the rim's own)
+            na, nb = t["n_points"][a[cand]], t["n_points"][b[cand]]
+            p = one_plane_p(na, na * t["rms"][a[cand]] ** 2, nb, nb * t["rms"][b[cand]] ** 2,
+                            (na + nb) * union ** 2)
+            ok[cand] &= p >= merge_alpha
     if not ok.any():
         return labels
     parent = np.arange(len(t["segment_id"]) + 1)
