@@ -97,15 +97,20 @@ def run(name, xyz, sensor, view, extra="", show=None):
     t0 = time.perf_counter()
     from lidarstat.classify import covariance
 
-    seg = segment_covariance(xyz, covariance(xyz, sensor=sensor, keep_neighbors=True))
+    # each command with its defaults: `covariance` at the automatic scale, `segment
+    # --method covariance` at k = 50
+    cls = covariance(xyz, sensor=sensor)
+    seg = segment_covariance(xyz, covariance(xyz, k=50, sensor=sensor, keep_neighbors=True))
     dt = time.perf_counter() - t0
-    pc = seg.fields["point_class"]
+    pc = cls.point_class
+    kq = np.percentile(cls.features["OptimalKNN"], [10, 50, 90])
     inseg = (seg.labels > 0).mean()
     print(f"{name}: {len(xyz)} points, {seg.n_segments} segments, {100 * inseg:.0f} % in "
           f"segments, {len(seg.lines) if seg.lines is not None else 0} lines, {dt:.1f} s")
     m = np.ones(len(xyz), dtype=bool) if show is None else show
     classes_png(DOCS / f"covariance_{name}_classes.png", xyz[m], pc[m],
-                f"{name}{extra}: point_class (k = 50, automatic tests)", view)
+                f"{name}{extra}: point_class (automatic scale, k {kq[0]:.0f}/{kq[1]:.0f}/"
+                f"{kq[2]:.0f} at 10/50/90 %)", view)
     segments_png(DOCS / f"covariance_{name}_segments.png", xyz[m], seg.labels[m], seg.lines,
                  f"{name}{extra}: {seg.n_segments} segments (grey: none), "
                  f"{100 * inseg:.0f} % of the points; lines black", view)

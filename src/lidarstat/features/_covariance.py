@@ -262,6 +262,9 @@ def _check_sensor(sensor, func):
 #: Weinmann et al.'s lower bound, and the paper's fixed k = 50 as the upper one (the plane
 #: and cylinder tests keep their power; the kNN search is that of the fixed scale).
 OPTIMAL_K_MIN, OPTIMAL_K_MAX = 20, 50
+#: A prefix whose middle eigenvalue is below this share of the largest is no candidate: it
+#: is a piece of a scan line, not of a surface (its entropy is low, its normal undetermined).
+OPTIMAL_MIN_SPREAD = 0.1
 
 
 def covariance_features(points, *, k=None, radius=None, neighborhoods=None, sensor=None,
@@ -284,9 +287,11 @@ def covariance_features(points, *, k=None, radius=None, neighborhoods=None, sens
         Neighbours per point, the point itself included (the paper: 50). Ignored when
         `radius` or `neighborhoods` is given. When neither `k` nor `radius` is given,
         every point gets its own optimal neighbourhood size: the prefix of its
-        ``OPTIMAL_K_MAX`` (50) nearest neighbours, at least ``OPTIMAL_K_MIN`` (10), whose
+        ``OPTIMAL_K_MAX`` (50) nearest neighbours, at least ``OPTIMAL_K_MIN`` (20), whose
         normalised eigenvalues have the smallest entropy (Weinmann et al. 2015, as PDAL's
-        ``filters.optimalneighborhood``); fields ``OptimalKNN`` and ``OptimalRadius``.
+        ``filters.optimalneighborhood``), among the prefixes that span a surface (middle
+        eigenvalue at least ``OPTIMAL_MIN_SPREAD`` of the largest; else all 50); fields
+        ``OptimalKNN`` and ``OptimalRadius``.
     radius : float, optional
         Use the points within a 3-D sphere of this radius instead of the k nearest.
     neighborhoods : Neighborhoods, optional
@@ -462,7 +467,8 @@ def _optimal_scale(pts, *, sensor, eigen_mode, keep_neighbors, block_size, progr
     local = pts - pts.mean(axis=0)
     kopt = np.empty(n, dtype=np.int64)
     entropy = np.empty(n)
-    optimal_k_rows(local, full.indptr, full.indices, k_min, k_max, kopt, entropy)
+    optimal_k_rows(local, full.indptr, full.indices, k_min, k_max, OPTIMAL_MIN_SPREAD, kopt,
+                   entropy)
     indptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(kopt, out=indptr[1:])
     pos = np.repeat(full.indptr[:-1] - indptr[:-1], kopt) + np.arange(indptr[-1])

@@ -5,7 +5,8 @@ second moments of the offsets from the point are accumulated neighbour by neighb
 at every prefix size k in ``[k_min, k_max]`` the covariance eigenvalues (closed form of a
 symmetric 3x3 matrix) give the eigenentropy of the normalised eigenvalues
 ``-sum e_i ln e_i``, ``e_i = lambda_i / sum lambda``. The smallest entropy wins (the
-first k on ties). Offsets from the point itself keep the moments small, so the
+first k on ties) among the prefixes whose middle eigenvalue is at least `min_spread` times
+the largest (a surface patch, not a piece of one scan line); with none, the whole row. Offsets from the point itself keep the moments small, so the
 one-pass covariance of a prefix loses no precision at the neighbourhood's scale.
 """
 
@@ -53,9 +54,10 @@ def _xlogx(x):
 
 
 @njit_parallel
-def optimal_k_rows(pts, indptr, idx, k_min, k_max, out_k, out_entropy):
+def optimal_k_rows(pts, indptr, idx, k_min, k_max, min_spread, out_k, out_entropy):
     """Per row (sorted by distance, the point itself first): the prefix size in
-    ``[k_min, min(k_max, row length)]`` of minimum eigenentropy, and that entropy."""
+    ``[k_min, min(k_max, row length)]`` of minimum eigenentropy among those with
+    ``lambda1 >= min_spread lambda2``, and that entropy (NaN when none qualifies)."""
     m = indptr.size - 1
     for r in prange(m):
         s = indptr[r]
@@ -94,11 +96,13 @@ def optimal_k_rows(pts, indptr, idx, k_min, k_max, out_k, out_entropy):
             l1 = max(l1, 0.0)
             l2 = max(l2, 0.0)
             tot = l0 + l1 + l2
-            if not tot > 0.0:
+            if not tot > 0.0 or l1 < min_spread * l2:
                 continue
             ent = -(_xlogx(l0 / tot) + _xlogx(l1 / tot) + _xlogx(l2 / tot))
             if ent < best:
                 best = ent
                 kbest = k
+        if best == np.inf:
+            kbest = n
         out_k[r] = kbest
         out_entropy[r] = best

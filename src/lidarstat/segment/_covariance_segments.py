@@ -417,18 +417,25 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
     if nbh.kind == "knn":
         del free, before, new
     labels = merge_coplanar(pts, labels, grow_nbh, max_angle=min_angle / 4,
-                            normals=normals, centroids=feats.centroid)
+                            normals=normals, centroids=centroids)
     from ._cylinders import merge_cylinders
 
     # per-point axes (minimum-curvature directions) of the curved surface points only
-    # (computed for those points: no (N, 3) temporaries at the segmentation's peak)
+    # (computed for those points: no (N, 3) temporaries at the segmentation's peak); at
+    # the automatic scale from the kept rows of k_max neighbours: the axes of the smaller
+    # neighbourhoods scatter, and the pieces of one pipe then fail to merge
+    geo = feats
+    if feats.k is None and feats.radius is None and nbh.kind == "knn":
+        from ..features import covariance_features
+
+        geo = covariance_features(pts, neighborhoods=nbh, sensor=feats.sensor)
     curved_pts = surface & ~(classes["plane_p"] >= classes.alpha)
     pt_axes = np.full((pts.shape[0], 3), np.nan)
     ci_ = np.flatnonzero(curved_pts)
-    pdir = np.stack([feats["PrincipalDirX"][ci_], feats["PrincipalDirY"][ci_],
-                     feats["PrincipalDirZ"][ci_]], axis=1)
-    pt_axes[ci_] = np.cross(normals[ci_], pdir)
-    del pdir, ci_
+    pdir = np.stack([geo["PrincipalDirX"][ci_], geo["PrincipalDirY"][ci_],
+                     geo["PrincipalDirZ"][ci_]], axis=1)
+    pt_axes[ci_] = np.cross(geo.normals[ci_], pdir)
+    del pdir, ci_, geo
     labels, cylinders = merge_cylinders(
         pts, labels, normals, seg_sigma, max_angle=min_angle / 4,
         sensor=nsensor, point_axes=pt_axes)
