@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 DOCS = Path(__file__).resolve().parent
-PUMP = DOCS.parent / ".." / "shared" / "data" / "e57_pump_tls" / "pump_scan.laz"
+PUMP = DOCS.parent.parent / ".." / "shared" / "data" / "e57_pump_tls" / "pump_scan.laz"
 CLASS_COLORS = np.array(["#bdbdbd", "#7f9fbf", "#d62728", "#ff7f0e"])
 CLASS_NAMES = ["undetermined", "surface", "edge", "boundary"]
 
