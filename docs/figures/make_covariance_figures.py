@@ -97,10 +97,9 @@ def run(name, xyz, sensor, view, extra="", show=None):
     t0 = time.perf_counter()
     from lidarstat.classify import covariance
 
-    # each command with its defaults: `covariance` at the automatic scale, `segment
-    # --method covariance` at k = 50
-    cls = covariance(xyz, sensor=sensor)
-    seg = segment_covariance(xyz, covariance(xyz, k=50, sensor=sensor, keep_neighbors=True))
+    # the defaults of both commands (the automatic scale)
+    cls = covariance(xyz, sensor=sensor, keep_neighbors=True)
+    seg = segment_covariance(xyz, cls)
     dt = time.perf_counter() - t0
     pc = cls.point_class
     kq = np.percentile(cls.features["OptimalKNN"], [10, 50, 90])
