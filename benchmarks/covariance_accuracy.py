@@ -4,13 +4,14 @@
 
 Scenes: the synthetic gable roof of the tests (40,000 points, noise 5 mm) and the
 terrestrial scans ``tls_building`` and ``tls_plant`` (one station, default step and range
-noise 0.002 + 5e-5 r, seed 0; ``--quick``: step 0.004). Parameters: k = 50, everything
-automatic (range noise estimated along the rays from the scanner position). Printed:
+noise 0.002 + 5e-5 r, seed 0; ``--quick``: step 0.004). Parameters: the defaults - the
+automatic scale (``--k K`` for a fixed one), range noise estimated along the rays from the
+scanner position, height noise along z on the gable roof. Printed:
 
 * edge and boundary precision / recall / F1 against three truths (boundary test: the
   default ``'grid'`` one, with its boundary errors by cause; the paper's ``'centroid'``
   test on the same features beside it): ``support`` - a point is an edge when its own
-  k-neighbourhood holds a point of another face (:func:`neighborhood_class_truth`),
+  neighbourhood (at its chosen size) holds a point of another face (:func:`neighborhood_class_truth`),
   a boundary when the end of the visible surface is within 0.5 of its own neighbourhood
   radius; ``band r_i`` - :func:`point_class_truth` zones of 0.7 (edge) / 0.5 (boundary)
   times the point's own neighbourhood radius; ``band median`` - the same with one
@@ -44,9 +45,9 @@ def prf(pred, truth):
 def class_scores(cloud, res):
     from lidarstat.synth import neighborhood_class_truth, point_class_truth
 
-    nbh = res.features.neighborhoods
+    nbh = used_neighbourhoods(res)
     pc = res.point_class
-    rk = nbh.distances.reshape(len(nbh), -1)[:, -1]
+    rk = nbh.distances[nbh.indptr[1:] - 1]
     out = {}
     sup = neighborhood_class_truth(cloud, nbh)
     out["support"] = {"edge": prf(pc == 2, sup == 2), "boundary": prf(pc == 3, sup == 3)}
@@ -145,7 +146,24 @@ def line_scores(cloud, seg, two_sigma):
             "2 sigma (m)": two_sigma}
 
 
-def tls(name, step):
+def used_neighbourhoods(res):
+    """The neighbourhoods the features were computed on: at the automatic scale the first
+    ``neighbors`` points of each kept kNN row."""
+    from lidarstat.neighbors import Neighborhoods
+
+    f = res.features
+    nbh = f.neighborhoods
+    if f.k is not None or f.radius is not None:
+        return nbh
+    used = np.minimum(np.asarray(f.counts, dtype=np.int64), nbh.counts)
+    indptr = np.zeros(used.size + 1, dtype=np.int64)
+    np.cumsum(used, out=indptr[1:])
+    pos = np.repeat(nbh.indptr[:-1] - indptr[:-1], used) + np.arange(indptr[-1])
+    return Neighborhoods(indptr, nbh.indices[pos], nbh.distances[pos], nbh.n_points,
+                         kind="knn")
+
+
+def tls(name, step, k=None):
     from lidarstat.classify import covariance
     from lidarstat.segment import hoover, segment_covariance
     from lidarstat.synth import make_tls_building, make_tls_plant
@@ -153,7 +171,7 @@ def tls(name, step):
     make = {"tls_building": make_tls_building, "tls_plant": make_tls_plant}[name]
     cloud = make(step=step, rng=0)
     t0 = time.perf_counter()
-    res = covariance(cloud.xyz, sensor=cloud.scanner, k=50, keep_neighbors=True)
+    res = covariance(cloud.xyz, sensor=cloud.scanner, k=k, keep_neighbors=True)
     seg = segment_covariance(cloud.xyz, res)
     dt = time.perf_counter() - t0
     h = hoover(seg.labels, cloud.face + 1, 0.8, min_points=200)
@@ -178,7 +196,7 @@ def tls(name, step):
     from lidarstat.classify import classify_covariance
     from lidarstat.synth import neighborhood_class_truth
 
-    sup = neighborhood_class_truth(cloud, res.features.neighborhoods)
+    sup = neighborhood_class_truth(cloud, used_neighbourhoods(res))
     cen = classify_covariance(res.features, points=cloud.xyz, boundary="centroid")
     out = {"points": len(cloud), "seconds": round(dt, 1), "classes": class_scores(cloud, res),
            "boundary errors by cause (grid test, the default)": grid_errors(
@@ -238,7 +256,7 @@ def grid_errors(cloud, res, grid, sup):
     return out
 
 
-def gable(rng):
+def gable(rng, k=None):
     from scipy.spatial import cKDTree
 
     from lidarstat.classify import covariance
@@ -249,9 +267,12 @@ def gable(rng):
     pts = np.c_[xy, z]
     ridge = np.abs(xy[:, 0] - 5) * np.cos(np.radians(30))
     border = np.minimum.reduce([xy[:, 0], 10 - xy[:, 0], xy[:, 1], 10 - xy[:, 1]])
-    res = covariance(pts, k=50)
-    d, _ = cKDTree(pts).query(pts[::50], k=50)
-    rk = np.median(d[:, -1])
+    res = covariance(pts, k=k)
+    if k is None:
+        rk = float(np.median(res.features["OptimalRadius"]))
+    else:
+        d, _ = cKDTree(pts).query(pts[::50], k=k)
+        rk = np.median(d[:, -1])
     pc = res.point_class
     out = {}
     for c in (0.5, 0.6, 0.75, 1.0):
@@ -263,12 +284,15 @@ def gable(rng):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="coarse scans (step 0.004)")
+    p.add_argument("--k", type=int, default=None,
+                   help="fixed neighbourhood size (default: the automatic scale)")
     p.add_argument("--json", default=None, help="write the figures here")
     a = p.parse_args(argv)
     step = 0.004 if a.quick else 0.0025
-    res = {"step": step, "gable": gable(np.random.default_rng(0))}
+    res = {"step": step, "k": a.k if a.k is not None else "automatic",
+           "gable": gable(np.random.default_rng(0), a.k)}
     for name in ("tls_building", "tls_plant"):
-        res[name] = tls(name, step)
+        res[name] = tls(name, step, a.k)
     print(json.dumps(res, indent=1))
     if a.json:
         with open(a.json, "w") as f:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 DOCS = Path(__file__).resolve().parent
-PUMP = DOCS.parent / ".." / "shared" / "data" / "e57_pump_tls" / "pump_scan.laz"
+PUMP = DOCS.parent.parent / ".." / "shared" / "data" / "e57_pump_tls" / "pump_scan.laz"
 CLASS_COLORS = np.array(["#bdbdbd", "#7f9fbf", "#d62728", "#ff7f0e"])
 CLASS_NAMES = ["undetermined", "surface", "edge", "boundary"]
 
@@ -97,15 +97,19 @@ def run(name, xyz, sensor, view, extra="", show=None):
     t0 = time.perf_counter()
     from lidarstat.classify import covariance
 
-    seg = segment_covariance(xyz, covariance(xyz, sensor=sensor, keep_neighbors=True))
+    # the defaults of both commands (the automatic scale)
+    cls = covariance(xyz, sensor=sensor, keep_neighbors=True)
+    seg = segment_covariance(xyz, cls)
     dt = time.perf_counter() - t0
-    pc = seg.fields["point_class"]
+    pc = cls.point_class
+    kq = np.percentile(cls.features["OptimalKNN"], [10, 50, 90])
     inseg = (seg.labels > 0).mean()
     print(f"{name}: {len(xyz)} points, {seg.n_segments} segments, {100 * inseg:.0f} % in "
           f"segments, {len(seg.lines) if seg.lines is not None else 0} lines, {dt:.1f} s")
     m = np.ones(len(xyz), dtype=bool) if show is None else show
     classes_png(DOCS / f"covariance_{name}_classes.png", xyz[m], pc[m],
-                f"{name}{extra}: point_class (k = 50, automatic tests)", view)
+                f"{name}{extra}: point_class (automatic scale, k {kq[0]:.0f}/{kq[1]:.0f}/"
+                f"{kq[2]:.0f} at 10/50/90 %)", view)
     segments_png(DOCS / f"covariance_{name}_segments.png", xyz[m], seg.labels[m], seg.lines,
                  f"{name}{extra}: {seg.n_segments} segments (grey: none), "
                  f"{100 * inseg:.0f} % of the points; lines black", view)

@@ -104,7 +104,8 @@ def test_segment_covariance_min_size_is_a_deprecated_spelling(box_las, tmp_path,
     (["segment", "IN", "out.laz", "--method", "covariance", "--eigen-mode", "sqrt"],
      "--eigen-mode"),
     (["segment", "IN", "out.laz", "--method", "covariance", "--noise", "range"],
-     "argument --noise: --method covariance does not use it"),
+     "noise='range' needs features computed with a sensor"),
+    (["covariance", "IN", "out.laz", "--noise", "along"], "argument --noise: invalid choice"),
     (["covariance", "IN", "out.laz", "--sensor", "0", "0", "10", "--boundary-alpha", "0.01"],
      "argument --boundary-alpha: the 'grid' boundary test"),
     (["covariance", "IN", "out.laz", "--border-band", "0.4"],
@@ -144,3 +145,29 @@ def test_covariance_grid_test_with_a_sensor(tmp_path, capsys):
     meta = json.loads(summary.read_text())
     assert meta["boundary"] == "grid" and meta["border_band"] == 0.4
     assert meta["boundary_alpha"] is None and len(meta["range_noise"]) == 2
+
+
+def test_covariance_automatic_scale_and_noise(box_las, tmp_path, capsys):
+    """No --k or --radius: the automatic scale, printed and in the summary; --noise."""
+    import json
+
+    out, summary = tmp_path / "out.npz", tmp_path / "s.json"
+    assert main(["covariance", str(box_las), str(out), "--summary-json", str(summary)]) == 0
+    stdout = capsys.readouterr().out
+    assert "automatic (minimum eigenentropy, k 20 to 50)" in stdout
+    res = read(out)
+    k = np.asarray(res["OptimalKNN"])
+    assert k.min() >= 20 and k.max() <= 50 and "OptimalRadius" in res.field_names
+    meta = json.loads(summary.read_text())
+    assert meta["scale"] == "optimal" and meta["k"] is None and meta["noise"] == "z"
+    assert 20 <= meta["optimal_k_median"] <= 50
+    assert main(["covariance", str(box_las), str(out), "--k", "30", "--noise", "normal",
+                 "--summary-json", str(summary), "-q"]) == 0
+    meta = json.loads(summary.read_text())
+    assert meta["noise"] == "normal" and meta["k"] == 30 and "scale" not in meta
+
+
+def test_segment_covariance_takes_noise(box_las, tmp_path):
+    out = tmp_path / "seg.npz"
+    assert main(["segment", str(box_las), str(out), "--method", "covariance", "--noise",
+                 "normal", "-q"]) == 0

@@ -32,9 +32,9 @@ import numpy as np
 
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
-from ..features import PointClass
+from ..features import Noise, PointClass, height_variance
 from ._covariance_noise import (estimate_plane_sigma, estimate_range_noise,
-                                estimate_smooth_range_noise)
+                                estimate_smooth_range_noise, noise_sensor)
 from ._covariance_result import CovarianceClasses, CovarianceClassification
 from ._covariance_tests import (BORDER_BAND, BOUNDARY_ALPHA, CURVED_ALPHA, JUMP_ALPHA,
                                 _feature_points, boundary_test, curved_surface_test,
@@ -66,8 +66,22 @@ class CurvedTest(str, enum.Enum):
         return self.value
 
 
-#: Directions of the noise `sigma` the classification models.
-NOISE = ("normal", "range")
+#: Directions of the noise `sigma` the classification models (the shared noise model).
+NOISE = tuple(m.value for m in Noise)
+
+
+def across_sigma(features, sigma, noise):
+    """Noise std across each neighbourhood's plane for noise `sigma` along the direction
+    `noise`: ``sigma |d . n|``, the shared model
+    (:func:`lidarstat.features.height_variance` with the neighbourhood's normal as the
+    frame axis; with a sensor ``|d . n|`` is the features' ``ray_cos``)."""
+    sigma = np.asarray(sigma, dtype=np.float64)
+    if noise == "range":
+        return sigma * features.ray_cos
+    frames = np.zeros((len(features), 3, 3))
+    frames[:, 2, :] = features.normals
+    with np.errstate(invalid="ignore"):
+        return sigma * np.sqrt(height_variance(frames, 1.0, noise=noise))
 
 
 def _grid_test(pts, features, along, meta, *, jump_alpha, smooth_alpha, cylinders):
@@ -109,7 +123,7 @@ def _noise_scale(features, points, sigma, noise, meta, func):
                 "lines); give `sigma` or thresholds")
         return sigma, True
     if sigma is None:
-        sigma = estimate_plane_sigma(evals, counts)
+        sigma = estimate_plane_sigma(evals, counts, across_sigma(features, 1.0, noise))
         if not sigma > 0:
             raise InvalidParameterError(
                 f"{func}: the estimated noise is 0 (the neighbourhoods are exact planes or "
@@ -137,16 +151,19 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     features : CovarianceResult
         From :func:`lidarstat.features.covariance_features`.
     sigma : float or (N,) array_like, optional
-        Noise standard deviation (per point allowed): across the surface
-        (``noise='normal'``) or along the ray (``'range'``). Default: estimated, by
-        :func:`estimate_plane_sigma` or, for ``'range'``, as the model ``a + b r`` from the
+        Noise standard deviation (per point allowed) along the direction `noise`.
+        Default: estimated, by :func:`estimate_plane_sigma` (``'z'``, ``'normal'``) or, for ``'range'``, as the model ``a + b r`` from the
         residuals of the best smooth model (cylinder or plane) of every neighbourhood
         (:func:`estimate_smooth_range_noise`, which needs the `points`).
-    noise : {'normal', 'range'}, optional
-        ``'range'`` (default when the features were computed with a sensor): the noise
-        runs along the scanner's rays, so across a surface seen at incidence theta it is
-        ``sigma |cos theta|`` - terrestrial scans, where a single normal sigma would call
-        the walls facing the scanner rough and the grazing ground smooth.
+    noise : Noise or {'z', 'range', 'normal'}, optional
+        Direction of the noise `sigma` (the shared noise model): across a neighbourhood
+        of normal n the plane test's noise is ``sigma |d . n|``. ``'range'`` (default
+        when the features were computed with a sensor): along the scanner's rays, so
+        ``sigma |cos theta|`` at incidence theta - terrestrial scans, where a single
+        normal sigma would call the walls facing the scanner rough and the grazing
+        ground smooth. ``'z'`` (default without a sensor): along z, ``sigma |n_z|`` -
+        range images and airborne scans, whose steep faces are smoother across than
+        the height noise. ``'normal'``: across the surface (isotropic noise).
     alpha : float
         Level of the plane test (and of the variation test, whose level defaults to it).
     boundary_alpha : float, optional
@@ -226,8 +243,8 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         variance_threshold = check_scalar(variance_threshold, "variance_threshold", func=func,
                                           low=0.0, closed="left")
     if noise is None:
-        noise = "range" if has_sensor else "normal"
-    check_option(noise, "noise", NOISE, func=func)
+        noise = Noise.RANGE if has_sensor else Noise.Z
+    noise = str(Noise.parse(noise, "noise", func=func))
     if noise == "range" and not has_sensor:
         raise InvalidParameterError(f"{func}: noise='range' needs features computed with a sensor")
     if curved is None:
@@ -243,7 +260,10 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     meta = {"noise": noise, "boundary": boundary.value}
     sigma, estimated = _noise_scale(features, points, sigma, noise, meta, func)
     valid = (counts >= 4) & np.isfinite(evals).all(axis=1)
-    across = sigma if noise == "normal" else sigma * features.ray_cos
+    across = across_sigma(features, sigma, noise)
+    # the point the noise runs from, for the models that weight each neighbour by its
+    # own noise (cylinder fits, segment models): the sensor, or a point far up for 'z'
+    meta["noise_sensor"] = noise_sensor(noise, features.sensor, points)
     plane_p = plane_test(evals, counts, across)
     if curvature_threshold is None:
         low = plane_p >= alpha
@@ -265,8 +285,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
         if query.size:
             variation_p[query], curv_radius[query], cyl_centre[query], cyl_axis[query] = \
                 curved_surface_test(points, features, query, sigma,
-                                    sensor=features.sensor if noise == "range" else None,
-                                    return_model=True)
+                                    sensor=meta["noise_sensor"], return_model=True)
         meta["curvature_radius"] = curv_radius
         # the fitted cylinders (a point of the axis, the unit axis), with the radius the
         # model on which the 'grid' test places the borders of curved-surface nodes
@@ -285,7 +304,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
     if grid:
         meta["jump_alpha"] = jump_alpha
         meta["border_band"] = border_band
-        along = sigma if noise == "range" else sigma / np.maximum(features.ray_cos, 0.05)
+        along = sigma if noise == "range" else across / np.maximum(features.ray_cos, 0.05)
         cylinders = None
         if curved is CurvedTest.CYLINDER:
             # the border of a node on a consistently curved surface is placed on its
@@ -315,7 +334,7 @@ def classify_covariance(features, *, sigma=None, noise=None, alpha=0.05,
                              variance_threshold=variance_threshold, meta=meta)
 
 
-def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None, alpha=0.05,
+def covariance(points, *, k=None, radius=None, sensor=None, sigma=None, noise=None, alpha=0.05,
                boundary=None, boundary_alpha=None, jump_alpha=JUMP_ALPHA,
                border_band=BORDER_BAND, curved="cylinder", curved_alpha=None,
                curvature_threshold=None, variance_threshold=None, eigen_mode="raw",
@@ -323,7 +342,9 @@ def covariance(points, *, k=50, radius=None, sensor=None, sigma=None, noise=None
     """Covariance features and surface / edge / boundary classes of every point (seed 003).
 
     One call of :func:`lidarstat.features.covariance_features` and
-    :func:`classify_covariance`; see them for the parameters.
+    :func:`classify_covariance`; see them for the parameters. Without `k` and `radius`
+    every point gets its optimal neighbourhood size (minimum eigenentropy of its 10 to
+    50 nearest points; fields ``OptimalKNN``, ``OptimalRadius``).
 
     Returns
     -------

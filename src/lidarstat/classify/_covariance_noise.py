@@ -16,11 +16,37 @@ from ..errors import InvalidParameterError
 from ..stats import chi2_critical
 from ._covariance_tests import _cylinder_axes, _neighbour_rows
 
-def estimate_plane_sigma(evals, counts):
-    """Robust noise estimate: ``sigma^2 = median((n-1) lambda0) / median(chi2(n-3))``.
+#: Neighbourhoods whose share of the noise across them, ``|d . n|``, is below this are
+#: left out of the noise estimate (steep faces of a z-noise cloud: their residual is
+#: mostly the noise the model does not carry).
+MIN_NOISE_SHARE = 0.2
 
-    Valid when most neighbourhoods are planar (the median ignores edges and curved parts).
-    Uses the median neighbourhood size for the chi-square median.
+#: Height above the cloud of the point from which ``noise='z'`` runs: rays from it are
+#: vertical to within 1e-4 radians over 10 km.
+Z_NOISE_HEIGHT = 1e8
+
+
+def noise_sensor(noise, sensor, points):
+    """The point the noise runs from, for models that weight each point by the share of
+    its noise across the fitted surface (cylinder fits, segment models): the `sensor` for
+    ``'range'``, a point `Z_NOISE_HEIGHT` above the cloud for ``'z'`` (vertical rays),
+    None for ``'normal'``."""
+    if noise == "range":
+        return sensor
+    if noise == "z" and points is not None:
+        c = np.asarray(points, dtype=np.float64).mean(axis=0)
+        return np.array([c[0], c[1], c[2] + Z_NOISE_HEIGHT])
+    return None
+
+
+def estimate_plane_sigma(evals, counts, share=None):
+    """Robust noise estimate: ``sigma^2 = median((n-1) lambda0 / s^2 / median(chi2(n-3)))``.
+
+    `share` is the share ``s = |d . n|`` of the noise across each neighbourhood (1: the
+    noise is across the surface); neighbourhoods with ``s < MIN_NOISE_SHARE`` are left
+    out. Each term has median sigma^2 on a plane whatever its size n (so the estimate
+    holds for per-point neighbourhood sizes), and the median ignores edges and curved
+    parts while most neighbourhoods are planar.
 
     Returns
     -------
@@ -28,13 +54,15 @@ def estimate_plane_sigma(evals, counts):
     """
     n = np.asarray(counts, dtype=np.float64)
     l0 = np.asarray(evals)[:, 0]
-    ok = (n >= 4) & np.isfinite(l0)
+    s2 = np.ones_like(l0) if share is None else np.asarray(share, dtype=np.float64) ** 2
+    with np.errstate(invalid="ignore"):
+        ok = (n >= 4) & np.isfinite(l0) & (s2 >= MIN_NOISE_SHARE ** 2)
     if not ok.any():
         raise InvalidParameterError("cannot estimate sigma: no neighbourhood has 4 points")
-    ss = (n[ok] - 1) * l0[ok]
-    df = float(np.median(n[ok])) - 3
-    med = chi2_critical(0.5, df)  # median of chi2(df)
-    return float(np.sqrt(np.median(ss) / med))
+    ss = (n[ok] - 1) * l0[ok] / s2[ok]
+    sizes, which = np.unique(n[ok], return_inverse=True)
+    med = chi2_critical(0.5, sizes - 3)[which]  # median of chi2(n - 3), per point
+    return float(np.sqrt(np.median(ss / med)))
 
 
 #: Re-estimations of the range noise on the points its plane test accepts (see
@@ -66,7 +94,8 @@ def _range_line(rho, r, med, bins, keep=None):
     if rc.size < 2 or np.ptp(rc) == 0:
         return float(np.median(sc)), 0.0
     b, a = np.polyfit(rc, sc, 1)
-    if b < 0:
+    if b < 0 or not a + b * rc.min() > 0:
+        # a line through the bins' noise must stay positive over the scanned ranges
         return float(np.median(sc)), 0.0
     return float(a), float(b)
 

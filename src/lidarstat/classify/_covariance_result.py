@@ -161,11 +161,24 @@ class CovarianceClassification:
         """The parameters actually used (neighbourhood, noise, tests; what
         ``--summary-json`` writes beside the counts)."""
         f = self.features
-        return {"k": f.k, "radius": f.radius, "eigen_mode": _plain(f.eigen_mode),
-                "sensor": _plain(f.sensor), **self.classes.params}
+        out = {"k": f.k, "radius": f.radius, "eigen_mode": _plain(f.eigen_mode),
+               "sensor": _plain(f.sensor), **self.classes.params}
+        if f.meta.get("scale") == "optimal":
+            kopt = f.fields["OptimalKNN"]
+            out.update(scale="optimal", k_min=f.meta["k_min"], k_max=f.meta["k_max"],
+                       optimal_k_median=float(np.median(kopt)),
+                       optimal_radius_median=float(np.median(f.fields["OptimalRadius"])))
+        return out
 
     def summary(self) -> str:
         f = self.features
-        nb = f"k {f.k}" if f.k is not None else f"radius {f.radius}"
+        if f.meta.get("scale") == "optimal":
+            q = np.percentile(f.fields["OptimalKNN"], [10, 50, 90])
+            r = np.median(f.fields["OptimalRadius"])
+            nb = (f"automatic (minimum eigenentropy, k {f.meta['k_min']} to "
+                  f"{f.meta['k_max']}): k 10/50/90 % {q[0]:.0f}/{q[1]:.0f}/{q[2]:.0f}, "
+                  f"radius median {r:.4g}")
+        else:
+            nb = f"k {f.k}" if f.k is not None else f"radius {f.radius}"
         return (f"neighbourhoods: {nb}, median {np.median(f.counts):.0f} points\n"
                 + self.classes.summary())

@@ -84,10 +84,15 @@ def boundary_test(offset_uv, evals, counts):
 
 
 def _neighbour_rows(points, features, query):
-    """CSR rows (indptr, indices) of the points `query`: kept neighbourhoods, else a search."""
+    """CSR rows (indptr, indices) of the points `query`: kept neighbourhoods, else a search.
+
+    The rows are the neighbourhoods the features were computed on: at the automatic scale
+    (``features.k`` and ``features.radius`` None) the first ``neighbors`` points of each
+    kept (or searched) nearest-neighbour row."""
     nbh = features.neighborhoods
+    used = np.asarray(features.counts)[query].astype(np.int64)
     if nbh is not None and nbh.query is None and len(nbh) == len(points):
-        counts = nbh.counts[query]
+        counts = np.minimum(nbh.counts[query], used)
         indptr = np.zeros(query.size + 1, dtype=np.int64)
         np.cumsum(counts, out=indptr[1:])
         starts = nbh.indptr[query]
@@ -96,11 +101,17 @@ def _neighbour_rows(points, features, query):
     from scipy.spatial import cKDTree
 
     tree = cKDTree(points)
-    if features.k is not None:
-        k = min(int(features.k), len(points))
+    if features.k is not None or features.radius is None:
+        k = min(int(features.k if features.k is not None else max(used.max(initial=1), 1)),
+                len(points))
         _, idx = tree.query(points[query], k=k, workers=-1)
         idx = np.asarray(idx).reshape(query.size, k)
-        return np.arange(query.size + 1, dtype=np.int64) * k, idx.ravel()
+        if features.k is not None:
+            return np.arange(query.size + 1, dtype=np.int64) * k, idx.ravel()
+        counts = np.minimum(used, k)
+        indptr = np.zeros(query.size + 1, dtype=np.int64)
+        np.cumsum(counts, out=indptr[1:])
+        return indptr, idx[np.arange(k)[None, :] < counts[:, None]]
     rows = tree.query_ball_point(points[query], features.radius, workers=-1)
     counts = np.fromiter((len(r) for r in rows), dtype=np.int64, count=query.size)
     indptr = np.zeros(query.size + 1, dtype=np.int64)

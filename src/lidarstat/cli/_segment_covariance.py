@@ -5,11 +5,12 @@ from __future__ import annotations
 from . import _options as opt
 
 #: The shared options of ``segment`` this method uses (the others are refused).
-USES = frozenset({"k", "radius", "sigma", "sensor", "alpha", "min_points"})
+USES = frozenset({"k", "radius", "sigma", "noise", "sensor", "alpha", "min_points"})
 
 
-#: ``--k`` and ``--min-points`` of this method when they are not given.
-DEFAULT_K, DEFAULT_MIN_POINTS = 50, 50
+#: ``--min-points`` of this method when it is not given (without ``--k`` and
+#: ``--radius`` the neighbourhood sizes are chosen per point).
+DEFAULT_MIN_POINTS = 50
 
 
 def add_arguments(group):
@@ -37,8 +38,8 @@ def run(args, cloud):
     from .covariance import classification_options
 
     result = covariance(
-        cloud.xyz, k=DEFAULT_K if args.k is None else args.k, radius=args.radius,
-        sensor=args.sensor, sigma=args.sigma, alpha=args.alpha, keep_neighbors=True,
+        cloud.xyz, k=args.k, radius=args.radius, sensor=args.sensor, sigma=args.sigma,
+        noise=args.noise, alpha=args.alpha, keep_neighbors=True,
         **classification_options(args, args.sensor))
     return segment_covariance(
         cloud.xyz, result,

@@ -82,7 +82,8 @@ def cmd_covariance(args):
     t0 = time.perf_counter()
     sensor = resolve_sensor(args.sensor, args.input, args.quiet)
     res = covariance(cloud.xyz, k=args.k, radius=args.radius, sensor=sensor,
-                     sigma=args.sigma, alpha=args.alpha, eigen_mode=args.eigen_mode,
+                     sigma=args.sigma, noise=args.noise, alpha=args.alpha,
+                     eigen_mode=args.eigen_mode,
                      progress=progress(args.quiet), **classification_options(args, sensor))
     elapsed = time.perf_counter() - t0
     write(out, cloud, fields=res.to_fields())
@@ -106,9 +107,10 @@ def register(sub):
         "eigen features, and a tested surface / edge / boundary class (Bae and Lichti).")
     s.add_argument("input")
     s.add_argument("output", help="output file; format from the suffix")
-    add_neighbourhood(s, k=50)
-    add_noise(s, noise=False, sigma_help="noise std (default: estimated from the data; "
-              "along the rays with a sensor, else across the surfaces)")
+    add_neighbourhood(s, k_help="neighbours per point, itself included (at least 3) "
+                      "[automatic: per point, the size from 20 to 50 of minimum "
+                      "eigenentropy]")
+    add_noise(s, sigma_help="noise std along --noise (default: estimated from the data)")
     add_alpha(s, help="level of the plane test (and of the variation test)")
     s.add_argument("--eigen-mode", choices=[m.value for m in EigenMode], default="raw",
                    help="eigen features from eigenvalues, their square roots (PDAL's default) "

@@ -64,6 +64,12 @@ FIELDS = {
     "NormalVariation": ("float64", "variance of normals along PrincipalDir"),
     "neighbors": ("int32", "points in the neighbourhood"),
 }
+#: Fields of the automatic scale (PDAL's ``filters.optimalneighborhood`` names).
+SCALE_FIELDS = {
+    "OptimalKNN": ("int32", "neighbourhood size of minimum eigenentropy"),
+    "OptimalRadius": ("float64", "distance to the OptimalKNN-th nearest point"),
+}
+FIELDS.update(SCALE_FIELDS)
 register_field_descriptions(FIELDS)
 
 
@@ -252,7 +258,16 @@ def _check_sensor(sensor, func):
     return s
 
 
-def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor=None,
+#: The range of neighbourhood sizes of the automatic scale (``k`` and ``radius`` None):
+#: Weinmann et al.'s lower bound, and the paper's fixed k = 50 as the upper one (the plane
+#: and cylinder tests keep their power; the kNN search is that of the fixed scale).
+OPTIMAL_K_MIN, OPTIMAL_K_MAX = 20, 50
+#: A prefix whose middle eigenvalue is below this share of the largest is no candidate: it
+#: is a piece of a scan line, not of a surface (its entropy is low, its normal undetermined).
+OPTIMAL_MIN_SPREAD = 0.1
+
+
+def covariance_features(points, *, k=None, radius=None, neighborhoods=None, sensor=None,
                         eigen_mode="raw", keep_neighbors=False, block_size=262144,
                         progress=None) -> CovarianceResult:
     """Covariance features of every point (Bae, Lichti et al.; Pauly et al. 2002).
@@ -268,9 +283,15 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
     ----------
     points : (N, 3) array_like
         Coordinates (any magnitude: local origins are subtracted).
-    k : int
+    k : int, optional
         Neighbours per point, the point itself included (the paper: 50). Ignored when
-        `radius` or `neighborhoods` is given.
+        `radius` or `neighborhoods` is given. When neither `k` nor `radius` is given,
+        every point gets its own optimal neighbourhood size: the prefix of its
+        ``OPTIMAL_K_MAX`` (50) nearest neighbours, at least ``OPTIMAL_K_MIN`` (20), whose
+        normalised eigenvalues have the smallest entropy (Weinmann et al. 2015, as PDAL's
+        ``filters.optimalneighborhood``), among the prefixes that span a surface (middle
+        eigenvalue at least ``OPTIMAL_MIN_SPREAD`` of the largest; else all 50); fields
+        ``OptimalKNN`` and ``OptimalRadius``.
     radius : float, optional
         Use the points within a 3-D sphere of this radius instead of the k nearest.
     neighborhoods : Neighborhoods, optional
@@ -326,6 +347,10 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
     elif radius is not None:
         radius = check_scalar(radius, "radius", func=func, low=0.0)
         kind = "radius"
+    elif k is None:
+        return _optimal_scale(pts, sensor=sensor, eigen_mode=eigen_mode,
+                              keep_neighbors=keep_neighbors, block_size=block_size,
+                              progress=progress)
     else:
         k = check_scalar(k, "k", func=func, low=3, closed="left", integer=True)
         if k > n:
@@ -422,6 +447,43 @@ def covariance_features(points, *, k=50, radius=None, neighborhoods=None, sensor
             scan_in[order] = scan
             scan = scan_in
         object.__setattr__(res, "scan_boundary", scan)
+    return res
+
+
+def _optimal_scale(pts, *, sensor, eigen_mode, keep_neighbors, block_size, progress):
+    """Features at every point's optimal neighbourhood size (see `covariance_features`):
+    one kNN query of ``OPTIMAL_K_MAX``, the minimum-eigenentropy prefix per point
+    (:func:`._covariance_scale_kernels.optimal_k_rows`), then the features on those
+    prefixes. The kept neighbourhoods (`keep_neighbors`) are the full kNN rows."""
+    from ._covariance_scale_kernels import optimal_k_rows
+
+    n = pts.shape[0]
+    if n < 3:
+        raise InvalidParameterError(
+            f"covariance_features: the automatic scale needs at least 3 points, got {n}")
+    k_max = min(OPTIMAL_K_MAX, n)
+    k_min = min(OPTIMAL_K_MIN, k_max)
+    _, _, full, _ = _knn_table(pts, k_max, block_size=block_size, sort=True)
+    local = pts - pts.mean(axis=0)
+    kopt = np.empty(n, dtype=np.int64)
+    entropy = np.empty(n)
+    optimal_k_rows(local, full.indptr, full.indices, k_min, k_max, OPTIMAL_MIN_SPREAD, kopt,
+                   entropy)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(kopt, out=indptr[1:])
+    pos = np.repeat(full.indptr[:-1] - indptr[:-1], kopt) + np.arange(indptr[-1])
+    prefix = Neighborhoods(indptr, full.indices[pos], full.distances[pos], n,
+                           kind="knn", row_order=full.row_order)
+    del pos
+    res = covariance_features(pts, neighborhoods=prefix, sensor=sensor,
+                              eigen_mode=eigen_mode, block_size=block_size,
+                              progress=progress)
+    res.fields["OptimalKNN"] = kopt.astype(np.int32)
+    res.fields["OptimalRadius"] = prefix.distances[indptr[1:] - 1]
+    object.__setattr__(res, "k", None)
+    object.__setattr__(res, "radius", None)
+    object.__setattr__(res, "neighborhoods", full if keep_neighbors else None)
+    res.meta.update(scale="optimal", k_min=k_min, k_max=k_max)
     return res
 
 

@@ -150,8 +150,27 @@ def _union_plane_rms(points, labels, a, b):
     return np.sqrt(np.maximum(w, 0.0) / (na + nb))
 
 
+#: Level of the one-plane test of a merge (:func:`merge_coplanar`): the union's plane
+#: against one plane per part. Small, because the parts of one real surface are not
+#: exact planes, and a crease between two faces rejects at any level.
+MERGE_ALPHA = 0.001
+
+
+def one_plane_p(n_a, rss_a, n_b, rss_b, rss_u):
+    """p-value of "segments a and b lie on one plane" (Chow's test): with the residual
+    sums of squares of each part's total-least-squares plane and of the union's,
+    ``F = ((RSS_u - RSS_a - RSS_b) / 3) / ((RSS_a + RSS_b) / (n_a + n_b - 6)) ~ F(3,
+    n_a + n_b - 6)`` (three parameters of the second plane)."""
+    from ..stats import f_pvalue
+
+    df2 = np.maximum(n_a + n_b - 6, 1).astype(np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = ((rss_u - rss_a - rss_b) / 3.0) / ((rss_a + rss_b) / df2)
+    return f_pvalue(np.maximum(f, 0.0), 3.0, df2)
+
+
 def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=None,
-                   centroids=None, tolerance=1.5):
+                   centroids=None, tolerance=1.5, merge_alpha=MERGE_ALPHA):
     """Merge touching segments that are one surface (split by a window, a pipe in front, ...).
 
     Two segments that share neighbour pairs merge when their plane normals differ by less
@@ -162,8 +181,9 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
     plane tolerance): a smooth continuation. Either way the plane fitted to the union
     must have an orthogonal RMS at most `tolerance` times the larger RMS of the two
     (two parallel planes a recess apart are not one surface; pieces of one cylinder are
-    merged by :func:`lidarstat.segment._cylinders.merge_cylinders`). Ids are renumbered
-    by size.
+    merged by :func:`lidarstat.segment._cylinders.merge_cylinders`), and one plane for
+    the union must not be rejected against a plane per part at `merge_alpha`
+    (:func:`one_plane_p`; None: not tested). Ids are renumbered by size.
     """
     from ._grow import adjacency_of_pairs, relabel
 
@@ -212,6 +232,14 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
         union = _union_plane_rms(points, labels, pairs[cand, 0], pairs[cand, 1])
         ok[cand] = union <= tolerance * np.maximum(pooled[cand], np.maximum(
             t["rms"][a[cand]], t["rms"][b[cand]]))
+        if merge_alpha is not None:
+            # the model test each part passes must hold for the union: one plane for both
+            # (a flange's face and its cylindrical rim meet at a crease, where the union's
+            # RMS stays within the tolerance of the rim's own)
+            na, nb = t["n_points"][a[cand]], t["n_points"][b[cand]]
+            p = one_plane_p(na, na * t["rms"][a[cand]] ** 2, nb, nb * t["rms"][b[cand]] ** 2,
+                            (na + nb) * union ** 2)
+            ok[cand] &= p >= merge_alpha
     if not ok.any():
         return labels
     parent = np.arange(len(t["segment_id"]) + 1)
@@ -303,6 +331,9 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
     # range noise, the plane-median line (noise plus the typical model error of a
     # real scan's surfaces, never below the noise; docs/methods/covariance.md)
     seg_sigma = classes.meta.get("segment_sigma", classes.sigma)
+    # the point the noise runs from (the sensor for 'range', far up for 'z', None for
+    # 'normal'): every model below weights its points by their noise across it
+    nsensor = classes.meta.get("noise_sensor")
     nbh = feats.neighborhoods
     if nbh is None:
         raise InvalidParameterError(f"{func}: `result` must be computed with keep_neighbors=True")
@@ -322,8 +353,7 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
         from ._scales import planar_scales
 
         kstar, kp, pn = planar_scales(pts, nbh, seg_sigma, alpha=classes.alpha,
-                                      sensor=feats.sensor if classes.meta.get("noise") ==
-                                      "range" else None)
+                                      sensor=nsensor)
         extra = {"scale_k": kstar.astype(np.uint8), "scale_plane_p": kp}
         # Fig. 4 on the first grow_k neighbours of surface points, plus every point's
         # largest planar prefix; members of either may be joined, only tested points grow
@@ -350,8 +380,11 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
     normals = feats.normals  # one (N, 3) stack for every step below (read only)
     centroids = feats.centroid
     across = seg_sigma
-    if classes.meta.get("noise") == "range":
-        across = np.maximum(seg_sigma * feats.ray_cos, 1e-12)
+    if nsensor is not None:
+        ray = pts - nsensor
+        cos = np.abs(np.einsum("ij,ij->i", ray, normals)) / np.linalg.norm(ray, axis=1)
+        across = np.maximum(seg_sigma * cos, 1e-12)
+        del ray, cos
     reint = np.zeros(pts.shape[0], dtype=np.uint8)
     if reintegration:
         cand = edge_like | (pc == PointClass.UNDETERMINED)
@@ -365,7 +398,7 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
     # when the plane is identified and passes the plane test)
     from ._refine import refine_borders, strip_segments
 
-    rsensor = feats.sensor if classes.meta.get("noise") == "range" else None
+    rsensor = nsensor
     labels, moved, models = refine_borders(pts, labels, nbh, seg_sigma,
                                            sensor=rsensor)
     reint[moved] = 2
@@ -384,25 +417,31 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
     if nbh.kind == "knn":
         del free, before, new
     labels = merge_coplanar(pts, labels, grow_nbh, max_angle=min_angle / 4,
-                            normals=normals, centroids=feats.centroid)
+                            normals=normals, centroids=centroids)
     from ._cylinders import merge_cylinders
 
     # per-point axes (minimum-curvature directions) of the curved surface points only
-    # (computed for those points: no (N, 3) temporaries at the segmentation's peak)
+    # (computed for those points: no (N, 3) temporaries at the segmentation's peak); at
+    # the automatic scale from the kept rows of k_max neighbours: the axes of the smaller
+    # neighbourhoods scatter, and the pieces of one pipe then fail to merge
+    geo = feats
+    if feats.k is None and feats.radius is None and nbh.kind == "knn":
+        from ..features import covariance_features
+
+        geo = covariance_features(pts, neighborhoods=nbh, sensor=feats.sensor)
     curved_pts = surface & ~(classes["plane_p"] >= classes.alpha)
     pt_axes = np.full((pts.shape[0], 3), np.nan)
     ci_ = np.flatnonzero(curved_pts)
-    pdir = np.stack([feats["PrincipalDirX"][ci_], feats["PrincipalDirY"][ci_],
-                     feats["PrincipalDirZ"][ci_]], axis=1)
-    pt_axes[ci_] = np.cross(normals[ci_], pdir)
-    del pdir, ci_
+    pdir = np.stack([geo["PrincipalDirX"][ci_], geo["PrincipalDirY"][ci_],
+                     geo["PrincipalDirZ"][ci_]], axis=1)
+    pt_axes[ci_] = np.cross(geo.normals[ci_], pdir)
+    del pdir, ci_, geo
     labels, cylinders = merge_cylinders(
         pts, labels, normals, seg_sigma, max_angle=min_angle / 4,
-        sensor=feats.sensor if classes.meta.get("noise") == "range" else None,
-        point_axes=pt_axes)
+        sensor=nsensor, point_axes=pt_axes)
     from ._cylinders import absorb_into_cylinders, refine_cylinder_table, segment_cylinders
 
-    csensor = feats.sensor if classes.meta.get("noise") == "range" else None
+    csensor = nsensor
     cylinders = refine_cylinder_table(pts, labels, cylinders, seg_sigma, sensor=csensor)
     labels, absorbed = absorb_into_cylinders(pts, labels, grow_nbh, cylinders, seg_sigma,
                                              sensor=csensor)
