@@ -28,12 +28,9 @@ def add_arguments(group):
 
 def run(args, cloud):
     """Ridges, then the units between the ridge band and the jets the chi-square rejects."""
-    from ..errors import InvalidParameterError
     from ..segment import ridge_segments, ridges
 
-    radius = args.radius
-    if radius is None and args.k is None:
-        raise InvalidParameterError("segment --method ridges needs --radius or --k")
+    radius = args.radius  # neither --radius nor --k: the automatic scale
     res = ridges(cloud.xyz, radius=radius, k=None if radius is not None else args.k,
                  sigma=args.sigma, alpha=args.alpha, weight=args.weight, sensor=args.sensor,
                  noise=args.noise, ratio=args.ratio, min_length=args.min_length)
