@@ -124,8 +124,8 @@ def test_ridges_errors():
     pts = _crest(1.0)[:500]
     with pytest.raises(InvalidParameterError, match="ratio"):
         ridges(pts, radius=0.25, ratio=0.5)
-    with pytest.raises(InvalidParameterError, match="exactly one"):
-        ridges(pts)
+    with pytest.raises(InvalidParameterError, match="at most one"):
+        ridges(pts, radius=0.25, k=30)
 
 
 def test_cli_ridges_and_segment(tmp_path, crest_result):

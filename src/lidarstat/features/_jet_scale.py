@@ -141,13 +141,14 @@ def choose_rungs(points, radii, criterion, alpha, tests, kw, block_size=131072):
         stat[open_, j] = s
         hit = np.flatnonzero(open_)[s > z]
         chosen[hit] = j
-    chosen[chosen < 0] = 0
-    return spread_rungs(points, seeds, chosen, float(radii[0]), nr), seeds, stat
+    detected = chosen >= 0
+    chosen[~detected] = 0
+    return spread_rungs(points, seeds, chosen, detected, float(radii[0]), nr), seeds, stat
 
 
-def spread_rungs(points, seeds, chosen, reach, nr):
-    """Every point's rung: the smallest rung of the seeds within `reach` (the smallest
-    radius: the point's own smallest neighbourhood), else its nearest seed's.
+def spread_rungs(points, seeds, chosen, detected, reach, nr):
+    """Every point's rung: the smallest rung of the detecting seeds within `reach` (the
+    smallest radius: the point's own smallest neighbourhood), else its nearest seed's.
 
     The smallest rung wins so that the scale is homogeneous across a feature (a crest's
     axis detected at a small rung is not flanked by points at larger rungs whose
@@ -158,7 +159,7 @@ def spread_rungs(points, seeds, chosen, reach, nr):
     n = points.shape[0]
     rung = np.full(n, -1, np.int64)
     for j in range(nr):
-        sel = seeds[chosen == j]
+        sel = seeds[detected & (chosen == j)]
         if sel.size == 0:
             continue
         open_ = np.flatnonzero(rung < 0)
