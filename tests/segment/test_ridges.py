@@ -243,3 +243,32 @@ def test_segment_curvature_speaks_the_shared_vocabulary():
     np.testing.assert_array_equal(new.labels, old.labels)
     assert new.params["min_points"] == 40 and new.params["sigma"] == 0.005
     assert new.params["noise"] == "z"
+
+
+def test_cli_ridges_at_the_automatic_scale(tmp_path, capsys):
+    """`lidarstat ridges IN OUT` runs with no scale argument, prints the scale it chose,
+    writes it per point (`radius`) and in the summary, and finds the crest;
+    `segment --method ridges` runs at the automatic scale too."""
+    rng = np.random.default_rng(11)
+    g = np.arange(-0.6, 0.6 + 1e-9, SPACING)
+    x, y = [a.ravel() for a in np.meshgrid(g, g)]
+    z = 0.3 * np.exp(-x * x / (2 * 0.15**2)) + rng.normal(0, SIGMA, x.size)
+    src = tmp_path / "narrow.npz"
+    write(src, PointCloud(xyz=np.c_[x, y, z]))
+    out = tmp_path / "out.npz"
+    summary = tmp_path / "s.json"
+    assert main(["ridges", str(src), str(out), "--summary-json", str(summary)]) == 0
+    text = capsys.readouterr().out
+    assert "scale: automatic, radius median" in text
+    meta = json.loads(summary.read_text())
+    assert meta["scale"] == "auto" and meta["params"]["radii"]
+    cloud = read(out)
+    r = cloud.attributes["radius"]
+    assert np.all(np.isin(r, meta["params"]["radii"]))
+    crest = cloud.attributes["ridge"] == 1
+    inner = np.abs(y) < 0.4
+    assert np.mean(np.abs(x[crest & inner]) <= SPACING + 1e-9) > 0.9  # within a spacing
+    assert np.ptp(y[crest & (np.abs(x) < SPACING)]) > 0.8
+    seg_out = tmp_path / "seg.npz"
+    assert main(["segment", str(src), str(seg_out), "--method", "ridges", "-q"]) == 0
+    assert read(seg_out).attributes["segment_id"].max() >= 2
