@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 DOCS = Path(__file__).resolve().parent
-PUMP = DOCS.parent / ".." / "shared" / "data" / "e57_pump_tls" / "pump_scan.laz"
+PUMP = DOCS.parent.parent / ".." / "shared" / "data" / "e57_pump_tls" / "pump_scan.laz"
 RESULTS = DOCS.parent.parent / "benchmarks" / "results_ridges.json"
 
 
