@@ -28,7 +28,8 @@ Usage::
     PYTHONPATH=src python benchmarks/ridge_scenes.py --skip-indirect --scales auto k50
 
 Each scene runs at its fixed radius (``fixed``), at the automatic scale (``auto``: no
-radius) and at ``k = 50`` (``k50``), sigma given; key ``scenes`` of the results file
+radius; ``auto_curvature``: the criterion of ``segment --method ridges``, a significant
+curvature) and at ``k = 50`` (``k50``), sigma given; key ``scenes`` of the results file
 (``ridge_family.py`` writes the key ``family``).
 """
 
@@ -93,6 +94,10 @@ def scale_kwargs(rkw, scale):
     rkw = dict(rkw)
     if scale != "fixed":
         rkw.pop("radius")
+    if scale == "auto_curvature":
+        from lidarstat.features import CURVATURE_SCALE
+
+        rkw["scale_criterion"] = CURVATURE_SCALE
     if scale == "k50":
         rkw["k"] = 50
     return rkw
@@ -102,13 +107,14 @@ def run_scene(name, indirect=True, scale="fixed"):
     kw, rkw, tol = SCENES[name]
     rkw = scale_kwargs(rkw, scale)
     sc = FACTORY[name](**kw)
-    out = dict(scene=name, scale=scale, points=len(sc.xyz), ridges_params=rkw, spacing=tol)
+    out = dict(scene=name, scale=scale, points=len(sc.xyz), spacing=tol,
+               ridges_params={k: v for k, v in rkw.items() if k != "scale_criterion"})
     if name == "tls_building":
         rkw = dict(rkw, sensor=sc.scanner)
     t0 = time.perf_counter()
     res = ridges(sc.xyz, **rkw)
     out["seconds_ridges"] = round(time.perf_counter() - t0, 2)
-    if scale == "auto":
+    if scale.startswith("auto"):
         out["radius_median"] = res.params.get("radius_median")
         out["points_per_radius"] = dict(zip([round(r, 4) for r in res.params["radii"]],
                                             res.params["points_per_radius"]))
@@ -164,8 +170,9 @@ def main(argv=None):
     ap.add_argument("--out", default=str(HERE / "results_ridges.json"))
     ap.add_argument("--skip-indirect", action="store_true",
                     help="only the direct segmentation (the indirect methods take minutes)")
-    ap.add_argument("--scales", nargs="*", default=["fixed", "auto", "k50"],
-                    help="jet scales to run: fixed (the scene's radius), auto, k50")
+    ap.add_argument("--scales", nargs="*", default=["fixed", "auto", "auto_curvature", "k50"],
+                    help="jet scales to run: fixed (the scene's radius), auto, auto_curvature "
+                    "(the automatic scale of segment --method ridges), k50")
     args = ap.parse_args(argv)
     names = args.scenes or (["column", "hip_roof"] if args.quick else list(SCENES))
     # warm-up: compile the kernels on a small scene (not timed)
@@ -198,6 +205,9 @@ def main(argv=None):
         data = json.loads(path.read_text()) if path.exists() else {}
         if isinstance(data, list):
             data = {}
+        if set(args.scales) != {"fixed", "auto", "auto_curvature", "k50"}:  # a partial rerun
+            keep = [r for r in data.get("scenes", []) if r.get("scale") not in args.scales]
+            results = keep + results
         data["scenes"] = results
         path.write_text(json.dumps(data, indent=1, default=float))
         print(f"written {args.out}")

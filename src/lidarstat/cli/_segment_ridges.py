@@ -28,12 +28,16 @@ def add_arguments(group):
 
 def run(args, cloud):
     """Ridges, then the units between the ridge band and the jets the chi-square rejects."""
+    from ..features import CURVATURE_SCALE
     from ..segment import ridge_segments, ridges
 
-    radius = args.radius  # neither --radius nor --k: the automatic scale
+    # neither --radius nor --k: the automatic scale, at the smallest radius whose jets
+    # detect a curvature (creases, the barriers, need no wider jets)
+    radius = args.radius
     res = ridges(cloud.xyz, radius=radius, k=None if radius is not None else args.k,
                  sigma=args.sigma, alpha=args.alpha, weight=args.weight, sensor=args.sensor,
-                 noise=args.noise, ratio=args.ratio, min_length=args.min_length)
+                 noise=args.noise, ratio=args.ratio, min_length=args.min_length,
+                 scale_criterion=CURVATURE_SCALE)
     min_points = DEFAULT_MIN_POINTS if args.min_points is None else args.min_points
     return ridge_segments(cloud.xyz, res, grow_k=args.ridge_grow_k, width=args.band,
                           min_points=min_points, extend=args.extend)

@@ -129,7 +129,7 @@ def ridge_scale_criterion(alpha, ratio):
 
 def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricube",
            sensor=None, noise=None, ratio=2.0, cross_k=16, min_length=None, min_vertices=3,
-           smooth=5, jet_result=None, progress=None) -> RidgeResult:
+           smooth=5, scale_criterion=None, jet_result=None, progress=None) -> RidgeResult:
     """Crest and ravine points and lines from the fourth-order Monge form of every point.
 
     Steps (docs/methods/jets.md): jets of degree 4 (:func:`lidarstat.features.jets`);
@@ -172,6 +172,11 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     smooth : int
         Line vertices are the moving average over this many consecutive crossings (the
         crossings scatter across the line by ``position_sd``; 1 keeps them raw).
+    scale_criterion : lidarstat.features.JetScaleCriterion, optional
+        What the automatic scale must detect (without `radius` and `k`); default
+        :func:`ridge_scale_criterion` (the k'' of a ridge). The direct segmentation uses
+        :data:`lidarstat.features.CURVATURE_SCALE`: creases want the smallest radius
+        whose jets detect a curvature, not the larger one a smooth ridge's k'' needs.
     jet_result : JetResult, optional
         Reuse jets already computed on `points`.
     progress : callable, optional
@@ -196,12 +201,16 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
         res = run_on_unique(dup, lambda: ridges(
             pts[dup.first], radius=radius, k=k, sigma=sigma, alpha=alpha, weight=weight,
             sensor=sensor, noise=noise, ratio=ratio, cross_k=cross_k, min_length=min_length,
-            min_vertices=min_vertices, smooth=smooth, jet_result=jet_result,
+            min_vertices=min_vertices, smooth=smooth, scale_criterion=scale_criterion,
+            jet_result=jet_result,
             progress=progress), what=func)
         return replace(res, fields=map_rows(res.fields, dup.n_unique, dup.inverse),
                        jets=map_rows(res.jets, dup.n_unique, dup.inverse))
     if jet_result is None:
-        crit = ridge_scale_criterion(alpha, ratio) if radius is None and k is None else None
+        crit = None
+        if radius is None and k is None:
+            crit = (ridge_scale_criterion(alpha, ratio) if scale_criterion is None
+                    else scale_criterion)
         jet_result = jets(pts, radius=radius, k=k, sigma=sigma, alpha=alpha, degree=4,
                           weight=weight, sensor=sensor, noise=noise, scale_criterion=crit,
                           progress=progress)
