@@ -62,7 +62,7 @@ def run_ridge_scene(kind, sign, curved, seed):
 
 
 def run_null_scene(kind, seed):
-    xyz, truth = make_null_scene(500 + seed, kind)
+    xyz, _ = make_null_scene(500 + seed, kind)
     row = dict(kind=kind, seed=seed, points=len(xyz))
     for name, kw in SCALES.items():
         t0 = time.perf_counter()

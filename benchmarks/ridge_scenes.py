@@ -28,8 +28,9 @@ Usage::
     PYTHONPATH=src python benchmarks/ridge_scenes.py --skip-indirect --scales auto k50
 
 Each scene runs at its fixed radius (``fixed``), at the automatic scale (``auto``: no
-radius; ``auto_curvature``: the criterion of ``segment --method ridges``, a significant
-curvature) and at ``k = 50`` (``k50``), sigma given; key ``scenes`` of the results file
+radius; ``auto_curvature``: with the criterion of a significant curvature), at the
+smallest radius of the ladder (``segment_default``: the default of ``segment --method
+ridges``) and at ``k = 50`` (``k50``), sigma given; key ``scenes`` of the results file
 (``ridge_family.py`` writes the key ``family``).
 """
 
@@ -88,7 +89,7 @@ def coverage(sc, mask, tol, creases, truth_face):
                 if mask.any() else None)
 
 
-def scale_kwargs(rkw, scale):
+def scale_kwargs(rkw, scale, xyz):
     """The scene's ridges options at `scale`: 'fixed' (its radius), 'auto' (no radius: the
     automatic scale) or 'k50' (50 nearest neighbours); sigma and alpha as given."""
     rkw = dict(rkw)
@@ -98,6 +99,10 @@ def scale_kwargs(rkw, scale):
         from lidarstat.features import CURVATURE_SCALE
 
         rkw["scale_criterion"] = CURVATURE_SCALE
+    if scale == "segment_default":
+        from lidarstat.features import radius_ladder
+
+        rkw["radius"] = float(radius_ladder(xyz)[0])
     if scale == "k50":
         rkw["k"] = 50
     return rkw
@@ -105,8 +110,8 @@ def scale_kwargs(rkw, scale):
 
 def run_scene(name, indirect=True, scale="fixed"):
     kw, rkw, tol = SCENES[name]
-    rkw = scale_kwargs(rkw, scale)
     sc = FACTORY[name](**kw)
+    rkw = scale_kwargs(rkw, scale, sc.xyz)
     out = dict(scene=name, scale=scale, points=len(sc.xyz), spacing=tol,
                ridges_params={k: v for k, v in rkw.items() if k != "scale_criterion"})
     if name == "tls_building":
@@ -170,9 +175,11 @@ def main(argv=None):
     ap.add_argument("--out", default=str(HERE / "results_ridges.json"))
     ap.add_argument("--skip-indirect", action="store_true",
                     help="only the direct segmentation (the indirect methods take minutes)")
-    ap.add_argument("--scales", nargs="*", default=["fixed", "auto", "auto_curvature", "k50"],
+    ap.add_argument("--scales", nargs="*",
+                    default=["fixed", "auto", "auto_curvature", "segment_default", "k50"],
                     help="jet scales to run: fixed (the scene's radius), auto, auto_curvature "
-                    "(the automatic scale of segment --method ridges), k50")
+                    "(automatic with the curvature criterion), segment_default (the smallest "
+                    "radius of the ladder, segment --method ridges' default), k50")
     args = ap.parse_args(argv)
     names = args.scenes or (["column", "hip_roof"] if args.quick else list(SCENES))
     # warm-up: compile the kernels on a small scene (not timed)
@@ -205,7 +212,7 @@ def main(argv=None):
         data = json.loads(path.read_text()) if path.exists() else {}
         if isinstance(data, list):
             data = {}
-        if set(args.scales) != {"fixed", "auto", "auto_curvature", "k50"}:  # a partial rerun
+        if len(args.scales) < 5:  # a partial rerun keeps the other scales' rows
             keep = [r for r in data.get("scenes", []) if r.get("scale") not in args.scales]
             results = keep + results
         data["scenes"] = results

@@ -27,7 +27,7 @@ def _scene(seed, kind, sign, curved):
                             length=length)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _scored(seed, kind, sign, curved):
     """Scene, result, recall per line and precision (each scene run once per session)."""
     with np.errstate(divide="ignore"):
@@ -87,7 +87,7 @@ def test_no_ridge_on_planes_spheres_cylinders(kind):
     """No ridge point at all; a plane is not umbilic (k1 = k2 = 0 is not a significant
     curvature): the umbilic share stays at the level of chance."""
     for seed in range(2):
-        xyz, truth = make_null_scene(300 + seed, kind, half=0.3)
+        xyz, _ = make_null_scene(300 + seed, kind, half=0.3)
         res = ridges(xyz)
         assert int((res["ridge"] > 0).sum()) == 0 and len(res.lines) == 0, (kind, seed)
         if kind == "plane":

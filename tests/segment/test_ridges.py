@@ -248,7 +248,8 @@ def test_segment_curvature_speaks_the_shared_vocabulary():
 def test_cli_ridges_at_the_automatic_scale(tmp_path, capsys):
     """`lidarstat ridges IN OUT` runs with no scale argument, prints the scale it chose,
     writes it per point (`radius`) and in the summary, and finds the crest;
-    `segment --method ridges` runs at the automatic scale too."""
+    `segment --method ridges` runs without a scale too (one radius from the data: the
+    smallest of the ladder, what its crease barriers need)."""
     rng = np.random.default_rng(11)
     g = np.arange(-0.6, 0.6 + 1e-9, SPACING)
     x, y = [a.ravel() for a in np.meshgrid(g, g)]
@@ -270,5 +271,9 @@ def test_cli_ridges_at_the_automatic_scale(tmp_path, capsys):
     assert np.mean(np.abs(x[crest & inner]) <= SPACING + 1e-9) > 0.9  # within a spacing
     assert np.ptp(y[crest & (np.abs(x) < SPACING)]) > 0.8
     seg_out = tmp_path / "seg.npz"
-    assert main(["segment", str(src), str(seg_out), "--method", "ridges", "-q"]) == 0
-    assert read(seg_out).attributes["segment_id"].max() >= 2
+    seg_json = tmp_path / "seg.json"
+    assert main(["segment", str(src), str(seg_out), "--method", "ridges", "-q",
+                 "--summary-json", str(seg_json)]) == 0
+    assert read(seg_out).attributes["segment_id"].max() >= 1
+    used = json.loads(seg_json.read_text())
+    assert np.isclose(used["params"]["radius"], min(meta["params"]["radii"]))

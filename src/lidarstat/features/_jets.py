@@ -205,7 +205,7 @@ def _auto_fit(pts, *, criterion, sigma, noise, sensor, alpha, kw, block_size, pr
                              noise=state["noise"], points=pts[rows], sensor=sensor_arr)
         return jet_tests(sub, s2, alpha)
 
-    rung, seeds, stat = choose_rungs(pts, radii, criterion, alpha, tests, kw,
+    rung, seeds, _ = choose_rungs(pts, radii, criterion, alpha, tests, kw,
                                      block_size=block_size)
     out = fit_rungs(pts, radii, rung, kw, block_size=block_size, progress=progress)
     fit = _to_fit(out, kw["degree"], kw["monge_degree"], kw["weight"])
