@@ -12,7 +12,9 @@ jet with a degree-4 Monge form at every point, on all cores. Timed:
 * ``lidarstat_full``: ``fit_jets(weight='tricube', standard_errors=True)``: tricube
   weights, Satterthwaite traces and the propagated standard errors of all 11 coefficients;
 * ``lidarstat_radius_full``: the fused radius driver ``jets(radius=r)`` with r calibrated to
-  a median of 50 neighbours, whole call including the neighbour search and the tests.
+  a median of 50 neighbours, whole call including the neighbour search and the tests;
+* ``lidarstat_auto_full``: ``jets()`` at the automatic scale (no radius, no k: the rung
+  selection on the seeds and the final fit at every point's radius), whole call.
 
 Each lidarstat timing runs in a fresh subprocess after a cold run has filled a
 benchmark-private Numba cache (compilation is not timed). Ratios are CGAL time / lidarstat
@@ -23,6 +25,7 @@ Usage::
     python benchmarks/bench_jets.py --quick                 # seconds: 20,000 points
     python benchmarks/bench_jets.py                         # 2,000,000 points, writes
                                                             # benchmarks/results_jets.json
+    python benchmarks/bench_jets.py --points 200000         # the same at 200,000 points
 """
 
 from __future__ import annotations
@@ -60,6 +63,15 @@ def child(args):
 
     tmp = Path(args.tmp)
     xyz = np.load(tmp / "xyz.npy")
+    if args.child == "auto_full":
+        t = time.perf_counter()
+        res = jets(xyz, sigma=0.02, degree=4)
+        dt = time.perf_counter() - t
+        print(json.dumps({"seconds": dt, "median_neighbors": float(np.median(res["neighbors"])),
+                          "radius_median": float(np.median(res["radius"])),
+                          "radii": res.meta["radii"],
+                          "points_per_radius": res.meta["points_per_radius"]}))
+        return
     if args.child == "radius_full":
         t = time.perf_counter()
         res = jets(xyz, radius=args.radius, sigma=0.02, degree=4)
@@ -131,13 +143,17 @@ def main():
            "date": datetime.datetime.now().isoformat(timespec="seconds"),
            "machine": platform.platform(), "cpus": os.cpu_count()}
     # cold runs fill the Numba cache (not timed)
-    for mode in ("cgal_equivalent", "full", "radius_full"):
+    modes = ("cgal_equivalent", "full", "radius_full", "auto_full")
+    for mode in modes:
         _run_child(mode, tmp, radius)
-    for mode in ("cgal_equivalent", "full", "radius_full"):
+    for mode in modes:
         runs = [_run_child(mode, tmp, radius) for _ in range(args.repeats)]
         res[f"lidarstat_{mode}"] = float(np.median([r["seconds"] for r in runs]))
         if mode == "radius_full":
             res["radius_median_neighbors"] = runs[0]["median_neighbors"]
+        if mode == "auto_full":
+            res["auto"] = {k: runs[0][k] for k in ("median_neighbors", "radius_median", "radii",
+                                                   "points_per_radius")}
     exe = _build_cgal(tmp)
     if exe is not None:
         times = []
@@ -159,12 +175,14 @@ def main():
         ok = np.isfinite(coef).all(axis=1) & np.isfinite(ours[:, :11]).all(axis=1)
         scale = np.abs(coef[ok]).max(axis=0)
         res["max_rel_diff_vs_cgal"] = float((np.abs(coef[ok] - ours[ok, :11]) / scale).max())
-        for mode in ("cgal_equivalent", "full", "radius_full"):
+        for mode in modes:
             res[f"ratio_{mode}"] = res["cgal"] / res[f"lidarstat_{mode}"]
     rows = [("CGAL Monge_via_jet_fitting d=4 (kNN given)", res.get("cgal")),
             ("lidarstat fit_jets, unweighted, no SEs (kNN given)", res["lidarstat_cgal_equivalent"]),
             ("lidarstat fit_jets, tricube + SEs (kNN given)", res["lidarstat_full"]),
-            ("lidarstat jets(radius), search + fit + tests", res["lidarstat_radius_full"])]
+            ("lidarstat jets(radius), search + fit + tests", res["lidarstat_radius_full"]),
+            ("lidarstat jets(), automatic scale, search + fit + tests",
+             res["lidarstat_auto_full"])]
     print(f"\n{args.points} points, k = {K}, {os.cpu_count()} cpus\n")
     print("| run | seconds | CGAL / run |")
     print("|---|---|---|")

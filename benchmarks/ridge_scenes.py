@@ -25,6 +25,13 @@ Usage::
     PYTHONPATH=src python benchmarks/ridge_scenes.py           # all four scenes ->
                                                                # benchmarks/results_ridges.json
     PYTHONPATH=src python benchmarks/ridge_scenes.py --skip-indirect   # direct only
+    PYTHONPATH=src python benchmarks/ridge_scenes.py --skip-indirect --scales auto k50
+
+Each scene runs at its fixed radius (``fixed``), at the automatic scale (``auto``: no
+radius; ``auto_curvature``: with the criterion of a significant curvature), at the
+smallest radius of the ladder (``segment_default``: the default of ``segment --method
+ridges``) and at ``k = 50`` (``k50``), sigma given; key ``scenes`` of the results file
+(``ridge_family.py`` writes the key ``family``).
 """
 
 from __future__ import annotations
@@ -82,15 +89,40 @@ def coverage(sc, mask, tol, creases, truth_face):
                 if mask.any() else None)
 
 
-def run_scene(name, indirect=True):
+def scale_kwargs(rkw, scale, xyz):
+    """The scene's ridges options at `scale`: 'fixed' (its radius), 'auto' (no radius: the
+    automatic scale) or 'k50' (50 nearest neighbours); sigma and alpha as given."""
+    rkw = dict(rkw)
+    if scale != "fixed":
+        rkw.pop("radius")
+    if scale == "auto_curvature":
+        from lidarstat.features import CURVATURE_SCALE
+
+        rkw["scale_criterion"] = CURVATURE_SCALE
+    if scale == "segment_default":
+        from lidarstat.features import radius_ladder
+
+        rkw["radius"] = float(radius_ladder(xyz)[0])
+    if scale == "k50":
+        rkw["k"] = 50
+    return rkw
+
+
+def run_scene(name, indirect=True, scale="fixed"):
     kw, rkw, tol = SCENES[name]
     sc = FACTORY[name](**kw)
-    out = dict(scene=name, points=len(sc.xyz), ridges_params=rkw, spacing=tol)
+    rkw = scale_kwargs(rkw, scale, sc.xyz)
+    out = dict(scene=name, scale=scale, points=len(sc.xyz), spacing=tol,
+               ridges_params={k: v for k, v in rkw.items() if k != "scale_criterion"})
     if name == "tls_building":
         rkw = dict(rkw, sensor=sc.scanner)
     t0 = time.perf_counter()
     res = ridges(sc.xyz, **rkw)
     out["seconds_ridges"] = round(time.perf_counter() - t0, 2)
+    if scale.startswith("auto"):
+        out["radius_median"] = res.params.get("radius_median")
+        out["points_per_radius"] = dict(zip([round(r, 4) for r in res.params["radii"]],
+                                            res.params["points_per_radius"]))
     t0 = time.perf_counter()
     seg = ridge_segments(sc.xyz, res)
     out["seconds_segments"] = round(time.perf_counter() - t0, 2)
@@ -118,7 +150,7 @@ def run_scene(name, indirect=True):
         "barrier": coverage(sc, seg.fields["barrier"] > 0, tol, creases, cface)}
     out["n_segments"] = int(seg.n_segments)
     t0 = time.perf_counter()
-    if not indirect:
+    if not indirect or scale != "fixed":
         ind = None
         out["indirect"] = "not run (--skip-indirect)"
     elif name in ("agpart", "column"):
@@ -143,16 +175,21 @@ def main(argv=None):
     ap.add_argument("--out", default=str(HERE / "results_ridges.json"))
     ap.add_argument("--skip-indirect", action="store_true",
                     help="only the direct segmentation (the indirect methods take minutes)")
+    ap.add_argument("--scales", nargs="*",
+                    default=["fixed", "auto", "auto_curvature", "segment_default", "k50"],
+                    help="jet scales to run: fixed (the scene's radius), auto, auto_curvature "
+                    "(automatic with the curvature criterion), segment_default (the smallest "
+                    "radius of the ladder, segment --method ridges' default), k50")
     args = ap.parse_args(argv)
     names = args.scenes or (["column", "hip_roof"] if args.quick else list(SCENES))
     # warm-up: compile the kernels on a small scene (not timed)
     ridge_segments(make_column(spacing=0.06, sigma=0.0015, rng=0).xyz,
                    ridges(make_column(spacing=0.06, sigma=0.0015, rng=0).xyz, radius=0.3,
                           sigma=0.0015))
-    results = [run_scene(n, not args.skip_indirect) for n in names]
-    print("| scene | points | Hoover direct | Hoover indirect | "
+    results = [run_scene(n, not args.skip_indirect, sc) for sc in args.scales for n in names]
+    print("| scene | scale | points | Hoover direct | Hoover indirect | "
           "coverage ridge / crease / both | crease points within 1 / 2.5 spacings |")
-    print("|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|")
     for r in results:
         h = r["hoover"]
         cells = []
@@ -166,12 +203,20 @@ def main(argv=None):
             cells.append(", ".join(parts))
         c = r["crease_coverage"]
         cp = c["crease_points"]
-        print(f"| {r['scene']} | {r['points']} | {cells[0]} | {cells[1]} | "
+        print(f"| {r['scene']} | {r['scale']} | {r['points']} | {cells[0]} | {cells[1]} | "
               f"{c['ridge_points']['coverage']:.3f} / {cp['coverage']:.3f} / "
               f"{c['ridge_or_crease']['coverage']:.3f} | {cp['within_1_spacing']} / "
               f"{cp['within_2_5_spacings']} |")
     if not args.quick:
-        Path(args.out).write_text(json.dumps(results, indent=1, default=float))
+        path = Path(args.out)
+        data = json.loads(path.read_text()) if path.exists() else {}
+        if isinstance(data, list):
+            data = {}
+        if len(args.scales) < 5:  # a partial rerun keeps the other scales' rows
+            keep = [r for r in data.get("scenes", []) if r.get("scale") not in args.scales]
+            results = keep + results
+        data["scenes"] = results
+        path.write_text(json.dumps(data, indent=1, default=float))
         print(f"written {args.out}")
     return results
 

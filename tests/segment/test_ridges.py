@@ -124,8 +124,8 @@ def test_ridges_errors():
     pts = _crest(1.0)[:500]
     with pytest.raises(InvalidParameterError, match="ratio"):
         ridges(pts, radius=0.25, ratio=0.5)
-    with pytest.raises(InvalidParameterError, match="exactly one"):
-        ridges(pts)
+    with pytest.raises(InvalidParameterError, match="at most one"):
+        ridges(pts, radius=0.25, k=30)
 
 
 def test_cli_ridges_and_segment(tmp_path, crest_result):
@@ -243,3 +243,37 @@ def test_segment_curvature_speaks_the_shared_vocabulary():
     np.testing.assert_array_equal(new.labels, old.labels)
     assert new.params["min_points"] == 40 and new.params["sigma"] == 0.005
     assert new.params["noise"] == "z"
+
+
+def test_cli_ridges_at_the_automatic_scale(tmp_path, capsys):
+    """`lidarstat ridges IN OUT` runs with no scale argument, prints the scale it chose,
+    writes it per point (`radius`) and in the summary, and finds the crest;
+    `segment --method ridges` runs without a scale too (one radius from the data: the
+    smallest of the ladder, what its crease barriers need)."""
+    rng = np.random.default_rng(11)
+    g = np.arange(-0.6, 0.6 + 1e-9, SPACING)
+    x, y = [a.ravel() for a in np.meshgrid(g, g)]
+    z = 0.3 * np.exp(-x * x / (2 * 0.15**2)) + rng.normal(0, SIGMA, x.size)
+    src = tmp_path / "narrow.npz"
+    write(src, PointCloud(xyz=np.c_[x, y, z]))
+    out = tmp_path / "out.npz"
+    summary = tmp_path / "s.json"
+    assert main(["ridges", str(src), str(out), "--summary-json", str(summary)]) == 0
+    text = capsys.readouterr().out
+    assert "scale: automatic, radius median" in text
+    meta = json.loads(summary.read_text())
+    assert meta["scale"] == "auto" and meta["params"]["radii"]
+    cloud = read(out)
+    r = cloud.attributes["radius"]
+    assert np.all(np.isin(r, meta["params"]["radii"]))
+    crest = cloud.attributes["ridge"] == 1
+    inner = np.abs(y) < 0.4
+    assert np.mean(np.abs(x[crest & inner]) <= SPACING + 1e-9) > 0.9  # within a spacing
+    assert np.ptp(y[crest & (np.abs(x) < SPACING)]) > 0.8
+    seg_out = tmp_path / "seg.npz"
+    seg_json = tmp_path / "seg.json"
+    assert main(["segment", str(src), str(seg_out), "--method", "ridges", "-q",
+                 "--summary-json", str(seg_json)]) == 0
+    assert read(seg_out).attributes["segment_id"].max() >= 1
+    used = json.loads(seg_json.read_text())
+    assert np.isclose(used["params"]["radius"], min(meta["params"]["radii"]))

@@ -28,12 +28,17 @@ def add_arguments(group):
 
 def run(args, cloud):
     """Ridges, then the units between the ridge band and the jets the chi-square rejects."""
-    from ..errors import InvalidParameterError
+    from ..features import radius_ladder
     from ..segment import ridge_segments, ridges
 
+    # neither --radius nor --k: one radius from the data, the smallest of the automatic
+    # scale's ladder (about 48 points, three times a degree-4 jet's minimum). Creases, the
+    # barriers, are C0 discontinuities that jets reject at any scale; per-point radii
+    # (wider beside the creases) widen the rejection bands and lose faces
+    # (docs/methods/jets.md, validation)
     radius = args.radius
     if radius is None and args.k is None:
-        raise InvalidParameterError("segment --method ridges needs --radius or --k")
+        radius = float(radius_ladder(cloud.xyz)[0])
     res = ridges(cloud.xyz, radius=radius, k=None if radius is not None else args.k,
                  sigma=args.sigma, alpha=args.alpha, weight=args.weight, sensor=args.sensor,
                  noise=args.noise, ratio=args.ratio, min_length=args.min_length)

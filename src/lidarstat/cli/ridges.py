@@ -47,6 +47,7 @@ def cmd_ridges(args):
                 "seconds": elapsed, "sigma": res.jets.sigma,
                 "sigma_estimated": res.jets.sigma_estimated, "crest_points": int((r == 1).sum()),
                 "ravine_points": int((r == 2).sum()), "n_lines": len(res.lines),
+                "scale": res.params.get("scale", "fixed"),
                 "params": res.params}
         write_summary_json(args.summary_json, meta)
     return 0
@@ -71,10 +72,11 @@ def register(sub):
         "the jet, the ridge class (1 crest, 2 ravine) and umbilics, and trace ridge lines.")
     s.add_argument("input")
     s.add_argument("output", help="output file; format from the suffix")
-    g = add_neighbourhood(s, k_min=JET_NEIGHBORS,
-                          k_help=f"k nearest neighbours (at least {JET_NEIGHBORS}, a degree-4 "
-                          "jet)", radius_help="sphere radius of the jets (bandwidth)")
-    g.required = True
+    add_neighbourhood(s, k_min=JET_NEIGHBORS,
+                      k_help=f"k nearest neighbours (at least {JET_NEIGHBORS}, a degree-4 jet)",
+                      radius_help="sphere radius of the jets (bandwidth); without --radius "
+                      "and --k, the automatic scale: per point the smallest radius at which "
+                      "the k'' of a ridge is significant (field 'radius')")
     add_noise(s)
     add_alpha(s, 0.01, help="level of the jet, curvature and k'' tests")
     add_jet_arguments(s)

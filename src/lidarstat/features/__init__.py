@@ -14,6 +14,7 @@ from ._hk import SurfaceType, hk_surface_types
 from ._bandwidth import BandwidthResult, optimal_bandwidth
 from ._curvature_formulas import curvature_jacobian, curvatures, principal_jacobian
 from ._jet_fit import MONGE_NAMES, JetFit, PrincipalDirections, fit_jets, principal_directions
+from ._jet_scale import CURVATURE_SCALE, JetScaleCriterion, radius_ladder
 from ._jets import JET_FIELDS, JetResult, jet_tests, jets
 from ._quadric import FitStatus, QuadricFit, fit_quadrics
 from ._plane_regression import (PLANE_FIELDS, AdaptiveBandwidth, LocalPlaneFit,
@@ -28,6 +29,7 @@ __all__ = ["COVARIANCE_FIELDS", "CovarianceResult", "covariance_features", "eige
            "sigma_from_fits", "point_spacing", "scale_ladder",
            "PLANE_FIELDS", "AdaptiveBandwidth", "BandwidthCriterion", "BandwidthSelection", "LocalPlaneFit", "geary_bandwidths",
            "local_planes", "select_plane_bandwidth", "JET_FIELDS", "MONGE_NAMES",
+           "CURVATURE_SCALE", "JetScaleCriterion", "radius_ladder",
            "JetFit", "JetResult",
            "PrincipalDirections", "fit_jets", "jet_tests", "jets", "principal_directions",
            "SurfaceType", "hk_surface_types", "cylinder_test", "PointClass", "EigenMode",

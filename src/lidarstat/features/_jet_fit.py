@@ -216,14 +216,18 @@ def _outs(out):
 
 
 def _fit_cells(index, *, degree, monge_degree, weight, sensor, min_neighbors, standard_errors,
-               block_size, progress):
-    """Fused search + fit over a CellIndex, block by block; outputs in input order."""
+               block_size, progress, active=None):
+    """Fused search + fit over a CellIndex, block by block; outputs in input order.
+
+    `active` (bool, input order) restricts the fits to those points; the other rows are
+    marked SKIPPED."""
     n = index.n_points
     out = _allocate(n)
     sensor_arr, has_sensor = _sensor(sensor, index.origin)
     params = (float(index.radius), degree, monge_degree, weight == "tricube", sensor_arr,
               has_sensor, int(min_neighbors), bool(standard_errors))
-    active = np.ones(n, np.uint8)
+    active = (np.ones(n, np.uint8) if active is None
+              else np.ascontiguousarray(active[index.order], dtype=np.uint8))
     done = 0
     for c0, c1 in index.cell_blocks(block_size):
         s0, s1 = index.cell_start[c0], index.cell_start[c1]

@@ -23,6 +23,7 @@ from ._jet_fit import (
     _to_fit,
     fit_jets,
 )
+from ._jet_scale import CURVATURE_SCALE, choose_rungs, fit_rungs, radius_ladder
 from ._noise import height_variance, resolve_noise
 from ._quadric import FitStatus, unfitted_reason
 
@@ -46,6 +47,7 @@ JET_FIELDS = {
     "chi2_pass": ("uint8", "1 where the chi-square test accepts the jet"),
     "cond": ("float64", "condition number of the fit"),
     "dz0": ("float64", "fitted minus observed height along the PCA normal"),
+    "radius": ("float64", "radius chosen for the point (automatic scale)"),
 }
 register_field_descriptions(JET_FIELDS)
 
@@ -145,8 +147,7 @@ class JetResult:
         """A short text summary (what a command prints)."""
         st = self.fields["status"]
         n = st.size
-        hood = (f"radius {self.meta['radius']:g}" if self.meta.get("radius") is not None
-                else f"k {self.meta.get('k')}")
+        hood = _hood_text(self.meta, self.fields)
         lines = [f"{n} points, jets of degree {self.meta.get('degree')} ({hood}, weight "
                  f"{self.meta.get('weight')}), alpha {self.alpha}",
                  f"sigma {self.sigma:.6g}" + (" (estimated from the data)"
@@ -158,16 +159,77 @@ class JetResult:
         return "\n".join(lines)
 
 
+def _hood_text(meta, fields):
+    """The neighbourhood in words: the radius, k, or the automatic scale's radii."""
+    if meta.get("scale") == "auto":
+        r = fields["radius"]
+        ok = np.isfinite(r)
+        if not ok.any():
+            return "automatic scale"
+        q = np.quantile(r[ok], [0.0, 0.5, 1.0])
+        return (f"automatic scale ({meta['scale_criterion']}): radius median {q[1]:.4g}, "
+                f"range {q[0]:.4g} to {q[2]:.4g}")
+    if meta.get("radius") is not None:
+        return f"radius {meta['radius']:g}"
+    return f"k {meta.get('k')}"
+
+
+def _estimate_sigma(fit, ok, func):
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s0 = fit.q / fit.trace_b
+    sigma = float(np.sqrt(np.median(s0[ok])))
+    logger.info("estimated sigma = %g", sigma)
+    if not sigma > 0:
+        raise InvalidParameterError(
+            f"{func}: the estimated sigma is {sigma}: the points lie exactly on the jets; "
+            "give `sigma` explicitly")
+    return sigma
+
+
+def _auto_fit(pts, *, criterion, sigma, noise, sensor, alpha, kw, block_size, progress, func):
+    """Jets at the automatic scale (``_jet_scale``): the fit, sigma, and the scale's record."""
+    radii = radius_ladder(pts)
+    sensor_arr = None if sensor is None else np.asarray(sensor, dtype=np.float64)
+    state = {"sigma": sigma, "noise": noise}
+
+    def tests(sub, rows):
+        ok = sub.status == FitStatus.OK
+        if state["sigma"] is None:  # the smallest rung: least smoothing bias in Q
+            if not ok.any():
+                raise InsufficientNeighborsError(
+                    f"{func}: no jet could be fitted at the smallest radius of the automatic "
+                    f"scale ({radii[0]:.4g}): {unfitted_reason(sub.status, sub.neighbors, kw['min_neighbors'])}")
+            state["sigma"] = _estimate_sigma(sub, ok, func)
+            state["noise"] = Noise.NORMAL.value
+        s2 = height_variance(np.where(ok[:, None, None], sub.frame, 0.0), state["sigma"],
+                             noise=state["noise"], points=pts[rows], sensor=sensor_arr)
+        return jet_tests(sub, s2, alpha)
+
+    rung, seeds, _ = choose_rungs(pts, radii, criterion, alpha, tests, kw,
+                                     block_size=block_size)
+    out = fit_rungs(pts, radii, rung, kw, block_size=block_size, progress=progress)
+    fit = _to_fit(out, kw["degree"], kw["monge_degree"], kw["weight"])
+    counts = np.bincount(rung, minlength=len(radii))
+    info = {"scale": "auto", "scale_criterion": criterion.name,
+            "radii": [float(r) for r in radii],
+            "points_per_radius": [int(c) for c in counts], "scale_seeds": int(seeds.size)}
+    return fit, state["sigma"], state["noise"], radii[rung], info
+
+
 def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge_degree=None,
          weight="tricube", sensor=None, noise=None, min_neighbors=None, standard_errors=True,
-         block_size=131072, progress=None) -> JetResult:
+         scale_criterion=None, block_size=131072, progress=None) -> JetResult:
     """Monge coefficients with standard deviations and a chi-square test of every jet.
 
     Parameters
     ----------
     points : (N, 3) array_like
     radius : float, optional
-        Sphere radius (and tricube bandwidth); exactly one of `radius` and `k`.
+        Sphere radius (and tricube bandwidth); at most one of `radius` and `k`. With
+        neither, the scale is chosen per point from the data (the automatic scale,
+        docs/methods/jets.md): the smallest radius of a ladder at which
+        `scale_criterion` detects its quantity at the noise; the radius is written to
+        the ``radius`` field.
     k : int, optional
         Number of nearest neighbours (the point itself included).
     sigma : float, optional
@@ -181,6 +243,10 @@ def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge
         Direction of the measurement noise (see
         :func:`lidarstat.features.height_variance`); default ``'range'`` with a sensor,
         else ``'z'``.
+    scale_criterion : JetScaleCriterion, optional
+        What the automatic scale must detect (default
+        :data:`lidarstat.features.CURVATURE_SCALE`: a significant principal curvature);
+        :func:`lidarstat.segment.ridges` asks for a significant k'' of a ridge.
     block_size : int
         Points per block of the fused radius driver.
     progress : callable(done, total), optional
@@ -203,8 +269,8 @@ def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge
     """
     func = "jets"
     pts = check_points(points)
-    if (radius is None) == (k is None):
-        raise InvalidParameterError(f"{func}: give exactly one of `radius` and `k`")
+    if radius is not None and k is not None:
+        raise InvalidParameterError(f"{func}: give at most one of `radius` and `k`")
     degree, monge_degree, min_neighbors, weight = _check_options(
         func, degree, monge_degree, weight, min_neighbors, sensor)
     alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0)
@@ -215,9 +281,22 @@ def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge
     if dup.any:  # every location once, its result to every point at it (_duplicates)
         res = run_on_unique(dup, lambda: jets(
             pts[dup.first], radius=radius, k=k, sigma=sigma, alpha=alpha, noise=noise,
-            block_size=block_size, progress=progress, **kw), what=func)
+            scale_criterion=scale_criterion, block_size=block_size, progress=progress, **kw),
+            what=func)
         return map_rows(res, dup.n_unique, dup.inverse)
-    if radius is not None:
+    scale_info, chosen = {}, None
+    estimated = sigma is None
+    if not estimated:
+        sigma = check_scalar(sigma, "sigma", func=func, low=0.0)
+    if radius is None and k is None:
+        if pts.shape[0] <= (degree + 1) * (degree + 2) // 2:
+            raise InsufficientNeighborsError(
+                f"{func}: {pts.shape[0]} distinct points, too few for a jet of degree {degree}")
+        fit, sigma, noise, chosen, scale_info = _auto_fit(
+            pts, criterion=CURVATURE_SCALE if scale_criterion is None else scale_criterion,
+            sigma=sigma, noise=noise, sensor=sensor, alpha=alpha, kw=kw,
+            block_size=block_size, progress=progress, func=func)
+    elif radius is not None:
         radius = check_scalar(radius, "radius", func=func, low=0.0)
         index = CellIndex(pts, radius)
         out = _fit_cells(index, block_size=block_size, progress=progress, **kw)
@@ -236,25 +315,18 @@ def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge
             f"{func}: no jet could be fitted: {why} (degree {degree} needs "
             f"{(degree + 1) * (degree + 2) // 2 + 1} points, not all on one line); "
             "enlarge `radius`/`k`")
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s0 = fit.q / fit.trace_b
-    estimated = sigma is None
-    if estimated:
+    if sigma is None:
         noise = Noise.NORMAL.value
-        sigma = float(np.sqrt(np.median(s0[ok])))
-        logger.info("estimated sigma = %g", sigma)
-        if not sigma > 0:
-            raise InvalidParameterError(
-                f"{func}: the estimated sigma is {sigma}: the points lie exactly on the jets; "
-                "give `sigma` explicitly")
-    else:
-        sigma = check_scalar(sigma, "sigma", func=func, low=0.0)
+        sigma = _estimate_sigma(fit, ok, func)
     sensor_arr = None if sensor is None else np.asarray(sensor, dtype=np.float64)
     s2 = height_variance(np.where(ok[:, None, None], fit.frame, 0.0), sigma, noise=noise,
                          points=pts, sensor=sensor_arr)
     fields = jet_tests(fit, s2, alpha)
+    if chosen is not None:
+        fields["radius"] = chosen
     return JetResult(fields=fields, fit=fit, sigma=float(sigma), sigma_estimated=estimated,
                      alpha=alpha, meta={"radius": radius, "k": k, "degree": degree,
                                         "monge_degree": monge_degree, "weight": weight,
                                         "noise": noise, "min_neighbors": int(min_neighbors),
-                                        "standard_errors": bool(standard_errors)})
+                                        "standard_errors": bool(standard_errors),
+                                        **scale_info})

@@ -106,7 +106,7 @@ def ridge_segments(points, ridge_result: RidgeResult, *, grow_k=8, width=None, m
     if extend is None:
         extend = ridge_result.params.get("radius")
         if extend is None:
-            extend = float(np.median(ridge_result.jets.fit.bandwidth))
+            extend = float(np.nanmedian(ridge_result.jets.fit.bandwidth))
     extend = check_scalar(extend, "extend", func=func, low=0.0, closed="left")
     if len(lines):
         sampled, _ = lines.sample(width / 4.0)

@@ -8,7 +8,7 @@ import numpy as np
 
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
-from ..features import JET_FIELDS, MONGE_NAMES, FitStatus, Weight, jets
+from ..features import JET_FIELDS, MONGE_NAMES, FitStatus, JetScaleCriterion, Weight, jets
 from ..io import register_field_descriptions
 from ..neighbors import find_duplicates, knn_neighbors, map_rows, run_on_unique
 from ..stats import z_critical
@@ -19,7 +19,7 @@ from ._result import Polylines
 RIDGE_FIELDS = {
     "ridge": ("uint8", "0 none, 1 crest (convex), 2 ravine (concave)"),
     "ridge_line": ("int32", "id of the ridge line (0 none)"),
-    "umbilic": ("uint8", "1 where k1 - k2 is not significant"),
+    "umbilic": ("uint8", "1 where k1 = k2 is accepted and the curvature is significant"),
     "extremality": ("float64", "derivative of the dominant k along its line"),
 }
 register_field_descriptions(RIDGE_FIELDS)
@@ -62,11 +62,25 @@ class RidgeResult:
         spec = {**JET_FIELDS, **RIDGE_FIELDS}
         return {k: np.asarray(v, dtype=spec[k][0]) for k, v in self.fields.items()}
 
+    def _scale_text(self):
+        p = self.params
+        if p.get("scale") == "auto":
+            r = self.fields["radius"]
+            r = r[np.isfinite(r)]
+            if not r.size:
+                return "automatic"
+            per = ", ".join(f"{a:.4g}: {c}" for a, c in zip(p["radii"], p["points_per_radius"])
+                            if c)
+            return (f"automatic, radius median {np.median(r):.4g} (points per radius: "
+                    f"{per})")
+        return f"radius {p['radius']:g}" if p.get("radius") is not None else f"k {p.get('k')}"
+
     def summary(self) -> str:
         r = self.fields["ridge"]
         n = r.size
         lines = [f"{n} points, jets of degree {self.params.get('degree')}, sigma "
                  f"{self.jets.sigma:.6g}" + (" (estimated)" if self.jets.sigma_estimated else ""),
+                 "  scale: " + self._scale_text(),
                  f"  crest points  {int((r == 1).sum()):>9d}",
                  f"  ravine points {int((r == 2).sum()):>9d}",
                  f"  umbilic       {int(self.fields['umbilic'].sum()):>9d}",
@@ -87,9 +101,35 @@ def _sd_matrix(fields, n):
     return sd
 
 
+def ridge_scale_criterion(alpha, ratio):
+    """The automatic scale of :func:`ridges`: a ridge's k'' is significant.
+
+    Per point, the candidate test of the ridge detector (the dominant curvature significant
+    at ``alpha/2`` and dominant by `ratio`) and the one-sided z statistic of its k''
+    (positive for a crest, negative for a ravine): the statistic whose significance the
+    zero-crossing test needs. Two one-sided tails (crest or ravine).
+    """
+    zk = z_critical(alpha / 2, sides=1)
+
+    def statistic(fit, fields):
+        n = len(fit)
+        sd = _sd_matrix(fields, n)
+        ctype = np.zeros(n, np.uint8)
+        cval = np.empty((n, 12))
+        ok = fit.status == FitStatus.OK
+        _rk.candidates(np.ascontiguousarray(fit.monge), np.nan_to_num(sd, nan=np.inf),
+                       np.ascontiguousarray(fit.frame), ok, ratio, zk, ctype, cval)
+        sign = np.where(ctype == 1, 1.0, -1.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            z = sign * cval[:, 2] / cval[:, 3]
+        return np.where(ctype > 0, np.nan_to_num(z, nan=0.0), 0.0)
+
+    return JetScaleCriterion("k'' of a ridge", statistic, 2)
+
+
 def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricube",
            sensor=None, noise=None, ratio=2.0, cross_k=16, min_length=None, min_vertices=3,
-           smooth=5, jet_result=None, progress=None) -> RidgeResult:
+           smooth=5, scale_criterion=None, jet_result=None, progress=None) -> RidgeResult:
     """Crest and ravine points and lines from the fourth-order Monge form of every point.
 
     Steps (docs/methods/jets.md): jets of degree 4 (:func:`lidarstat.features.jets`);
@@ -107,7 +147,10 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     ----------
     points : (N, 3) array_like
     radius, k : float, int
-        Jet neighbourhood (exactly one), as :func:`lidarstat.features.jets`.
+        Jet neighbourhood (at most one), as :func:`lidarstat.features.jets`. With neither,
+        the automatic scale: per point the smallest radius of a ladder at which the k''
+        of a ridge is significant (:func:`ridge_scale_criterion`; the radius is the
+        ``radius`` field).
     sigma : float, optional
         Measurement noise std (estimated when omitted).
     alpha : float
@@ -120,7 +163,8 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
         Neighbours examined for crossings and tracing.
     min_length : float, optional
         Lines shorter than this are dropped with their points. Default: twice the jet
-        radius (for `k`, twice the median distance to the k-th neighbour): neighbouring
+        radius (for `k`, twice the median distance to the k-th neighbour; at the
+        automatic scale, twice the median radius of the line's points): neighbouring
         jets share most of their points, so noise makes correlated patches about one
         radius wide where a test passes by chance; a line must outrun them.
     min_vertices : int
@@ -128,6 +172,11 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     smooth : int
         Line vertices are the moving average over this many consecutive crossings (the
         crossings scatter across the line by ``position_sd``; 1 keeps them raw).
+    scale_criterion : lidarstat.features.JetScaleCriterion, optional
+        What the automatic scale must detect (without `radius` and `k`); default
+        :func:`ridge_scale_criterion` (the k'' of a ridge). The direct segmentation uses
+        :data:`lidarstat.features.CURVATURE_SCALE`: creases want the smallest radius
+        whose jets detect a curvature, not the larger one a smooth ridge's k'' needs.
     jet_result : JetResult, optional
         Reuse jets already computed on `points`.
     progress : callable, optional
@@ -152,13 +201,19 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
         res = run_on_unique(dup, lambda: ridges(
             pts[dup.first], radius=radius, k=k, sigma=sigma, alpha=alpha, weight=weight,
             sensor=sensor, noise=noise, ratio=ratio, cross_k=cross_k, min_length=min_length,
-            min_vertices=min_vertices, smooth=smooth, jet_result=jet_result,
+            min_vertices=min_vertices, smooth=smooth, scale_criterion=scale_criterion,
+            jet_result=jet_result,
             progress=progress), what=func)
         return replace(res, fields=map_rows(res.fields, dup.n_unique, dup.inverse),
                        jets=map_rows(res.jets, dup.n_unique, dup.inverse))
     if jet_result is None:
+        crit = None
+        if radius is None and k is None:
+            crit = (ridge_scale_criterion(alpha, ratio) if scale_criterion is None
+                    else scale_criterion)
         jet_result = jets(pts, radius=radius, k=k, sigma=sigma, alpha=alpha, degree=4,
-                          weight=weight, sensor=sensor, noise=noise, progress=progress)
+                          weight=weight, sensor=sensor, noise=noise, scale_criterion=crit,
+                          progress=progress)
     elif len(jet_result) != pts.shape[0] or jet_result.fit.monge_degree != 4:
         raise InvalidParameterError(f"{func}: `jet_result` has {len(jet_result)} points, "
                                     f"`points` {pts.shape[0]}, or is not of Monge degree 4")
@@ -193,32 +248,47 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     vert = np.where(count[:, None] > 0, where, local)
     nl = _rk.trace(nb.indptr, nb.indices, ridge, vert, tangent, step * 1.0001,
                    np.cos(np.radians(50.0)), order, line_of, out_pts, out_start)
-    if min_length is None:
-        scale = radius if radius is not None else float(np.median(fit.bandwidth[fitted]))
-        min_length = 2.0 * float(scale)
-    min_length = check_scalar(min_length, "min_length", func=func, low=0.0, closed="left")
+    auto = jet_result.meta.get("scale") == "auto"
+    if min_length is None and auto:
+        line_min = 2.0 * fit.bandwidth  # per line: twice the median radius of its points
+    else:
+        if min_length is None:
+            scale = radius if radius is not None else float(np.median(fit.bandwidth[fitted]))
+            min_length = 2.0 * float(scale)
+        min_length = check_scalar(min_length, "min_length", func=func, low=0.0,
+                                  closed="left")
+        line_min = np.full(n, min_length)
     # line test: the curvature along the line significant at family-wise level alpha over
     # the cloud's ~N / median(neighbours) independent neighbourhoods (Bonferroni)
     n_eff = max(1.0, n / max(1.0, float(np.median(fit.neighbors[fitted])) if fitted.any()
                              else 1.0))
     z_line = z_critical(alpha / n_eff)
     lines, new_id = _build_lines(nl, out_pts, out_start, line_of, vert + origin, ridge, cval,
-                                 min_vertices, smooth, min_length, 4.0 * step, z_line)
+                                 min_vertices, smooth, line_min, 4.0 * step, z_line)
     line_of = new_id[line_of]
     ridge[line_of == 0] = 0
     ridge_line = line_of.astype(np.int32)
     with np.errstate(invalid="ignore"):
-        z2 = z_critical(alpha)  # k1 - k2 against its sd, two-sided
+        # umbilic: k1 = k2 accepted (two-sided z of k1 - k2) and the curvature significant
+        # (two-sided z of k1 + k2): a plane (k1 = k2 = 0) is not umbilic
+        z2 = z_critical(alpha)
         gap_sd = np.sqrt(sd[:, 0] ** 2 + sd[:, 1] ** 2)
-        umbilic = fitted & ((jet_result["k1"] - jet_result["k2"]) <= z2 * gap_sd)
+        k1, k2 = jet_result["k1"], jet_result["k2"]
+        umbilic = fitted & ((k1 - k2) <= z2 * gap_sd) & (np.abs(k1 + k2) > z2 * gap_sd)
     fields = dict(jet_result.fields)
     fields.update(ridge=ridge, ridge_line=ridge_line, umbilic=umbilic.astype(np.uint8),
                   extremality=cval[:, 1])
-    params = dict(radius=radius, k=k, sigma=jet_result.sigma,
+    scale = {key: jet_result.meta[key] for key in ("scale", "scale_criterion", "radii",
+                                                  "points_per_radius") if key in jet_result.meta}
+    if auto:
+        r_used = fit.bandwidth[fitted]
+        scale["radius_median"] = float(np.median(r_used)) if r_used.size else float("nan")
+    params = dict(radius=radius, k=k, **scale, sigma=jet_result.sigma,
                   sigma_estimated=jet_result.sigma_estimated, alpha=alpha, degree=4,
                   z_line=z_line, weight=weight, noise=jet_result.meta.get("noise"),
-                  ratio=ratio, cross_k=cross_k, min_length=min_length,
-                  min_vertices=min_vertices, smooth=smooth, step=step)
+                  ratio=ratio, cross_k=cross_k,
+                  min_vertices=min_vertices, smooth=smooth, step=step,
+                  min_length=None if auto and min_length is None else min_length)
     return RidgeResult(fields=fields, lines=lines, jets=jet_result, params=params)
 
 
@@ -284,7 +354,7 @@ def _join_lines(chains, vert, ridge, join):
 
 
 def _build_lines(nl, out_pts, out_start, line_of, vert, ridge, cval, min_vertices, smooth,
-                 min_length, join, z_line):
+                 line_min, join, z_line):
     members = np.bincount(line_of, minlength=nl + 1)[1:]
     chains = [out_pts[out_start[li]:out_start[li + 1]] for li in range(nl)]
     chains, alive, owner = _join_lines(chains, vert, ridge, join)
@@ -301,7 +371,7 @@ def _build_lines(nl, out_pts, out_start, line_of, vert, ridge, cval, min_vertice
         seg = np.linalg.norm(np.diff(v, axis=0), axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             kz = float(np.median(np.abs(cval[ids, 0]) / cval[ids, 11]))
-        if seg.sum() < min_length or not kz > z_line:
+        if seg.sum() < float(np.median(line_min[ids])) or not kz > z_line:
             continue
         final[li] = len(verts) + 1
         kk = np.abs(cval[ids, 0])

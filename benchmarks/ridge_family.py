@@ -1,0 +1,134 @@
+#!/usr/bin/env python
+"""Ridges on the independent scene family: the automatic scale against a fixed ``k = 50``.
+
+The scenes are those of ``tests/independent/indep_ridges.py`` (plain NumPy, exact truth,
+not ``lidarstat.synth``): Gaussian and cylindrical crest and trench profiles along
+straight and circular axes, random azimuths, widths, heights, spacings (0.01 to 0.02 m)
+and noise (0.5 to 2 mm along z); planes, spheres and cylinders for "no ridge there".
+For every scene and both scales: the recall of each true ridge line (share of its length,
+beyond 0.1 m of the scene's ends, with a detected point of its type within one spacing),
+the precision (share of ridge points within 2.5 spacings of a true line), the number of
+ridge points on the null scenes, the umbilic share and the wall seconds (machine shared:
+timings are indicative, ratios in the same run).
+
+Usage::
+
+    PYTHONPATH=src python benchmarks/ridge_family.py            # 2 seeds per configuration,
+                                                                # key "family" of
+                                                                # benchmarks/results_ridges.json
+    PYTHONPATH=src python benchmarks/ridge_family.py --seeds 1 --no-write
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "src"))
+sys.path.insert(0, str(HERE.parent / "tests" / "independent"))
+
+from indep_ridges import (line_recall, make_null_scene, make_ridge_scene,  # noqa: E402
+                          ridge_precision)
+
+from lidarstat.segment import ridges  # noqa: E402
+
+SCALES = {"auto": {}, "k50": {"k": 50}}
+
+
+def run_ridge_scene(kind, sign, curved, seed):
+    with np.errstate(divide="ignore"):
+        scene = make_ridge_scene(1000 * seed + 7, kind=kind, sign=sign, curved=curved)
+    row = dict(kind=kind, sign=sign, curved=curved, seed=seed, points=len(scene.xyz),
+               **{k: round(v, 4) for k, v in scene.params.items()
+                  if k in ("spacing", "sigma", "amp", "width")})
+    for name, kw in SCALES.items():
+        t0 = time.perf_counter()
+        res = ridges(scene.xyz, **kw)
+        dt = time.perf_counter() - t0
+        rec = line_recall(scene, res["ridge"], scene.xyz, margin=0.1)
+        row[name] = dict(seconds=round(dt, 2), recall=[round(r, 3) for _, r in rec],
+                         line_types=[int(t) for t, _ in rec],
+                         precision=round(ridge_precision(scene, res["ridge"]), 3),
+                         umbilic=round(float(res["umbilic"].mean()), 4),
+                         radius_median=round(float(np.nanmedian(res.jets.fit.bandwidth)), 4))
+    return row
+
+
+def run_null_scene(kind, seed):
+    xyz, _ = make_null_scene(500 + seed, kind)
+    row = dict(kind=kind, seed=seed, points=len(xyz))
+    for name, kw in SCALES.items():
+        t0 = time.perf_counter()
+        res = ridges(xyz, **kw)
+        row[name] = dict(seconds=round(time.perf_counter() - t0, 2),
+                         ridge_points=int((res["ridge"] > 0).sum()), lines=len(res.lines),
+                         umbilic=round(float(res["umbilic"].mean()), 4))
+    return row
+
+
+def summarise(rows, nulls):
+    out = {}
+    for name in SCALES:
+        for kind in ("gauss", "cyl"):
+            rs = [r for r in rows if r["kind"] == kind]
+            rec = np.concatenate([r[name]["recall"] for r in rs])
+            out[f"{name}_{kind}"] = dict(
+                lines=int(rec.size), lines_found_90=round(float(np.mean(rec >= 0.9)), 3),
+                recall_median=round(float(np.median(rec)), 3),
+                recall_min=round(float(rec.min()), 3),
+                precision_median=round(float(np.median([r[name]["precision"] for r in rs])), 3),
+                precision_min=round(float(min(r[name]["precision"] for r in rs)), 3),
+                seconds_total=round(float(sum(r[name]["seconds"] for r in rs)), 1))
+        out[f"{name}_null"] = dict(
+            scenes=len(nulls), ridge_points=int(sum(r[name]["ridge_points"] for r in nulls)),
+            lines=int(sum(r[name]["lines"] for r in nulls)),
+            umbilic_plane=round(float(np.mean([r[name]["umbilic"] for r in nulls
+                                               if r["kind"] == "plane"])), 4))
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--out", default=str(HERE / "results_ridges.json"))
+    ap.add_argument("--no-write", action="store_true")
+    args = ap.parse_args(argv)
+    warnings.simplefilter("ignore", RuntimeWarning)
+    ridges(make_null_scene(0, "plane", half=0.2)[0])  # compile (not timed)
+    ridges(make_null_scene(0, "plane", half=0.2)[0], k=50)
+    rows, nulls = [], []
+    for kind in ("gauss", "cyl"):
+        for curved in (False, True):
+            for sign in (1.0, -1.0):
+                for seed in range(args.seeds):
+                    rows.append(run_ridge_scene(kind, sign, curved, seed))
+                    r = rows[-1]
+                    print(kind, "curved" if curved else "straight", sign, seed, r["points"],
+                          {n: (r[n]["recall"], r[n]["precision"], r[n]["seconds"])
+                           for n in SCALES}, flush=True)
+    for kind in ("plane", "sphere", "cylinder"):
+        for seed in range(args.seeds):
+            nulls.append(run_null_scene(kind, seed))
+            print(nulls[-1], flush=True)
+    summary = summarise(rows, nulls)
+    print(json.dumps(summary, indent=1))
+    if not args.no_write:
+        path = Path(args.out)
+        data = json.loads(path.read_text()) if path.exists() else {}
+        if isinstance(data, list):
+            data = {"scenes": data}
+        data["family"] = {"summary": summary, "scenes": rows, "null_scenes": nulls,
+                          "seeds": args.seeds}
+        path.write_text(json.dumps(data, indent=1))
+        print(f"written {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,174 @@
+"""Automatic scale of the jets: per point, the smallest radius of a ladder at which the
+test that matters detects its quantity at the noise (the bandwidth reasoning of eq. 19-20).
+
+A ladder of radii ``r_j = r_0 sqrt(2)^j`` (each rung doubles the expected number of
+neighbours; ``r_0`` holds about :data:`BASE_NEIGHBORS` points at the cloud's density). On
+seed points (one per cube of side ``r_0``) the jets are fitted rung by rung, smallest
+first; a seed keeps the first rung at which its test statistic exceeds the one-sided
+normal quantile at ``alpha / (J m)`` (Bonferroni over the J rungs and the criterion's m
+one-sided tails, so that a seed with nothing to detect picks a rung by chance with
+probability at most ``alpha``); a seed where no rung detects anything takes the smallest
+rung (nothing to gain by smoothing). Every point takes the rung of its nearest seed, and
+the jets are fitted once more at the chosen radius of every point.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..neighbors import CellIndex, knn_neighbors
+from ..stats import normal_quantile, z_critical
+from ._jet_fit import _fit_cells, _to_fit
+
+#: Expected neighbours of the smallest rung: three times the 16 a degree-4 jet needs.
+BASE_NEIGHBORS = 48
+#: Rungs of the ladder (the largest holds 2^(J-1) times the smallest's neighbours).
+SCALE_RUNGS = 7
+#: Ratio of consecutive radii (twice the points per rung on a surface).
+RUNG_FACTOR = math.sqrt(2.0)
+#: Power at which the estimate must be detectable at the chosen rung.
+SCALE_POWER = 0.8
+
+
+@dataclass(frozen=True)
+class JetScaleCriterion:
+    """What the automatic scale must detect.
+
+    ``statistic(fit, fields)`` returns, per fitted point, a statistic that is one-sided
+    standard normal under the null (nothing to detect) for each of ``tails`` tails; a rung
+    is chosen when it exceeds ``z_{1 - alpha / (J tails)}``.
+    """
+
+    name: str
+    statistic: object
+    tails: int
+
+
+def _curvature_statistic(fit, fields):
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z1 = np.abs(fields["k1"]) / fields["k1_sd"]
+        z2 = np.abs(fields["k2"]) / fields["k2_sd"]
+    return np.fmax(np.nan_to_num(z1, nan=0.0), np.nan_to_num(z2, nan=0.0))
+
+
+#: Default criterion of :func:`lidarstat.features.jets`: a principal curvature is
+#: significant (two two-sided tests: four tails).
+CURVATURE_SCALE = JetScaleCriterion("curvature", _curvature_statistic, 4)
+
+
+def radius_ladder(points, rungs=SCALE_RUNGS, base=BASE_NEIGHBORS):
+    """Radii of the ladder: ``r_0 sqrt(2)^j``, ``r_0`` holding about `base` points.
+
+    The density is read from the median distance ``d_8`` to the 8th nearest point (the
+    point itself included) as ``8 / (pi d_8^2)`` points per unit area of surface.
+    """
+    n = points.shape[0]
+    k = min(8, n)
+    nb = knn_neighbors(points, k)
+    d = float(np.median(nb.distances[nb.indptr[1:] - 1]))
+    r0 = d * math.sqrt(base / k)
+    return r0 * RUNG_FACTOR ** np.arange(rungs)
+
+
+def scale_seeds(points, cell):
+    """One seed per occupied cube of side `cell`: the first point in it (input order)."""
+    keys = np.floor((points - points.min(axis=0)) / cell).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    return np.sort(first)
+
+
+def fit_rungs(points, radii, rung, kw, block_size=131072, progress=None):
+    """Jets of every point at radius ``radii[rung[i]]`` (rung -1: not fitted, SKIPPED).
+
+    One fused radius pass per rung that has points, over the whole cloud.
+    """
+    n = points.shape[0]
+    merged = None
+    todo = [j for j in range(len(radii)) if np.any(rung == j)]
+    for j in todo:
+        mask = rung == j
+        out = _fit_cells(CellIndex(points, float(radii[j])), active=mask,
+                         block_size=block_size, progress=None, **kw)
+        if merged is None:
+            merged = out
+        else:
+            for key, val in out.items():
+                val_m = merged[key]
+                val_m[mask] = val[mask]
+        if progress is not None:
+            progress(int(np.count_nonzero((rung >= 0) & (rung <= j))), n)
+    return merged
+
+
+def choose_rungs(points, radii, criterion, alpha, tests, kw, block_size=131072):
+    """The rung of every point (see the module docstring).
+
+    `tests(fit, rows)` returns the per-point fields of the fitted rows (Monge coefficients
+    and their standard deviations at the cloud's noise) for `criterion`.
+
+    Returns
+    -------
+    rung : (N,) ndarray of int
+    seeds : (M,) ndarray of int
+        The seed points.
+    seed_stat : (M, J) ndarray
+        The criterion's statistic of every seed at every rung it was fitted at (NaN
+        above its chosen rung).
+    """
+    n = points.shape[0]
+    seeds = scale_seeds(points, float(radii[0]))
+    nr = len(radii)
+    z = z_critical(alpha / (nr * criterion.tails), sides=1) + normal_quantile(SCALE_POWER)
+    chosen = np.full(seeds.size, -1, np.int64)
+    stat = np.full((seeds.size, nr), np.nan)
+    for j in range(nr):
+        open_ = chosen < 0
+        if not open_.any():
+            break
+        rows = seeds[open_]
+        mask = np.zeros(n, bool)
+        mask[rows] = True
+        out = _fit_cells(CellIndex(points, float(radii[j])), active=mask,
+                         block_size=block_size, progress=None, **kw)
+        sub = _to_fit({key: val[rows] for key, val in out.items()}, kw["degree"],
+                      kw["monge_degree"], kw["weight"])
+        fields = tests(sub, rows)
+        s = np.asarray(criterion.statistic(sub, fields), dtype=np.float64)
+        s = np.where(sub.status == 0, s, np.nan)
+        stat[open_, j] = s
+        hit = np.flatnonzero(open_)[s > z]
+        chosen[hit] = j
+    detected = chosen >= 0
+    chosen[~detected] = 0
+    return spread_rungs(points, seeds, chosen, detected, float(radii[0]), nr), seeds, stat
+
+
+def spread_rungs(points, seeds, chosen, detected, reach, nr):
+    """Every point's rung: the smallest rung of the detecting seeds within `reach` (the
+    smallest radius: the point's own smallest neighbourhood), else its nearest seed's.
+
+    The smallest rung wins so that the scale is homogeneous across a feature (a crest's
+    axis detected at a small rung is not flanked by points at larger rungs whose
+    crossings with it would be mixed-scale).
+    """
+    from scipy.spatial import cKDTree
+
+    n = points.shape[0]
+    rung = np.full(n, -1, np.int64)
+    for j in range(nr):
+        sel = seeds[detected & (chosen == j)]
+        if sel.size == 0:
+            continue
+        open_ = np.flatnonzero(rung < 0)
+        if open_.size == 0:
+            break
+        d, _ = cKDTree(points[sel]).query(points[open_], distance_upper_bound=reach)
+        rung[open_[np.isfinite(d)]] = j
+    rest = np.flatnonzero(rung < 0)
+    if rest.size:
+        _, near = cKDTree(points[seeds]).query(points[rest])
+        rung[rest] = chosen[near]
+    return rung
