@@ -16,10 +16,14 @@ Reaches (the buffer that makes the result independent of the tiling):
   ``CurvatureVariance`` and ``NormalVariation`` use its neighbours' features. With
   ``--radius`` the buffer is ``2 x radius``; with ``--k`` twice the k-th-neighbour
   reach (:func:`knn_reach`: the largest distance to the k-th neighbour on the largest
-  tile, times 1.5 for tiles sparser than that one).
+  tile, times 1.5 for tiles sparser than that one); at the automatic scale (neither)
+  twice the reach of its largest neighbourhood, ``OPTIMAL_K_MAX`` neighbours.
 * ``ridges``: the jets reach one radius; a ridge point compares its neighbours' jets,
   and the ridge lines are traced through them and kept when at least ``--min-length``
   (two radii by default) long: ``3 x radius`` (with ``--k``, the k-th-neighbour reach).
+  The automatic scale's ladder is read from each cloud's density, so a catalogue needs
+  ``--radius`` or ``--k`` (or an explicit ``--buffer``, the tiles then choosing their
+  ladders each).
   The per-point jets are then independent of the tiling; the ridge lines are not quite:
   a line longer than the buffer is traced in pieces, and the line test's Bonferroni
   count (the cloud's independent neighbourhoods) is the tile's with its buffer.
@@ -45,7 +49,7 @@ __all__ = ["COVARIANCE", "RIDGES", "SEGMENT", "TILE_OPTIONS", "knn_reach"]
 TILE_OPTIONS = {
     "curvature": frozenset({"radius", "sigma", "noise", "sensor", "alpha", "test", "frame",
                             "min_neighbors", "minimal_detectable"}),
-    "covariance": frozenset({"k", "radius", "sensor", "sigma", "alpha", "eigen_mode",
+    "covariance": frozenset({"k", "radius", "sensor", "sigma", "noise", "alpha", "eigen_mode",
                              "boundary", "boundary_alpha", "curvature_threshold",
                              "variance_threshold", "curved", "curved_alpha", "border_band",
                              "jump_alpha"}),
@@ -113,6 +117,10 @@ def _neighbourhood_reach(args, cat, command):
 
 # -------------------------------------------------------------------------- covariance
 def _covariance_reach(args, cat):
+    if args.k is None and args.radius is None:  # the automatic scale: at most OPTIMAL_K_MAX
+        from ..features import OPTIMAL_K_MAX
+
+        return knn_reach(cat, OPTIMAL_K_MAX)
     return _neighbourhood_reach(args, cat, "covariance")
 
 
@@ -131,7 +139,8 @@ def _covariance_prepare(args, cat):
 
     i = _largest(cat)
     res = covariance(read(cat.files[i].path).xyz, k=args.k, radius=args.radius,
-                     sensor=args.sensor, alpha=args.alpha, eigen_mode=args.eigen_mode,
+                     sensor=args.sensor, noise=args.noise, alpha=args.alpha,
+                     eigen_mode=args.eigen_mode,
                      **classification_options(args, args.sensor))
     extra["sigma"] = _scalar_sigma(res.classes.sigma, "covariance")
     _say(args, f"sigma {extra['sigma']:.4g} estimated on {cat.files[i].path.name}, used for "
@@ -148,7 +157,8 @@ def _covariance_fields(args, extra):
 
     def fields(tile):
         res = covariance(tile.xyz, k=args.k, radius=args.radius, sensor=args.sensor,
-                         sigma=sigma, alpha=args.alpha, eigen_mode=args.eigen_mode, **opts)
+                         sigma=sigma, noise=args.noise, alpha=args.alpha,
+                         eigen_mode=args.eigen_mode, **opts)
         return res.to_fields(), {}
 
     return fields
