@@ -25,6 +25,7 @@ from ._csg import (
 )
 from ._edges import crease_lines, distance_to_creases
 from ._orthographic import scan_orthographic
+from ._roof_scenes import ROOF_SCENE_KINDS, make_roof_scene
 from ._scenes import SCENES, make_agpart, make_column
 from ._surfaces import (
     SURFACE_KINDS,
@@ -65,6 +66,8 @@ __all__ = [
     "make_column",
     "make_als_town",
     "make_hip_roof_scene",
+    "make_roof_scene",
+    "ROOF_SCENE_KINDS",
     "MATERIALS",
     "ASPRS_CLASSES",
     "make_tls_building",
