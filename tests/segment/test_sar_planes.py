@@ -128,3 +128,21 @@ def test_segment_sar_adds_steep_and_small_planes():
     assert np.all(np.isfinite(seg.table["gof_p"][roof_rows]))
     assert np.all(np.isfinite(seg.table["normal_se_deg"][roof_rows]))
     assert seg.params["planes_found"] == int(np.sum(seg.table["stage"] == 2))
+
+
+def test_small_planes_are_kept_by_their_own_test():
+    """A 20-point face (a dormer cheek at airborne density) is kept by its plane test
+    although below min_points; a 20-point crown is not a plane."""
+    rng = np.random.default_rng(2)
+    hits = 0
+    for _ in range(10):
+        cheek = np.c_[rng.uniform(0, 1.2, (20, 2)), np.zeros(20)]
+        cheek[:, 2] = 0.5 * cheek[:, 0] + rng.normal(0, SIGMA, 20)
+        blob = rng.normal([10, 10, 3], 0.4, (20, 3))
+        P = np.r_[cheek, blob]
+        labels, _, table, _ = grow_planes(P, np.ones(40, bool), sigma=SIGMA, min_points=30,
+                                          min_size=12)
+        hits += np.mean(labels[:20] > 0) >= 0.9
+        assert not np.any(labels[20:] > 0)
+        assert np.all(table["gof_p"] >= 0.001)
+    assert hits >= 9

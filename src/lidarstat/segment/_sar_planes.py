@@ -196,7 +196,7 @@ def local_noise(P, lam_min, nz, k, sigma, *, cell=NOISE_CELL, q=SIGMA_QUANTILE,
 
 
 def grow_planes(points, free, *, sigma, k=12, alpha=0.05, edge_alpha=0.05, min_points=30,
-                gof_alpha=0.001, local=True):
+                gof_alpha=0.001, local=True, min_size=None):
     """Planes among the `free` points by tested growth in their own frame.
 
     Parameters
@@ -212,7 +212,11 @@ def grow_planes(points, free, *, sigma, k=12, alpha=0.05, edge_alpha=0.05, min_p
         Levels of the local planarity test, of the membership and tilt tests, and of
         each plane's test against the noise.
     min_points : int
-        Smallest plane kept.
+        Smallest plane kept whatever its test says.
+    min_size : int, optional
+        Smallest plane grown (default `min_points`); planes of `min_size` to
+        `min_points` - 1 points are kept when their own test accepts them (small faces:
+        dormer cheeks, chimney sides).
 
     Returns
     -------
@@ -239,7 +243,8 @@ def grow_planes(points, free, *, sigma, k=12, alpha=0.05, edge_alpha=0.05, min_p
     planar = lam[:, 0] <= chi2_critical(alpha, k - 3) * noise_along_normal(
         vec[:, 2, 0], sz, sigma_h) ** 2
     lab, reg_sz = _grow(P, nbr, planar, lam, vec, sz, sigma_h, z_critical(edge_alpha),
-                        chi2_critical(edge_alpha, 2), min_points)
+                        chi2_critical(edge_alpha, 2),
+                        min_points if min_size is None else min_size)
     sizes = np.bincount(lab)[1:]
     rank = np.zeros(sizes.size + 1, dtype=np.int64)
     rank[1 + np.argsort(-sizes, kind="stable")] = np.arange(1, sizes.size + 1)
@@ -267,6 +272,18 @@ def grow_planes(points, free, *, sigma, k=12, alpha=0.05, edge_alpha=0.05, min_p
                                           plane_sz[r])):
             rows[key].append(v)
     table = {c: np.asarray(v, dtype=np.float64) for c, v in rows.items()}
+    # planes below min_points are kept only when their own test accepts them
+    small = (sizes < min_points) & (table["gof_p"] < gof_alpha) if sizes.size else \
+        np.zeros(0, bool)
+    if small.any():
+        keep = np.flatnonzero(~small)
+        new = np.zeros(sizes.size + 1, dtype=np.int64)
+        new[keep + 1] = np.arange(1, keep.size + 1)
+        gone = labels > 0
+        gone[gone] = small[labels[gone] - 1]
+        residual[gone] = np.nan
+        labels = new[labels]
+        table = {c: v[keep] for c, v in table.items()}
     return labels, residual, table, sigma_h
 
 

@@ -23,7 +23,8 @@ def add_planes(points, seg, *, sigma, alpha=0.05, edge_alpha=0.05, min_points=30
 
     `sigma` is the height noise of roof planes (the SAR units' residual scale); the
     planimetric noise is estimated from the steep local planes
-    (:func:`lidarstat.segment._sar_planes.planimetric_noise`). Segments 1..S keep their
+    (:func:`lidarstat.segment._sar_planes.planimetric_noise`). Planes of `k` to
+    `min_points` - 1 points are kept when their own test accepts them. Segments 1..S keep their
     SAR rows; grown planes follow as S+1.. with ``stage`` 2, their ``normal_*``,
     ``slope_deg``, ``normal_se_deg``, ``sigma`` (residual scale), ``sigma_noise`` (the
     height noise its tests used) and the plane test ``gof_stat``, ``gof_df``, ``gof_p``
@@ -33,7 +34,8 @@ def add_planes(points, seg, *, sigma, alpha=0.05, edge_alpha=0.05, min_points=30
     s1 = int(labels.max()) if labels.size else 0
     lab2, res2, tab2, sigma_h = grow_planes(points, labels == 0, sigma=sigma, k=k,
                                             alpha=alpha, edge_alpha=edge_alpha,
-                                            min_points=min_points, gof_alpha=gof_alpha)
+                                            min_points=min_points, gof_alpha=gof_alpha,
+                                            min_size=min(k, min_points))
     s2 = int(lab2.max()) if lab2.size else 0
     both = np.where(lab2 > 0, lab2 + s1, labels)
     sigma_z = np.r_[np.full(s1, float(sigma)), tab2["sigma_noise"] if s2 else np.empty(0)]
