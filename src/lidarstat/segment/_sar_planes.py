@@ -252,7 +252,9 @@ def grow_planes(points, free, *, sigma, k=12, alpha=0.05, edge_alpha=0.05, min_p
     plane_sz = np.empty(sizes.size)
     plane_sz[rank[1:] - 1] = reg_sz[1:]
     labels[idx] = lab
+    sizes = np.bincount(lab, minlength=sizes.size + 1)[1:]  # in rank order
     rows = {c: [] for c in PLANE_COLUMNS}
+    max_z = np.zeros(sizes.size)
     order = np.argsort(lab, kind="stable")
     starts = np.searchsorted(lab[order], np.arange(1, sizes.size + 2))
     for r in range(sizes.size):
@@ -264,17 +266,23 @@ def grow_planes(points, free, *, sigma, k=12, alpha=0.05, edge_alpha=0.05, min_p
         residual[idx[mem]] = e
         rss, df = float(e @ e), mem.size - 3
         s0 = float(noise_along_normal(nrm[2], plane_sz[r], sigma_h))
-        test = chi2_test(rss / s0 ** 2, df, alpha=gof_alpha)
+        # the p-value does not depend on the level; gof_alpha None keeps no small plane
+        test = chi2_test(rss / s0 ** 2, df, alpha=gof_alpha or 0.001)
         s_hat = np.sqrt(rss / df)
+        max_z[r] = np.abs(e).max() / s0
         for key, v in zip(PLANE_COLUMNS, (*nrm, np.degrees(np.arccos(min(abs(nrm[2]), 1.0))),
                                           np.degrees(s_hat / np.sqrt(max(lam_r[1], 1e-12))),
                                           s_hat, rss / s0 ** 2, df, float(test.pvalue),
                                           plane_sz[r])):
             rows[key].append(v)
     table = {c: np.asarray(v, dtype=np.float64) for c, v in rows.items()}
-    # planes below min_points are kept only when their own test accepts them
-    small = (sizes < min_points) & (table["gof_p"] < gof_alpha) if sizes.size else \
-        np.zeros(0, bool)
+    # planes below min_points are kept only when their own test accepts them and no
+    # point of theirs is an outlier (largest |residual| / noise against the two-sided
+    # Bonferroni normal critical value at gof_alpha): a few points of a crown over a
+    # roof can tilt a 12-point plane until its sum of squares passes
+    small = sizes < min_points
+    if gof_alpha is not None:
+        small &= (table["gof_p"] < gof_alpha) | (max_z > z_critical(gof_alpha / sizes))
     if small.any():
         keep = np.flatnonzero(~small)
         new = np.zeros(sizes.size + 1, dtype=np.int64)

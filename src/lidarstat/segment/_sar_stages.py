@@ -40,9 +40,11 @@ def add_planes(points, seg, *, sigma, alpha=0.05, edge_alpha=0.05, min_points=30
     both = np.where(lab2 > 0, lab2 + s1, labels)
     sigma_z = np.r_[np.full(s1, float(sigma)), tab2["sigma_noise"] if s2 else np.empty(0)]
     table = seg.table
-    eligible = np.ones(s1 + s2, bool)
+    # SAR units of order 1 and planes of min_points or more admit points: the prediction
+    # band of a small plane widens fast off its few points
+    eligible = np.bincount(both, minlength=s1 + s2 + 1)[1:] >= min_points
     if s1 and "degree" in table:
-        eligible[:s1] = np.asarray(table["degree"]) == 1
+        eligible[:s1] &= np.asarray(table["degree"]) == 1
     final, res_att = attach_points(points, both, sigma_z, sigma_h, k=k, edge_alpha=edge_alpha,
                                    eligible=eligible)
     fields = dict(seg.fields)
