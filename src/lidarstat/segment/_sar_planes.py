@@ -21,10 +21,14 @@ frame (orthogonal residuals, noise along the normal):
    standard errors ``sigma / sqrt(lambda_j)``, chi-square(2), `edge_alpha`), so a region
    stops at a crease: the points across it are admitted only within the prediction band
    and never carry the growth on.
-4. **The plane's test**: every region of `min_points` or more is refitted; its residual
-   sum of squares against the noise, ``RSS / sigma^2 ~ chi2(m - 3)`` (`gof_alpha`), and
-   the standard error of its normal, ``sigma_hat / sqrt(S_min)`` radians (the tilt about
-   the in-plane axis of least spread).
+4. **The plane's test**: every region is refitted; its residual sum of squares against
+   the noise, ``RSS / sigma^2 ~ chi2(m - 3)`` (`gof_alpha`), and the standard error of
+   its normal, ``sigma_hat / sqrt(S_min)`` radians (the tilt about the in-plane axis of
+   least spread). Regions of `min_points` or more are kept; smaller ones (down to
+   `min_size`) when the test accepts them and no point is an outlier.
+
+:func:`attach_points` then joins the free points on the rim of a plane by the same
+prediction test.
 """
 
 from __future__ import annotations
