@@ -6,8 +6,10 @@ Full mode (a few minutes on an otherwise idle machine):
 
 * the whole ``segment_sar`` on a synthetic airborne town scaled to ~1 million points
   (``make_als_town`` over 400 x 300 m at 8 pulses/m^2) with its defaults (automatic
-  bandwidth, multi-scale windows, estimated noise), with the Hoover scores of the roof
-  planes and the normal errors of the correct ones;
+  bandwidth, multi-scale windows, estimated noise), the SAR stage alone
+  (``planes=False``: the second stage's planes are scored by
+  ``tests/segment/test_sar_planes.py`` and ``benchmarks/real_sar.py``), with the Hoover
+  scores of the roof planes and the normal errors of the correct ones;
 * on the same run, PySAL ``spreg.ML_Lag`` (its default method 'full') and
   ``lidarstat.stats.sar_fit`` on the same 5,000-point cluster with the same W: time ratio
   and the agreement of rho and theta.
@@ -158,7 +160,7 @@ def bench_segment(cloud, radius=None):
     from lidarstat.segment import hoover, segment_sar
 
     t = time.perf_counter()
-    seg = segment_sar(cloud.xyz, radius=radius)
+    seg = segment_sar(cloud.xyz, radius=radius, planes=False)
     dt = time.perf_counter() - t
     rp = cloud.fields["roof_plane"].astype(int)
     h_all = hoover(seg.labels, rp, 0.8)
@@ -279,7 +281,7 @@ def bench_hip_roof(figures=FIGURES):
 
     cloud = make_hip_roof_scene(rng=1)
     t = time.perf_counter()
-    seg = segment_sar(cloud.xyz)
+    seg = segment_sar(cloud.xyz, planes=False)
     dt = time.perf_counter() - t
     rp = cloud.fields["roof_plane"].astype(int)
     planes = cloud.meta["roof_planes"]

@@ -86,3 +86,18 @@ def test_curvature_method_runs_at_the_automatic_scale(rng, tmp_path, capsys):
     assert main(["segment", str(src), str(out), "--method", "curvature", "--radius", "1.0",
                  "--sigma", "0.03", "-q"]) == 0
     assert "surface_type" in read(out).attributes
+
+
+def test_sar_no_planes_keeps_the_sar_units_alone(rng, tmp_path, capsys):
+    src = _gable(rng, tmp_path)
+    tables = {}
+    for extra in ([], ["--no-planes"]):
+        out = tmp_path / f"p{len(extra)}.las"
+        assert main(["segment", str(src), str(out), "--method", "sar", "--radius", "1.0",
+                     "--summary-json", str(tmp_path / "s.json"), *extra]) == 0
+        capsys.readouterr()
+        tables[len(extra)] = list(csv.DictReader(
+            (tmp_path / f"p{len(extra)}.segments.csv").read_text().splitlines()))
+        params = json_params(__import__("json").loads((tmp_path / "s.json").read_text()))
+        assert params["planes"] is (not extra)
+    assert "stage" in tables[0][0] and "stage" not in tables[1][0]

@@ -62,6 +62,10 @@ def add_arguments(group):
                        "segment it rejects is split into two surfaces when that removes "
                        "at least half of its residual sum of squares (0.001); 0 disables "
                        "it")
+    group.add_argument("--no-planes", dest="planes", action="store_false",
+                       help="keep the SAR units alone: no second stage of planes in their "
+                       "own frame (steep faces, walls, faces narrower than the bandwidth) "
+                       "among the points no unit took")
     group.add_argument("--diagnostics", default=None, metavar="DIR",
                        help="write Forward Search monitoring plots (PNG) to DIR")
 
@@ -79,7 +83,7 @@ def run(args, cloud):
                        search=args.search, w_radius=args.w_radius,
                        min_points=min_points,
                        fs_block=args.fs_block, outlier_alpha=_level_or_off(args.outlier_alpha),
-                       gof_alpha=_level_or_off(args.gof_alpha))
+                       gof_alpha=_level_or_off(args.gof_alpha), planes=args.planes)
 
 
 def _level_or_off(alpha):

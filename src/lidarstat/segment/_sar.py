@@ -23,6 +23,7 @@ from .._shared.validation import check_option, check_points, check_scalar
 from ..neighbors import check_copies, radius_neighbors
 from ._forward_search import STOP_RULES, StopRule
 from ._raw_clusters import raw_clusters
+from ._sar_stages import add_planes
 from ._sar_units import refine_raw_clusters
 from ._search_area import delaunay_graph
 
@@ -54,7 +55,7 @@ def segment_sar(points, *, radius=None, sigma=None, alpha=0.05, edge_alpha=0.05,
                 fs_alpha=0.001, envelope_alpha=0.001, fs_stop="both", degree=1, max_degree=3,
                 adaptive="multiscale", criterion="rice", grow_radius=None, search=None,
                 w_radius=None, min_points=30, fs_block=1, max_steps=500, outlier_alpha=0.01,
-                gof_alpha=0.001, progress=None, rng=0):
+                gof_alpha=0.001, planes=True, progress=None, rng=0):
     """Segment a cloud into planar (or polynomial) surface units by SAR-FS (seed 002).
 
     Parameters
@@ -115,6 +116,11 @@ def segment_sar(points, *, radius=None, sigma=None, alpha=0.05, edge_alpha=0.05,
     gof_alpha : float or None
         Level of the per-segment goodness-of-fit test against the noise `sigma` (given or
         estimated) and of the split of the segments it rejects (:func:`refine_raw_clusters`).
+    planes : bool
+        Second stage (:func:`add_planes`): planes in their own frame among the points no
+        SAR unit took (steep faces, walls, faces narrower than b), grown by tested
+        membership, then the free points next to any plane joined to it by the same
+        membership test. Table column ``stage`` (1: SAR unit, 2: grown plane).
     progress : callable, optional
         ``progress(done, total)``.
     rng : int or Generator
@@ -201,6 +207,11 @@ def segment_sar(points, *, radius=None, sigma=None, alpha=0.05, edge_alpha=0.05,
     if sigma is None and sigma_units > SIGMA_RATIO * sigma_local:
         fit, seg = one_pass(sigma_units)
         passes = 2
+    if planes:
+        noise = sigma_units if sigma is None and np.isfinite(sigma_units) \
+            else float(np.sqrt(fit.sigma2))
+        seg = add_planes(points, seg, sigma=noise, alpha=alpha, edge_alpha=edge_alpha,
+                         min_points=min_points, gof_alpha=gof_alpha)
     f = fit.to_fields()
     seg.fields.update({"z0": f["z0"], "slope_e": f["slope_e"], "slope_n": f["slope_n"],
                        "plane_pass": f["plane_pass"]})
@@ -209,5 +220,5 @@ def segment_sar(points, *, radius=None, sigma=None, alpha=0.05, edge_alpha=0.05,
                        "sigma_units": sigma_units, "sigma_passes": passes, "alpha": alpha,
                        "edge_alpha": edge_alpha, "grow_radius": grow_radius,
                        "spacing": spacing, "adaptive": fit.params.get("adaptive"),
-                       "degree": degree, "max_degree": max_degree})
+                       "degree": degree, "max_degree": max_degree, "planes": planes})
     return seg

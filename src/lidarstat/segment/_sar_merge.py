@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidParameterError
-from ..stats import chow_test
+from ..stats import chi2_test, chow_test
 from ._sar_refine import refit_unit
 from ._search_area import search_areas
 
@@ -114,11 +114,34 @@ def _chow(ma, mb, alpha):
     return chow_test(rab, ra, rb, r, na, nb, alpha=alpha)
 
 
-def merge_groups(points, unit_labels, units, graph, alpha, search):
+def crease_refuses(mom_a, mom_b, sigma2, alpha):
+    """The crease test of a merge: True when the union of two point sets fails the test
+    against the noise that each set passes.
+
+    Each set's residual sum of squares about its own least-squares surface (from the
+    normal-equation moments) is referred to ``sigma2 chi2(n - r)``, upper tail at
+    `alpha`; the merge is refused when both parts pass and the union (moments summed)
+    rejects: two faces meeting at a crease each fit a plane, their union does not. When a
+    part already fails, the test cannot tell a crease from roughness and does not refuse.
+    """
+    tests = []
+    for mom in (mom_a, mom_b, tuple(x + y for x, y in zip(mom_a, mom_b))):
+        rss, r, n = _rss(mom)
+        if n <= r:
+            return False
+        tests.append(bool(chi2_test(rss / sigma2, n - r, alpha=alpha).reject))
+    return (not tests[0]) and (not tests[1]) and tests[2]
+
+
+def merge_groups(points, unit_labels, units, graph, alpha, search, *, sigma2=None,
+                 crease_alpha=None):
     """Union of nearby units whose surfaces do not differ (Chow test at `alpha`).
 
     Candidates are pairs with at least 4 contacts (:func:`area_contacts` within
-    `search`)."""
+    `search`). With `sigma2` and `crease_alpha`, a merge Chow's test allows is still
+    refused when the union of the two groups (every unit already merged into either)
+    fails the test against the noise each group passes (:func:`crease_refuses`), so a
+    chain of pairwise merges cannot join two faces across a crease."""
     n_units = len(units)
     parent = np.arange(n_units + 1)
 
@@ -150,6 +173,11 @@ def merge_groups(points, unit_labels, units, graph, alpha, search):
                                   scale, z0)
         return moments[u]
 
+    group = {}  # root -> summed moments of its members' raw clusters
+
+    def gmom(r):
+        return group.get(r) or mom(r)
+
     for key in keys[counts >= 4]:
         ua, ub = int(key // base), int(key % base)
         if units[ua - 1].degree != units[ub - 1].degree or units[ua - 1].frame is not None \
@@ -157,8 +185,16 @@ def merge_groups(points, unit_labels, units, graph, alpha, search):
             continue
         if not _chow(mom(ua), mom(ub), alpha).reject:
             ra, rb = find(ua), find(ub)
-            if ra != rb:
-                parent[max(ra, rb)] = min(ra, rb)
+            if ra == rb:
+                continue
+            ma, mb = gmom(ra), gmom(rb)
+            if sigma2 is not None and crease_alpha is not None and \
+                    crease_refuses(ma, mb, sigma2, crease_alpha):
+                continue
+            lo_r, hi_r = min(ra, rb), max(ra, rb)
+            parent[hi_r] = lo_r
+            group[lo_r] = tuple(x + y for x, y in zip(ma, mb))
+            group.pop(hi_r, None)
     return np.array([find(u) for u in range(n_units + 1)])
 
 

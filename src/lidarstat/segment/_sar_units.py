@@ -104,8 +104,9 @@ def refine_raw_clusters(points, raw_labels, *, search, w_radius, degrees=1, max_
     merge_alpha : float or None
         Adjacent units of the same order are merged when the Chow F test does not reject
         one common surface at this level (a plane split into two raw clusters by a dormer
-        or a chimney becomes one unit again; their Table 6 sizes are summed). None: no
-        merging.
+        or a chimney becomes one unit again; their Table 6 sizes are summed), unless the
+        union fails the test against the noise `sigma` (level `gof_alpha`) that each part
+        passes (a crease, :func:`crease_refuses`). None: no merging.
     outlier_alpha : float or None
         Level of the final outlier test, per point (iterated data snooping with deletion
         residuals, :func:`outlier_test`; default 0.01; Baarda's usual 0.001 lets wall
@@ -176,7 +177,9 @@ def refine_raw_clusters(points, raw_labels, *, search, w_radius, degrees=1, max_
                       LidarstatWarning, stacklevel=3)
     unit_labels = assign(units, n)
     if merge_alpha is not None and len(units) > 1:
-        root = merge_groups(points, unit_labels, units, graph, merge_alpha, search)
+        root = merge_groups(points, unit_labels, units, graph, merge_alpha, search,
+                            sigma2=None if sigma is None else float(sigma) ** 2,
+                            crease_alpha=gof_alpha)
         groups = {}
         for u in range(1, len(units) + 1):
             groups.setdefault(int(root[u]), []).append(u)
