@@ -17,8 +17,9 @@ frame (orthogonal residuals, noise along the normal):
    orthogonal distance passes the prediction test
    ``|n.(x - c)| <= z_{1-a/2} sigma sqrt(1 + 1/m + sum_j (u_j.(x - c))^2 / S_j)``
    (`edge_alpha`); an admitted point expands the region only when it is planar and its
-   local normal agrees with the region's (Wald test of the two tilts against their
-   standard errors ``sigma / sqrt(lambda_j)``, chi-square(2), `edge_alpha`), so a region
+   local normal agrees with the region's (Wald test of the two tilts t = U'n_local in
+   the region's axes U against their covariance ``sigma^2 (U' S U)^{-1}``, S the scatter
+   of the point's neighbourhood: ``t' U'SU t / sigma^2 ~ chi-square(2)``, `edge_alpha`), so a region
    stops at a crease: the points across it are admitted only within the prediction band
    and never carry the growth on.
 4. **The plane's test**: every region is refitted; its residual sum of squares against
@@ -161,7 +162,11 @@ def _grow(P, nbr, planar, lam, vec, sz, sigma_h, z_band, chi_tilt, min_points):
             ln = ln * np.where((ln @ nrm) < 0, -1.0, 1.0)[:, None]
             t = ln @ u  # (c, 2) small-angle tilts
             s2 = noise_along_normal(ln[:, 2], *sig) ** 2
-            w = (t[:, 0] ** 2 * lam[cand, 2] + t[:, 1] ** 2 * lam[cand, 1]) / s2
+            # Wald form t' (U' S U) t / sigma^2, S the local scatter: exact whatever the
+            # local axes' orientation against the region's
+            pu = np.einsum("ji,cjk->cik", u, vec[cand])
+            info = np.einsum("cik,ck,cjk->cij", pu, lam[cand], pu)
+            w = np.einsum("ci,cij,cj->c", t, info, t) / s2
             frontier = cand[planar[cand] & (w <= chi_tilt)]
         region = np.concatenate(members)
         if region.size < min_points:
