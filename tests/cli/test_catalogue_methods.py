@@ -33,7 +33,8 @@ def _run(args, capsys):
 
 
 @pytest.mark.parametrize("seed, neighbourhood", [(0, ["--radius", "1.5"]),
-                                                 (2, ["--k", "20"])])
+                                                 (2, ["--k", "20"]),
+                                                 (1, [])])  # the automatic scale
 def test_covariance_on_a_catalogue_equals_the_whole_file(tmp_path, capsys, seed,
                                                          neighbourhood):
     _tiles(tmp_path, seed=seed)

@@ -89,12 +89,6 @@ def test_segment_ridges_jet_radius_is_deprecated(cylinder, tmp_path, capsys):
     assert "segment_id" in read(out).attributes
 
 
-def test_ridges_needs_a_neighbourhood(cylinder, tmp_path, capsys):
-    with pytest.raises(SystemExit):
-        build_parser().parse_args(["ridges", str(cylinder), str(tmp_path / "o.npz")])
-    assert "--k" in capsys.readouterr().err
-
-
 def test_curvature_runs_at_the_automatic_scale_and_prints_it(cylinder, tmp_path, capsys):
     out, js = tmp_path / "auto.npz", tmp_path / "auto.json"
     assert main(["curvature", str(cylinder), str(out), "--summary-json", str(js)]) == 0

@@ -68,7 +68,12 @@ def _assert_same_fields(tiled, whole):
             # each tile's corner), so float sums round differently: values agree to 1e-6
             # of the field's scale (its 99th percentile of magnitudes).
             scale = np.nanpercentile(np.abs(b), 99) if np.isfinite(b).any() else 1.0
-            np.testing.assert_allclose(a[posed], b[posed], rtol=1e-6, atol=1e-6 * scale,
+            # The cylinder fit behind `variation_p` refines its axis until a step tilts it
+            # by less than 1e-3 rad: a roundoff-sized difference can end the refinement
+            # one step apart, which moves the p-value by that step's effect (at most
+            # 2.4e-4 of it on the 9,000-point scenes), never the decision.
+            rtol = 1e-3 if name == "variation_p" else 1e-6
+            np.testing.assert_allclose(a[posed], b[posed], rtol=rtol, atol=1e-6 * scale,
                                        equal_nan=True, err_msg=name)
         else:  # every decision, on every point, is identical
             np.testing.assert_array_equal(a, b, err_msg=name)

@@ -21,21 +21,21 @@ from ._covariance_tests import _cylinder_axes, _neighbour_rows
 #: mostly the noise the model does not carry).
 MIN_NOISE_SHARE = 0.2
 
-#: Height above the cloud of the point from which ``noise='z'`` runs: rays from it are
-#: vertical to within 1e-4 radians over 10 km.
-Z_NOISE_HEIGHT = 1e8
+#: Height of the point from which ``noise='z'`` runs, above the coordinates' origin: rays
+#: from it are vertical to within 1e-5 radians for points within 1e7 of the origin (any
+#: projected CRS), and the same for every tile of an area (no cloud-dependent position).
+Z_NOISE_HEIGHT = 1e12
 
 
 def noise_sensor(noise, sensor, points):
     """The point the noise runs from, for models that weight each point by the share of
     its noise across the fitted surface (cylinder fits, segment models): the `sensor` for
-    ``'range'``, a point `Z_NOISE_HEIGHT` above the cloud for ``'z'`` (vertical rays),
+    ``'range'``, the point `Z_NOISE_HEIGHT` above the origin for ``'z'`` (vertical rays),
     None for ``'normal'``."""
     if noise == "range":
         return sensor
     if noise == "z" and points is not None:
-        c = np.asarray(points, dtype=np.float64).mean(axis=0)
-        return np.array([c[0], c[1], c[2] + Z_NOISE_HEIGHT])
+        return np.array([0.0, 0.0, Z_NOISE_HEIGHT])
     return None
 
 

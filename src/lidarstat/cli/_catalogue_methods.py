@@ -251,6 +251,10 @@ def _segment_buffer(args, cat):
         reach = args.radius
     elif args.k is not None or hasattr(method, "DEFAULT_K"):
         reach = knn_reach(cat, args.k if args.k is not None else method.DEFAULT_K)
+    elif args.method == "covariance":  # the automatic scale: at most OPTIMAL_K_MAX
+        from ..features import OPTIMAL_K_MAX
+
+        reach = knn_reach(cat, OPTIMAL_K_MAX)
     else:
         raise InvalidParameterError(f"segment --method {args.method} on a catalogue needs "
                                     "--radius or --buffer (the neighbourhood the tiles' "
