@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import tempfile
 import time
 from pathlib import Path
 
@@ -311,7 +312,8 @@ def main(argv=None):
             if not args.no_anchor:
                 for key, settings in (("cloudcompare_ransac", RANSAC),
                                       ("cloudcompare_ransac_12", RANSAC_SMALL)):
-                    cc, cc_dt = cloudcompare_ransac(xyz, out / f".cc_{name}", settings)
+                    cc, cc_dt = cloudcompare_ransac(
+                        xyz, Path(tempfile.gettempdir()) / f"lidarstat_cc_{name}", settings)
                     if cc is None:
                         break
                     sc, _ = roof_score(cc, b)
