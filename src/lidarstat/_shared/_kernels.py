@@ -87,3 +87,13 @@ def mirror3(cov):  # pragma: no cover - compiled
     cov[1, 0] = cov[0, 1]
     cov[2, 0] = cov[0, 2]
     cov[2, 1] = cov[1, 2]
+
+
+@njit
+def uf_find(parent, i):  # pragma: no cover - compiled
+    """Root of `i` in the union-find forest `parent`, with path halving (every visited
+    node is pointed at its grandparent)."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i

@@ -8,7 +8,7 @@ from numba import prange
 
 from .._shared._jit import njit, njit_parallel
 from .._shared._kernels import eigh3
-from ._continuity import _find
+from .._shared._kernels import uf_find as _find
 
 
 @njit_parallel

@@ -27,6 +27,7 @@ from numba import prange
 from .._shared._columns import column_max, column_min
 from ..neighbors import GRID_CELL_CHUNK as _CELL_CHUNK, grid_block_ranges as _block_ranges, grid_candidate_count as _count, grid_knn_point as _knn_point, grid_knn_scratch as _scratch  # noqa: E501
 from .._shared._jit import njit, njit_parallel
+from .._shared._kernels import uf_find as _find
 from ..neighbors import find_duplicates
 from ._surface import cell_keys, cell_order
 
@@ -241,18 +242,6 @@ def _knn_smooth(c0, c1, pts, zs, cell_keys, cell_start, dims, cell, k, tau0, ste
                     nbr[r, t] = j
                     smooth[r, t] = abs(zs[j] - zs[i]) <= step + slope * np.sqrt(td[q])
                     t += 1
-
-
-@njit
-def _find(parent, i):
-    root = i
-    while parent[root] != root:
-        root = parent[root]
-    while parent[i] != root:  # path compression
-        nxt = parent[i]
-        parent[i] = root
-        i = nxt
-    return root
 
 
 @njit

@@ -10,15 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._shared._jit import njit
-
-
-@njit
-def _find(parent, a):
-    # Path halving: every visited node points to its grandparent.
-    while parent[a] != a:
-        parent[a] = parent[parent[a]]
-        a = parent[a]
-    return a
+from .._shared._kernels import uf_find as _find
 
 
 @njit

@@ -8,18 +8,7 @@ import numpy as np
 
 from .._shared._jit import njit
 from .._shared._kernels import eigh3
-
-
-@njit
-def _find(parent, i):
-    root = i
-    while parent[root] != root:
-        root = parent[root]
-    while parent[i] != root:  # path compression
-        nxt = parent[i]
-        parent[i] = root
-        i = nxt
-    return root
+from .._shared._kernels import uf_find as _find
 
 
 @njit
