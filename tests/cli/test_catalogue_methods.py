@@ -15,7 +15,7 @@ from lidarstat.io import read
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pipeline"))
-from test_catalogue import _assert_same_fields, _by_xyz
+from test_catalogue import _assert_same_fields, _by_xyz, _cut
 from test_catalogue_cli import _gather, _tiles
 
 
@@ -202,3 +202,33 @@ def test_a_segmentation_whose_reach_is_chosen_in_the_run_needs_a_buffer(tmp_path
     assert rc == 2
     assert "needs --radius or --buffer" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_evaluate_two_catalogues_scores_the_area(tmp_path, capsys):
+    """Tiles paired by name, their counts summed: the scores of the whole area (the same
+    points in another order give the same confusion), and one line per unmatched tile."""
+    from lidarstat.io import PointCloud, write
+
+    rng = np.random.default_rng(7)
+    n = 9000
+    xy = rng.uniform(0, 60, (n, 2)) + [150000.0, 450000.0]
+    ref_cls = rng.choice(np.array([1, 2, 6, 11], np.uint8), n)
+    res_cls = np.where(rng.random(n) < 0.9, ref_cls, rng.choice(np.array([2, 6], np.uint8), n))
+    xyz = np.c_[xy, rng.normal(0, 1, n)]
+    write(tmp_path / "ref.laz", PointCloud(xyz, {"classification": ref_cls}))
+    write(tmp_path / "res.laz", PointCloud(xyz, {"classification": res_cls}))
+    _cut(read(tmp_path / "ref.laz"), tmp_path / "ref")
+    _cut(read(tmp_path / "res.laz"), tmp_path / "res")
+    for args, name in (([tmp_path / "res.laz", "--reference", tmp_path / "ref.laz"], "w"),
+                       ([tmp_path / "res", "--reference", tmp_path / "ref"], "t")):
+        _run(["evaluate", *args, "--classes", "--json", tmp_path / f"{name}.json", "-q"],
+             capsys)
+    whole, tiled = (json.loads((tmp_path / f"{k}.json").read_text()) for k in "wt")
+    assert tiled["ground_object"] == whole["ground_object"]
+    assert tiled["classes"] == whole["classes"]
+    assert len(tiled["tiles"]) == 9
+    assert sum(t["ground_object"]["n"] for t in tiled["tiles"]) == n
+    (tmp_path / "ref" / "tile_0_0.laz").unlink()
+    rc = main(["evaluate", str(tmp_path / "res"), "--reference", str(tmp_path / "ref")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "tile_0_0.laz: no reference tile" in err[0]

@@ -51,6 +51,18 @@ class FilterErrors:
     confusion: np.ndarray
     n: int
 
+    @classmethod
+    def from_confusion(cls, confusion) -> "FilterErrors":
+        """The errors of a (2, 2) confusion matrix (rows reference ground, object; columns
+        result ground, object): counts of several tiles summed give the area's errors."""
+        cm = np.asarray(confusion, dtype=np.int64).reshape(2, 2)
+        (a, b), (c, d) = cm.tolist()
+        n = a + b + c + d
+        nan = float("nan")
+        return cls(type_i=b / (a + b) if a + b else nan,
+                   type_ii=c / (c + d) if c + d else nan,
+                   total=(b + c) / n if n else nan, kappa=_kappa(cm), confusion=cm, n=n)
+
     def to_dict(self) -> dict:
         """JSON-ready dict (errors as fractions)."""
         return {"type_i": self.type_i, "type_ii": self.type_ii, "total": self.total,
@@ -93,15 +105,9 @@ def filter_errors(result_ground, reference_ground) -> FilterErrors:
     r, t = _check_pair(result_ground, reference_ground, "result_ground", "reference_ground")
     r = r.astype(bool)
     t = t.astype(bool)
-    a = int(np.sum(t & r))
-    b = int(np.sum(t & ~r))
-    c = int(np.sum(~t & r))
-    d = int(np.sum(~t & ~r))
-    cm = np.array([[a, b], [c, d]], dtype=np.int64)
-    nan = float("nan")
-    return FilterErrors(type_i=b / (a + b) if a + b else nan,
-                        type_ii=c / (c + d) if c + d else nan,
-                        total=(b + c) / t.size, kappa=_kappa(cm), confusion=cm, n=int(t.size))
+    cm = np.array([[np.sum(t & r), np.sum(t & ~r)], [np.sum(~t & r), np.sum(~t & ~r)]],
+                  dtype=np.int64)
+    return FilterErrors.from_confusion(cm)
 
 
 @dataclass(frozen=True)
@@ -129,6 +135,23 @@ class ClassScores:
     precision: dict
     recall: dict
 
+    @classmethod
+    def from_confusion(cls, labels, confusion) -> "ClassScores":
+        """The scores of a confusion matrix over `labels` (rows reference, columns
+        result): counts of several tiles summed give the area's scores."""
+        labels = np.asarray(labels)
+        cm = np.asarray(confusion, dtype=np.int64)
+        col = cm.sum(axis=0)
+        row = cm.sum(axis=1)
+        diag = np.diag(cm)
+        nan = float("nan")
+        prec = {int(c): (float(diag[i] / col[i]) if col[i] else nan)
+                for i, c in enumerate(labels)}
+        rec = {int(c): (float(diag[i] / row[i]) if row[i] else nan)
+               for i, c in enumerate(labels)}
+        return cls(labels=labels, confusion=cm, accuracy=float(diag.sum() / cm.sum()),
+                   kappa=_kappa(cm), precision=prec, recall=rec)
+
     def to_dict(self) -> dict:
         """JSON-ready dict."""
         return {"labels": [int(v) for v in self.labels], "confusion": self.confusion.tolist(),
@@ -153,12 +176,5 @@ def class_scores(result, reference) -> ClassScores:
     ti = np.searchsorted(labels, t)
     k = labels.size
     cm = np.bincount(ti * k + ri, minlength=k * k).reshape(k, k).astype(np.int64)
-    col = cm.sum(axis=0)
-    row = cm.sum(axis=1)
-    diag = np.diag(cm)
-    prec = {int(c): (float(diag[i] / col[i]) if col[i] else float("nan"))
-            for i, c in enumerate(labels)}
-    rec = {int(c): (float(diag[i] / row[i]) if row[i] else float("nan"))
-           for i, c in enumerate(labels)}
-    return ClassScores(labels=labels, confusion=cm, accuracy=float(diag.sum() / cm.sum()),
-                       kappa=_kappa(cm), precision=prec, recall=rec)
+    return ClassScores.from_confusion(labels, cm)
+
