@@ -39,14 +39,7 @@ from lidarstat.classify import _moments_objects, filter_errors, moments  # noqa:
 from lidarstat.io import linear_units, read  # noqa: E402
 
 DATA = HERE.parent.parent / "shared" / "data"
-FILES = [
-    "ahn3_amsterdam/ahn_2386_9702.laz",
-    "ahn3_amsterdam/ahn_2397_9705.laz",
-    "ahn3_delft_3dfier/derived/ahn3_cropped_1_bgt.laz",
-    "ahn3_delft_3dfier/derived/ahn3_cropped_2_bgt.laz",
-    "ign_lidarhd_samples/870000_6618000.subset.50mx100m.las",
-    "ign_lidarhd_samples/St_Barth_RGAF09_UTM20N_IGN_1988_SB_subset_100m.laz",
-]
+from real_moments import PRODUCER_FILES as FILES  # noqa: E402 (the same files)
 LEFT_OUT = (7, 9, 18)
 FIGURE_FILE = "ahn3_amsterdam/ahn_2386_9702.laz"
 

@@ -54,14 +54,7 @@ from lidarstat.io import linear_units, read
 DATA = Path(os.environ.get("LIDARSTAT_SHARED_DATA", HERE.parent.parent / "shared" / "data"))
 ISPRS = [f"isprs_filtertest/joined/samp{s}_ref_intensity.laz"
          for s in ("11", "21", "31", "41", "51", "61", "71")]
-PRODUCER = [
-    "ahn3_amsterdam/ahn_2386_9702.laz",
-    "ahn3_amsterdam/ahn_2397_9705.laz",
-    "ahn3_delft_3dfier/derived/ahn3_cropped_1_bgt.laz",
-    "ahn3_delft_3dfier/derived/ahn3_cropped_2_bgt.laz",
-    "ign_lidarhd_samples/870000_6618000.subset.50mx100m.las",
-    "ign_lidarhd_samples/St_Barth_RGAF09_UTM20N_IGN_1988_SB_subset_100m.laz",
-]
+from real_moments import PRODUCER_FILES as PRODUCER  # noqa: E402 (the same files)
 METHODS = ["moments", "moments_no_terrain", "csf", "smrf"]
 #: The hard cases drawn before / after the terrain step: sample, what it shows.
 FIGURES = {"samp71": "ramps and embankments to a bridge", "samp61": "embankments",

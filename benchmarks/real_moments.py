@@ -42,13 +42,17 @@ from lidarstat.io import linear_units, read
 from lidarstat.segment import binary_scores
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-FILES = [
+#: The producer-classified AHN3 and IGN files (ground, buildings: buildings.py and
+#: ground_filters.py score the same files).
+PRODUCER_FILES = [
     "ahn3_amsterdam/ahn_2386_9702.laz",
     "ahn3_amsterdam/ahn_2397_9705.laz",
     "ahn3_delft_3dfier/derived/ahn3_cropped_1_bgt.laz",
     "ahn3_delft_3dfier/derived/ahn3_cropped_2_bgt.laz",
     "ign_lidarhd_samples/870000_6618000.subset.50mx100m.las",
     "ign_lidarhd_samples/St_Barth_RGAF09_UTM20N_IGN_1988_SB_subset_100m.laz",
+]
+FILES = PRODUCER_FILES + [
     "laspy_testdata/file_with_both_wkt_and_geotiff_vlrs.las",
     "pdal_testdata/autzen_trim.laz",
     "pdal_testdata/las_with_several_extra_byte_bloc.laz",
