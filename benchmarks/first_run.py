@@ -5,7 +5,9 @@ Every command runs in a fresh process with its own empty ``NUMBA_CACHE_DIR`` (th
 run, which compiles the kernels it uses), then again in a fresh process on the same cache
 dir (the cached run). The process runs the command in-process through ``lidarstat.cli.main``
 and then lists every Numba dispatcher of the ``lidarstat`` modules with its signatures, so
-a kernel compiled for two argument types shows up with two.
+a kernel compiled for two argument types shows up with two. ``first_compile_s`` is the
+time the first run spent in Numba's compiler (outermost compile events), ``first_cpu_s``
+its CPU time (less sensitive than wall time to other jobs on a shared machine).
 
     PYTHONPATH=src python benchmarks/first_run.py [--out FILE] [--label NAME]
 
@@ -39,13 +41,26 @@ COMMANDS = [
     ("segment-sar", ["segment", "{x}", "{o}.laz", "--method", "sar", "--radius", "1"]),
     ("segment-covariance", ["segment", "{x}", "{o}.laz", "--method", "covariance"]),
     ("segment-curvature", ["segment", "{x}", "{o}.laz", "--method", "curvature", "--radius", "1"]),
+    ("segment-ridges", ["segment", "{x}", "{o}.laz", "--method", "ridges", "--radius", "2"]),
 ]
 
 CHILD = r"""
-import json, sys, time
+import json, resource, sys, time
+from numba.core import event
+depth, compile_s = [0], [0.0]
+class Compiles(event.Listener):
+    def on_start(self, ev):
+        if depth[0] == 0:
+            self.t0 = time.perf_counter()
+        depth[0] += 1
+    def on_end(self, ev):
+        depth[0] -= 1
+        if depth[0] == 0:
+            compile_s[0] += time.perf_counter() - self.t0
 t0 = time.perf_counter()
-from lidarstat.cli import main
-rc = main(sys.argv[2:])
+with event.install_listener("numba:compile", Compiles()):
+    from lidarstat.cli import main
+    rc = main(sys.argv[2:])
 wall = time.perf_counter() - t0
 from numba.core.registry import CPUDispatcher
 seen, kernels = set(), {}
@@ -56,12 +71,19 @@ for name, mod in list(sys.modules.items()):
         if isinstance(obj, CPUDispatcher) and id(obj) not in seen:
             seen.add(id(obj))
             if obj.signatures:
-                key = f"{obj.py_func.__module__}.{obj.py_func.__qualname__}"
+                py = obj.py_func
+                key = f"{py.__module__}.{py.__qualname__}"
+                # a driver made per kernel (a closure): named by the kernels it closes over
+                inner = [getattr(c.cell_contents, "py_func", None) for c in py.__closure__ or ()]
+                inner = [f.__name__ for f in inner if f is not None]
+                if inner:
+                    key += "[" + ",".join(sorted(inner)) + "]"
                 kernels[key] = [str(s) for s in obj.signatures]
+cpu = resource.getrusage(resource.RUSAGE_SELF)
 with open(sys.argv[1], "w") as fh:
-    json.dump({"rc": rc, "inprocess_s": wall, "kernels": kernels}, fh)
+    json.dump({"rc": rc, "inprocess_s": wall, "compile_s": compile_s[0],
+               "cpu_s": cpu.ru_utime + cpu.ru_stime, "kernels": kernels}, fh)
 """
-
 
 def run(argv, cache_dir, tmp):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir))
@@ -78,7 +100,8 @@ def run(argv, cache_dir, tmp):
     if data["rc"] != 0:
         raise SystemExit(f"{argv}: command exit {data['rc']}\n{proc.stderr[-2000:]}")
     data["wall_s"] = round(wall, 2)
-    data["inprocess_s"] = round(data["inprocess_s"], 2)
+    for key in ("inprocess_s", "compile_s", "cpu_s"):
+        data[key] = round(data[key], 2)
     return data
 
 
@@ -89,7 +112,10 @@ def measure(name, argv, tmp, cache=None):
     kernels = first["kernels"]
     return {
         "first_s": first["wall_s"],
+        "first_compile_s": first["compile_s"],
+        "first_cpu_s": first["cpu_s"],
         "cached_s": cached["wall_s"],
+        "cached_compile_s": cached["compile_s"],
         "kernels": len(kernels),
         "specialisations": sum(len(v) for v in kernels.values()),
         "signatures": kernels,
@@ -103,10 +129,13 @@ def main():
     ap.add_argument("--only", nargs="*", help="command names to run")
     ap.add_argument("--warmup", action="store_true",
                     help="run `lidarstat warmup` on the fresh cache before the commands")
+    ap.add_argument("--machine-shared", action="store_true",
+                    help="note in the results that other jobs ran on the machine")
     args = ap.parse_args()
     import lidarstat
 
-    results = {"package": str(Path(lidarstat.__file__).parent), "commands": {}}
+    results = {"package": str(Path(lidarstat.__file__).parent), "commands": {},
+               "cpus": os.cpu_count(), "machine_shared": args.machine_shared}
     with tempfile.TemporaryDirectory() as tmp:
         shared = None
         if args.warmup:
@@ -125,9 +154,16 @@ def main():
             o = Path(tmp) / name
             argv = [a.format(x=x, o=o) for a in argv]
             results["commands"][name] = r = measure(name, argv, tmp, shared)
-            print(f"{name:20s} first {r['first_s']:6.1f} s  cached {r['cached_s']:5.1f} s  "
+            print(f"{name:20s} first {r['first_s']:6.1f} s (compiling "
+                  f"{r['first_compile_s']:5.1f} s, CPU {r['first_cpu_s']:5.1f} s)  cached {r['cached_s']:5.1f} s  "
                   f"kernels {r['kernels']:3d}  specialisations {r['specialisations']:3d}",
                   flush=True)
+            save(args, results)  # each command as it ends: a long run stopped keeps them
+    save(args, results)
+
+
+def save(args, results):
+    """Summarise the specialisations over the commands run and store under the label."""
     union = {}
     for r in results["commands"].values():
         for k, sigs in r["signatures"].items():
@@ -135,9 +171,9 @@ def main():
     results["total_kernels"] = len(union)
     results["total_specialisations"] = sum(len(v) for v in union.values())
     results["multi"] = {k: sorted(v) for k, v in union.items() if len(v) > 1}
-    print(f"all commands: {results['total_kernels']} kernels, "
+    print(f"all commands so far: {results['total_kernels']} kernels, "
           f"{results['total_specialisations']} specialisations; "
-          f"{len(results['multi'])} kernels with more than one")
+          f"{len(results['multi'])} kernels with more than one", flush=True)
     out = Path(args.out)
     store = json.loads(out.read_text()) if out.exists() else {}
     store[args.label] = results

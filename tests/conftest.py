@@ -34,3 +34,57 @@ def shared_file(relpath: str) -> Path:
     if not path.is_file():
         pytest.skip(f"real data file not found: {path}")
     return path
+
+
+# ------------------------------------------------------------------ compile time of the run
+# Numba's compile time, summed over the run's processes (xdist workers report theirs to
+# the controller), is printed in the summary: the share of the suite's time that a warm
+# cache saves. Outermost compile events only (a kernel's helpers compile inside it).
+_COMPILES = {"seconds": 0.0, "count": 0}
+
+
+def _count_compiles():
+    import time
+
+    from numba.core import event
+
+    class _Outermost(event.Listener):
+        depth = 0
+        start = 0.0
+
+        def on_start(self, ev):
+            if self.depth == 0:
+                self.start = time.perf_counter()
+            self.depth += 1
+
+        def on_end(self, ev):
+            self.depth -= 1
+            if self.depth == 0:
+                _COMPILES["seconds"] += time.perf_counter() - self.start
+                _COMPILES["count"] += 1
+
+    event.register("numba:compile", _Outermost())
+
+
+def pytest_configure(config):
+    _count_compiles()
+
+
+def pytest_sessionfinish(session):
+    workeroutput = getattr(session.config, "workeroutput", None)
+    if workeroutput is not None:
+        workeroutput["numba_compiles"] = dict(_COMPILES)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error):
+    theirs = getattr(node, "workeroutput", {}).get("numba_compiles", {})
+    _COMPILES["seconds"] += theirs.get("seconds", 0.0)
+    _COMPILES["count"] += theirs.get("count", 0)
+
+
+def pytest_terminal_summary(terminalreporter):
+    if _COMPILES["count"]:
+        terminalreporter.write_line(
+            f"Numba: {_COMPILES['count']} compilations, {_COMPILES['seconds']:.0f} s compiling "
+            f"(summed over the test processes; a warm cache loads instead)")

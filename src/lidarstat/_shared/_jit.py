@@ -4,6 +4,11 @@ Every kernel uses ``@njit`` or ``@njit_parallel`` from here: ``cache=True`` so t
 CLI load compiled code from ``__pycache__`` instead of recompiling at every start,
 ``nogil=True`` so kernels can run in threads (Dask), ``fastmath=False`` because the
 statistics rely on IEEE semantics (NaN propagation, no reassociation of the moment sums).
+
+A kernel called from another kernel is compiled for the argument types of the call
+(:func:`one_signature`): constants count as plain ``int64``/``bool``/``float64`` and a
+``prange`` index as ``int64``, so each helper is compiled once rather than once per
+constant and once per loop kind. Compilation is what a first run waits for.
 """
 
 from __future__ import annotations
@@ -16,16 +21,47 @@ _DEFAULTS = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
 
 def njit(*args, **kwargs):
-    """``numba.njit`` with lidarstat's defaults."""
+    """``numba.njit`` with lidarstat's defaults, one signature per argument types."""
     opts = {**_DEFAULTS, **kwargs}
     if args and callable(args[0]):
-        return numba.njit(**opts)(args[0])
-    return numba.njit(*args, **opts)
+        return one_signature(numba.njit(**opts)(args[0]))
+    decorate = numba.njit(*args, **opts)
+    return lambda func: one_signature(decorate(func))
 
 
 def njit_parallel(func):
-    """``numba.njit(parallel=True)`` with lidarstat's defaults."""
-    return numba.njit(parallel=True, **_DEFAULTS)(func)
+    """``numba.njit(parallel=True)`` with lidarstat's defaults, one signature per types."""
+    return one_signature(numba.njit(parallel=True, **_DEFAULTS)(func))
+
+
+def _call_type(ty):
+    from numba.core import types
+
+    ty = types.unliteral(ty)
+    return types.int64 if ty == types.uint64 else ty
+
+
+def one_signature(dispatcher):
+    """Compile `dispatcher`, when another kernel calls it, for plain argument types.
+
+    Numba types a call from one kernel to another with the caller's types as they are: a
+    constant argument as ``Literal[int](0)`` (one compilation per distinct constant) and,
+    inside a ``prange`` loop, the loop index as ``uint64`` where the same loop before the
+    parallel rewrite typed it ``int64`` (every helper called in a parallel loop compiled
+    twice). Here a call types a constant as its plain type and an unsigned 64-bit scalar as
+    ``int64``; the caller converts the value (a no-op for a constant or an index). No kernel
+    of lidarstat takes an unsigned 64-bit scalar for its own sake: unsigned scalars in
+    kernels are ``prange`` indices, always below 2**63. Kernels that need a literal
+    (``numba.literally``) cannot use this. Returns `dispatcher`.
+    """
+    typed = dispatcher.get_call_template
+
+    def get_call_template(args, kws):
+        return typed(tuple(_call_type(a) for a in args),
+                     {k: _call_type(v) for k, v in kws.items()})
+
+    dispatcher.get_call_template = get_call_template
+    return dispatcher
 
 
 def closure_cache(driver, functions):

@@ -35,6 +35,15 @@ def _run(args):
 
     quiet = args.quiet
     start = time.perf_counter()
+    if not quiet:
+        import numba
+
+        where = numba.config.CACHE_DIR or str(Path(__file__).resolve().parents[1])
+        commands = sorted({argv[0] for _, argv in STEPS} - {"synth"})
+        print(f"lidarstat warmup: compiling the Numba kernels of {', '.join(commands)} "
+              f"into the cache under {where}, once (a few minutes); later runs of every "
+              f"command start without compiling",
+              file=sys.stderr, flush=True)
     with tempfile.TemporaryDirectory(prefix="lidarstat-warmup-") as tmp:
         x = Path(tmp) / "scene.laz"
         for i, (label, argv) in enumerate(STEPS, 1):

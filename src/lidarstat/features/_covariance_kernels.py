@@ -116,8 +116,10 @@ def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out
                     for t in range(k):
                         nbr_idx[row + t] = order[ti[t]]
                         nbr_dist[row + t] = np.sqrt(td[t])
-                _covariance_one(i, pts, ti, 0, k, sensor, has_sensor, cov, evals, evecs,
-                                out_feat[r])
+                # the row just written, not the int64 scratch: _covariance_one then has
+                # the index dtype of covariance_rows' CSR and is compiled once
+                _covariance_one(i, pts, out_idx[r], 0, k, sensor, has_sensor, cov, evals,
+                                evecs, out_feat[r])
 
 
 # ------------------------------------------------------------------ covariance per row
