@@ -402,7 +402,7 @@ def main_whole(args):
     """The issue's table: lidarstat against CloudCompare, whole process, same run."""
     tmp = Path(args.tmp or tempfile.mkdtemp(prefix="lidarstat_whole_"))
     tmp.mkdir(parents=True, exist_ok=True)
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp / "numba_cache"))
+    env = dict(os.environ, NUMBA_CACHE_DIR=args.numba_cache or str(tmp / "numba_cache"))
     import numba
 
     from lidarstat.io import PointCloud, write
@@ -430,8 +430,8 @@ def main_whole(args):
     if exe is None:
         res["skipped"]["cloudcompare"] = "not installed (apt-get install -y cloudcompare)"
     print(f"work dir {tmp}; {xyz.shape[0]} points")
-    warm = tmp / "warm.las"  # a small cloud on which the first runs compile the kernels
-    write(warm, PointCloud(xyz=xyz[:20000]))
+    warm = tmp / "warm.las"  # a small piece on which the first runs compile the kernels
+    write(warm, PointCloud(xyz=xyz[xyz[:, 0] < xyz[:, 0].min() + 0.01 * np.ptp(xyz[:, 0])]))
     whole_lidarstat(warm, tmp / "warm_out.las", calibrate_radius(xyz, 50)[0], env)
     for tgt in (() if args.skip_fixed else args.targets):
         r, med = calibrate_radius(xyz, tgt)
@@ -663,6 +663,8 @@ def main(argv=None):
     ap.add_argument("--before", default=None, metavar="SRC",
                     help="with --whole: also profile the package found at SRC (a PYTHONPATH, "
                     "e.g. the src folder of an earlier checkout) in the same run")
+    ap.add_argument("--numba-cache", default=None, metavar="DIR",
+                    help="with --whole: Numba cache folder (default: one in the work folder)")
     ap.add_argument("--input", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--output", default=None, help=argparse.SUPPRESS)
     # child-mode options
