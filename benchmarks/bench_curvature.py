@@ -11,6 +11,14 @@ Usage::
 
     python benchmarks/bench_curvature.py --points 2000000 --repeats 3 --out results.json
     python benchmarks/bench_curvature.py --points 200000 --skip-peers   # quick
+    python benchmarks/bench_curvature.py --whole --out benchmarks/results_curvature_speed.json
+
+``--whole`` measures the commands as a user runs them, start to exit (interpreter start,
+imports, read, compute, write): ``lidarstat curvature IN.las OUT.las --radius R`` against
+CloudCompare ``-O IN.ply -CURV MEAN R -SAVE_CLOUDS`` (its Debian build reads and writes no
+LAS; both read and write an uncompressed binary file), alternating, median of
+``--repeats``; the automatic scale (the command's default) in the same run; and the
+profile of the lidarstat process, piece by piece (``--child profile``).
 
 See benchmarks/README.md.
 """
@@ -261,7 +269,236 @@ def child_cgal(args):
         k: v for k, v in inner.items() if k != "fit_seconds"})
 
 
-CHILDREN = dict(lidarstat=child_lidarstat, pieces=child_pieces, scipy_pairs=child_scipy_pairs,
+# --------------------------------------------------------------------------- whole process
+
+#: The pieces of ``lidarstat curvature`` the profile times: (module, attribute, piece).
+#: Wrapped in place, so the command runs its own code path.
+PROFILE_PIECES = (
+    ("lidarstat.io", "read", "read"),
+    ("lidarstat.io", "write", "write"),
+    ("lidarstat.features._curvature", "find_duplicates", "duplicates"),
+    ("lidarstat.features._curvature", "CellIndex", "index"),
+    ("lidarstat.features._curvature", "estimate_sigma_index", "sigma"),
+    ("lidarstat.features._curvature", "_run_cells", "search_fit"),
+    ("lidarstat.features._curvature", "fit_height_variance", "statistics"),
+    ("lidarstat.features._curvature", "curvature_tests", "statistics"),
+    ("lidarstat.features._curvature", "_single_radius", "_single_radius"),
+    ("lidarstat.features._curvature_result", "CurvatureResult.to_fields", "fields"),
+)
+
+
+def child_profile(args):
+    """``lidarstat curvature`` through :func:`lidarstat.cli.main`, its pieces timed.
+
+    Wall and CPU seconds of: imports (the command's modules and the parser), read,
+    duplicates, index, sigma (the estimate), search_fit (the fused Numba kernel),
+    statistics (noise model, tests, types), assembly (the blocks' fields into input order),
+    fields, write; the parent adds the interpreter's start and exit (process wall minus the
+    time measured inside).
+    """
+    import importlib
+
+    t_in, c_in = time.perf_counter(), time.process_time()
+    tt = {}
+
+    def add(key, w, c):
+        a = tt.setdefault(key, [0.0, 0.0])
+        a[0] += w
+        a[1] += c
+
+    from lidarstat.cli import _app
+
+    if hasattr(_app, "command_of"):
+        _app.build_parser(_app.command_of(["curvature"]))
+    else:  # a version that builds every command's parser (--before)
+        _app.build_parser()
+    import lidarstat.features  # noqa: F401
+    import lidarstat.io  # noqa: F401
+
+    add("imports", time.perf_counter() - t_in, time.process_time() - c_in)
+
+    def wrap(owner, name, key):
+        f = getattr(owner, name)
+
+        def timed(*a, **kw):
+            w0, c0 = time.perf_counter(), time.process_time()
+            try:
+                return f(*a, **kw)
+            finally:
+                add(key, time.perf_counter() - w0, time.process_time() - c0)
+
+        setattr(owner, name, timed)
+
+    for where, name, key in PROFILE_PIECES:
+        owner = importlib.import_module(where)
+        *path, name = name.split(".")
+        for part in path:
+            owner = getattr(owner, part)
+        if hasattr(owner, name):
+            wrap(owner, name, key)
+    argv = ["curvature", args.input, args.output, "-q"]
+    if args.radius:
+        argv += ["--radius", repr(args.radius)]
+    w0, c0 = time.perf_counter(), time.process_time()
+    rc = _app.main(argv)
+    if rc:
+        raise RuntimeError(f"lidarstat curvature failed ({rc})")
+    add("main", time.perf_counter() - w0, time.process_time() - c0)
+    single = tt.pop("_single_radius", [0.0, 0.0])
+    inner = [tt.get(k, [0.0, 0.0]) for k in ("search_fit", "statistics")]
+    tt["assembly"] = [single[j] - inner[0][j] - inner[1][j] for j in range(2)]
+    inside = [time.perf_counter() - t_in, time.process_time() - c_in]
+    main = tt.pop("main")
+    named = ("read", "duplicates", "index", "sigma", "search_fit", "statistics", "assembly",
+             "fields", "write")
+    tt["other"] = [main[j] - sum(tt.get(k, [0.0, 0.0])[j] for k in named) for j in range(2)]
+    return dict(seconds=inside[0], cpu_seconds=inside[1],
+                pieces={k: v[0] for k, v in tt.items()},
+                pieces_cpu={k: v[1] for k, v in tt.items()})
+
+
+def whole_lidarstat(inp, out, radius, env):
+    """``lidarstat curvature`` as a user runs it: wall, CPU and peak RSS of the process."""
+    cmd = [sys.executable, "-m", "lidarstat.cli", "curvature", str(inp), str(out), "-q"]
+    if radius is not None:
+        cmd += ["--radius", repr(radius)]
+    return run_external_cpu(cmd, env=env)
+
+
+def whole_cloudcompare(exe, ply, out, radius):
+    """CloudCompare: open the PLY, -CURV MEAN at `radius`, save the cloud (binary PLY)."""
+    env = dict(os.environ, QT_QPA_PLATFORM="offscreen")
+    cmd = [exe, "-SILENT", "-AUTO_SAVE", "OFF", "-NO_TIMESTAMP", "-O", "-GLOBAL_SHIFT", "AUTO",
+           str(ply), "-CURV", "MEAN", f"{radius:.6f}", "-C_EXPORT_FMT", "PLY", "-SAVE_CLOUDS",
+           "FILE", str(out)]
+    return run_external_cpu(cmd, env=env)
+
+
+def run_external_cpu(cmd, env=None):
+    """Wall seconds, CPU seconds (user + system, children included) and peak RSS (MB)."""
+    log = tempfile.TemporaryFile()
+    t0 = time.perf_counter()
+    p = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
+    _, status, ru = os.wait4(p.pid, 0)
+    wall = time.perf_counter() - t0
+    code = os.waitstatus_to_exitcode(status)
+    log.seek(0)
+    text = log.read().decode(errors="replace")
+    if code != 0:
+        raise RuntimeError(f"{Path(cmd[0]).name} failed ({code}): {text.strip()[-400:]}")
+    return dict(seconds=wall, cpu_seconds=ru.ru_utime + ru.ru_stime,
+                peak_rss_mb=ru.ru_maxrss / 1024.0)
+
+
+def _median_run(runs):
+    secs = [r["seconds"] for r in runs]
+    return dict(seconds=float(np.median(secs)), all_seconds=secs,
+                cpu_seconds=float(np.median([r["cpu_seconds"] for r in runs])),
+                all_cpu_seconds=[r["cpu_seconds"] for r in runs],
+                peak_rss_mb=max(r["peak_rss_mb"] for r in runs))
+
+
+def main_whole(args):
+    """The issue's table: lidarstat against CloudCompare, whole process, same run."""
+    tmp = Path(args.tmp or tempfile.mkdtemp(prefix="lidarstat_whole_"))
+    tmp.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, NUMBA_CACHE_DIR=args.numba_cache or str(tmp / "numba_cache"))
+    import numba
+
+    from lidarstat.io import PointCloud, write
+
+    exe = shutil.which("CloudCompare") or shutil.which("cloudcompare")
+    xyz, nbuild = make_cloud(args.points)
+    las, ply = tmp / "cloud.las", tmp / "cloud.ply"
+    write(las, PointCloud(xyz=xyz))
+    write_ply(ply, xyz - np.floor(xyz.min(0)))
+    res = dict(date=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+               machine=dict(platform=platform.platform(), cpu=_cpu_name(), cores=os.cpu_count(),
+                            python=platform.python_version(), numpy=np.__version__,
+                            numba=numba.__version__, git=_git_rev()),
+               machine_shared=bool(args.shared),
+               points=int(xyz.shape[0]), repeats=args.repeats,
+               cloud=dict(density_per_m2=DENSITY, noise_sigma=NOISE, buildings=nbuild,
+                          las_bytes=las.stat().st_size, ply_bytes=ply.stat().st_size),
+               how=("whole process, start to exit, each run a fresh process; lidarstat reads "
+                    "LAS and writes LAS (its 20 result fields as extra bytes), CloudCompare "
+                    "reads binary PLY (x, y, z as doubles) and writes binary PLY (x, y, z and "
+                    "the mean curvature as floats): its Debian build has no LAS plug-in; "
+                    "runs alternate lidarstat / CloudCompare; medians; cpu_seconds = user + "
+                    "system of the process"),
+               rows={}, profile={}, skipped={})
+    if exe is None:
+        res["skipped"]["cloudcompare"] = "not installed (apt-get install -y cloudcompare)"
+    print(f"work dir {tmp}; {xyz.shape[0]} points")
+    warm = tmp / "warm.las"  # a small piece on which the first runs compile the kernels
+    write(warm, PointCloud(xyz=xyz[xyz[:, 0] < xyz[:, 0].min() + 0.01 * np.ptp(xyz[:, 0])]))
+    whole_lidarstat(warm, tmp / "warm_out.las", calibrate_radius(xyz, 50)[0], env)
+    for tgt in (() if args.skip_fixed else args.targets):
+        r, med = calibrate_radius(xyz, tgt)
+        ls_runs, cc_runs = [], []
+        for _ in range(args.repeats):
+            ls_runs.append(whole_lidarstat(las, tmp / "out.las", r, env))
+            if exe:
+                cc_runs.append(whole_cloudcompare(exe, ply, tmp / "cc_out.ply", r))
+        row = dict(radius=r, median_neighbors_sample=med, lidarstat=_median_run(ls_runs))
+        if cc_runs:
+            row["cloudcompare"] = _median_run(cc_runs)
+            row["ratio"] = row["lidarstat"]["seconds"] / row["cloudcompare"]["seconds"]
+            row["ratio_cpu"] = row["lidarstat"]["cpu_seconds"] / row["cloudcompare"]["cpu_seconds"]
+        res["rows"][str(tgt)] = row
+        prof = run_child("profile", env, input=las, output=tmp / "prof.las", radius=r)
+        prof["start_exit"] = prof["process_wall"] - prof["seconds"]
+        res["profile"][str(tgt)] = prof
+        if args.before:
+            # the same profile of another version of the package, in the same run
+            old_env = dict(env, PYTHONPATH=args.before,
+                           NUMBA_CACHE_DIR=str(tmp / "numba_cache_before"))
+            if tgt == args.targets[0]:
+                run_child("profile", old_env, input=warm, output=tmp / "warm_out.las", radius=r)
+            prof = run_child("profile", old_env, input=las, output=tmp / "prof.las", radius=r)
+            prof["start_exit"] = prof["process_wall"] - prof["seconds"]
+            prof["version"] = args.before
+            res.setdefault("profile_before", {})[str(tgt)] = prof
+        _print_row(tgt, row)
+    if args.auto:
+        runs = [whole_lidarstat(las, tmp / "auto.las", None, env) for _ in range(args.auto)]
+        res["rows"]["auto"] = dict(lidarstat=_median_run(runs), note=(
+            "the automatic scale, the command's default (no --radius): five rungs of 3 to "
+            "12 point spacings, the points that do not stop early fitted at each"))
+        _print_row("auto", res["rows"]["auto"])
+    Path(args.out).write_text(json.dumps(res, indent=1, default=str))
+    print_whole(res)
+    print(f"wrote {args.out}")
+
+
+def _print_row(tgt, row):
+    ls = row["lidarstat"]
+    cc = row.get("cloudcompare")
+    text = f"  {tgt}: lidarstat {ls['seconds']:.2f} s (cpu {ls['cpu_seconds']:.2f} s)"
+    if cc:
+        text += (f", CloudCompare {cc['seconds']:.2f} s (cpu {cc['cpu_seconds']:.2f} s), "
+                 f"ratio {row['ratio']:.2f} (cpu {row['ratio_cpu']:.2f})")
+    print(text, flush=True)
+
+
+def print_whole(res):
+    print(f"\n{res['points']} points, whole process, median of {res['repeats']}, "
+          f"{res['machine']['cores']} cores{' (shared)' if res['machine_shared'] else ''}")
+    print(f"{'neighbours':<12s} {'lidarstat s':>12s} {'CloudCompare s':>15s} {'ratio':>6s} "
+          f"{'cpu ratio':>9s}")
+    for tgt, row in res["rows"].items():
+        cc = row.get("cloudcompare", {})
+        print(f"{tgt:<12s} {row['lidarstat']['seconds']:12.2f} "
+              f"{cc.get('seconds', float('nan')):15.2f} {row.get('ratio', float('nan')):6.2f} "
+              f"{row.get('ratio_cpu', float('nan')):9.2f}")
+    for tgt, prof in [(t, p) for t, p in res["profile"].items()] + [
+            (f"{t} (before)", p) for t, p in res.get("profile_before", {}).items()]:
+        print(f"profile, about {tgt} neighbours (wall s / cpu s): start+exit "
+              f"{prof['start_exit']:.2f}; " + ", ".join(
+                  f"{k} {v:.2f}/{prof['pieces_cpu'][k]:.2f}" for k, v in prof["pieces"].items()))
+
+
+CHILDREN = dict(profile=child_profile, lidarstat=child_lidarstat, pieces=child_pieces, scipy_pairs=child_scipy_pairs,
                 scipy_ball=child_scipy_ball, scipy_knn=child_scipy_knn, pgeof=child_pgeof,
                 jakteristics=child_jakteristics, cgal=child_cgal)
 
@@ -414,6 +651,22 @@ def main(argv=None):
     ap.add_argument("--skip-peers", action="store_true")
     ap.add_argument("--skip-300", action="store_true", help="only the ~50-neighbour radius")
     ap.add_argument("--tmp", default=None, help="work directory (default: a new temp dir)")
+    ap.add_argument("--whole", action="store_true",
+                    help="whole-process comparison with CloudCompare and the profile")
+    ap.add_argument("--auto", type=int, default=1,
+                    help="with --whole: runs of the automatic scale (0: none) [1]")
+    ap.add_argument("--skip-fixed", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--targets", type=int, nargs="+", default=list(TARGETS),
+                    help="with --whole: median neighbour counts to compare at [50 300]")
+    ap.add_argument("--shared", action="store_true",
+                    help="record that other work ran on the machine meanwhile")
+    ap.add_argument("--before", default=None, metavar="SRC",
+                    help="with --whole: also profile the package found at SRC (a PYTHONPATH, "
+                    "e.g. the src folder of an earlier checkout) in the same run")
+    ap.add_argument("--numba-cache", default=None, metavar="DIR",
+                    help="with --whole: Numba cache folder (default: one in the work folder)")
+    ap.add_argument("--input", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--output", default=None, help=argparse.SUPPRESS)
     # child-mode options
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--child-out", default=None, help=argparse.SUPPRESS)
@@ -433,6 +686,8 @@ def main(argv=None):
         res["vmhwm_mb"] = _vmhwm_mb()
         Path(args.child_out).write_text(json.dumps(res))
         return
+    if args.whole:
+        return main_whole(args)
 
     tmp = Path(args.tmp or tempfile.mkdtemp(prefix="lidarstat_bench_"))
     tmp.mkdir(parents=True, exist_ok=True)

@@ -92,3 +92,24 @@ def test_shorten_keeps_whole_words_within_32_ascii_bytes():
     assert shorten("x" * 40) == "x" * 32
     assert shorten("angle \u03b8 of the normal") == "angle ? of the normal"
     assert len(field_description("b" * 32)) <= 32
+
+
+def test_chunked_write_is_the_file_laspy_writes_at_once(tmp_path, rng, monkeypatch):
+    """A write packs WRITE_CHUNK points at a time; the bytes are those of one LasData.write."""
+    from lidarstat.io import _las
+
+    monkeypatch.setattr(_las, "WRITE_CHUNK", 37)  # several chunks and a short last one
+    cloud = lio.PointCloud(rng.random((N, 3)) * 10 + 5e5)
+    fields = _fields(rng)
+    for suffix in (".las", ".laz"):
+        out = tmp_path / f"o{suffix}"
+        lio.write(out, cloud, fields=fields)
+        header, assign = _las._header_for(out, cloud, fields)
+        header.point_count = N
+        rec = _las._record(out, header, cloud, assign)
+        ref = tmp_path / f"ref{suffix}"
+        with open(ref, "wb") as fh:
+            laspy.LasData(header, points=rec).write(fh, do_compress=suffix == ".laz",
+                                                     laz_backend=_las._BACKEND)
+        assert out.read_bytes() == ref.read_bytes()
+        _check(out, fields)

@@ -232,8 +232,32 @@ def _tile_exceeds_radius(args):
     return None
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from ..synth import SCENES
+#: The commands this module defines itself (the others are in :data:`COMMAND_MODULES`).
+CORE_COMMANDS: tuple[str, ...] = ("info", "curvature", "bandwidth", "synth", "demo")
+
+
+def command_of(argv) -> str | None:
+    """The subcommand named in `argv` (its first word that is not an option), or None."""
+    for word in argv:
+        if not word.startswith("-"):
+            return word
+        if word == "--":
+            return None
+    return None
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``lidarstat`` parser with every subcommand, or with `command` alone.
+
+    A run of one of :data:`CORE_COMMANDS` parses with that subcommand alone, so that it
+    does not import the packages the other commands need (their options' choices come from
+    them): ``lidarstat curvature`` starts without SciPy's statistics, the segmentations or
+    the classifications.
+    """
+    only = command if command in CORE_COMMANDS else None
+
+    def want(name):
+        return only is None or name == only
 
     p = opt.Parser(
         prog="lidarstat",
@@ -243,84 +267,92 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    s = sub.add_parser("info", help="describe a point-cloud file or a catalogue of tiles")
-    s.add_argument("file", nargs="+", metavar="IN",
-                   help="a file; or a folder, a glob or several LAS/LAZ/COPC files: a "
-                   "catalogue of tiles (its tiles, extents, point counts and CRSs)")
-    s.add_argument("--json", action="store_true", help="machine-readable output")
-    s.add_argument("--tindex", default=None, metavar="FILE.geojson",
-                   help="write the tile index (one rectangle per file with its name and "
-                   "point count) as GeoJSON, as PDAL's tindex")
-    s.set_defaults(func=cmd_info)
+    if want("info"):
+        s = sub.add_parser("info", help="describe a point-cloud file or a catalogue of tiles")
+        s.add_argument("file", nargs="+", metavar="IN",
+                       help="a file; or a folder, a glob or several LAS/LAZ/COPC files: a "
+                       "catalogue of tiles (its tiles, extents, point counts and CRSs)")
+        s.add_argument("--json", action="store_true", help="machine-readable output")
+        s.add_argument("--tindex", default=None, metavar="FILE.geojson",
+                       help="write the tile index (one rectangle per file with its name and "
+                       "point count) as GeoJSON, as PDAL's tindex")
+        s.set_defaults(func=cmd_info)
 
-    s = sub.add_parser("curvature", help="tested local quadric, K, H and HK surface types",
-                       description="Fit a tricube-weighted quadric in a sphere around every "
-                       "point, test it, and write K, H, their tests and the surface type.")
-    s.add_argument("input")
-    s.add_argument("output", help="output file; format from the suffix")
-    s.add_argument("--radius", type=opt.positive_float, nargs="+", default=None,
-                   help="sphere radius (bandwidth); several radii = multi-scale (default: "
-                   "automatic, per point the smallest radius of a ladder of 3 to 8.5 point "
-                   "spacings whose tests detect the curvature seen, written to the field "
-                   "'radius')")
-    add_noise(s)
-    add_alpha(s)
-    s.add_argument("--test", choices=Test.values(), default=Test.CALIBRATED.value,
-                   help="family of tests: calibrated to the weighted fit, or the paper's as "
-                   "printed (default calibrated)")
-    s.add_argument("--frame", choices=Frame.values(), default=Frame.PCA.value,
-                   help="height axis of the local quadric: the neighbourhood's principal "
-                   "axes (pca, any orientation), the coordinate axis closest to them (auto) "
-                   "or z, the paper's (default pca)")
-    s.add_argument("--min-neighbors", type=opt.int_at_least(7), default=7,
-                   help="smallest neighbourhood a quadric is fitted on [7]")
-    s.add_argument("--power", type=opt.real(0.5, 1, "left", what="probability"), default=0.9,
-                   help="automatic scale: probability with which the chosen radius detects "
-                   "the curvature seen [0.9]")
-    s.add_argument("--minimal-detectable", action="store_true",
-                   help="also write K_min and H_min (eq. 19)")
-    add_run_outputs(s)
-    add_tiling(s)
-    s.set_defaults(func=cmd_curvature)
-    opt.add_check(s, _tile_exceeds_radius)
+    if want("curvature"):
+        s = sub.add_parser("curvature", help="tested local quadric, K, H and HK surface types",
+                           description="Fit a tricube-weighted quadric in a sphere around every "
+                           "point, test it, and write K, H, their tests and the surface type.")
+        s.add_argument("input")
+        s.add_argument("output", help="output file; format from the suffix")
+        s.add_argument("--radius", type=opt.positive_float, nargs="+", default=None,
+                       help="sphere radius (bandwidth); several radii = multi-scale (default: "
+                       "automatic, per point the smallest radius of a ladder of 3 to 8.5 point "
+                       "spacings whose tests detect the curvature seen, written to the field "
+                       "'radius')")
+        add_noise(s)
+        add_alpha(s)
+        s.add_argument("--test", choices=Test.values(), default=Test.CALIBRATED.value,
+                       help="family of tests: calibrated to the weighted fit, or the paper's as "
+                       "printed (default calibrated)")
+        s.add_argument("--frame", choices=Frame.values(), default=Frame.PCA.value,
+                       help="height axis of the local quadric: the neighbourhood's principal "
+                       "axes (pca, any orientation), the coordinate axis closest to them (auto) "
+                       "or z, the paper's (default pca)")
+        s.add_argument("--min-neighbors", type=opt.int_at_least(7), default=7,
+                       help="smallest neighbourhood a quadric is fitted on [7]")
+        s.add_argument("--power", type=opt.real(0.5, 1, "left", what="probability"), default=0.9,
+                       help="automatic scale: probability with which the chosen radius detects "
+                       "the curvature seen [0.9]")
+        s.add_argument("--minimal-detectable", action="store_true",
+                       help="also write K_min and H_min (eq. 19)")
+        add_run_outputs(s)
+        add_tiling(s)
+        s.set_defaults(func=cmd_curvature)
+        opt.add_check(s, _tile_exceeds_radius)
 
-    s = sub.add_parser("bandwidth", help="smallest radius whose tests detect K0 and H0")
-    s.add_argument("--K0", type=opt.finite_float, required=True,
-                   help="Gaussian curvature to detect")
-    s.add_argument("--H0", type=opt.finite_float, required=True,
-                   help="mean curvature to detect (not 0)")
-    s.add_argument("--sigma", type=opt.positive_float, required=True,
-                   help="measurement noise std")
-    s.add_argument("--density", type=opt.positive_float, required=True,
-                   help="points per unit area")
-    add_alpha(s)
-    s.add_argument("--power", type=opt.real(0.5, 1, "left", what="probability"), default=0.5,
-                   help="probability of detecting K0 and H0 [0.5]")
-    s.add_argument("--test", choices=Test.values(), default=Test.CALIBRATED.value,
-                   help="covariance of the tests (default calibrated)")
-    s.add_argument("--summary-json", default=None, metavar="FILE",
-                   help="write the design (parameters and radius) as JSON here")
-    s.set_defaults(func=cmd_bandwidth)
+    if want("bandwidth"):
+        s = sub.add_parser("bandwidth", help="smallest radius whose tests detect K0 and H0")
+        s.add_argument("--K0", type=opt.finite_float, required=True,
+                       help="Gaussian curvature to detect")
+        s.add_argument("--H0", type=opt.finite_float, required=True,
+                       help="mean curvature to detect (not 0)")
+        s.add_argument("--sigma", type=opt.positive_float, required=True,
+                       help="measurement noise std")
+        s.add_argument("--density", type=opt.positive_float, required=True,
+                       help="points per unit area")
+        add_alpha(s)
+        s.add_argument("--power", type=opt.real(0.5, 1, "left", what="probability"), default=0.5,
+                       help="probability of detecting K0 and H0 [0.5]")
+        s.add_argument("--test", choices=Test.values(), default=Test.CALIBRATED.value,
+                       help="covariance of the tests (default calibrated)")
+        s.add_argument("--summary-json", default=None, metavar="FILE",
+                       help="write the design (parameters and radius) as JSON here")
+        s.set_defaults(func=cmd_bandwidth)
 
-    s = sub.add_parser("synth", help="write a synthetic scene with exact truth fields")
-    s.add_argument("scene", choices=sorted(SCENES))
-    s.add_argument("output")
-    s.add_argument("--sigma", type=opt.nonnegative_float, default=None,
-                   help="noise std (default: the scene's own; 0 for the analytic patches)")
-    s.add_argument("--seed", type=opt.seed, default=0)
-    s.set_defaults(func=cmd_synth)
+    if want("synth"):
+        from ..synth import SCENES
 
-    s = sub.add_parser("demo", help="run curvature on a generated sample; LAS + PNG views")
-    s.add_argument("outdir", nargs="?", default="lidarstat_demo")
-    s.add_argument("--sigma", type=opt.nonnegative_float, default=0.015,
-                   help="noise added (dm)")
-    s.add_argument("--radius", type=opt.positive_float, default=None,
-                   help="fixed curvature radius (dm) (default: the automatic scale)")
-    s.add_argument("--seed", type=opt.seed, default=0)
-    s.set_defaults(func=cmd_demo)
+        s = sub.add_parser("synth", help="write a synthetic scene with exact truth fields")
+        s.add_argument("scene", choices=sorted(SCENES))
+        s.add_argument("output")
+        s.add_argument("--sigma", type=opt.nonnegative_float, default=None,
+                       help="noise std (default: the scene's own; 0 for the analytic patches)")
+        s.add_argument("--seed", type=opt.seed, default=0)
+        s.set_defaults(func=cmd_synth)
 
-    for name in COMMAND_MODULES:
-        import_module(f".{name}", __package__).register(sub)
+    if want("demo"):
+        s = sub.add_parser("demo", help="run curvature on a generated sample; LAS + PNG views")
+        s.add_argument("outdir", nargs="?", default="lidarstat_demo")
+        s.add_argument("--sigma", type=opt.nonnegative_float, default=0.015,
+                       help="noise added (dm)")
+        s.add_argument("--radius", type=opt.positive_float, default=None,
+                       help="fixed curvature radius (dm) (default: the automatic scale)")
+        s.add_argument("--seed", type=opt.seed, default=0)
+        s.set_defaults(func=cmd_demo)
+
+    if only is None:
+        for name in COMMAND_MODULES:
+            import_module(f".{name}", __package__).register(sub)
     from ._catalogue import install
 
     install(sub)  # IN may be a catalogue of tiles
@@ -383,7 +415,7 @@ def main(argv=None) -> int:
     args = None
     try:
         with _sigterm_unwinds():
-            parser = build_parser()
+            parser = build_parser(command_of(sys.argv[1:] if argv is None else argv))
             try:
                 args = parser.parse_args(argv)
             except SystemExit as exc:  # --help, --version or a usage error, already printed

@@ -251,6 +251,8 @@ def install(sub) -> None:
     from ._common import add_workers
 
     for command in TILE_METHODS:
+        if command not in sub.choices:  # a parser built for one other command
+            continue
         s = sub.choices[command]
         action = next(a for a in s._actions if a.dest == "input")
         action.nargs = "+"

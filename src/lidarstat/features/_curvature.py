@@ -102,7 +102,7 @@ def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neigh
     active_sorted = None if active is None else active[index.order].astype(np.uint8)
     sensor_local = None if sensor is None else np.asarray(sensor, float) - index.origin
     n = index.n_points
-    sorted_fields = None
+    fields = None
     done = 0
     covariance = "paper" if test == Test.PAPER else "sandwich"
     for c0, c1 in index.cell_blocks(block_size):
@@ -116,17 +116,14 @@ def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neigh
         res = curvature_tests(out, sigma2=sigma2, alpha=alpha, test=test,
                               minimal_detectable=minimal_detectable)
         res["z0"] = res["z0"] + index.sorted_points[s0:s1, 2] + index.origin[2]
-        if sorted_fields is None:
-            sorted_fields = {k: np.empty(n, dtype=v.dtype) for k, v in res.items()}
-        for k, v in res.items():  # blocks are contiguous in the sorted order
-            sorted_fields[k][s0:s1] = v
+        if fields is None:
+            fields = {k: np.empty(n, dtype=v.dtype) for k, v in res.items()}
+        rows = index.order[s0:s1]  # the block's input positions: one scatter per field
+        for k, v in res.items():
+            fields[k][rows] = v
         done += s1 - s0
         if progress is not None:
             progress(done, n)
-    # back to input order: one gather per field
-    inverse = np.empty_like(index.order)
-    inverse[index.order] = np.arange(n)
-    fields = {k: np.take(v, inverse) for k, v in sorted_fields.items()}
     return fields
 
 

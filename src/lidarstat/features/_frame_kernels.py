@@ -25,8 +25,10 @@ def _tricube(d, b):
 
 
 @njit
-def _local_frame(i, pts, idx, dist, s, e, b, frame, sensor, has_sensor, R, cov, evals, evecs):
-    """Fill R (3x3, rows e1, e2, n) for point i. Returns False if the frame is degenerate."""
+def _local_frame(buf, nk, px, py, pz, frame, sensor, has_sensor, R, cov, evals, evecs):
+    """Fill R (3x3, rows e1, e2, n) for the point at (px, py, pz) from the offsets
+    ``buf[:nk, :3]`` of its neighbours and their weights ``buf[:nk, 3]`` (all positive).
+    Returns False if the frame is degenerate."""
     if frame == FRAME_Z:
         for a in range(3):
             for c in range(3):
@@ -36,15 +38,12 @@ def _local_frame(i, pts, idx, dist, s, e, b, frame, sensor, has_sensor, R, cov, 
     m0 = 0.0
     m1 = 0.0
     m2 = 0.0
-    for t in range(s, e):
-        w = _tricube(dist[t], b)
-        if w <= 0.0:
-            continue
-        j = idx[t]
+    for t in range(nk):
+        w = buf[t, 3]
         sw += w
-        m0 += w * (pts[j, 0] - pts[i, 0])
-        m1 += w * (pts[j, 1] - pts[i, 1])
-        m2 += w * (pts[j, 2] - pts[i, 2])
+        m0 += w * buf[t, 0]
+        m1 += w * buf[t, 1]
+        m2 += w * buf[t, 2]
     if sw <= 0.0:
         return False
     m0 /= sw
@@ -53,15 +52,11 @@ def _local_frame(i, pts, idx, dist, s, e, b, frame, sensor, has_sensor, R, cov, 
     for a in range(3):
         for c in range(3):
             cov[a, c] = 0.0
-    for t in range(s, e):
-        w = _tricube(dist[t], b)
-        if w <= 0.0:
-            continue
-        j = idx[t]
-        d0 = pts[j, 0] - pts[i, 0] - m0
-        d1 = pts[j, 1] - pts[i, 1] - m1
-        d2 = pts[j, 2] - pts[i, 2] - m2
-        add_outer3(cov, w, d0, d1, d2)
+    for t in range(nk):
+        d0 = buf[t, 0] - m0
+        d1 = buf[t, 1] - m1
+        d2 = buf[t, 2] - m2
+        add_outer3(cov, buf[t, 3], d0, d1, d2)
     mirror3(cov)
     _eigh3(cov, evals, evecs)
     if evals[1] <= 0.0:
@@ -76,7 +71,7 @@ def _local_frame(i, pts, idx, dist, s, e, b, frame, sensor, has_sensor, R, cov, 
         if abs(n2) > abs(n0) and abs(n2) > abs(n1):
             k = 2
         sign = 1.0
-        if has_sensor and sensor[k] - pts[i, k] < 0.0:
+        if has_sensor and sensor[k] - (px, py, pz)[k] < 0.0:
             sign = -1.0
         for a in range(3):
             for c in range(3):
@@ -95,7 +90,7 @@ def _local_frame(i, pts, idx, dist, s, e, b, frame, sensor, has_sensor, R, cov, 
     # PCA frame: n = smallest eigenvector, oriented to the sensor or up
     flip = False
     if has_sensor:
-        dot = n0 * (sensor[0] - pts[i, 0]) + n1 * (sensor[1] - pts[i, 1]) + n2 * (sensor[2] - pts[i, 2])
+        dot = n0 * (sensor[0] - px) + n1 * (sensor[1] - py) + n2 * (sensor[2] - pz)
         flip = dot < 0.0
     else:
         flip = n2 < 0.0

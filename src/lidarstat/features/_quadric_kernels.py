@@ -63,8 +63,9 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
              beta_out, cof_out, frame_out, stats_out):
     """Fit point i; returns (status, p). stats_out = [Q, sum w, trB, trB2].
 
-    `buf` (at least e - s rows, 4 columns) receives u, v, h, w of the neighbours in pass 1
-    so that the residual pass reads them contiguously.
+    `buf` (at least e - s rows, 4 columns) receives the offsets and weight of the
+    neighbours (pass 0), then their u, v, h (pass 1), so that the frame, moment and residual
+    passes read them contiguously.
     """
     R, cov3, ev, evec, mom, N, N2, N3, L, LI, Ninv, tmp, rhs = ws
     b = bw
@@ -72,13 +73,28 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
         for t in range(s, e):
             if dist[t] > b:
                 b = dist[t]
+    # Pass 0: the offsets d_j = x_j - x_i and weights of the neighbours with positive
+    # weight, once, into `buf` (read contiguously by the frame and the moment passes)
+    px = pts[i, 0]
+    py = pts[i, 1]
+    pz = pts[i, 2]
     p = 0
+    nk = 0
     for t in range(s, e):
         if dist[t] < b:
             p += 1
+        w = _tricube(dist[t], b)
+        if w <= 0.0:
+            continue
+        j = idx[t]
+        buf[nk, 0] = pts[j, 0] - px
+        buf[nk, 1] = pts[j, 1] - py
+        buf[nk, 2] = pts[j, 2] - pz
+        buf[nk, 3] = w
+        nk += 1
     if p < min_nb or p < 6:
         return TOO_FEW, p
-    if not _local_frame(i, pts, idx, dist, s, e, b, frame, sensor, has_sensor, R, cov3, ev, evec):
+    if not _local_frame(buf, nk, px, py, pz, frame, sensor, has_sensor, R, cov3, ev, evec):
         return SINGULAR, p
     for a in range(3):
         for c in range(3):
@@ -101,26 +117,17 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
     r20 = R[2, 0]
     r21 = R[2, 1]
     r22 = R[2, 2]
-    px = pts[i, 0]
-    py = pts[i, 1]
-    pz = pts[i, 2]
-    nk = 0
-    for t in range(s, e):
-        w = _tricube(dist[t], b)
-        if w <= 0.0:
-            continue
-        j = idx[t]
-        d0 = pts[j, 0] - px
-        d1 = pts[j, 1] - py
-        d2 = pts[j, 2] - pz
+    for t in range(nk):  # the offsets and weights of pass 0, in local coordinates
+        d0 = buf[t, 0]
+        d1 = buf[t, 1]
+        d2 = buf[t, 2]
+        w = buf[t, 3]
         u = (r00 * d0 + r01 * d1 + r02 * d2) * inv_b
         v = (r10 * d0 + r11 * d1 + r12 * d2) * inv_b
         h = r20 * d0 + r21 * d1 + r22 * d2
-        buf[nk, 0] = u
-        buf[nk, 1] = v
-        buf[nk, 2] = h
-        buf[nk, 3] = w
-        nk += 1
+        buf[t, 0] = u
+        buf[t, 1] = v
+        buf[t, 2] = h
         uu = u * u
         uv = u * v
         vv = v * v

@@ -324,15 +324,25 @@ def _plan(path: Path, cloud: PointCloud, new: dict, header) -> tuple[dict, list]
     return assign, params
 
 
-def _dump(las: laspy.LasData, tmp: Path, compress: bool) -> None:
-    """Low-level writer: serialise `las` to `tmp`."""
-    with open(tmp, "wb") as fh:
-        las.write(fh, do_compress=compress, laz_backend=_BACKEND)
+def _dump(records, tmp: Path, compress: bool) -> None:
+    """Low-level writer: a LAS/LAZ file at `tmp` of ``records.header`` and the point
+    records ``records.chunks()`` yields, then the header's EVLRs (as ``laspy.LasData.write``
+    writes them)."""
+    header = records.header
+    with open(tmp, "wb") as fh, laspy.LasWriter(fh, header, do_compress=compress,
+                                                 closefd=False, laz_backend=_BACKEND) as writer:
+        for rec in records.chunks():
+            writer.write_points(rec)
+        if header.version.minor >= 4 and header.evlrs is not None:
+            writer.write_evlrs(header.evlrs)
 
 
-def _record(path: Path, header, cloud: PointCloud, assign: dict):
-    """LAS point record of `cloud` with the `assign` values, for `header`."""
-    ints = np.round((cloud.xyz - header.offsets) / header.scales)
+def _record(path: Path, header, cloud: PointCloud, assign: dict, start: int = 0,
+            stop: int | None = None):
+    """LAS point record of points ``start:stop`` of `cloud` with the `assign` values, for
+    `header`."""
+    stop = len(cloud) if stop is None else stop
+    ints = np.round((cloud.xyz[start:stop] - header.offsets) / header.scales)
     if ints.size and (ints.min() < -(2**31) or ints.max() > 2**31 - 1):
         raise InvalidParameterError(
             f"{path}: coordinates do not fit the LAS scale {list(header.scales)} and offset "
@@ -340,15 +350,21 @@ def _record(path: Path, header, cloud: PointCloud, assign: dict):
     try:
         # A bare record: building a LasData would reset the shared header's point count,
         # which the streaming writer keeps.
-        rec = laspy.ScaleAwarePointRecord.zeros(len(cloud), header=header)
+        rec = laspy.ScaleAwarePointRecord.zeros(stop - start, header=header)
         for j, dim in enumerate("XYZ"):
             rec[dim] = ints[:, j].astype(np.int32)
         for name, values in assign.items():
-            rec[name] = values
+            rec[name] = values[start:stop]
     except (ValueError, OverflowError, TypeError) as exc:
         raise InvalidParameterError(f"{path}: cannot build LAS points ({short_cause(exc)})"
                                     ) from exc
     return rec
+
+
+#: Points per record a write fills and writes at a time: a few megabytes, so that the
+#: record being filled stays in the processor's cache while every field is copied into it
+#: (a whole-cloud record is filled one field at a time, each pass over all its memory).
+WRITE_CHUNK = 1 << 15
 
 
 def _header_for(path: Path, cloud: PointCloud, new: dict):
@@ -363,15 +379,32 @@ def _header_for(path: Path, cloud: PointCloud, new: dict):
     return header, assign
 
 
+class _Records:
+    """The point records of a whole cloud, :data:`WRITE_CHUNK` points at a time."""
+
+    def __init__(self, path: Path, header, cloud: PointCloud, assign: dict):
+        self.path, self.header, self.cloud = path, header, cloud
+        self.assign = {k: np.asarray(v) for k, v in assign.items()}
+
+    def chunks(self):
+        n = len(self.cloud)
+        for start in range(0, n, WRITE_CHUNK):
+            yield _record(self.path, self.header, self.cloud, self.assign, start,
+                          min(start + WRITE_CHUNK, n))
+
+
 def write_file(path: Path, cloud: PointCloud, new: dict, fmt: str) -> None:
-    """Write `cloud` plus `new` fields to a LAS/LAZ file atomically."""
+    """Write `cloud` plus `new` fields to a LAS/LAZ file atomically.
+
+    The points are packed and written :data:`WRITE_CHUNK` at a time; the file is the one
+    ``laspy.LasData.write`` writes.
+    """
     header, assign = _header_for(path, cloud, new)
     header.point_count = len(cloud)
-    las = laspy.LasData(header, points=_record(path, header, cloud, assign))
     try:
         with atomic_path(path) as tmp:
-            _dump(las, tmp, fmt == "laz")
-    except OSError:
+            _dump(_Records(path, header, cloud, assign), tmp, fmt == "laz")
+    except (OSError, InvalidParameterError):
         raise
     except Exception as exc:  # laspy / lazrs errors
         raise PointCloudWriteError(f"{path}: cannot write {fmt.upper()} file "

@@ -118,7 +118,12 @@ def find_duplicates(points) -> Duplicates:
     if n == 0:
         empty = np.zeros(0, dtype=np.int64)
         return Duplicates(empty, empty, empty)
-    return Duplicates(*_kernels.unique_rows(pts, _row_hash(pts)))
+    h = _row_hash(pts)
+    s = np.sort(h)
+    if not (s[1:] == s[:-1]).any():  # equal rows hash equally: every row is distinct
+        every = np.arange(n, dtype=np.int64)
+        return Duplicates(every, every.copy(), np.ones(n, dtype=np.int64))
+    return Duplicates(*_kernels.unique_rows(pts, h))
 
 
 def _row_hash(pts):

@@ -1,19 +1,32 @@
-"""Vectorised hypothesis tests (chi-square, Wald, z, F, dip), sequential moments and densities."""
+"""Vectorised hypothesis tests (chi-square, Wald, z, F, dip), sequential moments and densities.
 
-from ._binomial import binomial_test
-from ._critical import (chi2_critical, chi2_pvalue, chi2_quantile, chi2_test, f_pvalue, f_test,
-                        normal_pvalue, normal_quantile, t_critical, z_critical,
-                        z_test_statistic)
-from ._hotelling import hotelling_pvalue, hotelling_test
-from ._moments import (DensityEstimate, SequentialMoments, density_estimate, dip_test,
-                       sequential_moments, standard_moments)
-from ._results import TestResult
-from ._sar import LogDet, SARFit, sar_fit, sar_mean_surface, sar_trend, weights_matrix
-from ._polynomial import PolynomialBasis, select_degree
-from ._sar_tests import chow_test, likelihood_ratio_test, moran_test, sar_variance_test
-from ._forward_search import deletion_residual_envelope, truncated_normal_variance
-from ._tests import (f_test_paper, variance_test_paper, variance_test_satterthwaite, wald_test,
-                     z_test)
+The names are loaded on first use (PEP 562), so that a command that needs only the
+normal and chi-square tests does not import the SAR models, the forward search or
+``scipy.stats``.
+"""
+
+from importlib import import_module
+
+#: Public name -> the module of this package that defines it.
+_WHERE = {
+    "binomial_test": "_binomial",
+    **dict.fromkeys(("chi2_critical", "chi2_pvalue", "chi2_quantile", "chi2_test", "f_pvalue",
+                     "f_test", "normal_pvalue", "normal_quantile", "t_critical", "z_critical",
+                     "z_test_statistic"), "_critical"),
+    **dict.fromkeys(("hotelling_pvalue", "hotelling_test"), "_hotelling"),
+    **dict.fromkeys(("DensityEstimate", "SequentialMoments", "density_estimate", "dip_test",
+                     "sequential_moments", "standard_moments"), "_moments"),
+    "TestResult": "_results",
+    **dict.fromkeys(("LogDet", "SARFit", "sar_fit", "sar_mean_surface", "sar_trend",
+                     "weights_matrix"), "_sar"),
+    **dict.fromkeys(("PolynomialBasis", "select_degree"), "_polynomial"),
+    **dict.fromkeys(("chow_test", "likelihood_ratio_test", "moran_test", "sar_variance_test"),
+                    "_sar_tests"),
+    **dict.fromkeys(("deletion_residual_envelope", "truncated_normal_variance"),
+                    "_forward_search"),
+    **dict.fromkeys(("f_test_paper", "variance_test_paper", "variance_test_satterthwaite",
+                     "wald_test", "z_test"), "_tests"),
+}
 
 __all__ = ["TestResult", "binomial_test", "z_critical", "t_critical", "chi2_critical", "chi2_quantile",
            "normal_quantile", "f_pvalue", "chi2_pvalue", "normal_pvalue", "hotelling_pvalue", "hotelling_test", "f_test", "chi2_test", "z_test_statistic", "variance_test_paper", "variance_test_satterthwaite", "wald_test",
@@ -23,3 +36,16 @@ __all__ = ["TestResult", "binomial_test", "z_critical", "t_critical", "chi2_crit
            "truncated_normal_variance",
            "SequentialMoments", "sequential_moments", "standard_moments", "DensityEstimate", "density_estimate",
            "dip_test"]
+
+
+def __getattr__(name: str):
+    where = _WHERE.get(name)
+    if where is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(f".{where}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(__all__)

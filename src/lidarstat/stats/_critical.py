@@ -16,8 +16,8 @@ module holds every distributional choice of the package:
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats as _st
 
+from . import _distributions as _d
 from ._results import TestResult
 from ._tests import _finish
 
@@ -48,13 +48,15 @@ def z_critical(alpha, *, sides: int = 2):
     float or ndarray
     """
     a = _level(alpha)
-    c = _st.norm.isf(a / sides)
+    c = _d.norm_isf(a / sides)
     return float(c) if np.ndim(c) == 0 else c
 
 
 def t_critical(alpha, df, *, sides: int = 2):
     """Critical value of Student's t test with `df` degrees of freedom at level `alpha`."""
     a = _level(alpha)
+    from scipy import stats as _st
+
     c = _st.t.isf(a / sides, df)
     return float(c) if np.ndim(c) == 0 else c
 
@@ -62,24 +64,26 @@ def t_critical(alpha, df, *, sides: int = 2):
 def chi2_critical(alpha, df):
     """Upper critical value of chi2(`df`) at level `alpha` (reject when the statistic exceeds it)."""
     a = _level(alpha)
-    c = _st.chi2.isf(a, df)
+    c = _d.chi2_isf(a, df)
     return float(c) if np.ndim(c) == 0 else c
 
 
 def chi2_quantile(q, df):
     """The `q` quantile of chi2(`df`) (robust scale estimates divide by it)."""
-    c = _st.chi2.ppf(q, df)
+    c = _d.chi2_ppf(q, df)
     return float(c) if np.ndim(c) == 0 else c
 
 
 def normal_quantile(q):
     """The `q` quantile of the standard normal (robust scale factors, power calculations)."""
-    c = _st.norm.ppf(q)
+    c = _d.norm_ppf(q)
     return float(c) if np.ndim(c) == 0 else c
 
 
 def f_pvalue(statistic, df1, df2):
     """Upper-tail p-value of F(`df1`, `df2`) at `statistic` (vectorised)."""
+    from scipy import stats as _st
+
     p = _st.f.sf(statistic, df1, df2)
     return float(p) if np.ndim(p) == 0 else p
 
@@ -87,7 +91,7 @@ def f_pvalue(statistic, df1, df2):
 def chi2_pvalue(statistic, df):
     """Upper-tail p-value of chi2(`df`) at `statistic` (vectorised; NaN where df is NaN)."""
     with np.errstate(invalid="ignore"):
-        p = _st.chi2.sf(statistic, df)
+        p = _d.chi2_sf(statistic, df)
     return float(p) if np.ndim(p) == 0 else p
 
 
@@ -95,7 +99,7 @@ def normal_pvalue(statistic, *, sides: int = 2):
     """p-value of a standard normal statistic: ``P(|Z| > |z|)`` (``sides=2``) or
     ``P(Z > z)`` (``sides=1``), vectorised."""
     z = np.asarray(statistic, dtype=np.float64)
-    p = np.minimum(2.0 * _st.norm.sf(np.abs(z)), 1.0) if sides == 2 else _st.norm.sf(z)
+    p = np.minimum(2.0 * _d.norm_sf(np.abs(z)), 1.0) if sides == 2 else _d.norm_sf(z)
     return float(p) if np.ndim(p) == 0 else p
 
 
@@ -115,6 +119,8 @@ def f_test(statistic, df1, df2, *, alpha) -> TestResult:
     -------
     TestResult
     """
+    from scipy import stats as _st
+
     _level(alpha)
     stat = np.asarray(statistic, dtype=np.float64)
     with np.errstate(invalid="ignore"):
@@ -127,7 +133,7 @@ def chi2_test(statistic, df, *, alpha) -> TestResult:
     _level(alpha)
     stat = np.asarray(statistic, dtype=np.float64)
     with np.errstate(invalid="ignore"):
-        p = _st.chi2.sf(stat, df)
+        p = _d.chi2_sf(stat, df)
     return _finish(stat, p, np.asarray(df, dtype=np.float64), alpha)
 
 
@@ -135,5 +141,5 @@ def z_test_statistic(statistic, *, alpha, sides: int = 2) -> TestResult:
     """Normal test of a standardised statistic (two-sided by default)."""
     _level(alpha)
     stat = np.asarray(statistic, dtype=np.float64)
-    tail = _st.norm.sf(np.abs(stat)) if sides == 2 else _st.norm.sf(stat)
+    tail = _d.norm_sf(np.abs(stat)) if sides == 2 else _d.norm_sf(stat)
     return _finish(stat, np.minimum(sides * tail, 1.0), np.nan, alpha)

@@ -1,0 +1,46 @@
+"""``lidarstat curvature`` parses with its own subcommand and imports only what it uses."""
+
+import subprocess
+import sys
+
+from lidarstat.cli._app import CORE_COMMANDS, build_parser, command_of
+
+
+def test_command_of_skips_the_global_options():
+    assert command_of(["-v", "curvature", "a.las", "b.las"]) == "curvature"
+    assert command_of(["--version"]) is None
+    assert command_of(["--", "curvature"]) is None
+
+
+def test_a_core_command_parses_alone_and_the_same():
+    full, alone = build_parser(), build_parser("curvature")
+    argv = ["curvature", "in.las", "out.las", "--radius", "0.5", "--sigma", "0.01", "-q"]
+    assert vars(full.parse_args(argv)).keys() == vars(alone.parse_args(argv)).keys()
+    assert {k: v for k, v in vars(full.parse_args(argv)).items() if k != "func"} == \
+        {k: v for k, v in vars(alone.parse_args(argv)).items() if k != "func"}
+    sub = next(a for a in alone._actions if a.dest == "command")
+    assert set(sub.choices) == {"curvature"}
+    assert {"curvature", "segment"} <= set(next(
+        a for a in full._actions if a.dest == "command").choices)
+    assert set(CORE_COMMANDS) <= set(next(a for a in full._actions if a.dest == "command").choices)
+
+
+def test_curvature_run_does_not_import_scipy_stats_or_other_methods(tmp_path):
+    import numpy as np
+
+    from lidarstat.io import PointCloud, write
+
+    g = np.linspace(0, 3, 30)
+    x, y = [a.ravel() for a in np.meshgrid(g, g)]
+    rng = np.random.default_rng(0)
+    write(tmp_path / "in.las", PointCloud(xyz=np.c_[x, y, 0.1 * x * x + rng.normal(0, 0.01, x.size)]))
+    code = (
+        "import sys\n"
+        "from lidarstat.cli._app import main\n"
+        f"assert main(['curvature', {str(tmp_path / 'in.las')!r}, {str(tmp_path / 'out.las')!r},"
+        " '--radius', '0.6', '-q']) == 0\n"
+        "bad = [m for m in sys.modules if m.startswith(('scipy.stats', 'lidarstat.segment',"
+        " 'lidarstat.classify', 'lidarstat.pipeline', 'lidarstat.report', 'matplotlib', 'dask'))]\n"
+        "assert not bad, bad\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+    assert (tmp_path / "out.las").exists()
