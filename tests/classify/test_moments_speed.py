@@ -136,10 +136,19 @@ def test_low_outlier_and_road_cell_kernels_equal_lexsort(rng):
     o = np.lexsort((z, key))
     ks = key[o]
     first = o[np.r_[True, ks[1:] != ks[:-1]]]
-    z1, arg = _outliers._cell_lowest(ij, z, (30, 30))
-    assert np.array_equal(arg.ravel()[key[first]], first)
-    assert np.array_equal(z1.ravel()[key[first]], z[first])
-    assert (arg.ravel() >= 0).sum() == first.size
+    none = np.zeros(z.size, bool)
+    z1, arg = _outliers._lowest_live(key, z, none, 900)
+    assert np.array_equal(arg[key[first]], first)
+    assert np.array_equal(z1[key[first]], z[first])
+    assert (arg >= 0).sum() == first.size
+    flagged = np.zeros(z.size, bool)  # flagged points are left out: the next lowest wins
+    flagged[first] = True
+    _, arg2 = _outliers._lowest_live(key, z, flagged, 900)
+    live = np.flatnonzero(~flagged)
+    o = live[np.lexsort((z[live], key[live]))]
+    ks = key[o]
+    assert np.array_equal(arg2[ks[np.r_[True, ks[1:] != ks[:-1]]]],
+                          o[np.r_[True, ks[1:] != ks[:-1]]])
     xy = rng.uniform(0, 50, (20000, 2))
     v = np.round(rng.normal(100, 20, 20000))
     span = np.ptp(xy, axis=0)
