@@ -163,14 +163,14 @@ class _Steps:
 #: function is wrapped where its caller looks it up.
 STEPS = (
     ("read", "lidarstat.io", "read"),
-    ("moments (driver: order, checks)", "lidarstat.classify", "moments"),
+    ("driver (order, copies, TIN evaluation)", "lidarstat.classify", "moments"),
     ("low noise", "lidarstat.classify._moments", "low_outliers"),
     ("windows", "lidarstat.classify._moments", "root_windows"),
     ("ground: opening", "lidarstat.classify._moments_ground", "opening_surface"),
     ("ground: window moments", "lidarstat.classify._moments_ground", "window_pass"),
     ("ground: cut interpolation", "lidarstat.classify._moments_ground", "interpolate_cuts"),
     ("ground: surface fit", "lidarstat.classify._moments_ground", "ground_surface"),
-    ("ground: surface eval", "lidarstat.classify._moments_ground", "heights"),
+    ("ground: heights above the surface", "lidarstat.classify._moments_ground", "heights"),
     ("ground: raised patches", "lidarstat.classify._moments", "drop_raised_patches"),
     ("terrain", "lidarstat.classify._moments", "terrain_step"),
     ("roads", "lidarstat.classify._moments", "road_points"),
