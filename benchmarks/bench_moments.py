@@ -1,40 +1,45 @@
-"""Whole `moments` classification on a synthetic airborne cloud, with CSF on the same points.
+"""`lidarstat moments` against CSF on a synthetic airborne cloud, whole process, and where the time goes.
 
 Cloud: sloped sine terrain, box buildings, tree blobs with two returns, intensity with a
-dark road band, 10 points/m2; generated with NumPy in seconds (deterministic seed). Each
-size runs `moments` (default parameters, tiles in threads) and then CSF (cloth
-1 m, slope smoothing) on the same points in the same process; the table gives both times,
-their ratio, the CPU time of each (all threads), the ground/object errors against the generator's truth, the time of each
-phase of `moments` and the peak memory of the process.
+dark road band, 10 points/m2, written once to a LAS file (point format 6) in a work
+folder. Each repeat runs, alternating, in fresh processes timed by GNU ``time`` (wall
+seconds and peak RSS of the process):
+
+* ``lidarstat moments IN OUT --no-report -q`` (start, read the LAS, classify, write the LAS);
+* CSF (the authors' ``cloth_simulation_filter``, cloth 1 m, slope smoothing) in a Python
+  process that reads the LAS with laspy, filters and writes the classification with laspy.
+
+The row of each size is the median of the repeats. The profile (``--profile``) runs the
+same command once more in a process that times every named step of ``moments`` (start
+and imports, read, low noise, windows, each part of the ground, terrain, roads,
+buildings, classes, fields, write) and samples its resident memory every 10 ms, giving
+each step's wall time and the peak RSS reached during it.
 
 Usage::
 
-    python benchmarks/bench_moments.py --quick            # 200k points, seconds
-    python benchmarks/bench_moments.py --out benchmarks/results_moments.json   # 1M and 10M
-    python benchmarks/bench_moments.py --points 3000000   # one size, no JSON
+    python benchmarks/bench_moments.py --quick                      # 200k points, one repeat
+    python benchmarks/bench_moments.py --points 10000000 --repeats 3 --profile \\
+        --out benchmarks/results_moments.json
+    python benchmarks/bench_moments.py --points 2000000 --repeats 1 --profile --skip-peers
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import resource
+import os
+import platform
+import subprocess
 import sys
+import tempfile
+import threading
 import time
-import warnings
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "src"))
-sys.path.insert(0, str(HERE))
-
-from lidarstat.classify import (_moments, _moments_ground, _moments_objects,  # noqa: E402
-                                _moments_windows, _roads, _surface, filter_errors, moments)
-
-FULL_SIZES = (1_000_000, 10_000_000)
+SRC = HERE.parent / "src"
 
 
 def make_cloud(n, seed=20261122, origin=(0.0, 0.0)):
@@ -64,104 +69,291 @@ def make_cloud(n, seed=20261122, origin=(0.0, 0.0)):
     return np.c_[xy + 5e5, z + 100], inten, nret, rnum, ground
 
 
-class _Phases:
-    """Wall time of the phases of `moments`, by wrapping its module functions."""
+def write_cloud(n, folder: Path):
+    """The cloud of `n` points as ``cloud_<n>.las`` and its truth (ground mask) as
+    ``truth_<n>.npy`` in `folder` (reused when present)."""
+    import laspy
 
-    NAMES = {"opening": (_moments_ground, "opening_surface"),
-             "windows": (_moments_windows, "tile_grid"),
-             "window passes": (_moments_ground, "window_pass"),
-             "surface fit": (_moments_ground, "ground_surface"),
-             "surface eval": (_surface.TinSurface, "__call__"),
-             "low noise": (_moments, "low_outliers"),
-             "continuity": (_moments_ground, "raised_patches"),
-             "cut interpolation": (_moments_ground, "interpolate_cuts"),
-             "roads": (_roads, "cell_median"),
-             "vegetation": (_moments_objects, "vegetation_like")}
+    las_path, truth_path = folder / f"cloud_{n}.las", folder / f"truth_{n}.npy"
+    if las_path.exists() and truth_path.exists():
+        return las_path, truth_path
+    xyz, inten, nret, rnum, truth = make_cloud(n)
+    header = laspy.LasHeader(version="1.4", point_format=6)
+    header.scales = np.full(3, 0.001)
+    header.offsets = np.floor(xyz.min(axis=0))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    las.intensity = np.clip(np.round(inten), 0, 65535).astype(np.uint16)
+    las.number_of_returns = nret.astype(np.uint8)
+    las.return_number = rnum.astype(np.uint8)
+    las.write(las_path)
+    np.save(truth_path, truth)
+    return las_path, truth_path
+
+
+# ------------------------------------------------------------------------- children
+def child_csf(inp, out):
+    """CSF as a user runs it: read with laspy, filter (cloth 1 m), write with laspy."""
+    import laspy
+
+    sys.path.insert(0, str(HERE))
+    from isprs_filtertest import csf_ground
+
+    las = laspy.read(inp)
+    xyz = np.c_[las.x, las.y, las.z]
+    g = csf_ground(xyz, 1.0)
+    del xyz
+    las.classification = np.where(g, 2, 1).astype(np.uint8)
+    las.write(out)
+
+
+class _Steps:
+    """Exclusive wall time and peak resident memory of named steps.
+
+    Module functions are wrapped; a step called inside another is timed on its own and
+    taken out of the outer one. A thread samples the resident set every 10 ms and
+    charges it to the innermost running step.
+    """
 
     def __init__(self):
-        self.seconds = defaultdict(float)
-        self._saved = []
+        self.seconds, self.cpu, self.peak_mib, self.stack, self.saved = {}, {}, {}, [], []
+        self._stop = threading.Event()
+        self._page = os.sysconf("SC_PAGE_SIZE")
 
-    def __enter__(self):
-        for name, (owner, attr) in self.NAMES.items():
-            orig = getattr(owner, attr)
-            self._saved.append((owner, attr, orig))
-            setattr(owner, attr, self._wrap(name, orig))
-        return self
+    def rss_mib(self):
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * self._page / 2**20
 
-    def _wrap(self, name, orig):
+    def _sample(self):
+        while not self._stop.wait(0.01):
+            name = self.stack[-1][0] if self.stack else "other"
+            self.peak_mib[name] = max(self.peak_mib.get(name, 0.0), self.rss_mib())
+
+    def start(self):
+        threading.Thread(target=self._sample, daemon=True).start()
+
+    def stop(self):
+        self._stop.set()
+        for owner, attr, orig in reversed(self.saved):
+            setattr(owner, attr, orig)
+
+    def wrap(self, name, owner, attr):
+        orig = getattr(owner, attr)
+        self.saved.append((owner, attr, orig))
+
         def timed(*a, **k):
-            t = time.perf_counter()
+            self.stack.append([name, time.perf_counter(), 0.0, time.process_time(), 0.0])
             try:
                 return orig(*a, **k)
             finally:
-                self.seconds[name] += time.perf_counter() - t
-        return timed
+                _, t0, inner, c0, cinner = self.stack.pop()
+                dt = time.perf_counter() - t0
+                dc = time.process_time() - c0
+                self.seconds[name] = self.seconds.get(name, 0.0) + dt - inner
+                self.cpu[name] = self.cpu.get(name, 0.0) + dc - cinner
+                self.peak_mib[name] = max(self.peak_mib.get(name, 0.0), self.rss_mib())
+                if self.stack:
+                    self.stack[-1][2] += dt
+                    self.stack[-1][4] += dc
 
-    def __exit__(self, *exc):
-        for owner, attr, orig in reversed(self._saved):
-            setattr(owner, attr, orig)
+        setattr(owner, attr, timed)
 
 
-def run(n, scheduler, workers):
-    from isprs_filtertest import csf_ground
+#: The named steps of ``lidarstat moments``: (label, module, attribute). A module
+#: function is wrapped where its caller looks it up.
+STEPS = (
+    ("read", "lidarstat.io", "read"),
+    ("driver (order, copies, TIN evaluation)", "lidarstat.classify", "moments"),
+    ("low noise", "lidarstat.classify._moments", "low_outliers"),
+    ("windows", "lidarstat.classify._moments", "root_windows"),
+    ("ground: opening", "lidarstat.classify._moments_ground", "opening_surface"),
+    ("ground: window moments", "lidarstat.classify._moments_ground", "window_pass"),
+    ("ground: cut interpolation", "lidarstat.classify._moments_ground", "interpolate_cuts"),
+    ("ground: surface fit", "lidarstat.classify._moments_ground", "ground_surface"),
+    ("ground: heights above the surface", "lidarstat.classify._moments_ground", "heights"),
+    ("ground: raised patches", "lidarstat.classify._moments", "drop_raised_patches"),
+    ("terrain", "lidarstat.classify._moments", "terrain_step"),
+    ("roads", "lidarstat.classify._moments", "road_points"),
+    ("buildings", "lidarstat.classify._moments", "building_step"),
+    ("classes", "lidarstat.classify._moments", "asprs_classes"),
+    ("fields (input order)", "lidarstat.classify._moments", "_expand"),
+    ("write", "lidarstat.io", "write"),
+)
 
-    t = time.perf_counter()
-    xyz, inten, nret, rnum, truth = make_cloud(n)
-    gen = time.perf_counter() - t
-    with _Phases() as ph:
-        t, c = time.perf_counter(), time.process_time()
-        res = moments(xyz, inten, number_of_returns=nret, return_number=rnum,
-                      scheduler=scheduler, workers=workers)
-        t_mom, c_mom = time.perf_counter() - t, time.process_time() - c
-    phases = {k: round(v, 3) for k, v in ph.seconds.items()}
-    phases["other"] = round(t_mom - sum(ph.seconds.values()), 3)
-    e = filter_errors(res.ground, truth)
-    del res
-    t, c = time.perf_counter(), time.process_time()
-    g = csf_ground(xyz, 1.0)
-    t_csf, c_csf = time.perf_counter() - t, time.process_time() - c
-    ec = filter_errors(g, truth)
-    return {"points": n, "generate_s": round(gen, 3), "moments_s": round(t_mom, 3),
-            "csf_s": round(t_csf, 3), "ratio_moments_over_csf": round(t_mom / t_csf, 3),
-            "moments_cpu_s": round(c_mom, 3), "csf_cpu_s": round(c_csf, 3),
-            "moments_total_error": e.total, "csf_total_error": ec.total,
-            "moments_phases_s": phases,
-            "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)}
+
+def _since_process_start():
+    """Seconds since this process started (interpreter start-up included)."""
+    with open("/proc/self/stat") as fh:
+        start = int(fh.read().rsplit(")", 1)[1].split()[19]) / os.sysconf("SC_CLK_TCK")
+    with open("/proc/uptime") as fh:
+        return float(fh.read().split()[0]) - start
+
+
+def child_profile(inp, out):
+    """``lidarstat moments IN OUT --no-report -q`` with every named step timed."""
+    import importlib
+
+    steps = _Steps()
+    steps.start()
+    import lidarstat.classify
+    import lidarstat.io
+    from lidarstat.cli import main
+
+    del lidarstat  # imported as the command imports them on its first call
+    started = _since_process_start()
+    for label, mod, attr in STEPS:
+        steps.wrap(label, importlib.import_module(mod), attr)
+    t1, c1 = time.perf_counter(), time.process_time()
+    rc = main(["moments", str(inp), str(out), "--no-report", "-q"])
+    total, ctotal = time.perf_counter() - t1, time.process_time() - c1
+    steps.stop()
+    secs = {"start + imports": started}
+    secs.update(steps.seconds)
+    secs["other"] = total - sum(steps.seconds.values())
+    cpu = {"start + imports": c1}
+    cpu.update(steps.cpu)
+    cpu["other"] = ctotal - sum(steps.cpu.values())
+    with open("/proc/self/status") as fh:
+        hwm = next(int(line.split()[1]) for line in fh if line.startswith("VmHWM"))
+    return {"rc": rc, "ended_s": _since_process_start(), "seconds": {k: round(v, 3) for k, v in secs.items()},
+            "cpu_seconds": {k: round(v, 3) for k, v in cpu.items()},
+            "peak_rss_mib": {k: round(v) for k, v in steps.peak_mib.items()},
+            "vmhwm_mib": round(hwm / 1024)}
+
+
+# ------------------------------------------------------------------------- parent
+def timed(cmd, env):
+    """Wall seconds, peak RSS (MiB), stdout and CPU seconds (user + system) of `cmd`, by
+    GNU time."""
+    res = subprocess.run(["/usr/bin/time", "-f", "TIME %e %M %U %S", *map(str, cmd)], env=env,
+                         capture_output=True, text=True, check=False)
+    line = [s for s in res.stderr.splitlines() if s.startswith("TIME ")]
+    if res.returncode != 0 or not line:
+        raise RuntimeError(f"{cmd[:4]} failed ({res.returncode}): {res.stderr[-2000:]}")
+    _, sec, kib, user, system = line[-1].split()
+    return float(sec), int(kib) / 1024, res.stdout, float(user) + float(system)
+
+
+def _env():
+    env = dict(os.environ)
+    env["PYTHONPATH"] = f"{SRC}{os.pathsep}{env.get('PYTHONPATH', '')}".rstrip(os.pathsep)
+    return env
+
+
+def errors(out_path, truth_path):
+    """Total error of the output's class 2 (and 11, road) as ground against the truth."""
+    import laspy
+
+    with laspy.open(out_path) as r:
+        cls = r.read().classification
+    truth = np.load(truth_path)
+    ground = (np.asarray(cls) == 2) | (np.asarray(cls) == 11)
+    return float(np.mean(ground != truth))
+
+
+def run_size(n, folder, repeats, env, skip_peers, profile):
+    inp, truth = write_cloud(n, folder)
+    out_l, out_c = folder / f"moments_{n}.las", folder / f"csf_{n}.las"
+    lid_cmd = [sys.executable, "-m", "lidarstat", "moments", inp, out_l, "--no-report", "-q"]
+    csf_cmd = [sys.executable, __file__, "--child", "csf", inp, out_c]
+    rows = {"lidarstat": [], "csf": []}
+    for _ in range(repeats):  # alternating
+        rows["lidarstat"].append(timed(lid_cmd, env))
+        if not skip_peers:
+            rows["csf"].append(timed(csf_cmd, env))
+    med = {k: (float(np.median([r[0] for r in v])), float(max(r[1] for r in v)),
+               float(np.median([r[3] for r in v])))
+           for k, v in rows.items() if v}
+    row = {"points": n, "lidarstat_s": round(med["lidarstat"][0], 2),
+           "lidarstat_all_s": [r[0] for r in rows["lidarstat"]],
+           "lidarstat_cpu_s": round(med["lidarstat"][2], 2),
+           "lidarstat_peak_rss_mib": round(med["lidarstat"][1]),
+           "lidarstat_total_error": round(errors(out_l, truth), 6)}
+    if "csf" in med:
+        row.update(csf_s=round(med["csf"][0], 2), csf_all_s=[r[0] for r in rows["csf"]],
+                   csf_cpu_s=round(med["csf"][2], 2),
+                   csf_peak_rss_mib=round(med["csf"][1]),
+                   csf_total_error=round(errors(out_c, truth), 6),
+                   ratio=round(med["lidarstat"][0] / med["csf"][0], 2))
+    if profile:
+        wall, peak, stdout, _ = timed([sys.executable, __file__, "--child", "profile", inp,
+                                    out_l], env)
+        prof = json.loads(stdout.strip().splitlines()[-1])
+        prof["seconds"]["exit"] = round(wall - prof.pop("ended_s"), 3)
+        prof.update(wall_s=wall, gnu_time_peak_rss_mib=round(peak))
+        row["profile"] = prof
+    return row
+
+
+def print_rows(rows):
+    print("\n| command | points | lidarstat | peer, same run | ratio | peak MiB (lidarstat / peer) |")
+    print("|---|---:|---:|---|---:|---|")
+    for r in rows:
+        peer = f"CSF 1 m {r['csf_s']:.1f} s" if "csf_s" in r else "-"
+        print(f"| `moments` | {r['points']:,} | {r['lidarstat_s']:.1f} s | {peer} | "
+              f"{r.get('ratio', float('nan')):.2f} | {r['lidarstat_peak_rss_mib']} / "
+              f"{r.get('csf_peak_rss_mib', '-')} |")
+    for r in rows:
+        p = r.get("profile")
+        if not p:
+            continue
+        print(f"\nprofile, {r['points']:,} points (peak {p['vmhwm_mib']} MiB):")
+        for k, v in p["seconds"].items():
+            print(f"  {k:34s} {v:7.2f} s  {p['cpu_seconds'].get(k, 0):7.2f} s CPU  "
+                  f"{p['peak_rss_mib'].get(k, 0):6d} MiB")
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="200,000 points only (seconds)")
-    ap.add_argument("--points", type=int, nargs="+", default=list(FULL_SIZES),
-                    help="cloud sizes (default: the full mode, 1M and 10M)")
-    ap.add_argument("--scheduler", default="threads", choices=("threads", "sync", "dask"))
-    ap.add_argument("--workers", type=int, default=None)
-    ap.add_argument("--out", default=None, help="JSON of the results (full mode only)")
+    ap.add_argument("--quick", action="store_true", help="200,000 points, one repeat")
+    ap.add_argument("--points", type=int, nargs="+", default=[10_000_000])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--profile", action="store_true", help="also the per-step profile")
+    ap.add_argument("--skip-peers", action="store_true", help="no CSF")
+    ap.add_argument("--work", default=None, help="folder of the clouds (default: a temp dir)")
+    ap.add_argument("--out", default=None, help="JSON of the results (rows stored under "
+                    "--label; other labels already in the file are kept)")
+    ap.add_argument("--label", default="current", help="name of this run in --out")
+    ap.add_argument("--child", nargs=3, metavar=("MODE", "IN", "OUT"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    sizes = [200_000] if args.quick else args.points
-    xyz, inten, *_ = make_cloud(20_000)
-    moments(xyz, inten)  # JIT warm-up (or cache load)
+    if args.child:
+        mode, inp, out = args.child
+        if mode == "csf":
+            child_csf(inp, out)
+        else:
+            print(json.dumps(child_profile(inp, out)))
+        return
+    sizes, repeats = ([200_000], 1) if args.quick else (args.points, args.repeats)
+    folder = Path(args.work or tempfile.mkdtemp(prefix="bench_moments_"))
+    folder.mkdir(parents=True, exist_ok=True)
+    env = _env()
+    warm, _ = write_cloud(20_000, folder)  # compile or load the kernels once, untimed
+    subprocess.run([sys.executable, "-m", "lidarstat", "moments", warm, folder / "warm.las",
+                    "--no-report", "-q"], env=env, check=True)
     rows = []
     for n in sizes:
-        rows.append(run(n, args.scheduler, args.workers))
-        print(json.dumps(rows[-1]), flush=True)
-    print("\n| points | moments (s) | CSF (s) | moments / CSF | total error moments | CSF "
-          "| peak RSS (MiB) |")
-    print("|---|---|---|---|---|---|---|")
-    for r in rows:
-        print(f"| {r['points']:,} | {r['moments_s']:.1f} | {r['csf_s']:.1f} | "
-              f"{r['ratio_moments_over_csf']:.2f} | {100 * r['moments_total_error']:.2f} % | "
-              f"{100 * r['csf_total_error']:.2f} % | {r['peak_rss_mib']} |")
-    print("\nmoments phases (s): " + "; ".join(
-        f"{r['points']:,}: " + ", ".join(f"{k} {v:.1f}" for k, v in r["moments_phases_s"].items())
-        for r in rows))
-    if args.out and not args.quick:
-        Path(args.out).write_text(json.dumps({"runs": rows, "scheduler": args.scheduler,
-                                              "workers": args.workers}, indent=1))
+        rows.append(run_size(n, folder, repeats, env, args.skip_peers, args.profile))
+        print(json.dumps({k: v for k, v in rows[-1].items() if k != "profile"}), flush=True)
+    print_rows(rows)
+    if args.out:
+        out = Path(args.out)
+        old = json.loads(out.read_text()) if out.exists() else {}
+        runs = old.get("runs") if isinstance(old.get("runs"), dict) else {}
+        runs[args.label] = {"repeats": repeats, "load_average": os.getloadavg(),
+                            "rows": rows}
+        out.write_text(json.dumps({
+            "what": "whole process (start, read LAS, classify, write LAS), median of "
+                    "alternating repeats; peak RSS by GNU time; profile: one more run "
+                    "with every named step timed (wall, CPU of all threads, peak RSS)",
+            "command": "lidarstat moments IN OUT --no-report -q",
+            "peer": "CSF (cloth_simulation_filter) cloth 1 m, slope smoothing, laspy read "
+                    "and write",
+            "machine_shared": True, "cpus": os.cpu_count(),
+            "python": platform.python_version(), "runs": runs}, indent=1) + "\n")
 
 
 if __name__ == "__main__":
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        main()
+    import warnings
+
+    warnings.simplefilter("ignore")
+    main()

@@ -136,10 +136,19 @@ def test_low_outlier_and_road_cell_kernels_equal_lexsort(rng):
     o = np.lexsort((z, key))
     ks = key[o]
     first = o[np.r_[True, ks[1:] != ks[:-1]]]
-    z1, arg = _outliers._cell_lowest(ij, z, (30, 30))
-    assert np.array_equal(arg.ravel()[key[first]], first)
-    assert np.array_equal(z1.ravel()[key[first]], z[first])
-    assert (arg.ravel() >= 0).sum() == first.size
+    none = np.zeros(z.size, bool)
+    z1, arg = _outliers._lowest_live(key, z, none, 900)
+    assert np.array_equal(arg[key[first]], first)
+    assert np.array_equal(z1[key[first]], z[first])
+    assert (arg >= 0).sum() == first.size
+    flagged = np.zeros(z.size, bool)  # flagged points are left out: the next lowest wins
+    flagged[first] = True
+    _, arg2 = _outliers._lowest_live(key, z, flagged, 900)
+    live = np.flatnonzero(~flagged)
+    o = live[np.lexsort((z[live], key[live]))]
+    ks = key[o]
+    assert np.array_equal(arg2[ks[np.r_[True, ks[1:] != ks[:-1]]]],
+                          o[np.r_[True, ks[1:] != ks[:-1]]])
     xy = rng.uniform(0, 50, (20000, 2))
     v = np.round(rng.normal(100, 20, 20000))
     span = np.ptp(xy, axis=0)
@@ -191,3 +200,94 @@ def test_cell_keys_equal_the_numpy_expression(rng):
             assert np.array_equal(_surface.cell_keys(xy, cell), ref(xy, cell))
             o = xy.min(axis=0) + 3.3  # some points below the origin: negative indices
             assert np.array_equal(_surface.cell_keys(xy, cell, o), ref(xy, cell, o))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_canonical_order_equals_lexsort(seed):
+    from lidarstat.classify._moments_kernels import canonical_order
+
+    g = np.random.default_rng(seed)
+    n = int(g.integers(2, 6000))
+    step = (1.0, 0.1, 0.001, 0.5, 2.0, 0.01)[seed]  # quantised: runs of equal x
+    x = np.round(g.uniform(0, 20, n) / step) * step
+    if seed == 4:
+        x[: n // 2] = 7.0  # one long run: the merge path
+    y, z, w = (np.round(g.uniform(0, 3, n)) for _ in range(3))
+    z[z == 0] = -0.0  # -0.0 and 0.0 are equal keys
+    for inten in (w, None):
+        keys = tuple(c for c in (inten, z, y, x) if c is not None)
+        assert np.array_equal(canonical_order(x, y, z, inten), np.lexsort(keys))
+
+
+def _low_outliers_reference(xy, z, *, points_per_cell=4.0, k=5.0, min_depth=0.5,
+                            iterations=3):
+    """The low-noise rule in plain NumPy: lexsort for the cell minima, np.partition for
+    the second-lowest neighbour."""
+    n = z.size
+    out = np.zeros(n, bool)
+    lo = xy.min(axis=0)
+    span = np.maximum(xy.max(axis=0) - lo, 1e-9)
+    cell = float(np.sqrt(points_per_cell * span[0] * span[1] / n))
+    ij = np.floor((xy - lo) / cell).astype(np.int64)
+    shape = tuple(ij.max(axis=0) + 1)
+    for _ in range(iterations):
+        live = np.flatnonzero(~out)
+        key = ij[live, 0] * shape[1] + ij[live, 1]
+        o = np.lexsort((live, z[live], key))
+        first = np.r_[True, key[o][1:] != key[o][:-1]]
+        z1 = np.full(shape[0] * shape[1], np.inf)
+        arg = np.full(shape[0] * shape[1], -1)
+        z1[key[o][first]] = z[live][o][first]
+        arg[key[o][first]] = live[o][first]
+        z1, arg = z1.reshape(shape), arg.reshape(shape)
+        p = np.pad(z1, 1, constant_values=np.inf)
+        stack = np.stack([p[1 + dx:1 + dx + shape[0], 1 + dy:1 + dy + shape[1]]
+                          for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy])
+        ref = np.partition(stack, 1, axis=0)[1]
+        ok = np.isfinite(z1) & np.isfinite(ref)
+        if ok.sum() < 8:
+            break
+        gap = ref[ok] - z1[ok]
+        med = np.median(gap)
+        fence = max(med + k * 1.4826 * np.median(np.abs(gap - med)), min_depth)
+        bad = gap > fence
+        if not bad.any():
+            break
+        out[arg[ok][bad]] = True
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_low_outliers_equal_reference(seed):
+    from lidarstat.classify import low_outliers
+
+    g = np.random.default_rng(seed)
+    n = int(g.integers(500, 8000))
+    xy = g.uniform(0, g.uniform(20, 80), (n, 2))
+    z = np.round(0.1 * xy[:, 0] + g.normal(0, 0.05, n), 2)  # ties among the lows
+    low = g.choice(n, size=int(g.integers(1, 30)), replace=False)
+    z[low] -= g.uniform(1, 8, low.size)
+    z[low[: low.size // 2]] = z[low[0]]  # equal lows in one cell: the first index wins
+    got = low_outliers(xy, z)
+    assert np.array_equal(got, _low_outliers_reference(xy, z))
+    assert got[low].mean() > 0.5
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_root_windows_equal_tile_grid(seed):
+    """The root windows (compiled keys, counting sort) are the tiles of ``tile_grid`` with
+    the grid anchored at 0: same order, keys, bounds, points and cores."""
+    from lidarstat._shared._tiles import tile_grid
+
+    g = np.random.default_rng(seed)
+    n = int(g.integers(1, 30000))
+    xy = np.round(g.uniform(0, g.uniform(1, 400), (n, 2)) + g.uniform(0, 100, 2), 2)
+    size = (64.0, 10.0, 7.3, 1000.0)[seed]
+    xyh = np.zeros((n, 3))
+    xyh[:, :2] = xy
+    perm_ref, ref = _moments_windows.window_order(tile_grid(xyh, size, anchor=(0.0, 0.0)))
+    perm, got = _moments_windows.root_windows(xy, size)
+    assert np.array_equal(perm, perm_ref) and len(got) == len(ref)
+    for a, b in zip(got, ref):
+        assert (a.key, a.bounds) == (b.key, b.bounds)
+        assert np.array_equal(a.points, b.points) and np.array_equal(a.core, b.core)

@@ -32,7 +32,7 @@ from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatDeprecationWarning, LidarstatWarning
 from ._cycle import ElevationRule
 from ._moments_ground import drop_raised_patches, ground_cut, heights
-from ._buildings import input_order
+from ._moments_kernels import canonical_order
 from ._moments_objects import asprs_classes, building_step
 from ._moments_options import MomentsMethod, MomentsOptions, unit_factors
 from ._moments_result import ASPRS, MomentsClassification
@@ -241,19 +241,16 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     # The classes must not depend on the order of the points (the tiles of a catalogue
     # bring them in another order than the whole file): every step runs on the points
     # sorted by x, y, z and intensity, and the results go back to the caller's order.
-    canon = np.lexsort(tuple(c for c in (inten, pts[:, 2], pts[:, 1], pts[:, 0])
-                             if c is not None))
+    canon = canonical_order(pts[:, 0], pts[:, 1], pts[:, 2], inten)
     pts = pts[canon]
     inten, nret, rnum = (None if a is None else a[canon] for a in (inten, nret, rnum))
 
     # 1. low noise, out of every analysis
-    pts_all = pts
     noise = (low_outliers(pts[:, :2], pts[:, 2], min_depth=0.5 / uz) if low_noise
              else np.zeros(n, bool))
+    pts_noise = pts[noise]  # for their heights under the final surface
     pts, inten, multi, has_returns = _without_low_noise(noise, pts, inten, nret, rnum, source)
     del nret, rnum
-    if not noise.any():
-        del pts_all  # only the low noise's heights need the caller's points
 
     # 2. analysis windows; the points in root-window order, local coordinates. Ties are
     # broken by the index in the sorted order above, not by the caller's order.
@@ -267,7 +264,9 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     origin = column_min(pts)
     origin[:2] = np.floor(origin[:2] / p.window) * p.window
     perm, roots = root_windows(pts[:, :2] - origin[:2], p.window)
-    xy = np.ascontiguousarray(pts[perm, :2] - origin[:2])
+    xy = np.empty((perm.size, 2))  # column by column: no (N, 2) temporaries
+    for j in range(2):
+        np.subtract(pts[:, j][perm], origin[j], out=xy[:, j])
     z = pts[:, 2][perm]
     z -= origin[2]
     del pts  # the caller's array (or its copy without the low noise): not needed again
@@ -279,6 +278,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         xy, z, perm, roots, p, inten, opening_window=opening_window / ux,
         opening_cell=1.0 / ux, surface_cell=surface_cell / ux, iterations=iterations,
         scheduler=scheduler, workers=workers)
+    cluster_id = fields["cluster_id"]
+    del fields, roots  # the last pass's own ground and cuts: `ground` and `cut` hold them
     if continuity and method is MomentsMethod.MOMENTS:
         ground, height, surf = drop_raised_patches(xy, z, perm, ground, height, surf,
                                                    surface_cell=surface_cell / ux,
@@ -293,6 +294,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                                   first_step=len(steps) + 1)
     if road_step is not None:
         steps.append(road_step)
+    has_intensity = inten is not None
+    del inten
     # 6. buildings (tested roof planes), objects and classes
     blds = building_step(xy, z, height, ground, multi, (ux, uz),
                          min_object_height=min_object_height / uz,
@@ -307,7 +310,7 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                   opening_window=opening_window, iterations=iterations,
                   vegetation_heights=list(vegetation_heights),
                   min_object_height=min_object_height, elevation_rule=elevation_rule.value,
-                  intensity=inten is not None, returns=has_returns, low_noise=low_noise,
+                  intensity=has_intensity, returns=has_returns, low_noise=low_noise,
                   road_rule=road_rule.value, road_cell_points=road_cell_points,
                   ground_spread=ground_spread, continuity=continuity, rng=seed,
                   road_threshold=(road_threshold if road_threshold is not None else
@@ -315,22 +318,23 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                                   else float(road_step.choice.threshold)),
                   n_low_noise=int(noise.sum()), units={"horizontal_m": ux, "vertical_m": uz},
                   terrain=terrain, buildings=blds.params)
-    # back to the input order, low noise included
+    # back to the input order, low noise included: one scatter per field through the
+    # composed order (window order -> without low noise -> sorted -> input)
+    kept = np.flatnonzero(~noise) if noise.any() else None
+    dest = canon[perm] if kept is None else canon[kept[perm]]
+    low = canon[np.flatnonzero(noise)]
+    del perm, kept
     cls, cluster_id, height, ground, cut, tolerance = _expand(
-        perm, len(perm), cls, fields["cluster_id"], height, ground, cut, tolerance,
-        fill=(0, 0, 0.0, False, 0.0, 0.0))
-    if noise.any():
-        cls, cluster_id, height, ground, cut, tolerance = _expand(
-            ~noise, noise.size, cls, cluster_id, height, ground, cut, tolerance,
-            fill=(ASPRS["low_noise"], 0, np.nan, False, np.nan, np.nan))
-        if surf is not None:  # heights of the low noise under the final ground surface
-            q = pts_all[noise] - origin
-            height[noise] = heights(q[:, 2], surf(q[:, :2]))
-    cls, cluster_id, height, ground, cut, tolerance = _expand(
-        canon, n, cls, cluster_id, height, ground, cut, tolerance,
-        fill=(0, 0, 0.0, False, 0.0, 0.0))
-    building_fields = input_order(blds.fields, [(perm, len(perm))]
-                                  + [(~noise, noise.size)] * bool(noise.any()) + [(canon, n)])
+        dest, low, n, cls, cluster_id, height, ground, cut, tolerance,
+        fill=(ASPRS["low_noise"], 0, np.nan, False, np.nan, np.nan))
+    if low.size and surf is not None:  # heights of the low noise under the final surface
+        q = pts_noise - origin
+        height[low] = heights(q[:, 2], surf(q[:, :2]))
+    building_fields = {}
+    for name in list(blds.fields):  # one field at a time: the window-order copy goes
+        a = blds.fields.pop(name)
+        building_fields[name] = _expand(dest, low, n, a,
+                                        fill=(np.nan if a.dtype.kind == "f" else 0,))[0]
     return MomentsClassification(classification=cls, cluster_id=cluster_id, height=height,
                                  ground=ground, steps=steps, windows=windows, params=params,
                                  cut=cut, tolerance=tolerance, building_fields=building_fields)
@@ -399,12 +403,13 @@ def _usable_intensity(inten, source):
     return inten
 
 
-def _expand(where, n, *arrays, fill):
-    """Scatter per-point arrays to positions `where` (a mask or indices) of ``n`` points;
-    the others get `fill`."""
+def _expand(dest, low, n, *arrays, fill):
+    """Scatter per-point arrays to positions `dest` of ``n`` points; the positions `low`
+    (the low noise: every other position is in `dest`) get `fill`."""
     out = []
     for a, f in zip(arrays, fill):
-        b = np.full(n, f, dtype=a.dtype)
-        b[where] = a
+        b = np.empty(n, dtype=a.dtype)
+        b[dest] = a
+        b[low] = f
         out.append(b)
     return out

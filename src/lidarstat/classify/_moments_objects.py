@@ -27,7 +27,10 @@ def building_step(xy, z, height, ground, multi, units, *, min_object_height, min
     """
     ux, uz = units
     obj = ~ground & (height >= min_object_height)
-    xyz = np.column_stack([xy * ux, z * uz])
+    xyz = np.empty((z.size, 3))  # metres, filled column by column: no (N, 2) temporaries
+    for j in range(2):
+        np.multiply(xy[:, j], ux, out=xyz[:, j])
+    np.multiply(z, uz, out=xyz[:, 2])
     return building_tests(xyz, obj, ground, multi, height * uz, alpha=options.building_alpha,
                           sigma=options.sigma, min_points=options.min_points,
                           min_height=min_height)

@@ -30,31 +30,56 @@ __all__ = ["low_outliers"]
 
 
 @njit
-def _lowest(key, z, m):  # pragma: no cover - compiled
+def _cell_keys(xy, lo0, lo1, cell, ny):  # pragma: no cover - compiled
+    """Flat cell number ``ix * ny + iy`` of every point, ``(ix, iy) = floor((xy - lo) / cell)``."""
+    key = np.empty(xy.shape[0], np.int64)
+    for i in range(xy.shape[0]):
+        key[i] = (np.int64(np.floor((xy[i, 0] - lo0) / cell)) * ny
+                  + np.int64(np.floor((xy[i, 1] - lo1) / cell)))
+    return key
+
+
+@njit
+def _lowest_live(key, z, out, m):  # pragma: no cover - compiled
+    """Per cell: the lowest z of the points not yet flagged in `out` and the index of that
+    point (inf / -1 where empty); the first of equal lows is kept (in index order)."""
     z1 = np.full(m, np.inf)
     arg = np.full(m, -1, np.int64)
-    for i in range(key.size):
+    for i in range(z.size):
+        if out[i]:
+            continue
         k = key[i]
-        if z[i] < z1[k]:  # strict: the first of equal lows is kept, as np.lexsort((z, key))
+        if z[i] < z1[k]:
             z1[k] = z[i]
             arg[k] = i
     return z1, arg
 
 
-def _cell_lowest(ij, z, shape):
-    """Per cell: the lowest z and the index of that point (inf / -1 where empty); O(N)."""
-    key = np.ascontiguousarray(ij[:, 0] * shape[1] + ij[:, 1])
-    z1, arg = _lowest(key, np.ascontiguousarray(z, dtype=np.float64), shape[0] * shape[1])
-    return z1.reshape(shape), arg.reshape(shape)
-
-
-def _second_lowest_neighbour(z1):
+@njit
+def _second_lowest_neighbour(z1):  # pragma: no cover - compiled
     """Second-lowest value among the eight neighbours of every cell (inf if < 2 filled)."""
-    p = np.pad(z1, 1, constant_values=np.inf)
     nx, ny = z1.shape
-    stack = np.stack([p[1 + dx:1 + dx + nx, 1 + dy:1 + dy + ny]
-                      for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy])
-    return np.partition(stack, 1, axis=0)[1]
+    out = np.empty((nx, ny))
+    for i in range(nx):
+        for j in range(ny):
+            a = np.inf  # lowest
+            b = np.inf  # second lowest
+            for di in range(-1, 2):
+                ii = i + di
+                for dj in range(-1, 2):
+                    jj = j + dj
+                    if di == 0 and dj == 0:
+                        continue
+                    v = np.inf
+                    if 0 <= ii < nx and 0 <= jj < ny:
+                        v = z1[ii, jj]
+                    if v < a:
+                        b = a
+                        a = v
+                    elif v < b:
+                        b = v
+            out[i, j] = b
+    return out
 
 
 def low_outliers(xy, z, *, points_per_cell: float = 4.0, k: float = 5.0,
@@ -102,11 +127,13 @@ def low_outliers(xy, z, *, points_per_cell: float = 4.0, k: float = 5.0,
     cell = float(np.sqrt(points_per_cell * span[0] * span[1] / n))
     if not cell > 0:
         return out
-    ij_all = np.floor((xy - lo) / cell).astype(np.int64)
-    shape = tuple(column_max(ij_all) + 1)
+    # floor((v - lo) / cell) is monotone in v: the largest index is that of the maximum
+    nx, ny = (int(np.floor((v - lo[j]) / cell)) + 1 for j, v in enumerate(column_max(xy)))
+    key = _cell_keys(np.ascontiguousarray(xy), float(lo[0]), float(lo[1]), cell, ny)
+    z = np.ascontiguousarray(z)
     for _ in range(iterations):
-        live = np.flatnonzero(~out)
-        z1, arg = _cell_lowest(ij_all[live], z[live], shape)
+        z1, arg = _lowest_live(key, z, out, nx * ny)
+        z1, arg = z1.reshape(nx, ny), arg.reshape(nx, ny)
         ref = _second_lowest_neighbour(z1)
         ok = np.isfinite(z1) & np.isfinite(ref)
         if ok.sum() < 8:
@@ -118,5 +145,5 @@ def low_outliers(xy, z, *, points_per_cell: float = 4.0, k: float = 5.0,
         bad = gap > fence
         if not bad.any():
             break
-        out[live[arg[ok][bad]]] = True
+        out[arg[ok][bad]] = True
     return out

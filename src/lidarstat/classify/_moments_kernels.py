@@ -1,0 +1,116 @@
+"""Compiled helpers of the moments driver (:mod:`._moments`): the canonical point order.
+
+The classification must not depend on the order of the points, so every step runs on the
+points sorted by x, then y, z and intensity (``np.lexsort`` of the four keys, ties in
+input order). A lexsort of four float keys is four stable indirect sorts of the whole
+cloud; one sort of x followed by a sort of each run of equal x by the other keys and the
+index gives the same permutation in a third of the time (LAS coordinates are quantised,
+so runs of equal x are short).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._shared._jit import njit
+
+__all__ = ["canonical_order"]
+
+#: Runs of equal x up to this length are sorted by insertion, longer ones by merging.
+_INSERTION_RUN = 24
+
+
+@njit
+def _less(y, z, w, a, b):  # pragma: no cover - compiled
+    """Whether point `a` comes before point `b` by y, then z, then w (w empty: left out),
+    then the index (as a stable sort of the input would order them)."""
+    if y[a] != y[b]:
+        return y[a] < y[b]
+    if z[a] != z[b]:
+        return z[a] < z[b]
+    if w.size and w[a] != w[b]:
+        return w[a] < w[b]
+    return a < b
+
+
+@njit
+def _sort_run(order, lo, hi, y, z, w, buf):  # pragma: no cover - compiled
+    """Stable sort of ``order[lo:hi]`` by y, z, w (insertion for short runs, bottom-up
+    merge sort through `buf` otherwise)."""
+    m = hi - lo
+    if m <= _INSERTION_RUN:
+        for i in range(lo + 1, hi):
+            p = order[i]
+            j = i - 1
+            while j >= lo and _less(y, z, w, p, order[j]):
+                order[j + 1] = order[j]
+                j -= 1
+            order[j + 1] = p
+        return
+    width = 1
+    src = order[lo:hi]
+    dst = buf[:m]
+    in_buf = False
+    while width < m:
+        for a in range(0, m, 2 * width):
+            mid = min(a + width, m)
+            end = min(a + 2 * width, m)
+            i, j, k = a, mid, a
+            while i < mid and j < end:
+                if _less(y, z, w, src[j], src[i]):
+                    dst[k] = src[j]
+                    j += 1
+                else:
+                    dst[k] = src[i]
+                    i += 1
+                k += 1
+            while i < mid:
+                dst[k] = src[i]
+                i += 1
+                k += 1
+            while j < end:
+                dst[k] = src[j]
+                j += 1
+                k += 1
+        src, dst = dst, src
+        in_buf = not in_buf
+        width *= 2
+    if in_buf:
+        order[lo:hi] = buf[:m]
+
+
+@njit
+def _sort_ties(order, first, y, z, w):  # pragma: no cover - compiled
+    """Sort every run of equal `first` (in `order`) by y, z and w."""
+    n = order.size
+    buf = np.empty(n, np.int64)
+    a = 0
+    while a < n:
+        b = a + 1
+        va = first[order[a]]
+        while b < n and first[order[b]] == va:
+            b += 1
+        if b - a > 1:
+            _sort_run(order, a, b, y, z, w, buf)
+        a = b
+
+
+def canonical_order(x, y, z, intensity=None) -> np.ndarray:
+    """``np.lexsort((intensity, z, y, x))`` (intensity left out when None), computed as a
+    sort of x and a sort of each run of equal x by y, z, intensity and the index.
+
+    Examples
+    --------
+    >>> x = np.array([1.0, 0.0, 1.0, 0.0, 1.0])
+    >>> y = np.array([2.0, 5.0, 1.0, 5.0, 1.0])
+    >>> z = np.array([0.0, 1.0, 3.0, 0.0, 3.0])
+    >>> canonical_order(x, y, z).tolist() == np.lexsort((z, y, x)).tolist()
+    True
+    """
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    order = np.argsort(x).astype(np.int64, copy=False)
+    y, z = (np.ascontiguousarray(a, dtype=np.float64) for a in (y, z))
+    w = (np.empty(0) if intensity is None
+         else np.ascontiguousarray(intensity, dtype=np.float64))
+    _sort_ties(order, x, y, z, w)
+    return order
