@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._terrain_kernels import cell_lowest, grid_bilinear
+from ._terrain_kernels import cell_lowest, fill_triangles, grid_bilinear
 
 __all__ = ["TERRAIN_DEFAULTS", "TerrainModel", "TerrainRefinement", "drop_bumps",
            "grow_ground", "refine_terrain", "reject_walled", "terrain_step"]
@@ -241,26 +241,33 @@ def reject_walled(grown_z, ground_z, lowest, *, cell, step, max_rise, wall_fract
 def _fill(grid):
     """Empty (``inf``) cells filled by linear interpolation in the Delaunay triangulation
     of the filled cells on their rims (the only cells a triangle over a hole joins), the
-    nearest filled cell outside the rims' hull."""
+    nearest filled cell outside the rims' hull.
+
+    The triangles are rasterised (:func:`~._terrain_kernels.fill_triangles`) rather than
+    the holes located in them: on a grid the holes lie on triangle edges, where a point
+    location falls back to a search of every triangle.
+    """
     from scipy import ndimage as ndi
-    from scipy.interpolate import griddata
+    from scipy.spatial import Delaunay
 
     empty = ~np.isfinite(grid)
     if not empty.any() or empty.all():
         return grid
     out = grid.copy()
     rim = ~empty & ndi.binary_dilation(empty, structure=np.ones((3, 3), bool))
-    full = np.argwhere(rim)
-    holes = np.argwhere(empty)
-    val = np.full(len(holes), np.nan)
+    full = np.argwhere(rim).astype(np.float64)
+    todo = empty.copy()
     if len(full) >= 3 and np.ptp(full[:, 0]) > 0 and np.ptp(full[:, 1]) > 0:
         try:
-            val = griddata(full, grid[rim], holes, method="linear")
+            tri = Delaunay(full).simplices.astype(np.int64)
         except Exception:  # noqa: BLE001 - degenerate (collinear) rims: nearest below
-            pass
-    idx = ndi.distance_transform_edt(empty, return_distances=False, return_indices=True)
-    nearest = grid[tuple(idx)][empty]
-    out[empty] = np.where(np.isfinite(val), val, nearest)
+            tri = None
+        if tri is not None:
+            fill_triangles(tri, full, np.ascontiguousarray(grid[rim]), out, todo)
+    if todo.any():
+        idx = ndi.distance_transform_edt(empty, return_distances=False,
+                                         return_indices=True)
+        out[todo] = grid[tuple(idx)][todo]
     return out
 
 
