@@ -80,7 +80,7 @@ class TerrainModel:
         Cell side (coordinate units); cell ``(i, j)`` covers
         ``[i cell, (i + 1) cell) x [j cell, (j + 1) cell)``.
     tin : callable, optional
-        The surface as a TIN (``f(xy) -> z``): the lowest ground point of every surface
+        The surface as a TIN (``f(xy / cell) -> z``): the lowest ground point of every surface
         cell at its own position, the filled cells at their centres. A cell-centre grid
         of lowest points lies under a slope by about ``slope * cell / 2``; the TIN passes
         through the ground points themselves.
@@ -95,8 +95,8 @@ class TerrainModel:
         """Elevation of the surface at `xy`: linear on the TIN of the cells' lowest
         ground points at their own positions when there is one, else bilinear between
         cell centres."""
-        if self.tin is not None:
-            return self.tin(np.ascontiguousarray(xy, dtype=np.float64))
+        if self.tin is not None:  # built in cell units (see _tin)
+            return self.tin(np.ascontiguousarray(xy, dtype=np.float64) / self.cell)
         return self.at(xy, self.grid)
 
     def slope_at(self, xy) -> np.ndarray:
@@ -434,12 +434,15 @@ def _tin(xy, z, surface_z, grid, cell):
     cells, first = np.unique(flat[on], return_index=True)
     pick = on[first]
     filled = np.flatnonzero(~np.isfinite(surface_z).ravel())
-    centres = (np.c_[filled // ny, filled % ny] + 0.5) * cell
-    P = np.r_[xy[pick], centres]
+    # in cell units rounded to 1e-9 cell: the vertices are often co-circular (the filled
+    # cells' centres), and which diagonal the triangulation takes must not depend on the
+    # last bits of the coordinates, i.e. on the file's unit
+    centres = np.c_[filled // ny, filled % ny] + 0.5
+    P = np.round(np.r_[xy[pick] / cell, centres], 9)
     V = np.r_[z[pick], grid.ravel()[filled]]
     if len(P) < 3:
         return None
-    return TinSurface(P, V, cell)
+    return TinSurface(P, V, 1.0)
 
 
 def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max_rise,
