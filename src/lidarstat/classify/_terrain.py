@@ -307,16 +307,19 @@ def reject_plateaus(surface_z, lowest, *, cell, step, max_rise, fraction, rounds
 def _reject_plateaus_once(surface_z, lowest, *, cell, step, max_rise, fraction):
     """Take back the parts of the surface standing on walls along most of their border.
 
-    The surface cells are joined into parts by smooth pairs (8-neighbours whose lowest
-    ground points differ by at most ``step + max_rise * distance``). A border pair of a
-    part is one of its cells and an 8-neighbour outside it holding points; it is a wall
-    when the part's cell is higher than the neighbour's lowest point by more than that
-    bound. Every part but the largest with more than `fraction` walls among its border
-    pairs is removed: a roof the moments cut kept as ground where the envelope ran over
-    it (a roof on the data's edge, a large flat roof), which :func:`reject_walled` does
-    not see because the growth did not add it. The data's edge is no border, so a roof
-    cut by the edge is judged on its inner sides; terrain terraces have walls on their
-    downhill side only.
+    The surface cells are joined into parts by smooth 4-neighbour pairs (either cell
+    within `step` of the extrapolation of the other and the cell beyond it, as the
+    growth, and at most ``step + max_rise * cell`` apart). A border pair of a part is one
+    of its cells and an 8-neighbour outside it holding points, compared with where the
+    part would continue (the extrapolation of the cell and the part's cell behind it,
+    the cell itself when that is not in the part): a wall when the neighbour's lowest
+    point lies more than ``3 step`` under it, uphill when more than that above it,
+    smooth otherwise. Every part but the largest with walls on more than `fraction` of
+    its non-uphill border and more walls than uphill pairs is removed: a roof the
+    moments cut kept as ground (a roof on the data's edge, a large flat roof, a flat
+    roof set into a slope), which :func:`reject_walled` does not see because the growth
+    did not add it. The data's edge is no border, so a roof cut by the edge is judged on
+    its inner sides; a terrace is walled on its downhill side only.
 
     Returns
     -------
@@ -367,10 +370,16 @@ def _reject_plateaus_once(surface_z, lowest, *, cell, step, max_rise, fraction):
     for di, dj in _DIRS:
         n_low = np.minimum(_shift(lowest, di, dj), _shift(surface_z, di, dj))
         n_part = _shift(part_grid, di, dj, fill=-2)
-        bound = step + max_rise * cell * np.hypot(di, dj)
+        back = _shift(surface_z, -di, -dj)
+        b_part = _shift(part_grid, -di, -dj, fill=-2)
+        # where the part would continue: the extrapolation of the cell and the one
+        # behind it when that is in the part, the cell itself otherwise
+        with np.errstate(invalid="ignore"):
+            pred = np.where(b_part == part_grid, 2 * surface_z - back, surface_z)
+        bound = 3 * step
         border = have & (n_part != part_grid) & np.isfinite(n_low)
         with np.errstate(invalid="ignore"):
-            dz = surface_z - n_low
+            dz = pred - n_low
         walls += np.bincount(part_grid[border & (dz > bound)], minlength=n)
         smooth += np.bincount(part_grid[border & (np.abs(dz) <= bound)], minlength=n)
         uphill += np.bincount(part_grid[border & (dz < -bound)], minlength=n)
