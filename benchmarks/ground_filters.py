@@ -59,7 +59,8 @@ METHODS = ["moments", "moments_no_terrain", "csf", "smrf"]
 #: The hard cases drawn before / after the terrain step: sample, what it shows.
 FIGURES = {"samp71": "ramps and embankments to a bridge", "samp61": "embankments",
            "samp21": "a bridge over a road", "samp41": "large flat roofs, a data gap",
-           "samp11": "a steep terraced slope"}
+           "samp11": "a steep terraced slope, stepped buildings",
+           "ahn3_cropped_1_bgt.laz": "Delft: canals, courtyards, flat roofs"}
 #: SMRF's single parameter set (Pingel et al. 2013, section 4).
 SMRF = {"cellsize": 1.0, "windows": 18, "slope_threshold": 0.15, "elevation_threshold": 0.5,
             "elevation_scaler": 1.25}
@@ -142,10 +143,10 @@ def figure(xyz, ref, before, after, name, folder):
         ax.set_xlabel("x (m)")
     axes[0].set_ylabel("y (m)")
     axes[1].legend(loc="lower right", fontsize=8, markerscale=4)
-    fig.suptitle(f"ISPRS {name}: {FIGURES[name]} (grey: elevation)", fontsize=11)
+    fig.suptitle(f"{name}: {FIGURES[name]} (grey: elevation)", fontsize=11)
     fig.tight_layout()
     folder.mkdir(parents=True, exist_ok=True)
-    fig.savefig(folder / f"moments_terrain_{name}.png", dpi=80)
+    fig.savefig(folder / f"moments_terrain_{name.split('.')[0]}.png", dpi=80)
     plt.close(fig)
 
 
@@ -183,6 +184,7 @@ def main(argv=None):
             Path(args.out).write_text(json.dumps(
                 {"isprs": rows_i, "producer": rows_p, "smrf_parameters": SMRF,
                  "machine": "two cores shared with other jobs (seconds are indicative)",
+                 "machine_shared": True,
                  "markdown": md}, indent=1))
         return md
 
@@ -192,7 +194,7 @@ def main(argv=None):
     if not args.quick and not args.isprs_only:
         for rel in PRODUCER:
             if (DATA / rel).is_file():
-                rows_p.append(run_file(rel))
+                rows_p.append(run_file(rel, figures))
                 save()
     print(save())
 

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from lidarstat.classify import filter_errors, moments
-from lidarstat.classify._terrain import grow_ground, refine_terrain, reject_walled
+from lidarstat.classify._terrain import (drop_opened, grow_ground, refine_terrain,
+                                         reject_plateaus, reject_walled)
 from lidarstat.synth import TERRAIN_SCENES, make_terrain_scene
 
 SEEDS = (0, 1)
@@ -113,3 +114,78 @@ def test_slope_dependent_tolerance():
     assert t.tolerance[-2] == pytest.approx(0.5, abs=0.02)
     assert t.tolerance[-1] == pytest.approx(1.0, abs=0.05)
     assert 0.55 <= t.height[-1] <= 0.95 + 1e-9
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_fill_matches_linear_interpolation(seed):
+    """The rasterised triangles give griddata's linear interpolation on the holes (the
+    same triangulation of the rim cells), nearest cell outside the hull."""
+    from scipy import ndimage as ndi
+    from scipy.interpolate import griddata
+
+    from lidarstat.classify._terrain import _fill
+
+    g = np.random.default_rng(seed)
+    a = (np.add.outer(np.linspace(0, 5, 40), np.sin(np.linspace(0, 3, 30)))
+         + g.normal(0, 0.1, (40, 30)))
+    holes = (g.random(a.shape) < 0.3) | ndi.binary_dilation(g.random(a.shape) < 0.01,
+                                                           iterations=3)
+    a[holes] = np.inf
+    rim = ~holes & ndi.binary_dilation(holes, structure=np.ones((3, 3), bool))
+    expect = griddata(np.argwhere(rim), a[rim], np.argwhere(holes), method="linear")
+    got = _fill(a)[holes]
+    inside = np.isfinite(expect)
+    assert np.abs(got[inside] - expect[inside]).max() < 1e-9
+    assert np.isfinite(got).all()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_opening_drops_roof_seeds_and_keeps_slopes(seed):
+    """A 16 m roof 6 m high among seeds on a 40 % slope: the progressive opening (slope
+    0.5, radius 18 m) drops the roof's cells and keeps every slope cell (the opening of
+    a plane is the plane)."""
+    g = np.random.default_rng(seed)
+    x = np.arange(40)[:, None] * 2.0 + np.zeros((40, 30))
+    ground_z = 0.4 * x + g.normal(0, 0.05, x.shape)
+    roof = np.zeros(x.shape, bool)
+    i, j = g.integers(10, 22), g.integers(8, 14)
+    roof[i:i + 8, j:j + 8] = True
+    ground_z[roof] += 6.0
+    out = drop_opened(ground_z, cell=2.0, slope=0.5, max_radius=18.0)
+    assert not np.isfinite(out[roof]).any()
+    assert np.isfinite(out[~roof]).all()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_walled_part_is_taken_back_terrace_is_not(seed):
+    """A roof on the data's edge (walls on its three inner sides) leaves the surface; a
+    terrace under a retaining wall (walled downhill, higher ground uphill, smooth at its
+    ends) stays."""
+    g = np.random.default_rng(seed)
+    z = np.zeros((60, 40)) + g.normal(0, 0.03, (60, 40))
+    # terrace: rows 20-29 raised by 3 m over columns 5-34, ramps at both ends, the
+    # ground uphill of it (rows >= 30) higher still
+    z[30:] += 6.0
+    z[20:30, 10:30] += 3.0
+    z[20:30, 5:10] += np.linspace(0.0, 3.0, 5)[None, :]
+    z[20:30, 30:35] += np.linspace(3.0, 0.0, 5)[None, :]
+    # roof on the data's edge (column 0): 5 m above the terrain around it
+    z[2:12, 0:8] += 5.0
+    surface, rejected = reject_plateaus(z.copy(), z.copy(), cell=2.0, step=0.3,
+                                        max_rise=1.0, fraction=0.5)
+    assert not np.isfinite(surface[2:12, 0:8]).any()
+    assert np.isfinite(surface[20:30]).all() and rejected == 80
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_surface_passes_through_ground_on_a_slope(seed):
+    """On a 50 % slope the surface is the TIN of the cells' lowest points at their own
+    positions: ground heights stay within the noise, std 0.02 m (a grid of cell centres
+    would lie 0.5 m under the slope, a median height near 0.5 m)."""
+    g = np.random.default_rng(seed)
+    xy = g.uniform(0, 60, (6000, 2))
+    z = 0.5 * xy[:, 0] + g.normal(0, 0.02, 6000)
+    t = refine_terrain(xy, z, np.ones(6000, bool), cell=2.0, tolerance=0.5,
+                       slope_tolerance=1.25, step=0.3, max_rise=1.0, below=1.0)
+    assert abs(np.median(t.height)) < 0.05 and t.height.min() > -6 * 0.02
+    assert t.ground.all()

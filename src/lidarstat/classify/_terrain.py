@@ -9,6 +9,10 @@ and:
 1. **grid**: the lowest point and the lowest ground point of every ``cell`` square; a
    ground cell rising steeply above most of its ground neighbours (a low object the cut
    kept) leaves the seeds;
+   **opening**: so does a ground cell standing more than ``open_slope * r`` above the
+   progressive opening of the seeds with a window of radius ``r`` (SMRF's test, Pingel
+   et al. 2013, up to ``open_radius``): a roof the cut kept. Steep ground leaves the
+   seeds too; the growth puts it back;
 2. **growth**: a cell without ground joins the ground when its lowest point continues a
    neighbouring ground cell smoothly: within ``step`` of the linear extrapolation of two
    ground cells in a row and rising at most ``max_rise`` per unit distance from the
@@ -18,8 +22,13 @@ and:
    ``wall_fraction`` of its border to cells not in it are walls (the region higher by
    more than the smooth-join bound): a bridge deck or a roof reached over a ramp has walls
    along most of its border, an embankment has none;
-4. **surface**: the ground cells' lowest points, empty cells filled by linear
-   interpolation (nearest cell outside their hull), bilinear between cell centres;
+   **plateaus**: the surface's cells are joined into parts by smooth continuation; a
+   part other than the largest whose border (its uphill side left out) is mostly walls,
+   with more walls than uphill border, is taken back (a roof the cut kept, a roof on
+   the data's edge) (:func:`reject_plateaus`);
+4. **surface**: the TIN of the ground cells' lowest points at their own positions (a
+   grid of cell centres would lie under a slope by ``slope * cell / 2``), empty cells
+   filled by linear interpolation (nearest cell outside their hull);
 5. **test**: a point is ground when its height above the surface lies within
    ``[-(below + s * slope), tolerance + s * slope]``, ``slope`` the surface's gradient
    at the point (Pingel et al. 2013's slope-dependent elevation threshold).
@@ -34,10 +43,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._terrain_kernels import cell_lowest, grid_bilinear
+from ._terrain_kernels import cell_lowest, fill_triangles, grid_bilinear
 
 __all__ = ["TERRAIN_DEFAULTS", "TerrainModel", "TerrainRefinement", "drop_bumps",
-           "grow_ground", "refine_terrain", "reject_walled", "terrain_step"]
+           "drop_opened", "grow_ground", "refine_terrain", "reject_plateaus", "reject_walled",
+           "terrain_step"]
 
 #: The terrain step's lengths in metres (slopes are dimensionless): the grid cell, the
 #: tolerance on flat ground and its growth per unit slope (the values of Pingel et al.
@@ -45,9 +55,12 @@ __all__ = ["TERRAIN_DEFAULTS", "TerrainModel", "TerrainRefinement", "drop_bumps"
 #: (a step of 0.3 m from the extrapolated terrain, a rise of at most 45 degrees from a
 #: neighbour), the depth allowed under the surface, and the largest share of walls on the
 #: border of a grown region, and how many of its 8 neighbours a seed cell must rise
-#: above steeply to be dropped as a bump.
+#: above steeply to be dropped as a bump; the largest share of walls on the border of a
+#: part of the surface; the slope and largest radius of the seeds' progressive opening
+#: (steeper than SMRF's 0.15: the growth, not the opening, decides on steep ground).
 TERRAIN_DEFAULTS = {"cell": 2.0, "tolerance": 0.5, "slope_tolerance": 1.25, "step": 0.3,
-                    "max_slope": 1.0, "below": 1.0, "wall_fraction": 0.2, "bump_sides": 5}
+                    "max_slope": 1.0, "below": 1.0, "wall_fraction": 0.2, "bump_sides": 5,
+                    "plateau_fraction": 0.5, "open_slope": 0.5, "open_radius": 18.0}
 
 #: The eight neighbour offsets of a cell.
 _DIRS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
@@ -66,14 +79,24 @@ class TerrainModel:
     cell : float
         Cell side (coordinate units); cell ``(i, j)`` covers
         ``[i cell, (i + 1) cell) x [j cell, (j + 1) cell)``.
+    tin : callable, optional
+        The surface as a TIN (``f(xy / cell) -> z``): the lowest ground point of every surface
+        cell at its own position, the filled cells at their centres. A cell-centre grid
+        of lowest points lies under a slope by about ``slope * cell / 2``; the TIN passes
+        through the ground points themselves.
     """
 
     grid: np.ndarray
     slope: np.ndarray
     cell: float
+    tin: object = None
 
     def __call__(self, xy) -> np.ndarray:
-        """Elevation of the surface at `xy` (bilinear between cell centres)."""
+        """Elevation of the surface at `xy`: linear on the TIN of the cells' lowest
+        ground points at their own positions when there is one, else bilinear between
+        cell centres."""
+        if self.tin is not None:  # built in cell units (see _tin)
+            return self.tin(np.ascontiguousarray(xy, dtype=np.float64) / self.cell)
         return self.at(xy, self.grid)
 
     def slope_at(self, xy) -> np.ndarray:
@@ -105,6 +128,8 @@ class TerrainRefinement:
     surface : TerrainModel
     grown_cells, rejected_cells : int
         Cells the growth added and kept, and cells it added but the wall test took back.
+    plateau_cells : int
+        Cells of the moments' ground taken back as walled parts (:func:`reject_plateaus`).
     """
 
     ground: np.ndarray
@@ -113,6 +138,7 @@ class TerrainRefinement:
     surface: TerrainModel
     grown_cells: int
     rejected_cells: int
+    plateau_cells: int = 0
 
 
 def _shift(a, di, dj, fill=np.inf):
@@ -122,6 +148,33 @@ def _shift(a, di, dj, fill=np.inf):
     h, w = a.shape
     out[max(di, 0):h + min(di, 0), max(dj, 0):w + min(dj, 0)] = \
         a[max(-di, 0):h + min(-di, 0), max(-dj, 0):w + min(-dj, 0)]
+    return out
+
+
+def drop_opened(ground_z, *, cell, slope, max_radius):
+    """Seed cells standing above a progressive opening of the seeds become empty.
+
+    The progressive morphological filter of SMRF (Pingel et al. 2013) on the seed grid:
+    openings with square windows of radius 1, 2, ... cells up to `max_radius`
+    (coordinate units), each of the previous one; a cell is dropped when it stands more
+    than ``slope * radius`` above an opening. It removes roofs narrower than the largest
+    window that the moments cut kept; it also removes steep ground, which the growth puts
+    back by smooth continuation (a roof it reaches that way is walled).
+    """
+    from scipy import ndimage as ndi
+
+    have = np.isfinite(ground_z)
+    if have.sum() < 3:
+        return ground_z
+    idx = ndi.distance_transform_edt(~have, return_distances=False, return_indices=True)
+    last = ground_z[tuple(idx)]
+    drop = np.zeros(ground_z.shape, bool)
+    for r in range(1, max(1, int(round(max_radius / cell))) + 1):
+        opened = ndi.grey_opening(last, size=(2 * r + 1, 2 * r + 1))
+        drop |= have & (ground_z - opened > slope * r * cell)
+        last = opened
+    out = ground_z.copy()
+    out[drop] = np.inf
     return out
 
 
@@ -238,34 +291,173 @@ def reject_walled(grown_z, ground_z, lowest, *, cell, step, max_rise, wall_fract
     return out, int(drop.sum())
 
 
+def reject_plateaus(surface_z, lowest, *, cell, step, max_rise, fraction, rounds=3):
+    """:func:`_reject_plateaus_once` repeated `rounds` times (a roof in steps loses its
+    lowest level first, which walls the next level). Returns ``(surface_z, rejected)``."""
+    total = 0
+    for _ in range(rounds):
+        surface_z, rejected = _reject_plateaus_once(surface_z, lowest, cell=cell, step=step,
+                                                    max_rise=max_rise, fraction=fraction)
+        total += rejected
+        if not rejected:
+            break
+    return surface_z, total
+
+
+def _reject_plateaus_once(surface_z, lowest, *, cell, step, max_rise, fraction):
+    """Take back the parts of the surface standing on walls along most of their border.
+
+    The surface cells are joined into parts by smooth 4-neighbour pairs (either cell
+    within `step` of the extrapolation of the other and the cell beyond it, as the
+    growth, and at most ``step + max_rise * cell`` apart). A border pair of a part is one
+    of its cells and an 8-neighbour outside it holding points, compared with where the
+    part would continue (the extrapolation of the cell and the part's cell behind it,
+    the cell itself when that is not in the part): a wall when the neighbour's lowest
+    point lies more than ``3 step`` under it, uphill when more than that above it,
+    smooth otherwise. Every part but the largest with walls on more than `fraction` of
+    its non-uphill border and more walls than uphill pairs is removed: a roof the
+    moments cut kept as ground (a roof on the data's edge, a large flat roof, a flat
+    roof set into a slope), which :func:`reject_walled` does not see because the growth
+    did not add it. The data's edge is no border, so a roof cut by the edge is judged on
+    its inner sides; a terrace is walled on its downhill side only.
+
+    Returns
+    -------
+    surface_z : (nx, ny) ndarray
+        Without the rejected parts.
+    rejected : int
+        Cells taken back.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    have = np.isfinite(surface_z)
+    if have.sum() < 2:
+        return surface_z, 0
+    nx, ny = surface_z.shape
+    index = np.arange(nx * ny).reshape(nx, ny)
+    rows, cols = [], []
+    for di, dj in ((0, 1), (1, 0)):  # 4-neighbours, each unordered pair once
+        n_z = _shift(surface_z, di, dj)
+        n_i = _shift(index, di, dj, fill=-1)
+        # the pair joins when either cell continues the other smoothly: within `step`
+        # of the extrapolation of the other and the cell beyond it (as the growth)
+        back = _shift(surface_z, -di, -dj)   # beyond this cell, away from the neighbour
+        far = _shift(surface_z, 2 * di, 2 * dj)  # beyond the neighbour
+        bound = step + max_rise * cell
+        with np.errstate(invalid="ignore"):
+            fwd = np.where(np.isfinite(back), 2 * surface_z - back, surface_z)
+            bwd = np.where(np.isfinite(far), 2 * n_z - far, n_z)
+            ok = (have & np.isfinite(n_z) & (np.abs(surface_z - n_z) <= bound)
+                  & ((np.abs(n_z - fwd) <= step) | (np.abs(surface_z - bwd) <= step)))
+        rows.append(index[ok])
+        cols.append(n_i[ok])
+    r = np.concatenate(rows)
+    c = np.concatenate(cols)
+    graph = coo_matrix((np.ones(r.size, np.int8), (r, c)), shape=(nx * ny, nx * ny))
+    _, lab = connected_components(graph, directed=False)
+    label = np.where(have, lab.reshape(nx, ny), -1)
+    # parts numbered 0..n-1 over the surface cells only
+    uniq, part = np.unique(label[have], return_inverse=True)
+    n = uniq.size
+    if n < 2:
+        return surface_z, 0
+    part_grid = np.full((nx, ny), -1, np.int64)
+    part_grid[have] = part
+    walls = np.zeros(n)
+    smooth = np.zeros(n)
+    uphill = np.zeros(n)
+    for di, dj in _DIRS:
+        n_low = np.minimum(_shift(lowest, di, dj), _shift(surface_z, di, dj))
+        n_part = _shift(part_grid, di, dj, fill=-2)
+        back = _shift(surface_z, -di, -dj)
+        b_part = _shift(part_grid, -di, -dj, fill=-2)
+        # where the part would continue: the extrapolation of the cell and the one
+        # behind it when that is in the part, the cell itself otherwise
+        with np.errstate(invalid="ignore"):
+            pred = np.where(b_part == part_grid, 2 * surface_z - back, surface_z)
+        bound = 3 * step
+        border = have & (n_part != part_grid) & np.isfinite(n_low)
+        with np.errstate(invalid="ignore"):
+            dz = pred - n_low
+        walls += np.bincount(part_grid[border & (dz > bound)], minlength=n)
+        smooth += np.bincount(part_grid[border & (np.abs(dz) <= bound)], minlength=n)
+        uphill += np.bincount(part_grid[border & (dz < -bound)], minlength=n)
+    size = np.bincount(part, minlength=n)
+    # walls on most of the border that is not uphill of the part (a roof set into a
+    # slope has a higher neighbour on one side, as a terrace under a retaining wall
+    # has), and more walls than uphill border (a terrace is walled on its downhill side
+    # only)
+    bad = (walls > fraction * np.maximum(walls + smooth, 1)) & (walls > uphill)
+    bad[np.argmax(size)] = False
+    drop = have & bad[np.maximum(part_grid, 0)]
+    out = surface_z.copy()
+    out[drop] = np.inf
+    return out, int(drop.sum())
+
+
 def _fill(grid):
     """Empty (``inf``) cells filled by linear interpolation in the Delaunay triangulation
     of the filled cells on their rims (the only cells a triangle over a hole joins), the
-    nearest filled cell outside the rims' hull."""
+    nearest filled cell outside the rims' hull.
+
+    The triangles are rasterised (:func:`~._terrain_kernels.fill_triangles`) rather than
+    the holes located in them: on a grid the holes lie on triangle edges, where a point
+    location falls back to a search of every triangle.
+    """
     from scipy import ndimage as ndi
-    from scipy.interpolate import griddata
+    from scipy.spatial import Delaunay
 
     empty = ~np.isfinite(grid)
     if not empty.any() or empty.all():
         return grid
     out = grid.copy()
     rim = ~empty & ndi.binary_dilation(empty, structure=np.ones((3, 3), bool))
-    full = np.argwhere(rim)
-    holes = np.argwhere(empty)
-    val = np.full(len(holes), np.nan)
+    full = np.argwhere(rim).astype(np.float64)
+    todo = empty.copy()
     if len(full) >= 3 and np.ptp(full[:, 0]) > 0 and np.ptp(full[:, 1]) > 0:
         try:
-            val = griddata(full, grid[rim], holes, method="linear")
+            tri = Delaunay(full).simplices.astype(np.int64)
         except Exception:  # noqa: BLE001 - degenerate (collinear) rims: nearest below
-            pass
-    idx = ndi.distance_transform_edt(empty, return_distances=False, return_indices=True)
-    nearest = grid[tuple(idx)][empty]
-    out[empty] = np.where(np.isfinite(val), val, nearest)
+            tri = None
+        if tri is not None:
+            fill_triangles(tri, full, np.ascontiguousarray(grid[rim]), out, todo)
+    if todo.any():
+        idx = ndi.distance_transform_edt(empty, return_distances=False,
+                                         return_indices=True)
+        out[todo] = grid[tuple(idx)][todo]
     return out
 
 
+def _tin(xy, z, surface_z, grid, cell):
+    """TIN of the surface cells' lowest points at their own positions and of the filled
+    cells' centres (:class:`TerrainModel`)."""
+    from ._surface import TinSurface
+
+    nx, ny = grid.shape
+    ij = np.floor(xy / cell).astype(np.int64)
+    np.clip(ij[:, 0], 0, nx - 1, out=ij[:, 0])
+    np.clip(ij[:, 1], 0, ny - 1, out=ij[:, 1])
+    flat = ij[:, 0] * ny + ij[:, 1]
+    on = np.flatnonzero(z == surface_z.ravel()[flat])
+    cells, first = np.unique(flat[on], return_index=True)
+    pick = on[first]
+    filled = np.flatnonzero(~np.isfinite(surface_z).ravel())
+    # in cell units rounded to 1e-9 cell: the vertices are often co-circular (the filled
+    # cells' centres), and which diagonal the triangulation takes must not depend on the
+    # last bits of the coordinates, i.e. on the file's unit
+    centres = np.c_[filled // ny, filled % ny] + 0.5
+    P = np.round(np.r_[xy[pick] / cell, centres], 9)
+    V = np.r_[z[pick], grid.ravel()[filled]]
+    if len(P) < 3:
+        return None
+    return TinSurface(P, V, 1.0)
+
+
 def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max_rise,
-                   below, wall_fraction=0.2, bump_sides=5) -> TerrainRefinement:
+                   below, wall_fraction=0.2, bump_sides=5,
+                   plateau_fraction=0.5, open_slope=0.5,
+                   open_radius=0.0) -> TerrainRefinement:
     """Grow the ground over smooth continuations, then test every point against it.
 
     Parameters
@@ -293,6 +485,13 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
     bump_sides : int
         Ground cells rising steeply above at least this many of their 8 ground
         neighbours leave the seeds first (:func:`drop_bumps`).
+    plateau_fraction : float
+        Largest share of walls on the border of a smooth part of the surface other than
+        the largest (:func:`reject_plateaus`; 1 switches it off).
+    open_slope, open_radius : float
+        Slope (vertical units per horizontal unit) and largest window radius (horizontal
+        units) of the progressive opening that seed cells must not stand above
+        (:func:`drop_opened`; radius 0 switches it off).
 
     Returns
     -------
@@ -319,19 +518,29 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
         ground_z = lowest
     ground_z = drop_bumps(ground_z, cell=cell, step=step, max_rise=max_rise,
                           min_sides=bump_sides)
-    grown_z = grow_ground(lowest, ground_z, cell=cell, step=step, max_rise=max_rise)
+    seeds_z = ground_z
+    if open_radius > 0:
+        seeds_z = drop_opened(ground_z, cell=cell, slope=open_slope, max_radius=open_radius)
+    grown_z = grow_ground(lowest, seeds_z, cell=cell, step=step, max_rise=max_rise)
+    # the wall test judges what the growth added beyond the moments' ground: ground the
+    # opening took away and the growth reached again (a wide terrace above a retaining
+    # wall, joined by a ramp) is the cut's ground, not a deck
     surface_z, rejected = reject_walled(grown_z, ground_z, lowest, cell=cell, step=step,
                                         max_rise=max_rise, wall_fraction=wall_fraction)
+    surface_z, plateaus = reject_plateaus(surface_z, lowest, cell=cell, step=step,
+                                          max_rise=max_rise, fraction=plateau_fraction)
     grown = int((np.isfinite(surface_z) & ~np.isfinite(ground_z)).sum())
     grid = _fill(surface_z)
     gx, gy = np.gradient(grid, cell) if min(grid.shape) > 1 else (np.zeros_like(grid),) * 2
-    model = TerrainModel(grid=grid, slope=np.hypot(gx, gy), cell=float(cell))
+    model = TerrainModel(grid=grid, slope=np.hypot(gx, gy), cell=float(cell),
+                         tin=_tin(xy, z, surface_z, grid, cell))
     height = np.round(z - model(xy), 6)
     extra = slope_tolerance * model.slope_at(xy)
     upper = tolerance + extra
     keep = (height <= upper) & (height >= -(below + extra))
     return TerrainRefinement(ground=keep, height=height, tolerance=upper, surface=model,
-                             grown_cells=grown, rejected_cells=rejected)
+                             grown_cells=grown, rejected_cells=rejected,
+                             plateau_cells=plateaus)
 
 
 def terrain_step(xy, z, ground, *, ux=1.0, uz=1.0):
@@ -349,5 +558,6 @@ def terrain_step(xy, z, ground, *, ux=1.0, uz=1.0):
                        slope_tolerance=d["slope_tolerance"] * aspect / uz,
                        step=d["step"] / uz, max_rise=d["max_slope"] / aspect,
                        below=d["below"] / uz, wall_fraction=d["wall_fraction"],
-                       bump_sides=d["bump_sides"])
+                       bump_sides=d["bump_sides"], plateau_fraction=d["plateau_fraction"],
+                       open_slope=d["open_slope"] / aspect, open_radius=d["open_radius"] / ux)
     return t.ground, t.height, t.surface, t.tolerance

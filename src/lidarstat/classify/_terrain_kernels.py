@@ -7,7 +7,7 @@ from numba import prange
 
 from .._shared._jit import njit, njit_parallel
 
-__all__ = ["cell_lowest", "grid_bilinear"]
+__all__ = ["cell_lowest", "fill_triangles", "grid_bilinear"]
 
 
 @njit
@@ -45,3 +45,39 @@ def grid_bilinear(xy, grid, cell, out):  # pragma: no cover - compiled
         fv = v - j0
         out[i] = ((1 - fu) * (1 - fv) * grid[i0, j0] + fu * (1 - fv) * grid[i1, j0]
                   + (1 - fu) * fv * grid[i0, j1] + fu * fv * grid[i1, j1])
+
+
+@njit
+def fill_triangles(tri, ij, val, grid, empty):  # pragma: no cover - compiled
+    """Linear interpolation inside every triangle of a triangulation of grid cells.
+
+    ``tri`` (T, 3) vertex indices into ``ij`` (integer cell indices, as float) holding
+    ``val``; every cell of ``empty`` inside a triangle (edges included) gets the linear
+    interpolation of the triangle's vertex values, written to ``grid``; cells outside every
+    triangle are left as they are. Visits the cells of each triangle's bounding box, so
+    the cost is the triangles' area, not (holes x triangles) as a point location is.
+    """
+    nx, ny = grid.shape
+    for t in range(tri.shape[0]):
+        a, b, c = tri[t, 0], tri[t, 1], tri[t, 2]
+        x0, y0 = ij[a, 0], ij[a, 1]
+        x1, y1 = ij[b, 0], ij[b, 1]
+        x2, y2 = ij[c, 0], ij[c, 1]
+        det = (y1 - y2) * (x0 - x2) + (x2 - x1) * (y0 - y2)
+        if det == 0.0:
+            continue
+        lo_i = max(np.int64(min(x0, x1, x2)), 0)
+        hi_i = min(np.int64(max(x0, x1, x2)), nx - 1)
+        lo_j = max(np.int64(min(y0, y1, y2)), 0)
+        hi_j = min(np.int64(max(y0, y1, y2)), ny - 1)
+        for i in range(lo_i, hi_i + 1):
+            for j in range(lo_j, hi_j + 1):
+                if not empty[i, j]:
+                    continue
+                l0 = ((y1 - y2) * (i - x2) + (x2 - x1) * (j - y2)) / det
+                l1 = ((y2 - y0) * (i - x2) + (x0 - x2) * (j - y2)) / det
+                l2 = 1.0 - l0 - l1
+                eps = -1e-9
+                if l0 >= eps and l1 >= eps and l2 >= eps:
+                    grid[i, j] = l0 * val[a] + l1 * val[b] + l2 * val[c]
+                    empty[i, j] = False
