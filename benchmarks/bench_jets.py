@@ -14,7 +14,13 @@ jet with a degree-4 Monge form at every point, on all cores. Timed:
 * ``lidarstat_radius_full``: the fused radius driver ``jets(radius=r)`` with r calibrated to
   a median of 50 neighbours, whole call including the neighbour search and the tests;
 * ``lidarstat_auto_full``: ``jets()`` at the automatic scale (no radius, no k: the rung
-  selection on the seeds and the final fit at every point's radius), whole call.
+  selection on the seeds and the final fit at every point's radius), whole call;
+* ``lidarstat_ridges_radius``, ``lidarstat_ridges_auto``: ``ridges`` (jets, tests,
+  crossings, lines) at the fixed radius and at its automatic scale (the k'' criterion,
+  its simulated null included), whole call.
+
+The lidarstat configurations alternate within each repeat (the machine may be shared:
+``machine_shared`` in the results; compare ratios of the same run).
 
 Each lidarstat timing runs in a fresh subprocess after a cold run has filled a
 benchmark-private Numba cache (compilation is not timed). Ratios are CGAL time / lidarstat
@@ -60,6 +66,7 @@ def child(args):
     """Time one lidarstat configuration on the cloud in args.tmp; print JSON."""
     from lidarstat.features import fit_jets, jets
     from lidarstat.neighbors import Neighborhoods
+    from lidarstat.segment import ridges
 
     tmp = Path(args.tmp)
     xyz = np.load(tmp / "xyz.npy")
@@ -71,6 +78,14 @@ def child(args):
                           "radius_median": float(np.median(res["radius"])),
                           "radii": res.meta["radii"],
                           "points_per_radius": res.meta["points_per_radius"]}))
+        return
+    if args.child in ("ridges_radius", "ridges_auto"):
+        kw = {"radius": args.radius} if args.child == "ridges_radius" else {}
+        t = time.perf_counter()
+        res = ridges(xyz, sigma=0.02, **kw)
+        dt = time.perf_counter() - t
+        print(json.dumps({"seconds": dt, "ridge_points": int((res["ridge"] > 0).sum()),
+                          "radius_median": float(np.median(res.jets.fit.bandwidth))}))
         return
     if args.child == "radius_full":
         t = time.perf_counter()
@@ -143,12 +158,20 @@ def main():
            "date": datetime.datetime.now().isoformat(timespec="seconds"),
            "machine": platform.platform(), "cpus": os.cpu_count()}
     # cold runs fill the Numba cache (not timed)
-    modes = ("cgal_equivalent", "full", "radius_full", "auto_full")
+    modes = ("cgal_equivalent", "full", "radius_full", "auto_full", "ridges_radius",
+             "ridges_auto")
     for mode in modes:
         _run_child(mode, tmp, radius)
+    all_runs = {mode: [] for mode in modes}
+    for _ in range(args.repeats):  # alternate the configurations
+        for mode in modes:
+            all_runs[mode].append(_run_child(mode, tmp, radius))
+    res["machine_shared"] = True
     for mode in modes:
-        runs = [_run_child(mode, tmp, radius) for _ in range(args.repeats)]
+        runs = all_runs[mode]
         res[f"lidarstat_{mode}"] = float(np.median([r["seconds"] for r in runs]))
+        if mode.startswith("ridges"):
+            res[mode] = runs[0]
         if mode == "radius_full":
             res["radius_median_neighbors"] = runs[0]["median_neighbors"]
         if mode == "auto_full":
@@ -182,7 +205,9 @@ def main():
             ("lidarstat fit_jets, tricube + SEs (kNN given)", res["lidarstat_full"]),
             ("lidarstat jets(radius), search + fit + tests", res["lidarstat_radius_full"]),
             ("lidarstat jets(), automatic scale, search + fit + tests",
-             res["lidarstat_auto_full"])]
+             res["lidarstat_auto_full"]),
+            ("lidarstat ridges(radius)", res["lidarstat_ridges_radius"]),
+            ("lidarstat ridges(), automatic scale", res["lidarstat_ridges_auto"])]
     print(f"\n{args.points} points, k = {K}, {os.cpu_count()} cpus\n")
     print("| run | seconds | CGAL / run |")
     print("|---|---|---|")

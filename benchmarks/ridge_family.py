@@ -34,8 +34,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
 sys.path.insert(0, str(HERE.parent / "tests" / "independent"))
 
-from indep_ridges import (line_recall, make_null_scene, make_ridge_scene,  # noqa: E402
-                          ridge_precision)
+from indep_ridges import line_recall, make_null_scene, make_ridge_scene, ridge_precision  # noqa: E402
 
 from lidarstat.segment import ridges  # noqa: E402
 
@@ -71,6 +70,25 @@ def run_null_scene(kind, seed):
                          ridge_points=int((res["ridge"] > 0).sum()), lines=len(res.lines),
                          umbilic=round(float(res["umbilic"].mean()), 4))
     return row
+
+
+def scale_null(rungs=5, samples=3000):
+    """Quantiles of the automatic scale's k'' statistic on simulated planes, per rung (the
+    calibration pools the smallest rungs), and the calibrated threshold at alpha 0.01."""
+    from lidarstat.features._jet_scale import NULL_RUNGS, SCALE_RUNGS, _null_sample, null_quantile
+    from lidarstat.segment._ridges import RIDGE_SCALE
+
+    kw = dict(degree=4, weight="tricube", min_neighbors=16)
+    out = {"pooled_rungs": NULL_RUNGS,
+           "threshold_alpha_0.01": round(null_quantile(RIDGE_SCALE, 0, 0.01 / SCALE_RUNGS, kw), 3),
+           "normal_bonferroni_alpha_0.01": 3.189, "rungs": []}
+    for j in range(rungs):
+        s = _null_sample(RIDGE_SCALE, j, 4, "tricube", 16, samples=samples, seed=99)
+        q = np.quantile(s, [0.5, 0.99, 0.998])
+        out["rungs"].append(dict(rung=j, samples=int(s.size), q50=round(float(q[0]), 3),
+                                 q99=round(float(q[1]), 3), q998=round(float(q[2]), 3)))
+        print(out["rungs"][-1], flush=True)
+    return out
 
 
 def summarise(rows, nulls):
@@ -119,13 +137,14 @@ def main(argv=None):
             print(nulls[-1], flush=True)
     summary = summarise(rows, nulls)
     print(json.dumps(summary, indent=1))
+    null = scale_null()
     if not args.no_write:
         path = Path(args.out)
         data = json.loads(path.read_text()) if path.exists() else {}
         if isinstance(data, list):
             data = {"scenes": data}
         data["family"] = {"summary": summary, "scenes": rows, "null_scenes": nulls,
-                          "seeds": args.seeds}
+                          "seeds": args.seeds, "scale_null": null, "machine_shared": True}
         path.write_text(json.dumps(data, indent=1))
         print(f"written {path}")
 

@@ -52,8 +52,9 @@ TOO_FEW = 1
 SINGULAR = 2
 SKIPPED = 255
 
-#: stats columns: Q, sum w, tr(B), tr(B^2), sqrt cond_1(equilibrated N), bandwidth, A0
-NSTAT = 7
+#: stats columns: Q, sum w, tr(B), tr(B^2), sqrt cond_1(equilibrated N), bandwidth, A0,
+#: distance from the point to the (unweighted) centroid of its neighbours over the bandwidth
+NSTAT = 8
 
 
 @njit
@@ -146,6 +147,14 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
         p += 1
     if p < min_nb or p <= m:
         return TOO_FEW, p
+    ux = 0.0
+    uy = 0.0
+    uz = 0.0
+    for t in range(p):
+        ux += buf[t, 0]
+        uy += buf[t, 1]
+        uz += buf[t, 2]
+    stats_out[7] = math.sqrt(ux * ux + uy * uy + uz * uz) / (p * b)
     mx /= sw
     my /= sw
     mz /= sw

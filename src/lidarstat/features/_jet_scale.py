@@ -4,16 +4,20 @@ test that matters detects its quantity at the noise (the bandwidth reasoning of 
 A ladder of radii ``r_j = r_0 sqrt(2)^j`` (each rung doubles the expected number of
 neighbours; ``r_0`` holds about :data:`BASE_NEIGHBORS` points at the cloud's density). On
 seed points (one per cube of side ``r_0``) the jets are fitted rung by rung, smallest
-first; a seed keeps the first rung at which its test statistic exceeds the one-sided
-normal quantile at ``alpha / (J m)`` (Bonferroni over the J rungs and the criterion's m
-one-sided tails, so that a seed with nothing to detect picks a rung by chance with
-probability at most ``alpha``); a seed where no rung detects anything takes the smallest
-rung (nothing to gain by smoothing). Every point takes the rung of its nearest seed, and
-the jets are fitted once more at the chosen radius of every point.
+first; a seed keeps the first rung at which its test statistic exceeds its null quantile
+at ``alpha / J`` (normal, Bonferroni over the criterion's tails too, or simulated for a
+calibrated criterion: :func:`null_quantile`) plus a power term, so that a seed with
+nothing to detect picks a rung by chance with probability at most ``alpha``. The climb
+stops at the first rung whose jet the chi-square test rejects (eq. 7: a wider
+neighbourhood only adds model bias) or whose neighbourhood is one-sided (a border); a
+seed where no rung detects anything takes the smallest rung (nothing to gain by
+smoothing). Every point takes the smallest rung of the detecting seeds within ``r_0``,
+else its nearest seed's, and the jets are fitted once more at every point's radius.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -21,7 +25,7 @@ import numpy as np
 
 from ..neighbors import CellIndex, knn_neighbors
 from ..stats import normal_quantile, z_critical
-from ._jet_fit import _fit_cells, _to_fit
+from ._jet_fit import MONGE_NAMES, _fit_cells, _to_fit
 
 #: Expected neighbours of the smallest rung: three times the 16 a degree-4 jet needs.
 BASE_NEIGHBORS = 48
@@ -31,6 +35,10 @@ SCALE_RUNGS = 7
 RUNG_FACTOR = math.sqrt(2.0)
 #: Power at which the estimate must be detectable at the chosen rung.
 SCALE_POWER = 0.8
+#: Largest distance from a point to its neighbours' centroid, over the radius, of a
+#: neighbourhood the scale may grow from: a half disc (a straight border) has 0.42, a
+#: whole disc of 48 random points exceeds 0.25 with probability about 0.002.
+ONE_SIDED = 0.35
 
 
 @dataclass(frozen=True)
@@ -39,12 +47,16 @@ class JetScaleCriterion:
 
     ``statistic(fit, fields)`` returns, per fitted point, a statistic that is one-sided
     standard normal under the null (nothing to detect) for each of ``tails`` tails; a rung
-    is chosen when it exceeds ``z_{1 - alpha / (J tails)}``.
+    is chosen when it exceeds ``z_{1 - alpha / (J tails)}``. With ``calibrate`` the
+    statistic's null distribution is not taken as normal but simulated
+    (:func:`null_quantile`): the rung is chosen when it exceeds the simulated
+    ``1 - alpha / J`` quantile.
     """
 
     name: str
     statistic: object
     tails: int
+    calibrate: bool = False
 
 
 def _curvature_statistic(fit, fields):
@@ -121,11 +133,15 @@ def choose_rungs(points, radii, criterion, alpha, tests, kw, block_size=131072):
     n = points.shape[0]
     seeds = scale_seeds(points, float(radii[0]))
     nr = len(radii)
-    z = z_critical(alpha / (nr * criterion.tails), sides=1) + normal_quantile(SCALE_POWER)
+    z = [null_quantile(criterion, j, alpha / nr, kw) + normal_quantile(SCALE_POWER)
+         if criterion.calibrate else
+         z_critical(alpha / (nr * criterion.tails), sides=1) + normal_quantile(SCALE_POWER)
+         for j in range(nr)]
     chosen = np.full(seeds.size, -1, np.int64)
+    stopped = np.zeros(seeds.size, bool)
     stat = np.full((seeds.size, nr), np.nan)
     for j in range(nr):
-        open_ = chosen < 0
+        open_ = (chosen < 0) & ~stopped
         if not open_.any():
             break
         rows = seeds[open_]
@@ -139,8 +155,16 @@ def choose_rungs(points, radii, criterion, alpha, tests, kw, block_size=131072):
         s = np.asarray(criterion.statistic(sub, fields), dtype=np.float64)
         s = np.where(sub.status == 0, s, np.nan)
         stat[open_, j] = s
-        hit = np.flatnonzero(open_)[s > z]
+        # the jet must fit at the chosen radius (eq. 7): a rejected jet stops the climb
+        # (a wider neighbourhood only adds model bias: a crease, the far side of a
+        # feature); a seed whose jet is rejected before anything is detected keeps r_0
+        # One-sided neighbourhoods (a border, an occlusion) stop it too: their jets
+        # extrapolate, and the statistic's null distribution is that of whole ones.
+        whole = sub.centroid <= ONE_SIDED
+        fits = np.asarray(fields["chi2_pass"], dtype=bool) & whole
+        hit = np.flatnonzero(open_)[(s > z[j]) & whole]
         chosen[hit] = j
+        stopped[np.flatnonzero(open_)[~fits]] = True
     detected = chosen >= 0
     chosen[~detected] = 0
     return spread_rungs(points, seeds, chosen, detected, float(radii[0]), nr), seeds, stat
@@ -172,3 +196,87 @@ def spread_rungs(points, seeds, chosen, detected, reach, nr):
         _, near = cKDTree(points[seeds]).query(points[rest])
         rung[rest] = chosen[near]
     return rung
+
+
+#: Null samples of a calibrated criterion per simulated rung, and the simulated rungs
+#: (the smallest: the null of a ratio statistic depends on the neighbourhood's pattern,
+#: which is the same at every rung up to scale and count; ``benchmarks/ridge_scale_null.py``
+#: measures its quantiles at all seven).
+NULL_SAMPLES = 6000
+NULL_RUNGS = 2
+
+
+def _unit_fields(fit, sigma):
+    """Monge coefficients and their standard deviations at height noise `sigma`."""
+    sd = sigma * np.sqrt(np.maximum(fit.monge_cofactor, 0.0))
+    out = {}
+    for j, name in enumerate(MONGE_NAMES):
+        out[name] = fit.monge[:, j]
+        out[f"{name}_sd"] = sd[:, j]
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _null_sample(criterion, rung, degree, weight, min_neighbors, samples=NULL_SAMPLES,
+                 seed=20250):
+    """Sorted simulated null values of ``criterion.statistic`` at rung `rung` of the ladder.
+
+    The null is a plane with normal noise along its normal. The statistics the scale
+    tests (ratios of a coefficient to its standard deviation) do not depend on the noise
+    level or the plane's orientation there, only on the pattern of the neighbourhood: a
+    jittered unit grid (each node moved uniformly within its cell) with the ladder of the
+    data (:func:`radius_ladder` of the pattern itself). The statistic is read at
+    `samples` query points on a square grid of step ``1.25 r`` (neighbourhoods that share
+    few points), one patch of the pattern with one noise draw.
+    """
+    rng = np.random.default_rng(seed + rung)
+    r = float(radius_ladder(_pattern(rng, 48))[rung])
+    sigma = 1e-3
+    m = int(math.ceil(math.sqrt(samples)))
+    step = 1.25 * r
+    side = int(math.ceil(m * step + 2 * r)) + 2
+    pts = _pattern(rng, side)
+    pts[:, 2] = rng.normal(0.0, sigma, pts.shape[0])
+    grid = r + 1.0 + step * (np.arange(m) + 0.5)
+    gx, gy = [a.ravel()[:samples] for a in np.meshgrid(grid, grid)]
+    from scipy.spatial import cKDTree
+
+    _, q = cKDTree(pts[:, :2]).query(np.c_[gx, gy])
+    q = np.unique(q)
+    mask = np.zeros(pts.shape[0], bool)
+    mask[q] = True
+    kw = dict(degree=degree, monge_degree=4, weight=weight, sensor=None,
+              min_neighbors=min_neighbors, standard_errors=True)
+    out = _fit_cells(CellIndex(pts, r), active=mask, block_size=131072, progress=None, **kw)
+    fit = _to_fit({key: val[q] for key, val in out.items()}, degree, 4, weight)
+    stat = np.asarray(criterion.statistic(fit, _unit_fields(fit, sigma)), dtype=np.float64)
+    return np.sort(stat[fit.status == 0])
+
+
+def _pattern(rng, side):
+    """A jittered unit grid of `side` x `side` nodes from the origin (z = 0)."""
+    g = np.arange(side, dtype=np.float64)
+    x, y = [a.ravel() for a in np.meshgrid(g, g)]
+    return np.c_[x + rng.uniform(-0.5, 0.5, x.size), y + rng.uniform(-0.5, 0.5, y.size),
+                 np.zeros(x.size)]
+
+
+def null_quantile(criterion, rung, prob, kw):
+    """The upper `prob` quantile of a criterion's statistic under the null at a rung.
+
+    Empirical from the pooled :func:`_null_sample` of the ``NULL_RUNGS`` smallest rungs
+    down to ``prob = 20 / samples``; below that the
+    excesses over that quantile are taken as exponential (their mean fitted on the top
+    20 samples), which is conservative for a statistic with a normal-like tail.
+    """
+    del rung  # the null does not depend on the rung (module docstring)
+    s = np.sort(np.concatenate([
+        _null_sample(criterion, j, int(kw["degree"]), str(kw["weight"]),
+                     int(kw["min_neighbors"])) for j in range(NULL_RUNGS)]))
+    m = s.size
+    p0 = 20.0 / m
+    if prob >= p0:
+        return float(np.quantile(s, 1.0 - prob))
+    t0 = float(s[m - 21])
+    excess = float(np.mean(s[m - 20:] - t0))
+    return t0 + excess * math.log(p0 / prob)

@@ -13,7 +13,7 @@ from .._shared.validation import check_points, check_scalar
 from ..errors import InsufficientNeighborsError, InvalidParameterError
 from ..io import register_field_descriptions
 from ..neighbors import CellIndex, find_duplicates, knn_neighbors, map_rows, run_on_unique
-from ..stats import variance_test_satterthwaite
+from ..stats import chi2_quantile, variance_test_satterthwaite
 from ._jet_fit import (
     _N_MONGE_OF,
     MONGE_NAMES,
@@ -175,9 +175,19 @@ def _hood_text(meta, fields):
 
 
 def _estimate_sigma(fit, ok, func):
+    """Median over the fitted jets of the median-unbiased variance of each jet.
+
+    ``Q / (c sigma^2) ~ chi2(nu)`` (Satterthwaite, ``c = tr(B^2)/tr(B)``, ``nu c = tr(B)``),
+    so ``Q / (c chi2_0.5(nu))`` has median sigma^2 at every jet; the plain ``Q / tr(B)``
+    has median ``sigma^2 chi2_0.5(nu) / nu``, low by 4 % at the ``nu`` of about 16 of the
+    automatic scale's smallest rung.
+    """
     with np.errstate(invalid="ignore", divide="ignore"):
-        s0 = fit.q / fit.trace_b
-    sigma = float(np.sqrt(np.median(s0[ok])))
+        nu = fit.trace_b[ok] ** 2 / fit.trace_b2[ok]
+        c = fit.trace_b2[ok] / fit.trace_b[ok]
+        use = np.isfinite(nu) & (nu > 0) & (c > 0)
+        s0 = fit.q[ok][use] / (c[use] * chi2_quantile(0.5, nu[use]))
+    sigma = float(np.sqrt(np.median(s0))) if s0.size else float("nan")
     logger.info("estimated sigma = %g", sigma)
     if not sigma > 0:
         raise InvalidParameterError(
