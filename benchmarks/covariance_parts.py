@@ -8,7 +8,8 @@ of the faces of at least 300 points.
 
 Speed: covariance features of one noisy plane-and-ridge cloud, alternating in one process
 (``--points``, best of ``--repeat``): lidarstat at the automatic scale (kNN 50 + minimum
-eigenentropy from 20 to 50 + features), lidarstat at k = 50, pgeof
+eigenentropy from 20 to 50 + features), lidarstat at k = 50, the classes (features and
+tests) at the automatic (tested) scale and at k = 50, pgeof
 ``compute_features_optimal`` (Weinmann's optimal neighbourhood from 20, on the same kNN
 50 rows; its kNN search timed apart) when installed.
 
@@ -69,10 +70,16 @@ def speed(n, repeat):
     xy = rng.uniform(0, np.sqrt(n) * 0.1, (n, 2))
     z = np.abs(xy[:, 0] - xy[:, 0].mean()) * 0.5 + rng.normal(0, 0.003, n)
     pts = np.c_[xy, z]
+    from lidarstat.classify import covariance
+
     covariance_features(pts[:5000])
     covariance_features(pts[:5000], k=50)
+    covariance(pts[:5000])
+    covariance(pts[:5000], k=50)
     runs = {"lidarstat automatic": lambda: covariance_features(pts),
-            "lidarstat k=50": lambda: covariance_features(pts, k=50)}
+            "lidarstat k=50": lambda: covariance_features(pts, k=50),
+            "lidarstat classes automatic": lambda: covariance(pts),
+            "lidarstat classes k=50": lambda: covariance(pts, k=50)}
     try:
         import pgeof
 
@@ -94,7 +101,9 @@ def speed(n, repeat):
             run()
             best[name] = min(best[name], time.perf_counter() - t0)
     out = {"points": n, "repeat": repeat, "seconds": best, "pgeof_knn_seconds": knn_s,
-           "ratio_automatic_over_k50": best["lidarstat automatic"] / best["lidarstat k=50"]}
+           "ratio_automatic_over_k50": best["lidarstat automatic"] / best["lidarstat k=50"],
+           "ratio_classes_automatic_over_k50": (best["lidarstat classes automatic"]
+                                                / best["lidarstat classes k=50"])}
     return out
 
 
@@ -106,6 +115,7 @@ def main(argv=None):
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     res = {"machine": "2 cores shared with other jobs (timings are noisy; ratios in one run)",
+           "machine_shared": True,
            "automatic": accuracy(a.seeds, None), "k50": accuracy(a.seeds, 50),
            "speed": speed(a.points, a.repeat)}
     for key in ("automatic", "k50"):

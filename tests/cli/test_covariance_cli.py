@@ -154,12 +154,13 @@ def test_covariance_automatic_scale_and_noise(box_las, tmp_path, capsys):
     out, summary = tmp_path / "out.npz", tmp_path / "s.json"
     assert main(["covariance", str(box_las), str(out), "--summary-json", str(summary)]) == 0
     stdout = capsys.readouterr().out
-    assert "automatic (minimum eigenentropy, k 20 to 50)" in stdout
+    assert "automatic (plane test with power, k 20 to 50)" in stdout
     res = read(out)
     k = np.asarray(res["OptimalKNN"])
     assert k.min() >= 20 and k.max() <= 50 and "OptimalRadius" in res.field_names
     meta = json.loads(summary.read_text())
     assert meta["scale"] == "optimal" and meta["k"] is None and meta["noise"] == "z"
+    assert meta["scale_rule"] == "tested"
     assert 20 <= meta["optimal_k_median"] <= 50
     assert main(["covariance", str(box_las), str(out), "--k", "30", "--noise", "normal",
                  "--summary-json", str(summary), "-q"]) == 0

@@ -59,6 +59,10 @@ def test_edges_precision_recall(runs):
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "57 of 64 surfaces (0.89): the steep cylindrical rims of the range-image flanges, "
+    "strips a few rows wide, are edges at the tested scale as at k = 50 (their rows of "
+    "50 cross the rim's creases); docs/methods/covariance.md"))
 def test_hoover_every_surface(runs):
     correct = total = 0
     for scan, _, seg in runs:
@@ -122,8 +126,8 @@ def test_plane_test_size_z_noise(slope):
 
 @pytest.mark.parametrize("slope", [0.0, 60.0])
 def test_plane_test_size_z_noise_automatic_scale(slope):
-    """The same at the automatic scale (each point's prefix chosen by its eigenentropy):
-    within the 99.9 % binomial interval on flat and steep faces (3.1 % of 864 and 7.3 %
+    """The same at the automatic scale (each point's prefix chosen by its plane test):
+    within the 99.9 % binomial interval on flat and steep faces (4.1 % of 864 and 6.8 %
     of 384 neighbourhoods)."""
     from scipy.stats import binom
 
@@ -166,3 +170,29 @@ def test_normal_noise_calls_steep_z_noise_faces_rough_or_smooth():
     rate_normal = (normal["plane_p"][on_steep] < 0.05).mean()
     assert 0.02 < rate_z < 0.09
     assert rate_normal < 0.005
+
+
+def test_tested_scale_stops_at_the_crease_only():
+    """The tested scale (``tested_scale``): on a z-noise range image of two planes
+    meeting at a 30-degree crease, the points far from the crease keep all 50 neighbours
+    (a stop by chance has probability 4e-4 per size) and those beside it stop below 50,
+    with a neighbourhood that reaches across the crease."""
+    from lidarstat.features import tested_scale
+
+    rng = np.random.default_rng(5)
+    g = np.arange(0, 60, 1.0)
+    x, y = (a.ravel() for a in np.meshgrid(g, g, indexing="ij"))
+    z = np.tan(np.radians(30)) * np.maximum(x - 30, 0) + rng.normal(0, 0.05, x.size)
+    pts = np.c_[x, y, z]
+    feats = covariance_features(pts, k=50, keep_neighbors=True)
+    k = tested_scale(pts, feats.neighborhoods, sigma=0.05, noise="z")
+    inner = (y > 5) & (y < 55) & (x > 5) & (x < 55)
+    far = inner & (np.abs(x - 30) > 6)
+    near = inner & (np.abs(x - 30) < 1.5)
+    assert (k[far] == 50).mean() > 0.99
+    assert (k[near] < 50).all()
+    side = x > 30
+    rows = side[feats.neighborhoods.indices.reshape(-1, 50)]
+    prefix = np.arange(50)[None, :] < k[:, None]
+    across = (rows & prefix).any(axis=1) & (~rows & prefix).any(axis=1)
+    assert across[near].all()

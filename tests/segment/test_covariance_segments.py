@@ -110,9 +110,8 @@ def test_tls_building_hoover_and_lines():
     listed true crease (``meta['edges']``, which holds the roof-fascia creases).
     """
     sc = make_tls_building(rng=0)
-    # at k = 50: at the automatic scale the soffit's own segment holds 238 of its 302
-    # points (0.79 < T) and Hoover counts 13 of 14 (benchmarks/results_covariance_accuracy.json)
-    seg = segment_covariance(sc.xyz, covariance(sc.xyz, sensor=sc.scanner, k=50,
+    # the defaults: the automatic (tested) scale
+    seg = segment_covariance(sc.xyz, covariance(sc.xyz, sensor=sc.scanner,
                                                 keep_neighbors=True))
     h = hoover(seg.labels, sc.face + 1, 0.8, min_points=200)
     assert h.correct == h.n_truth == 14 and h.noise == 0

@@ -343,8 +343,9 @@ def covariance(points, *, k=None, radius=None, sensor=None, sigma=None, noise=No
 
     One call of :func:`lidarstat.features.covariance_features` and
     :func:`classify_covariance`; see them for the parameters. Without `k` and `radius`
-    every point gets its optimal neighbourhood size (minimum eigenentropy of its 10 to
-    50 nearest points; fields ``OptimalKNN``, ``OptimalRadius``).
+    every point gets its own neighbourhood size (:func:`_tested_features`; fields
+    ``OptimalKNN``, ``OptimalRadius``); with a `curvature_threshold` (no noise model) the
+    minimum-eigenentropy size of :func:`lidarstat.features.covariance_features`.
 
     Returns
     -------
@@ -384,8 +385,44 @@ def covariance(points, *, k=None, radius=None, sensor=None, sigma=None, noise=No
             pts[dup.first], k=k, radius=radius, sensor=sensor, eigen_mode=eigen_mode,
             progress=progress, **opts), what="covariance")
         return map_rows(res, dup.n_unique, dup.inverse)
-    feats = covariance_features(points, k=k, radius=radius, sensor=sensor,
-                                eigen_mode=eigen_mode, keep_neighbors=keep_neighbors,
-                                progress=progress)
+    if k is None and radius is None and curvature_threshold is None:
+        feats = _tested_features(pts, sensor=sensor, sigma=sigma, noise=noise, alpha=alpha,
+                                 eigen_mode=eigen_mode, keep_neighbors=keep_neighbors,
+                                 progress=progress)
+    else:
+        feats = covariance_features(points, k=k, radius=radius, sensor=sensor,
+                                    eigen_mode=eigen_mode, keep_neighbors=keep_neighbors,
+                                    progress=progress)
     classes = classify_covariance(feats, points=points, **opts)
     return CovarianceClassification(features=feats, classes=classes)
+
+
+def _tested_features(pts, *, sensor, sigma, noise, alpha, eigen_mode, keep_neighbors,
+                     progress):
+    """Features at the tested scale: the smallest of a point's 20 to 50 nearest-neighbour
+    prefixes whose plane test detects a crease with power, else all 50
+    (:func:`lidarstat.features.tested_scale`), with the noise given or estimated on the
+    k = 50 neighbourhoods (:func:`_noise_scale`)."""
+    from ..features import (OPTIMAL_K_MAX, OPTIMAL_K_MIN, covariance_features,
+                            prefix_features, tested_scale)
+
+    func = "covariance"
+    n = pts.shape[0]
+    if n < 4:
+        raise InvalidParameterError(f"{func}: the automatic scale needs at least 4 points, "
+                                    f"got {n}")
+    k_max = min(OPTIMAL_K_MAX, n)
+    k_min = min(OPTIMAL_K_MIN, k_max)
+    full = covariance_features(pts, k=k_max, sensor=sensor, keep_neighbors=True)
+    if noise is None:
+        noise = Noise.RANGE if sensor is not None else Noise.Z
+    noise = str(Noise.parse(noise, "noise", func=func))
+    if noise == "range" and sensor is None:
+        return full  # refused by classify_covariance, with the other methods' message
+    scale, _ = _noise_scale(full, pts, sigma, noise, {}, func)
+    alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0, closed="neither")
+    sizes = tested_scale(pts, full.neighborhoods, sigma=scale, noise=noise,
+                         sensor=full.sensor, k_min=k_min, alpha=alpha)
+    return prefix_features(pts, full.neighborhoods, sizes, sensor=sensor,
+                           eigen_mode=eigen_mode, keep_neighbors=keep_neighbors,
+                           progress=progress, rule="tested", k_min=k_min)

@@ -165,7 +165,8 @@ class CovarianceClassification:
                "sensor": _plain(f.sensor), **self.classes.params}
         if f.meta.get("scale") == "optimal":
             kopt = f.fields["OptimalKNN"]
-            out.update(scale="optimal", k_min=f.meta["k_min"], k_max=f.meta["k_max"],
+            out.update(scale="optimal", scale_rule=f.meta.get("rule", "eigenentropy"),
+                       k_min=f.meta["k_min"], k_max=f.meta["k_max"],
                        optimal_k_median=float(np.median(kopt)),
                        optimal_radius_median=float(np.median(f.fields["OptimalRadius"])))
         return out
@@ -175,7 +176,9 @@ class CovarianceClassification:
         if f.meta.get("scale") == "optimal":
             q = np.percentile(f.fields["OptimalKNN"], [10, 50, 90])
             r = np.median(f.fields["OptimalRadius"])
-            nb = (f"automatic (minimum eigenentropy, k {f.meta['k_min']} to "
+            rule = ("plane test with power" if f.meta.get("rule") == "tested"
+                    else "minimum eigenentropy")
+            nb = (f"automatic ({rule}, k {f.meta['k_min']} to "
                   f"{f.meta['k_max']}): k 10/50/90 % {q[0]:.0f}/{q[1]:.0f}/{q[2]:.0f}, "
                   f"radius median {r:.4g}")
         else:

@@ -88,9 +88,14 @@ def _neighbour_rows(points, features, query):
 
     The rows are the neighbourhoods the features were computed on: at the automatic scale
     (``features.k`` and ``features.radius`` None) the first ``neighbors`` points of each
-    kept (or searched) nearest-neighbour row."""
+    kept (or searched) nearest-neighbour row; at the tested scale (``meta['rule']``
+    ``'tested'``) the whole rows, of ``meta['k_max']`` points: a prefix stops as soon as
+    its plane test detects a crease, often with a few points beyond it, and a circle
+    through those few is refuted only by the longer arm of the V."""
     nbh = features.neighborhoods
     used = np.asarray(features.counts)[query].astype(np.int64)
+    if features.meta.get("rule") == "tested":
+        used = np.maximum(used, int(features.meta["k_max"]))
     if nbh is not None and nbh.query is None and len(nbh) == len(points):
         counts = np.minimum(nbh.counts[query], used)
         indptr = np.zeros(query.size + 1, dtype=np.int64)

@@ -108,8 +108,8 @@ def register(sub):
     s.add_argument("input")
     s.add_argument("output", help="output file; format from the suffix")
     add_neighbourhood(s, k_help="neighbours per point, itself included (at least 3) "
-                      "[automatic: per point, the size from 20 to 50 of minimum "
-                      "eigenentropy]")
+                      "[automatic: per point, the smallest size from 20 to 50 whose "
+                      "plane test detects a crease with power, else 50]")
     add_noise(s, sigma_help="noise std along --noise (default: estimated from the data)")
     add_alpha(s, help="level of the plane test (and of the variation test)")
     s.add_argument("--eigen-mode", choices=[m.value for m in EigenMode], default="raw",

@@ -348,9 +348,11 @@ def covariance_features(points, *, k=None, radius=None, neighborhoods=None, sens
         radius = check_scalar(radius, "radius", func=func, low=0.0)
         kind = "radius"
     elif k is None:
-        return _optimal_scale(pts, sensor=sensor, eigen_mode=eigen_mode,
-                              keep_neighbors=keep_neighbors, block_size=block_size,
-                              progress=progress)
+        from ._covariance_scale import optimal_scale
+
+        return optimal_scale(pts, sensor=sensor, eigen_mode=eigen_mode,
+                             keep_neighbors=keep_neighbors, block_size=block_size,
+                             progress=progress)
     else:
         k = check_scalar(k, "k", func=func, low=3, closed="left", integer=True)
         if k > n:
@@ -447,43 +449,6 @@ def covariance_features(points, *, k=None, radius=None, neighborhoods=None, sens
             scan_in[order] = scan
             scan = scan_in
         object.__setattr__(res, "scan_boundary", scan)
-    return res
-
-
-def _optimal_scale(pts, *, sensor, eigen_mode, keep_neighbors, block_size, progress):
-    """Features at every point's optimal neighbourhood size (see `covariance_features`):
-    one kNN query of ``OPTIMAL_K_MAX``, the minimum-eigenentropy prefix per point
-    (:func:`._covariance_scale_kernels.optimal_k_rows`), then the features on those
-    prefixes. The kept neighbourhoods (`keep_neighbors`) are the full kNN rows."""
-    from ._covariance_scale_kernels import optimal_k_rows
-
-    n = pts.shape[0]
-    if n < 3:
-        raise InvalidParameterError(
-            f"covariance_features: the automatic scale needs at least 3 points, got {n}")
-    k_max = min(OPTIMAL_K_MAX, n)
-    k_min = min(OPTIMAL_K_MIN, k_max)
-    _, _, full, _ = _knn_table(pts, k_max, block_size=block_size, sort=True)
-    local = pts - pts.mean(axis=0)
-    kopt = np.empty(n, dtype=np.int64)
-    entropy = np.empty(n)
-    optimal_k_rows(local, full.indptr, full.indices, k_min, k_max, OPTIMAL_MIN_SPREAD, kopt,
-                   entropy)
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(kopt, out=indptr[1:])
-    pos = np.repeat(full.indptr[:-1] - indptr[:-1], kopt) + np.arange(indptr[-1])
-    prefix = Neighborhoods(indptr, full.indices[pos], full.distances[pos], n,
-                           kind="knn", row_order=full.row_order)
-    del pos
-    res = covariance_features(pts, neighborhoods=prefix, sensor=sensor,
-                              eigen_mode=eigen_mode, block_size=block_size,
-                              progress=progress)
-    res.fields["OptimalKNN"] = kopt.astype(np.int32)
-    res.fields["OptimalRadius"] = prefix.distances[indptr[1:] - 1]
-    object.__setattr__(res, "k", None)
-    object.__setattr__(res, "radius", None)
-    object.__setattr__(res, "neighborhoods", full if keep_neighbors else None)
-    res.meta.update(scale="optimal", k_min=k_min, k_max=k_max)
     return res
 
 

@@ -106,3 +106,84 @@ def optimal_k_rows(pts, indptr, idx, k_min, k_max, min_spread, out_k, out_entrop
             kbest = n
         out_k[r] = kbest
         out_entropy[r] = best
+
+
+@njit
+def _min_eigvec(a00, a01, a02, a11, a12, a22, lam):
+    """Unit eigenvector of a symmetric 3x3 matrix for its eigenvalue `lam` (the largest
+    cross product of two rows of ``A - lam I``)."""
+    r0x, r0y, r0z = a00 - lam, a01, a02
+    r1x, r1y, r1z = a01, a11 - lam, a12
+    r2x, r2y, r2z = a02, a12, a22 - lam
+    cax, cay, caz = r0y * r1z - r0z * r1y, r0z * r1x - r0x * r1z, r0x * r1y - r0y * r1x
+    cbx, cby, cbz = r0y * r2z - r0z * r2y, r0z * r2x - r0x * r2z, r0x * r2y - r0y * r2x
+    ccx, ccy, ccz = r1y * r2z - r1z * r2y, r1z * r2x - r1x * r2z, r1x * r2y - r1y * r2x
+    na = cax * cax + cay * cay + caz * caz
+    nb = cbx * cbx + cby * cby + cbz * cbz
+    nc = ccx * ccx + ccy * ccy + ccz * ccz
+    if na >= nb and na >= nc:
+        x, y, z, q = cax, cay, caz, na
+    elif nb >= nc:
+        x, y, z, q = cbx, cby, cbz, nb
+    else:
+        x, y, z, q = ccx, ccy, ccz, nc
+    if not q > 0.0:
+        return 0.0, 0.0, 1.0
+    s = 1.0 / math.sqrt(q)
+    return x * s, y * s, z * s
+
+
+@njit_parallel
+def tested_k_rows(pts, indptr, idx, k_min, k_max, sigma2, dirs, crit, min_share2, out_k):
+    """Per row (sorted by distance, the point itself first): the smallest prefix size in
+    ``[k_min, min(k_max, row length)]`` whose plane test rejects at the stopping level,
+    ``k lambda0 / (sigma^2 max((d . n)^2, min_share2)) > crit[k]`` (``lambda0`` the
+    smallest eigenvalue of the prefix's covariance divided by k, n its normal, d the
+    noise direction: ``dirs`` row r, or row 0 when it has one row, or the normal itself
+    when it has none); the whole row when none does. `sigma2` has one value per row or
+    one for all."""
+    m = indptr.size - 1
+    per_dir = dirs.shape[0] > 1
+    along_normal = dirs.shape[0] == 0
+    per_sigma = sigma2.size > 1
+    for r in prange(m):
+        s = indptr[r]
+        n = min(indptr[r + 1] - s, k_max)
+        out_k[r] = n
+        if n < 4:
+            continue
+        s2 = sigma2[r] if per_sigma else sigma2[0]
+        dr = r if per_dir else r - r
+        i = idx[s]
+        px, py, pz = pts[i, 0], pts[i, 1], pts[i, 2]
+        sx = sy = sz = 0.0
+        sxx = sxy = sxz = syy = syz = szz = 0.0
+        for t in range(n):
+            j = idx[s + t]
+            dx, dy, dz = pts[j, 0] - px, pts[j, 1] - py, pts[j, 2] - pz
+            sx += dx
+            sy += dy
+            sz += dz
+            sxx += dx * dx
+            sxy += dx * dy
+            sxz += dx * dz
+            syy += dy * dy
+            syz += dy * dz
+            szz += dz * dz
+            k = t + 1
+            if k < k_min or k < 4 or k == n:
+                continue
+            inv = 1.0 / k
+            mx, my, mz = sx * inv, sy * inv, sz * inv
+            c00, c01, c02 = sxx * inv - mx * mx, sxy * inv - mx * my, sxz * inv - mx * mz
+            c11, c12, c22 = syy * inv - my * my, syz * inv - my * mz, szz * inv - mz * mz
+            l0, l1, l2 = _eigvals3(c00, c01, c02, c11, c12, c22)
+            l0 = max(l0, 0.0)
+            share2 = 1.0
+            if not along_normal:
+                nx, ny, nz = _min_eigvec(c00, c01, c02, c11, c12, c22, l0)
+                dn = nx * dirs[dr, 0] + ny * dirs[dr, 1] + nz * dirs[dr, 2]
+                share2 = max(dn * dn, min_share2)
+            if k * l0 > crit[k] * s2 * share2:
+                out_k[r] = k
+                break

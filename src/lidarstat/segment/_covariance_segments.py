@@ -377,8 +377,27 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
         edge_ok = surface_prefix_edges(grow_nbh, surface | boundary)
         labels = grow_regions(grow_nbh, edge_ok, order=order, can_grow=surface,
                               mask=surface | boundary, merge=True, min_points=min_points)
-    normals = feats.normals  # one (N, 3) stack for every step below (read only)
-    centroids = feats.centroid
+    # at the automatic scale the segment-level steps take the planes of the kept rows of
+    # k_max neighbours (the classes keep their own scale): a prefix that stopped at a
+    # crease straddles it with a few points, and its plane is no face's
+    geo = feats
+    if feats.k is None and feats.radius is None and nbh.kind == "knn":
+        from ..features import covariance_features
+
+        geo = covariance_features(pts, neighborhoods=nbh, sensor=feats.sensor)
+    normals = geo.normals  # one (N, 3) stack for every step below (read only)
+    centroids = geo.centroid
+    # per-point axes (minimum-curvature directions) of the curved surface points only
+    # (computed for those points: no (N, 3) temporaries at the segmentation's peak); at
+    # the automatic scale from the kept rows of k_max neighbours: the axes of the smaller
+    # neighbourhoods scatter, and the pieces of one pipe then fail to merge
+    curved_pts = surface & ~(classes["plane_p"] >= classes.alpha)
+    pt_axes = np.full((pts.shape[0], 3), np.nan)
+    ci_ = np.flatnonzero(curved_pts)
+    pdir = np.stack([geo["PrincipalDirX"][ci_], geo["PrincipalDirY"][ci_],
+                     geo["PrincipalDirZ"][ci_]], axis=1)
+    pt_axes[ci_] = np.cross(normals[ci_], pdir)
+    del pdir, ci_, geo, curved_pts
     across = seg_sigma
     if nsensor is not None:
         ray = pts - nsensor
@@ -420,22 +439,6 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
                             normals=normals, centroids=centroids)
     from ._cylinders import merge_cylinders
 
-    # per-point axes (minimum-curvature directions) of the curved surface points only
-    # (computed for those points: no (N, 3) temporaries at the segmentation's peak); at
-    # the automatic scale from the kept rows of k_max neighbours: the axes of the smaller
-    # neighbourhoods scatter, and the pieces of one pipe then fail to merge
-    geo = feats
-    if feats.k is None and feats.radius is None and nbh.kind == "knn":
-        from ..features import covariance_features
-
-        geo = covariance_features(pts, neighborhoods=nbh, sensor=feats.sensor)
-    curved_pts = surface & ~(classes["plane_p"] >= classes.alpha)
-    pt_axes = np.full((pts.shape[0], 3), np.nan)
-    ci_ = np.flatnonzero(curved_pts)
-    pdir = np.stack([geo["PrincipalDirX"][ci_], geo["PrincipalDirY"][ci_],
-                     geo["PrincipalDirZ"][ci_]], axis=1)
-    pt_axes[ci_] = np.cross(geo.normals[ci_], pdir)
-    del pdir, ci_, geo
     labels, cylinders = merge_cylinders(
         pts, labels, normals, seg_sigma, max_angle=min_angle / 4,
         sensor=nsensor, point_axes=pt_axes)
