@@ -1,0 +1,228 @@
+#!/usr/bin/env python
+"""Time and peak memory of every command against the number of points (a log-log scaling plot).
+
+Each command runs with its defaults (the automatic scale where it has one) on synthetic
+airborne LAZ files of 0.2, 2 and 10 million points (``bench_moments.make_cloud``: a town
+at 10 points/m2 with terrain, buildings, trees and roads; intensity and returns, so that
+``moments`` sees what it reads from real files). Every run is a fresh process, whole
+process: interpreter start, imports, read, compute, write. Its wall time is measured by the
+parent and its peak resident memory comes from ``os.wait4``. One untimed run per command
+on a small file first fills a benchmark-private Numba cache, so the timed runs load
+compiled kernels (the first-run compile cost is ``benchmarks/first_run.py``'s subject).
+
+The 50-million-point catalogue (``moments`` over 50 tiles of one million points with a
+64 m buffer) is ``benchmarks/catalogue.py --points 50000000``; ``--catalogue N`` runs it
+from here, otherwise the entry stored in ``results_catalogue.json`` is plotted beside the
+single-file runs.
+
+A run that exceeds ``--timeout`` seconds is stopped and recorded as such (``null`` time):
+a command whose cost grows faster than the others shows as a missing point, not as a
+stalled script.
+
+Usage::
+
+    python benchmarks/scaling.py --out benchmarks/results_scaling.json \\
+        --figure docs/figures/scaling.png
+    python benchmarks/scaling.py --sizes 200000 --commands curvature moments   # quick
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+SIZES = (200_000, 2_000_000, 10_000_000)
+
+# name -> argv after "lidarstat" ({i} input, {o} output file)
+COMMANDS = {
+    "curvature": ["curvature", "{i}", "{o}"],
+    "covariance": ["covariance", "{i}", "{o}"],
+    "ridges": ["ridges", "{i}", "{o}"],
+    "moments": ["moments", "{i}", "{o}", "--no-report"],
+    "segment-covariance": ["segment", "{i}", "{o}", "--method", "covariance"],
+    "segment-curvature": ["segment", "{i}", "{o}", "--method", "curvature"],
+    "segment-sar": ["segment", "{i}", "{o}", "--method", "sar"],
+}
+
+
+def write_cloud(path: Path, n: int, seed: int = 20261126) -> None:
+    """The synthetic town of ``bench_moments`` as a LAZ file of `n` points."""
+    from bench_moments import make_cloud
+
+    from lidarstat.io import PointCloud, write
+
+    xyz, inten, nret, rnum, _ = make_cloud(n, seed=seed)
+    write(path, PointCloud(xyz, {
+        "intensity": np.clip(inten, 0, 65535).astype(np.uint16),
+        "number_of_returns": nret.astype(np.uint8),
+        "return_number": rnum.astype(np.uint8)}))
+
+
+def run(argv: list[str], env: dict, timeout: float) -> dict:
+    """One whole-process run: wall seconds and peak RSS (MiB), or a timeout / failure."""
+    cmd = [sys.executable, "-m", "lidarstat.cli", *argv, "-q"]
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = t0 + timeout
+    while True:
+        pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+        if pid:
+            break
+        if time.perf_counter() > deadline:
+            proc.kill()
+            os.wait4(proc.pid, 0)
+            proc.stderr.close()
+            return {"seconds": None, "peak_mib": None, "status": f"timeout {timeout:.0f} s"}
+        time.sleep(0.05)
+    wall = time.perf_counter() - t0
+    err = proc.stderr.read().decode().strip()
+    proc.stderr.close()
+    if os.waitstatus_to_exitcode(status) != 0:
+        return {"seconds": None, "peak_mib": None, "status": "failed: " + err[-300:]}
+    return {"seconds": round(wall, 2), "peak_mib": round(usage.ru_maxrss / 1024.0, 1),
+            "status": "ok"}
+
+
+def measure(commands, sizes, tmp: Path, timeout: float) -> dict:
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp / "numba"))
+    warm = tmp / "warm.laz"
+    write_cloud(warm, 20_000)
+    for name in commands:  # fill the Numba cache: the timed runs load compiled kernels
+        out = run([a.format(i=warm, o=tmp / "warm_out.laz") for a in COMMANDS[name]],
+                  env, timeout=1800)
+        print(f"warm-up {name}: {out['status']}", flush=True)
+    rows = {name: [] for name in commands}
+    for n in sizes:
+        src = tmp / f"town_{n}.laz"
+        write_cloud(src, n)
+        for name in commands:
+            dst = tmp / f"out_{name}_{n}.laz"
+            res = run([a.format(i=src, o=dst) for a in COMMANDS[name]], env, timeout)
+            dst.unlink(missing_ok=True)
+            res["points"] = n
+            if res["seconds"]:
+                res["seconds_per_million"] = round(res["seconds"] / (n / 1e6), 2)
+            rows[name].append(res)
+            print(f"{name:20s} {n:>10,d}  {res['seconds']} s  {res['peak_mib']} MiB  "
+                  f"{res['status']}", flush=True)
+        src.unlink()
+    return rows
+
+
+def table(results: dict) -> str:
+    """Markdown: one row per command, time (s) and peak (MiB) per size."""
+    sizes = sorted({r["points"] for rows in results["commands"].values() for r in rows})
+    head = "| command | " + " | ".join(f"{n / 1e6:g}M points" for n in sizes) + " |"
+    lines = [head, "|---|" + "---|" * len(sizes)]
+    for name, rows in results["commands"].items():
+        by = {r["points"]: r for r in rows}
+        cells = []
+        for n in sizes:
+            r = by.get(n)
+            if r is None:
+                cells.append("")
+            elif r["seconds"] is None:
+                cells.append(r["status"].split(":")[0])
+            else:
+                cells.append(f"{r['seconds']:.1f} s, {r['peak_mib']:.0f} MiB")
+        lines.append(f"| `{name}` | " + " | ".join(cells) + " |")
+    cat = results.get("catalogue")
+    if cat:
+        lines.append(f"\nCatalogue (`moments --dtm`, {cat['tiles']} tiles of "
+                     f"{cat['tile_points'] / 1e6:g}M points): {cat['points'] / 1e6:g}M points "
+                     f"in {cat['seconds']:.0f} s ({cat['seconds_per_million']:.1f} s per "
+                     f"million), peak {cat['peak_mib']:.0f} MiB.")
+    return "\n".join(lines)
+
+
+def figure(results: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(10, 4.2))
+    for name, rows in results["commands"].items():
+        ok = [r for r in rows if r["seconds"]]
+        if not ok:
+            continue
+        n = [r["points"] for r in ok]
+        line, = ax_t.plot(n, [r["seconds"] for r in ok], "o-", label=name)
+        ax_m.plot(n, [r["peak_mib"] for r in ok], "o-", color=line.get_color(), label=name)
+    cat = results.get("catalogue")
+    if cat:
+        ax_t.plot([cat["points"]], [cat["seconds"]], "k*", ms=11, label="catalogue (moments)")
+        ax_m.plot([cat["points"]], [cat["peak_mib"]], "k*", ms=11, label="catalogue (moments)")
+    ref = np.array([2e5, 5e7])
+    ax_t.plot(ref, 10 * ref / 1e6, ":", color="0.6", label="linear (10 s per million)")
+    for ax, label in ((ax_t, "wall time, whole process (s)"), (ax_m, "peak memory (MiB)")):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("points")
+        ax.set_ylabel(label)
+        ax.grid(True, which="both", alpha=0.3)
+    ax_m.axhline(4096, color="r", lw=0.8, ls="--")
+    ax_m.text(2.2e5, 4300, "4 GB", color="r", fontsize=8)
+    ax_t.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=list(SIZES))
+    ap.add_argument("--commands", nargs="+", default=list(COMMANDS), choices=list(COMMANDS))
+    ap.add_argument("--timeout", type=float, default=1500.0,
+                    help="seconds after which one run is stopped (default 1500)")
+    ap.add_argument("--catalogue", type=int, default=None, metavar="N",
+                    help="also run the N-point catalogue (benchmarks/catalogue.py --points N)")
+    ap.add_argument("--out", default=None, help="results JSON")
+    ap.add_argument("--figure", default=None, help="log-log PNG of time and memory")
+    ap.add_argument("--tmp", default=None, help="work folder")
+    args = ap.parse_args(argv)
+
+    with tempfile.TemporaryDirectory(dir=args.tmp) as tmp:
+        tmp = Path(tmp)
+        results = {"machine": {"platform": platform.platform(), "cores": os.cpu_count(),
+                               "python": platform.python_version(),
+                               "machine_shared": True,
+                               "note": "two cores shared with other jobs: seconds are "
+                                       "upper bounds; peak memory is not affected"},
+                   "commands": measure(args.commands, args.sizes, tmp, args.timeout)}
+        if args.catalogue:
+            import catalogue
+
+            results["catalogue"] = catalogue.scale(tmp / "catalogue", args.catalogue,
+                                                   1_000_000)
+    if "catalogue" not in results:
+        stored = HERE / "results_catalogue.json"
+        if stored.exists():
+            entries = {k: v for k, v in json.loads(stored.read_text()).items()
+                       if k.startswith("scale_")}
+            if entries:
+                results["catalogue"] = max(entries.values(), key=lambda e: e["points"])
+                results["catalogue"]["source"] = "results_catalogue.json"
+    results["markdown"] = table(results)
+    print(results["markdown"])
+    if args.out:
+        Path(args.out).write_text(json.dumps(results, indent=1) + "\n")
+    if args.figure:
+        figure(results, Path(args.figure))
+
+
+if __name__ == "__main__":
+    main()
