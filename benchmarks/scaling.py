@@ -24,6 +24,9 @@ Usage::
     python benchmarks/scaling.py --out benchmarks/results_scaling.json \\
         --figure docs/figures/scaling.png
     python benchmarks/scaling.py --sizes 200000 --commands curvature moments   # quick
+
+An existing ``--out`` file keeps its rows of the sizes and commands not run again, so the
+sizes can be measured in separate runs.
 """
 
 from __future__ import annotations
@@ -216,6 +219,13 @@ def main(argv=None):
             if entries:
                 results["catalogue"] = max(entries.values(), key=lambda e: e["points"])
                 results["catalogue"]["source"] = "results_catalogue.json"
+    if args.out and Path(args.out).exists():  # keep the sizes and commands not rerun
+        old = json.loads(Path(args.out).read_text()).get("commands", {})
+        for name, rows in old.items():
+            done = {r["points"] for r in results["commands"].get(name, [])}
+            kept = [r for r in rows if r["points"] not in done]
+            results["commands"][name] = sorted(kept + results["commands"].get(name, []),
+                                               key=lambda r: r["points"])
     results["markdown"] = table(results)
     print(results["markdown"])
     if args.out:
