@@ -194,14 +194,72 @@ def test_estimated_sigma_and_knn_reach(tmp_path, capsys, command, options, words
     assert words in out and "9 tiles processed" in out
 
 
-def test_a_segmentation_whose_reach_is_chosen_in_the_run_needs_a_buffer(tmp_path, capsys):
-    """SAR picks its bandwidth during the run: its buffer cannot follow it, so a catalogue
-    asks for --radius or --buffer before any work."""
-    _tiles(tmp_path, n=900)
-    rc = main(["segment", str(tmp_path / "tiles"), str(tmp_path / "out"), "--method", "sar"])
-    assert rc == 2
-    assert "needs --radius or --buffer" in capsys.readouterr().err
-    assert not (tmp_path / "out").exists()
+def test_curvature_automatic_scale_is_decided_for_the_area(tmp_path, capsys):
+    """No --radius: one ladder for the area (median of the sampled tiles' ladders), so
+    every field of every point is the whole cloud's at that ladder."""
+    from lidarstat.cli._catalogue_methods import area_ladder, curvature_ladder
+    from lidarstat.features import curvature
+    from lidarstat.pipeline import Catalogue
+
+    whole, _ = _tiles(tmp_path, seed=6, n=4000)
+    out = _run(["curvature", tmp_path / "tiles", tmp_path / "out", "--sigma", "0.05"],
+               capsys)
+    assert "automatic scale: radii" in out and "9 tiles processed" in out
+    ladder = area_ladder(Catalogue(tmp_path / "tiles"), curvature_ladder)
+    expected = curvature(whole.xyz, sigma=0.05, scales=ladder).to_fields()
+    _assert_same_fields(_gather(tmp_path / "out", expected), (whole.xyz, expected))
+
+
+def test_ridges_automatic_scale_is_decided_for_the_area(tmp_path, capsys):
+    """No --radius or --k: the jets' ladder is decided once for the area and the buffer
+    is three times its largest radius; the jets (and the radius each point chose) are
+    then the whole cloud's at that ladder."""
+    from lidarstat.cli._catalogue_methods import area_ladder, jet_ladder
+    from lidarstat.pipeline import Catalogue
+    from lidarstat.segment import ridges
+
+    whole, _ = _tiles(tmp_path, seed=7, n=3000)
+    out = _run(["ridges", tmp_path / "tiles", tmp_path / "out", "--sigma", "0.05"], capsys)
+    assert "automatic scale: radii" in out and "9 tiles processed" in out
+    ladder = area_ladder(Catalogue(tmp_path / "tiles"), jet_ladder)
+    assert f"buffer {3 * max(ladder):g}" in out
+    res = ridges(whole.xyz, sigma=0.05, alpha=0.01, scales=ladder)
+    expected = {k: v for k, v in res.to_fields().items()
+                if k not in {"ridge", "ridge_line", "umbilic", "extremality"}}
+    (_, a), (_, b) = (_by_xyz(_gather(tmp_path / "out", expected)),
+                      _by_xyz((whole.xyz, expected)))
+    np.testing.assert_array_equal(a["radius"], b["radius"])
+    np.testing.assert_array_equal(a["neighbors"], b["neighbors"])
+    posed = b["neighbors"] >= 30  # as in the fixed-radius test above
+    for name in b:
+        if np.issubdtype(b[name].dtype, np.floating):
+            scale = np.nanpercentile(np.abs(b[name]), 99) if np.isfinite(b[name]).any() else 1
+            np.testing.assert_allclose(a[name][posed], b[name][posed], rtol=1e-6,
+                                       atol=1e-6 * scale, equal_nan=True, err_msg=name)
+        else:
+            np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
+@pytest.mark.parametrize("method, words", [("sar", "radius"), ("curvature", "radii"),
+                                           ("ridges", "radius")])
+def test_segment_automatic_scale_is_decided_for_the_area(tmp_path, capsys, method, words):
+    """A scale the segmentation chooses from the data is chosen once for the area and
+    sets the buffer: no --radius or --buffer needed."""
+    from lidarstat.cli._catalogue_methods import area_ladder, curvature_ladder
+    from lidarstat.features import curvature
+    from lidarstat.pipeline import Catalogue
+
+    whole, _ = _tiles(tmp_path, seed=8, n=3000)
+    out = _run(["segment", tmp_path / "tiles", tmp_path / "out", "--method", method,
+                "--sigma", "0.05"], capsys)
+    assert f"automatic scale: {words}" in out and "9 tiles processed" in out
+    if method == "curvature":  # the tested classes are local: the whole cloud's
+        ladder = area_ladder(Catalogue(tmp_path / "tiles"), curvature_ladder)
+        expected = {"surface_type": curvature(whole.xyz, sigma=0.05, scales=ladder,
+                                              frame="pca").fields["surface_type"]}
+        (_, a), (_, b) = (_by_xyz(_gather(tmp_path / "out", expected)),
+                          _by_xyz((whole.xyz, expected)))
+        np.testing.assert_array_equal(a["surface_type"], b["surface_type"])
 
 
 def test_evaluate_two_catalogues_scores_the_area(tmp_path, capsys):

@@ -50,6 +50,22 @@ def test_tin_follows_the_analytic_ground(seed):
     assert np.nanpercentile(err[inside], 95) < _curvature_bound() * ground_h ** 2 / 2
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_blocked_tin_equals_the_whole_triangulation(seed):
+    """Built block by block (a margin of ground around each block, grown where a
+    triangle may not be the whole triangulation's), the TIN is the whole one's: holes
+    larger than the first margin (a lake, a missing corner) included."""
+    xyz, cls = _scene(seed, n=5000)
+    xy = xyz[:, :2] - [120000.0, 480000.0]
+    cls[np.hypot(xy[:, 0] - 40, xy[:, 1] - 40) < 15] = 9  # a lake wider than the margin
+    cls[(xy[:, 0] > 65) & (xy[:, 1] > 60)] = 6  # the hull of the ground misses a corner
+    whole = terrain_model(xyz, cls, resolution=1.0)
+    blocked = terrain_model(xyz, cls, resolution=1.0, block_points=1200)
+    np.testing.assert_array_equal(np.isnan(blocked.values), np.isnan(whole.values))
+    np.testing.assert_allclose(blocked.values, whole.values, rtol=0, atol=1e-9,
+                               equal_nan=True)
+
+
 def test_objects_do_not_raise_the_terrain():
     xyz, cls = _scene(7)
     with_objects = terrain_model(xyz, cls, resolution=2.0)

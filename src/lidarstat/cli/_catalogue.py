@@ -51,16 +51,16 @@ def _progress(quiet):
 
 # ----------------------------------------------------------------- per-command methods
 def _curvature_scales(args, cat):
-    """The radii of the run: ``--radius``, or the automatic ladder measured on the largest
-    tile (one ladder for the whole area)."""
+    """The radii of the run: ``--radius``, or the automatic ladder decided once for the
+    area (:func:`lidarstat.cli._catalogue_methods.area_ladder`)."""
     if args.radius is not None:
         return list(args.radius)
     if getattr(args, "_scales", None) is None:
-        from ..features import scale_ladder
-        from ..io import read
-
-        first = max(range(len(cat)), key=lambda i: cat.files[i].n_points)
-        args._scales = list(scale_ladder(read(cat.files[first].path).xyz))
+        args._scales = list(_methods.area_ladder(cat, _methods.curvature_ladder))
+        if not args.quiet:
+            print("  automatic scale: radii "
+                  f"{', '.join(f'{r:.4g}' for r in args._scales)} decided on "
+                  f"{len(_methods.sample_tiles(cat))} tiles, used for every tile")
     return args._scales
 
 

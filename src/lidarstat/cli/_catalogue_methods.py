@@ -20,14 +20,14 @@ Reaches (the buffer that makes the result independent of the tiling):
   twice the reach of its largest neighbourhood, ``OPTIMAL_K_MAX`` neighbours.
 * ``ridges``: the jets reach one radius; a ridge point compares its neighbours' jets,
   and the ridge lines are traced through them and kept when at least ``--min-length``
-  (two radii by default) long: ``3 x radius`` (with ``--k``, the k-th-neighbour reach).
-  The automatic scale's ladder is read from each cloud's density, so a catalogue needs
-  ``--radius`` or ``--k`` (or an explicit ``--buffer``, the tiles then choosing their
-  ladders each).
+  (two radii by default) long: ``3 x radius`` (with ``--k``, the k-th-neighbour reach;
+  at the automatic scale, the largest radius of the area's ladder, :func:`area_ladder`).
   The per-point jets are then independent of the tiling; the ridge lines are not quite:
   a line longer than the buffer is traced in pieces, and the line test's Bonferroni
   count (the cloud's independent neighbourhoods) is the tile's with its buffer.
-* ``segment``: segmentations couple points further than any buffer. Each tile is
+* ``segment``: segmentations couple points further than any buffer. A scale the method
+  chooses from the data is chosen once for the area (:func:`segment_scale`): the SAR
+  bandwidth, the curvature ladder (and noise), the ridges' radius. Each tile is
   segmented with a buffer (default: the method's neighbourhood reach times 4, so that
   the segments near a tile's border grow over the neighbours' points as on the whole
   area) and its points keep the segments of that run; a surface
@@ -41,7 +41,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["COVARIANCE", "RIDGES", "SEGMENT", "TILE_OPTIONS", "knn_reach"]
+__all__ = ["AREA_SAMPLE_TILES", "COVARIANCE", "RIDGES", "SEGMENT", "TILE_OPTIONS",
+           "area_ladder", "curvature_ladder", "jet_ladder", "knn_reach", "sample_tiles",
+           "segment_scale"]
 
 #: The options each command's tile function passes on (destinations). Any other option
 #: given with a catalogue is refused rather than ignored, so an option added to a command
@@ -63,6 +65,60 @@ KNN_MARGIN = 1.5
 
 def _largest(cat) -> int:
     return max(range(len(cat)), key=lambda i: cat.files[i].n_points)
+
+
+#: Tiles (spread evenly over the catalogue's order) on which an automatic scale is
+#: decided for the area.
+AREA_SAMPLE_TILES = 9
+
+
+def sample_tiles(cat) -> list[int]:
+    """The tiles an area's scale is decided on: up to :data:`AREA_SAMPLE_TILES`, spread
+    evenly over the catalogue."""
+    n = len(cat)
+    return sorted({int(i) for i in np.linspace(0, n - 1, min(n, AREA_SAMPLE_TILES)).round()})
+
+
+def area_ladder(cat, ladder_of) -> tuple[float, ...]:
+    """One ladder of radii for the whole area: per rung, the median over a sample of
+    tiles (:data:`AREA_SAMPLE_TILES`, one read at a time) of ``ladder_of(xyz)``, each
+    tile's ladder from its own density.
+
+    An automatic scale reads its ladder from the cloud's density; a tile would read its
+    own, and a point's result would depend on the tile it lies in. Given this ladder,
+    every tile runs the whole area's automatic scale.
+    """
+    from ..io import read
+
+    ladders = [np.asarray(ladder_of(read(cat.files[i].path).xyz), dtype=np.float64)
+               for i in sample_tiles(cat)]
+    return tuple(float(r) for r in np.median(np.vstack(ladders), axis=0))
+
+
+def jet_ladder(xyz):
+    """The jets' automatic ladder of a tile (its density measured on 20,000 points)."""
+    from ..features import radius_ladder
+
+    return radius_ladder(xyz, sample=20000)
+
+
+def curvature_ladder(xyz):
+    """The tested curvature's automatic ladder of a tile."""
+    from ..features import scale_ladder
+
+    return scale_ladder(xyz)
+
+
+def _cached(args, name, compute):
+    """A decision for the area, made once per run (buffer and tiles share it)."""
+    key = f"_area_{name}"
+    if getattr(args, key, None) is None:
+        setattr(args, key, compute())
+    return getattr(args, key)
+
+
+def _ladder_text(ladder):
+    return ", ".join(f"{r:.4g}" for r in ladder)
 
 
 def knn_reach(cat, k: int) -> float:
@@ -168,7 +224,17 @@ COVARIANCE = (_covariance_buffer, _covariance_fields, _covariance_prepare)
 
 
 # ------------------------------------------------------------------------------ ridges
+def _ridges_ladder(args, cat):
+    """The area's ladder of the jets' automatic scale (neither --radius nor --k)."""
+    if args.radius is not None or args.k is not None:
+        return None
+    return _cached(args, "jet_ladder", lambda: area_ladder(cat, jet_ladder))
+
+
 def _jet_reach(args, cat):
+    ladder = _ridges_ladder(args, cat)
+    if ladder is not None:
+        return max(ladder)
     return _neighbourhood_reach(args, cat, "ridges")
 
 
@@ -177,8 +243,13 @@ def _ridges_buffer(args, cat):
 
 
 def _ridges_prepare(args, cat):
-    """One noise sigma for the area (the jets' estimate on the largest tile)."""
-    extra = {"outputs": _outputs(args, cat), "offsets": _offsets(cat)}
+    """One noise sigma for the area (the jets' estimate on the largest tile) and, at the
+    automatic scale, one ladder of radii."""
+    extra = {"outputs": _outputs(args, cat), "offsets": _offsets(cat),
+             "scales": _ridges_ladder(args, cat)}
+    if extra["scales"] is not None:
+        _say(args, f"automatic scale: radii {_ladder_text(extra['scales'])} decided on "
+             f"{len(sample_tiles(cat))} tiles, used for every tile")
     if args.sigma is not None:
         return extra
     from ..features import jets
@@ -187,7 +258,7 @@ def _ridges_prepare(args, cat):
     i = _largest(cat)
     res = jets(read(cat.files[i].path).xyz, radius=args.radius, k=args.k, alpha=args.alpha,
                degree=4, weight=args.weight, sensor=args.sensor, noise=args.noise,
-               standard_errors=False)
+               standard_errors=False, scales=extra["scales"])
     extra["sigma"] = _scalar_sigma(res.sigma, "ridges")
     _say(args, f"sigma {extra['sigma']:.4g} estimated on {cat.files[i].path.name}, used for "
          "every tile")
@@ -215,7 +286,8 @@ def _ridges_fields(args, extra):
     def fields(tile):
         res = ridges(tile.xyz, radius=args.radius, k=args.k, sigma=sigma, alpha=args.alpha,
                      weight=args.weight, sensor=args.sensor, noise=args.noise,
-                     ratio=args.ratio, min_length=args.min_length)
+                     ratio=args.ratio, min_length=args.min_length,
+                     scales=extra.get("scales"))
         out = Path(extra["outputs"][tile.extent.path])
         lines = _lines_in_tile(res.lines, tile.extent)
         # line ids unique over the area, in the points' field and the lines alike
@@ -240,25 +312,72 @@ RIDGES = (_ridges_buffer, _ridges_fields, _ridges_prepare)
 SEGMENT_REACHES = 4.0
 
 
+def segment_scale(args, cat) -> dict:
+    """What ``segment`` chooses from the data, chosen once for the area: options for
+    every tile's run. Empty when the scale is given (``--radius``, ``--k``) or is
+    local (the covariance method's per-point k).
+
+    * ``sar``: the bandwidth ``radius`` by ``--criterion``, the median of its selection
+      on a sample of tiles (:data:`AREA_SAMPLE_TILES`);
+    * ``curvature``: the ladder ``scales`` (:func:`area_ladder` of
+      :func:`lidarstat.features.scale_ladder`) and, without ``--sigma``, one noise
+      sigma estimated on the largest tile at the ladder's middle radius;
+    * ``ridges``: the jets' ``radius``, the smallest rung of the area's ladder
+      (:func:`lidarstat.features.radius_ladder`), as the one-file run takes it from its
+      cloud.
+    """
+    if args.radius is not None or getattr(args, "k", None) is not None:
+        return {}
+    if args.method == "sar":
+        def select():
+            from ..features import select_plane_bandwidth
+            from ..io import read
+
+            b = [select_plane_bandwidth(read(cat.files[i].path).xyz,
+                                        criterion=args.criterion, rng=0).bandwidth
+                 for i in sample_tiles(cat)]
+            return {"radius": float(np.median(b))}
+
+        return _cached(args, "segment_scale", select)
+    if args.method == "curvature":
+        def ladder():
+            scales = area_ladder(cat, curvature_ladder)
+            out = {"scales": scales}
+            if args.sigma is None:
+                from ..features import estimate_sigma
+                from ..io import read
+
+                out["sigma"] = _scalar_sigma(estimate_sigma(
+                    read(cat.files[_largest(cat)].path).xyz, scales[len(scales) // 2],
+                    noise=args.noise, frame=args.frame, sensor=args.sensor), "segment")
+            return out
+
+        return _cached(args, "segment_scale", ladder)
+    if args.method == "ridges":
+        return _cached(args, "segment_scale",
+                       lambda: {"radius": area_ladder(cat, jet_ladder)[0]})
+    return {}
+
+
 def _segment_buffer(args, cat):
     from importlib import import_module
 
-    from ..errors import InvalidParameterError
     from .segment import SEGMENT_METHODS
 
     method = import_module(SEGMENT_METHODS[args.method])
+    area = segment_scale(args, cat)
     if args.radius is not None:
         reach = args.radius
+    elif "radius" in area:
+        reach = area["radius"]
+    elif "scales" in area:
+        reach = max(area["scales"])
     elif args.k is not None or hasattr(method, "DEFAULT_K"):
         reach = knn_reach(cat, args.k if args.k is not None else method.DEFAULT_K)
-    elif args.method == "covariance":  # the automatic scale: at most OPTIMAL_K_MAX
+    else:  # the covariance method's automatic scale: at most OPTIMAL_K_MAX
         from ..features import OPTIMAL_K_MAX
 
         reach = knn_reach(cat, OPTIMAL_K_MAX)
-    else:
-        raise InvalidParameterError(f"segment --method {args.method} on a catalogue needs "
-                                    "--radius or --buffer (the neighbourhood the tiles' "
-                                    "buffer follows)")
     return SEGMENT_REACHES * reach
 
 
@@ -268,7 +387,13 @@ def _offsets(cat) -> dict:
 
 
 def _segment_prepare(args, cat):
-    return {"outputs": _outputs(args, cat), "offsets": _offsets(cat)}
+    area = segment_scale(args, cat)
+    words = {"radius": lambda v: f"radius {v:.4g}", "sigma": lambda v: f"sigma {v:.4g}",
+             "scales": lambda v: f"radii {_ladder_text(v)}"}
+    if area:
+        _say(args, "automatic scale: " + ", ".join(words[k](v) for k, v in area.items())
+             + " decided for the area, used for every tile")
+    return {"outputs": _outputs(args, cat), "offsets": _offsets(cat), "area": area}
 
 
 def _segment_fields(args, extra):
@@ -278,9 +403,24 @@ def _segment_fields(args, extra):
     from .segment import SEGMENT_METHODS
 
     method = import_module(SEGMENT_METHODS[args.method])
+    area = dict(extra.get("area", {}))
+    scales, run_args = area.pop("scales", None), args
+    if area:  # the area's radius (and sigma) as if given on the command line
+        from argparse import Namespace
+
+        run_args = Namespace(**{**vars(args), **area})
+
+    def run(xyz):
+        if scales is None:
+            return method.run(run_args, PointCloud(xyz))
+        from ..features import curvature
+
+        curv = curvature(xyz, sigma=run_args.sigma, alpha=args.alpha, frame=args.frame,
+                         noise=args.noise, sensor=args.sensor, scales=scales)
+        return method.run(run_args, PointCloud(xyz), curv=curv)
 
     def fields(tile):
-        seg = method.run(args, PointCloud(tile.xyz))
+        seg = run(tile.xyz)
         f = seg.to_fields()
         n = tile.n_core
         labels = np.asarray(f["segment_id"]).astype(np.int64)

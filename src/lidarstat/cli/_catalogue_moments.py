@@ -44,12 +44,13 @@ def _area_road_cut(args, cat):
     step = max(1, -(-cat.n_points // ROAD_SAMPLE_POINTS))
     names = ("intensity", "number_of_returns", "return_number")
     xyz, attrs = [], {n: [] for n in names}
-    for f in cat.files:
-        c = read(f.path)
-        xyz.append(c.xyz[::step])
+    for f in cat.files:  # copies of every step-th point: a tile is freed once sampled
+        c = read(f.path, fields=names)
+        xyz.append(c.xyz[::step].copy())
         for n in names:
             a = c.attributes.get(n)
-            attrs[n].append(None if a is None else np.asarray(a)[::step])
+            attrs[n].append(None if a is None else np.asarray(a)[::step].copy())
+        del c
     attrs = {n: (None if any(a is None for a in v) else np.concatenate(v))
              for n, v in attrs.items()}
     if attrs["intensity"] is None:
@@ -105,16 +106,18 @@ def _moments_fields(args, extra):
             road_threshold=extra.get("road_threshold"), terrain=not args.no_terrain,
             building_alpha=args.building_alpha, sigma=args.sigma)
         stem = Path(extra["outputs"][tile.extent.path]).stem
-        if args.dtm:  # the tile's extent, from the ground of the tile and its buffer
-            e = tile.extent
-            dtm = terrain_model(tile.xyz, res.classification,
-                                resolution=args.dtm_resolution / units.horizontal,
-                                bounds=(e.xmin, e.ymin, e.xmax, e.ymax), crs=core.crs)
-            write_geotiff(Path(args.dtm) / f"{stem}.tif", dtm)
+        fields = res.to_fields()
         if extra.get("report") is not None:
             write_moments_report(extra["report"] / "tiles" / stem, res, max_plots=12,
                                  input_path=tile.extent.path)
-        return res.to_fields(), {}
+        del res  # the classifier's arrays go before the terrain model is built
+        if args.dtm:  # the tile's extent, from the ground of the tile and its buffer
+            e = tile.extent
+            dtm = terrain_model(tile.xyz, fields["classification"],
+                                resolution=args.dtm_resolution / units.horizontal,
+                                bounds=(e.xmin, e.ymin, e.xmax, e.ymax), crs=core.crs)
+            write_geotiff(Path(args.dtm) / f"{stem}.tif", dtm)
+        return fields, {}
 
     return fields
 

@@ -40,8 +40,9 @@ def add_arguments(group):
                        "intersect adjacent surfaces")
 
 
-def run(args, cloud):
-    """Segment `cloud` by :func:`lidarstat.segment.segment_curvature`."""
+def run(args, cloud, **library):
+    """Segment `cloud` by :func:`lidarstat.segment.segment_curvature` (`library`: more of
+    its arguments, e.g. a precomputed ``curv``)."""
     from ..segment import segment_curvature
 
     return segment_curvature(cloud.xyz, radius=args.radius, sigma=args.sigma,
@@ -49,4 +50,4 @@ def run(args, cloud):
                              min_points=DEFAULT_MIN_POINTS if args.min_points is None
                              else args.min_points, refine=args.refine,
                              frame=args.frame, noise=args.noise,
-                             sensor=args.sensor, merge_alpha=args.merge_alpha)
+                             sensor=args.sensor, merge_alpha=args.merge_alpha, **library)

@@ -71,25 +71,41 @@ def _curvature_statistic(fit, fields):
 CURVATURE_SCALE = JetScaleCriterion("curvature", _curvature_statistic, 4)
 
 
-def radius_ladder(points, rungs=SCALE_RUNGS, base=BASE_NEIGHBORS):
+def radius_ladder(points, rungs=SCALE_RUNGS, base=BASE_NEIGHBORS, *, sample=None, rng=0):
     """Radii of the ladder: ``r_0 sqrt(2)^j``, ``r_0`` holding about `base` points.
 
     The density is read from the median distance ``d_8`` to the 8th nearest point (the
-    point itself included) as ``8 / (pi d_8^2)`` points per unit area of surface.
+    point itself included) as ``8 / (pi d_8^2)`` points per unit area of surface; over
+    every point, or over a seeded random subset of `sample` points (their neighbours
+    among all the points).
     """
+    points = np.asarray(points, dtype=np.float64)
     n = points.shape[0]
     k = min(8, n)
-    nb = knn_neighbors(points, k)
+    query = None
+    if sample is not None and sample < n:
+        query = np.sort(np.random.default_rng(rng).choice(n, size=int(sample), replace=False))
+    nb = knn_neighbors(points, k, query=query)
     d = float(np.median(nb.distances[nb.indptr[1:] - 1]))
     r0 = d * math.sqrt(base / k)
     return r0 * RUNG_FACTOR ** np.arange(rungs)
 
 
 def scale_seeds(points, cell):
-    """One seed per occupied cube of side `cell`: the first point in it (input order)."""
-    keys = np.floor((points - points.min(axis=0)) / cell).astype(np.int64)
-    _, first = np.unique(keys, axis=0, return_index=True)
-    return np.sort(first)
+    """One seed per occupied cube of side `cell` (cubes on multiples of `cell`): the
+    point nearest the cube's centre (ties: the smallest x, then y, then z).
+
+    Neither the cubes nor the seed depend on the order of the points or on which other
+    points the cloud holds, so a tile with a buffer of neighbouring points has the whole
+    area's seeds over its extent.
+    """
+    keys = np.floor(points / cell).astype(np.int64)
+    d2 = (((points / cell) - keys - 0.5) ** 2).sum(axis=1)
+    order = np.lexsort((points[:, 2], points[:, 1], points[:, 0], d2, keys[:, 2],
+                        keys[:, 1], keys[:, 0]))
+    k = keys[order]
+    first = np.r_[True, np.any(k[1:] != k[:-1], axis=1)]
+    return np.sort(order[first])
 
 
 def fit_rungs(points, radii, rung, kw, block_size=131072, progress=None):

@@ -196,9 +196,10 @@ def _estimate_sigma(fit, ok, func):
     return sigma
 
 
-def _auto_fit(pts, *, criterion, sigma, noise, sensor, alpha, kw, block_size, progress, func):
+def _auto_fit(pts, *, criterion, sigma, noise, sensor, alpha, kw, block_size, progress, func,
+              scales=None):
     """Jets at the automatic scale (``_jet_scale``): the fit, sigma, and the scale's record."""
-    radii = radius_ladder(pts)
+    radii = radius_ladder(pts) if scales is None else np.asarray(scales, dtype=np.float64)
     sensor_arr = None if sensor is None else np.asarray(sensor, dtype=np.float64)
     state = {"sigma": sigma, "noise": noise}
 
@@ -228,7 +229,7 @@ def _auto_fit(pts, *, criterion, sigma, noise, sensor, alpha, kw, block_size, pr
 
 def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge_degree=None,
          weight="tricube", sensor=None, noise=None, min_neighbors=None, standard_errors=True,
-         scale_criterion=None, block_size=131072, progress=None) -> JetResult:
+         scale_criterion=None, scales=None, block_size=131072, progress=None) -> JetResult:
     """Monge coefficients with standard deviations and a chi-square test of every jet.
 
     Parameters
@@ -257,6 +258,10 @@ def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge
         What the automatic scale must detect (default
         :data:`lidarstat.features.CURVATURE_SCALE`: a significant principal curvature);
         :func:`lidarstat.segment.ridges` asks for a significant k'' of a ridge.
+    scales : sequence of float, optional
+        Automatic scale: the ladder of radii, increasing (default
+        :func:`lidarstat.features.radius_ladder` of `points`; a catalogue of tiles gives
+        every tile the area's ladder).
     block_size : int
         Points per block of the fused radius driver.
     progress : callable(done, total), optional
@@ -291,13 +296,23 @@ def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge
     if dup.any:  # every location once, its result to every point at it (_duplicates)
         res = run_on_unique(dup, lambda: jets(
             pts[dup.first], radius=radius, k=k, sigma=sigma, alpha=alpha, noise=noise,
-            scale_criterion=scale_criterion, block_size=block_size, progress=progress, **kw),
+            scale_criterion=scale_criterion, scales=scales, block_size=block_size,
+            progress=progress, **kw),
             what=func)
         return map_rows(res, dup.n_unique, dup.inverse)
     scale_info, chosen = {}, None
     estimated = sigma is None
     if not estimated:
         sigma = check_scalar(sigma, "sigma", func=func, low=0.0)
+    if scales is not None:
+        scales = np.atleast_1d(np.asarray(scales, dtype=np.float64))
+        if scales.ndim != 1 or not scales.size or not np.all(np.isfinite(scales) & (scales > 0)) \
+                or np.any(np.diff(scales) <= 0):
+            raise InvalidParameterError(f"The 'scales' parameter of {func} must be increasing "
+                                        "positive radii.")
+        if radius is not None or k is not None:
+            raise InvalidParameterError(f"{func}: `scales` is the automatic scale's ladder: "
+                                        "give it without `radius` and `k`")
     if radius is None and k is None:
         if pts.shape[0] <= (degree + 1) * (degree + 2) // 2:
             raise InsufficientNeighborsError(
@@ -305,7 +320,7 @@ def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge
         fit, sigma, noise, chosen, scale_info = _auto_fit(
             pts, criterion=CURVATURE_SCALE if scale_criterion is None else scale_criterion,
             sigma=sigma, noise=noise, sensor=sensor, alpha=alpha, kw=kw,
-            block_size=block_size, progress=progress, func=func)
+            block_size=block_size, progress=progress, func=func, scales=scales)
     elif radius is not None:
         radius = check_scalar(radius, "radius", func=func, low=0.0)
         index = CellIndex(pts, radius)

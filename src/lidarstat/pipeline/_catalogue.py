@@ -309,8 +309,40 @@ class TileRun:
     summary: dict = field(default_factory=dict)
 
 
+def _release_memory() -> None:
+    """Hand the heap's free pages back to the system (glibc's ``malloc_trim``).
+
+    A tile's arrays are freed when it is written, but glibc keeps the free pages of its
+    heaps (one heap per thread) for later allocations, so the resident memory of a run
+    of many tiles would grow towards the largest set of tiles ever in progress at once,
+    heap by heap. No-op where the C library has no ``malloc_trim``.
+    """
+    global _TRIM
+    if _TRIM is None:
+        import ctypes
+        import ctypes.util
+
+        try:
+            _TRIM = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim
+        except (OSError, AttributeError):
+            _TRIM = False
+    if _TRIM:
+        _TRIM(0)
+
+
+_TRIM = None
+
+
 def _run_one(func, cat: Catalogue, i: int, out: Path, buffer: float, points_per_chunk: int
              ) -> TileRun:
+    try:
+        return _run_tile(func, cat, i, out, buffer, points_per_chunk)
+    finally:  # the tile's arrays are gone: their pages go back to the system
+        _release_memory()
+
+
+def _run_tile(func, cat: Catalogue, i: int, out: Path, buffer: float, points_per_chunk: int
+              ) -> TileRun:
     t0 = time.perf_counter()
     tile = cat.read_tile(i, buffer, points_per_chunk=points_per_chunk)
     with output_group(defer=False):  # what the method writes of a tile appears at once

@@ -11,6 +11,15 @@ PDAL's ``filters.delaunay`` + ``writers.raster`` do.
 In a catalogue each tile's model is computed from the ground points of the tile *and its
 buffer* and covers the tile's extent, so the triangles near the tile's border are those of
 the whole area whenever the buffer holds the ground points they are made of.
+
+A Delaunay triangulation takes about 500 bytes a point while it is built (Qhull's
+structures): more than the classification of the same points. Above
+:data:`TIN_BLOCK_POINTS` ground points the raster is therefore built block by block, each
+block from the ground within a margin of it; a cell takes its value only from a triangle
+whose circumcircle lies inside the margin, which is a triangle of the whole
+triangulation, and the other cells are done again with twice the margin. The raster is
+the whole triangulation's (for ground points in general position: four points on one
+circle can be triangulated either way), with the memory of one block.
 """
 
 from __future__ import annotations
@@ -24,10 +33,13 @@ from ..errors import InvalidPointsError
 from ..io import Raster
 from ._terrain_kernels import rasterize_tin
 
-__all__ = ["GROUND_CODES_DTM", "terrain_model"]
+__all__ = ["GROUND_CODES_DTM", "TIN_BLOCK_POINTS", "terrain_model"]
 
 #: ASPRS classes taken as ground: bare earth (2) and road surface (11).
 GROUND_CODES_DTM = (2, 11)
+
+#: Ground points above which :func:`terrain_model` triangulates block by block.
+TIN_BLOCK_POINTS = 250_000
 
 
 def _grid(bounds, resolution):
@@ -42,7 +54,8 @@ def _grid(bounds, resolution):
 
 
 def terrain_model(xyz, classification, *, resolution: float, bounds=None,
-                  ground_codes=GROUND_CODES_DTM, crs: str | None = None) -> Raster:
+                  ground_codes=GROUND_CODES_DTM, crs: str | None = None,
+                  block_points: int = TIN_BLOCK_POINTS) -> Raster:
     """A raster of the ground surface (TIN of the ground points) at `resolution`.
 
     Parameters
@@ -58,6 +71,12 @@ def terrain_model(xyz, classification, *, resolution: float, bounds=None,
         Classes taken as ground.
     crs : str, optional
         Recorded in the raster.
+    block_points : int
+        Ground points above which the TIN is built block by block (each block from the
+        ground within a margin of it, the margin doubled where a triangle of the block
+        may not be one of the whole triangulation): the same raster, with the memory of
+        one block's triangulation (a Delaunay triangulation takes about 500 bytes a
+        point while it is built).
 
     Returns
     -------
@@ -77,10 +96,10 @@ def terrain_model(xyz, classification, *, resolution: float, bounds=None,
     >>> dtm.shape, round(float(dtm.values[5, 4]), 6)  # the cell centred at x = 4.5
     ((10, 10), 2.45)
     """
-    from scipy.spatial import Delaunay, QhullError
-
     xyz = check_points(xyz, name="xyz")
     resolution = check_scalar(resolution, "resolution", func="terrain_model", low=0)
+    block_points = check_scalar(block_points, "block_points", func="terrain_model", low=3,
+                                closed="left", integer=True)
     cls = np.asarray(classification)
     if cls.shape != (len(xyz),):
         raise InvalidPointsError(f"classification has {cls.shape[0] if cls.ndim else 0} "
@@ -97,13 +116,121 @@ def terrain_model(xyz, classification, *, resolution: float, bounds=None,
     # one height per planimetric location (the lowest), so the triangulation is defined
     xy = ground[:, :2] - origin
     order = np.lexsort((ground[:, 2], xy[:, 1], xy[:, 0]))
-    xy, z = xy[order], ground[order, 2]
-    keep = np.r_[True, np.any(np.diff(xy, axis=0) != 0, axis=1)]
-    try:
-        tri = Delaunay(xy[keep])
-    except QhullError:
-        raise InvalidPointsError("the ground points lie on one line: no terrain surface "
-                                 "can be triangulated") from None
-    values = rasterize_tin(tri.points, z[keep], tri.simplices.astype(np.int64),
-                           float(resolution), rows, cols)
+    keep = np.r_[True, np.any(np.diff(xy[order], axis=0) != 0, axis=1)]
+    xy, z = xy[order[keep]], ground[order[keep], 2]
+    del ground, order, keep
+    if len(xy) <= block_points:
+        tri = _triangulate(xy, strict=True)
+        values = rasterize_tin(tri.points, z, tri.simplices.astype(np.int64),
+                               float(resolution), rows, cols)
+    else:
+        values = _blocked_tin(xy, z, float(resolution), rows, cols, block_points)
     return Raster(values, left, top, resolution, crs)
+
+
+def _triangulate(xy, *, strict):
+    """The Delaunay triangulation of `xy`; None (or an error when `strict`) when the
+    points lie on one line."""
+    from scipy.spatial import Delaunay, QhullError
+
+    try:
+        return Delaunay(xy)
+    except (QhullError, ValueError):
+        if strict:
+            raise InvalidPointsError("the ground points lie on one line: no terrain surface "
+                                     "can be triangulated") from None
+        return None
+
+
+class _Hull:
+    """The convex hull of all the ground points, computed when first asked."""
+
+    def __init__(self, xy):
+        self.xy, self.eq = xy, None
+
+    def contains(self, centres):
+        """Which of `centres` lie in the hull (edges included)."""
+        from scipy.spatial import ConvexHull, QhullError
+
+        if self.eq is None:
+            try:
+                self.eq = ConvexHull(self.xy).equations
+            except (QhullError, ValueError):  # on one line: the final pass decides
+                return np.ones(len(centres), bool)
+        scale = float(np.abs(self.xy).max()) + 1.0
+        return np.all(centres @ self.eq[:, :2].T + self.eq[:, 2] <= 1e-9 * scale, axis=1)
+
+
+def _blocked_tin(xy, z, resolution, rows, cols, block_points):
+    """The TIN rasterised block by block, each block from the ground points within a
+    margin of it; equal to the triangulation of all the points.
+
+    A Delaunay triangle of a subset whose circumcircle lies inside the subset's window
+    is a triangle of the whole triangulation (no point of the whole set lies in its
+    circle: one would lie in the window, hence in the subset). A block's cells take the
+    values of such triangles; the cells covered only by other triangles, or by none but
+    inside the convex hull of all the points, are done again with twice the margin, the
+    last time with every point. Memory holds one block's triangulation.
+    """
+    values = np.full((rows, cols), np.nan)
+    side = max(8, int(math.sqrt(block_points / len(xy) * rows * cols)))  # cells
+    hull = _Hull(xy)
+    for r0 in range(0, rows, side):
+        for c0 in range(0, cols, side):
+            r1, c1 = min(r0 + side, rows), min(c0 + side, cols)
+            values[r0:r1, c0:c1] = _tin_block(xy, z, resolution, (r0, r1, c0, c1),
+                                              side * resolution / 8.0, hull)
+    return values
+
+
+def _tin_block(xy, z, res, cells, margin, hull):
+    r0, r1, c0, c1 = cells
+    # the block in grid coordinates (x east, y north from the top-left corner)
+    bx0, bx1, by0, by1 = c0 * res, c1 * res, -r1 * res, -r0 * res
+    out = np.full((r1 - r0, c1 - c0), np.nan)
+    pending = np.ones(out.shape, bool)
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    while True:
+        w = (bx0 - margin, by0 - margin, bx1 + margin, by1 + margin)
+        everything = w[0] <= lo[0] and w[1] <= lo[1] and w[2] >= hi[0] and w[3] >= hi[1]
+        sel = np.flatnonzero((xy[:, 0] >= w[0]) & (xy[:, 0] <= w[2])
+                             & (xy[:, 1] >= w[1]) & (xy[:, 1] <= w[3]))
+        tri = _triangulate(xy[sel], strict=everything) if len(sel) >= 3 else None
+        if tri is not None:
+            # the block's own grid: cell centres relative to its top-left corner
+            pts = tri.points - [bx0, by1]
+            simp = tri.simplices.astype(np.int64)
+            safe = np.ones(len(simp), bool) if everything else _circle_inside(pts, simp, (
+                w[0] - bx0, w[1] - by1, w[2] - bx0, w[3] - by1))
+            zz = z[sel]
+            done = rasterize_tin(pts, zz, simp[safe], res, r1 - r0, c1 - c0)
+            got = pending & np.isfinite(done)
+            out[got] = done[got]
+            pending &= ~got
+            if not everything and pending.any():
+                unsafe = np.isfinite(rasterize_tin(pts, zz, simp[~safe], res, r1 - r0,
+                                                   c1 - c0))
+                rr, cc = np.nonzero(pending & ~unsafe)
+                if rr.size:  # outside the subset's hull: pending if inside the whole's
+                    centres = np.c_[bx0 + (cc + 0.5) * res, by1 - (rr + 0.5) * res]
+                    pending[rr, cc] = hull.contains(centres)
+            del tri
+        if everything or not pending.any():
+            return out
+        margin *= 2.0
+
+
+def _circle_inside(pts, simp, window):
+    """Triangles whose circumcircle lies inside `window` (xmin, ymin, xmax, ymax)."""
+    a, b, c = pts[simp[:, 0]], pts[simp[:, 1]], pts[simp[:, 2]]
+    b, c = b - a, c - a
+    d = 2.0 * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bb, cc = (b ** 2).sum(1), (c ** 2).sum(1)
+        ux = (c[:, 1] * bb - b[:, 1] * cc) / d
+        uy = (b[:, 0] * cc - c[:, 0] * bb) / d
+    rad = np.hypot(ux, uy)
+    ux, uy = ux + a[:, 0], uy + a[:, 1]
+    ok = ((ux - rad >= window[0]) & (uy - rad >= window[1]) & (ux + rad <= window[2])
+          & (uy + rad <= window[3]))
+    return ok & np.isfinite(rad)

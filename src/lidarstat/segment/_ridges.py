@@ -127,7 +127,8 @@ RIDGE_SCALE = JetScaleCriterion("k'' of a ridge", _ridge_statistic, 2, calibrate
 
 def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricube",
            sensor=None, noise=None, ratio=2.0, cross_k=16, min_length=None, min_vertices=3,
-           smooth=5, scale_criterion=None, jet_result=None, progress=None) -> RidgeResult:
+           smooth=5, scale_criterion=None, scales=None, jet_result=None,
+           progress=None) -> RidgeResult:
     """Crest and ravine points and lines from the fourth-order Monge form of every point.
 
     Steps (docs/methods/jets.md): jets of degree 4 (:func:`lidarstat.features.jets`);
@@ -175,6 +176,10 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
         :data:`RIDGE_SCALE` (the k'' of a ridge). The direct segmentation uses
         :data:`lidarstat.features.CURVATURE_SCALE`: creases want the smallest radius
         whose jets detect a curvature, not the larger one a smooth ridge's k'' needs.
+    scales : sequence of float, optional
+        The automatic scale's ladder of radii (default
+        :func:`lidarstat.features.radius_ladder` of `points`); see
+        :func:`lidarstat.features.jets`.
     jet_result : JetResult, optional
         Reuse jets already computed on `points`.
     progress : callable, optional
@@ -200,7 +205,7 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
             pts[dup.first], radius=radius, k=k, sigma=sigma, alpha=alpha, weight=weight,
             sensor=sensor, noise=noise, ratio=ratio, cross_k=cross_k, min_length=min_length,
             min_vertices=min_vertices, smooth=smooth, scale_criterion=scale_criterion,
-            jet_result=jet_result,
+            scales=scales, jet_result=jet_result,
             progress=progress), what=func)
         return replace(res, fields=map_rows(res.fields, dup.n_unique, dup.inverse),
                        jets=map_rows(res.jets, dup.n_unique, dup.inverse))
@@ -210,7 +215,7 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
             crit = RIDGE_SCALE if scale_criterion is None else scale_criterion
         jet_result = jets(pts, radius=radius, k=k, sigma=sigma, alpha=alpha, degree=4,
                           weight=weight, sensor=sensor, noise=noise, scale_criterion=crit,
-                          progress=progress)
+                          scales=scales, progress=progress)
     elif len(jet_result) != pts.shape[0] or jet_result.fit.monge_degree != 4:
         raise InvalidParameterError(f"{func}: `jet_result` has {len(jet_result)} points, "
                                     f"`points` {pts.shape[0]}, or is not of Monge degree 4")
