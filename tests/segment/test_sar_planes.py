@@ -192,7 +192,7 @@ def test_plane_merge_keeps_every_plane_its_test():
     for seed in (0, 1):
         cloud = make_roof_scene("dormers", density=6, sigma=SIGMA, rng=seed, layout_seed=seed)
         truth, rp = _truth(cloud)
-        labels, _, table, _, merged = grow_planes(cloud.xyz, np.ones(len(cloud.xyz), bool),
+        labels, _, table, _, _ = grow_planes(cloud.xyz, np.ones(len(cloud.xyz), bool),
                                                   sigma=SIGMA)
         assert hoover(labels, truth, 0.8).correct == len(np.unique(truth[truth > 0]))
         assert np.all(np.isfinite(table["gof_p"])) and np.all(table["normal_se_deg"] > 0)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._result import Segmentation, segment_table
+from ._sar_plane_merge import MERGE_ALPHA
 from ._sar_planes import PLANE_COLUMNS, attach_points, grow_planes, segment_planes
 
 #: Neighbours of the local planes and of the membership test of the second stage.
@@ -22,15 +23,15 @@ ATTACH_SHARE = 2.0 / PLANES_K
 
 
 def add_planes(points, seg, *, sigma, alpha=0.05, edge_alpha=0.05, min_points=30,
-               gof_alpha=0.001, k=PLANES_K):
+               gof_alpha=0.001, k=PLANES_K, merge_alpha=MERGE_ALPHA):
     """SAR segmentation `seg` with the grown planes of the free points added.
 
     `sigma` is the height noise of roof planes (the SAR units' residual scale); the
     planimetric noise is estimated from the steep local planes
     (:func:`lidarstat.segment._sar_planes.planimetric_noise`). Planes of `k` to
     `min_points` - 1 points are kept when their own test accepts them; adjacent grown
-    regions that are one plane are merged first (``params["planes_merged"]``). Segments 1..S keep their
-    SAR rows; grown planes follow as S+1.. with ``stage`` 2, their ``normal_*``,
+    regions that are one plane are merged first at `merge_alpha` (None: no merge;
+    ``params["planes_merged"]``). Segments 1..S keep their SAR rows; grown planes follow as S+1.. with ``stage`` 2, their ``normal_*``,
     ``slope_deg``, ``normal_se_deg``, ``sigma`` (residual scale), ``sigma_noise`` (the
     height noise its tests used) and the plane test ``gof_stat``, ``gof_df``, ``gof_p``
     (other SAR columns NaN, integer ones -1).
@@ -40,7 +41,8 @@ def add_planes(points, seg, *, sigma, alpha=0.05, edge_alpha=0.05, min_points=30
     lab2, res2, tab2, sigma_h, merged = grow_planes(points, labels == 0, sigma=sigma, k=k,
                                             alpha=alpha, edge_alpha=edge_alpha,
                                             min_points=min_points, gof_alpha=gof_alpha,
-                                            min_size=min(k, min_points))
+                                            min_size=min(k, min_points),
+                                            merge_alpha=merge_alpha)
     s2 = int(lab2.max()) if lab2.size else 0
     both = np.where(lab2 > 0, lab2 + s1, labels)
     sigma_z = np.r_[np.full(s1, float(sigma)), tab2["sigma_noise"] if s2 else np.empty(0)]
