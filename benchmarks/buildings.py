@@ -100,6 +100,20 @@ def run(rel):
            "tested": scores(new[keep], truth[keep]), "cells": scores(old[keep], truth[keep]),
            "sigma": round(b["sigma"], 4), "roof_patches": b["n_roof_patches"],
            "missed_as_ground": int(np.sum(truth & keep & res.ground))}
+    # what the disagreements are: false building points by reference class and by the
+    # rule that decided (building_evidence: 1 roof patch, 2 roof cell), missed building
+    # points by lidarstat class, and the quartiles of their heights above the ground
+    ev = np.asarray(res.to_fields()["building_evidence"])
+    false, missed = new & ~truth & keep, truth & ~new & keep
+    row["false_by_reference_class"] = {int(c): int(n) for c, n in
+                                       zip(*np.unique(ref[false], return_counts=True))}
+    row["false_by_evidence"] = {int(c): int(n) for c, n in
+                                zip(*np.unique(ev[false], return_counts=True))}
+    row["missed_by_class"] = {int(c): int(n) for c, n in
+                              zip(*np.unique(res.classification[missed], return_counts=True))}
+    row["missed_height_quartiles"] = ([round(float(q), 2) for q in
+                                       np.quantile(res.height[missed], [0.25, 0.5, 0.75])]
+                                      if missed.any() else None)
     if omit.any():
         row["omitted_points"] = int(np.sum(omit & keep))
         row["tested_outside_omissions"] = scores(new[keep & ~omit], truth[keep & ~omit])
