@@ -19,6 +19,7 @@ from scipy import stats
 
 from lidarstat.segment import hoover, segment_sar
 from lidarstat.segment._sar_merge import _moments, crease_refuses
+from lidarstat.segment._sar_plane_merge import merge_planes
 from lidarstat.segment._sar_planes import (attach_points, grow_planes, noise_along_normal,
                                            planimetric_noise, _local_pca)
 from lidarstat.neighbors import knn_neighbors
@@ -39,7 +40,7 @@ def _truth(cloud, min_points=30):
 def test_grown_planes_match_the_roof_planes(kind, seed):
     cloud = make_roof_scene(kind, density=6, sigma=SIGMA, rng=seed, layout_seed=seed)
     truth, rp = _truth(cloud)
-    labels, residual, table, sigma_h = grow_planes(cloud.xyz, np.ones(len(cloud.xyz), bool),
+    labels, residual, table, sigma_h, _ = grow_planes(cloud.xyz, np.ones(len(cloud.xyz), bool),
                                                    sigma=SIGMA)
     score = hoover(labels, truth, 0.8)
     n_true = len(np.unique(truth[truth > 0]))
@@ -140,9 +141,63 @@ def test_small_planes_are_kept_by_their_own_test():
         cheek[:, 2] = 0.5 * cheek[:, 0] + rng.normal(0, SIGMA, 20)
         blob = rng.normal([10, 10, 3], 0.4, (20, 3))
         P = np.r_[cheek, blob]
-        labels, _, table, _ = grow_planes(P, np.ones(40, bool), sigma=SIGMA, min_points=30,
+        labels, _, table, _, _ = grow_planes(P, np.ones(40, bool), sigma=SIGMA, min_points=30,
                                           min_size=12)
         hits += np.mean(labels[:20] > 0) >= 0.9
         assert not np.any(labels[20:] > 0)
         assert np.all(table["gof_p"] >= 0.001)
     assert hits >= 9
+
+
+def _two_regions(rng, n, slope_b, gap=0.0):
+    """Two abutting 4 x 4 m regions (x < 4 and x >= 4) of a roof of slope 10 degrees,
+    the second tilted to `slope_b` degrees at the seam; labels 1 and 2."""
+    xy = rng.uniform(0, 8, (2 * n, 2))
+    left = xy[:, 0] < 4
+    z = np.where(left, np.tan(np.radians(10)) * xy[:, 0],
+                 np.tan(np.radians(10)) * 4 + np.tan(np.radians(slope_b)) * (xy[:, 0] - 4))
+    P = np.c_[xy, z + rng.normal(0, SIGMA, 2 * n)]
+    return P, np.where(left, 1, 2)
+
+
+def test_plane_merge_joins_one_plane_at_its_level_and_refuses_a_crease():
+    """Chow's F test of the merge of two abutting regions: one plane cut in two is
+    joined except at the test's level (seed sweep); two faces at a 3 degree crease are
+    never joined."""
+    rng = np.random.default_rng(5)
+    reps, alpha = 200, 0.01
+    kept_apart = 0
+    for _ in range(reps):
+        P, lab = _two_regions(rng, 150, 10)
+        nbr = knn_neighbors(P, 12).indices.reshape(-1, 12)
+        out, _, merged = merge_planes(P, lab, nbr, np.full(3, SIGMA), SIGMA,
+                                      merge_alpha=alpha, noise=noise_along_normal)
+        kept_apart += merged == 0
+        assert np.unique(out).size == 2 - merged
+    # refusals under the null: Chow at alpha, or the crease test (both parts accepted
+    # and the union rejected, at most its level 0.001)
+    assert kept_apart <= stats.binom.ppf(0.999, reps, alpha + 0.001)
+    for _ in range(20):
+        P, lab = _two_regions(rng, 150, 13)
+        nbr = knn_neighbors(P, 12).indices.reshape(-1, 12)
+        out, _, merged = merge_planes(P, lab, nbr, np.full(3, SIGMA), SIGMA,
+                                      merge_alpha=alpha, noise=noise_along_normal)
+        assert merged == 0 and np.array_equal(out, lab)
+
+
+def test_plane_merge_keeps_every_plane_its_test():
+    """On the dormer scenes the merge leaves every roof plane correct (Hoover 0.8) and
+    every plane with its test and normal standard error, and no plane spans two true
+    faces."""
+    for seed in (0, 1):
+        cloud = make_roof_scene("dormers", density=6, sigma=SIGMA, rng=seed, layout_seed=seed)
+        truth, rp = _truth(cloud)
+        labels, _, table, _, _ = grow_planes(cloud.xyz, np.ones(len(cloud.xyz), bool),
+                                                  sigma=SIGMA)
+        assert hoover(labels, truth, 0.8).correct == len(np.unique(truth[truth > 0]))
+        assert np.all(np.isfinite(table["gof_p"])) and np.all(table["normal_se_deg"] > 0)
+        # no plane spans two true faces
+        for s in range(1, labels.max() + 1):
+            f = rp[(labels == s) & (rp > 0)]
+            if f.size:
+                assert np.bincount(f).max() >= 0.95 * f.size

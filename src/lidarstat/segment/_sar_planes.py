@@ -28,6 +28,9 @@ frame (orthogonal residuals, noise along the normal):
    least spread). Regions of `min_points` or more are kept; smaller ones (down to
    `min_size`) when the test accepts them and no point is an outlier.
 
+Adjacent regions that are one plane (Chow's F test, the crease test) are merged first
+(:mod:`._sar_plane_merge`): tested growth can cut one rough face into several regions.
+
 :func:`attach_points` then joins the free points on the rim of a plane by the same
 prediction test.
 """
@@ -38,6 +41,7 @@ import numpy as np
 
 from ..neighbors import knn_neighbors
 from ..stats import chi2_critical, chi2_quantile, chi2_test, z_critical
+from ._sar_plane_merge import MERGE_ALPHA, merge_planes
 
 #: Local normals this far from vertical (degrees) estimate the planimetric noise.
 STEEP_DEG = 60.0
@@ -205,7 +209,7 @@ def local_noise(P, lam_min, nz, k, sigma, *, cell=NOISE_CELL, q=SIGMA_QUANTILE,
 
 
 def grow_planes(points, free, *, sigma, k=12, alpha=0.05, edge_alpha=0.05, min_points=30,
-                gof_alpha=0.001, local=True, min_size=None):
+                gof_alpha=0.001, local=True, min_size=None, merge_alpha=MERGE_ALPHA):
     """Planes among the `free` points by tested growth in their own frame.
 
     Parameters
@@ -226,6 +230,10 @@ def grow_planes(points, free, *, sigma, k=12, alpha=0.05, edge_alpha=0.05, min_p
         Smallest plane grown (default `min_points`); planes of `min_size` to
         `min_points` - 1 points are kept when their own test accepts them (small faces:
         dormer cheeks, chimney sides).
+    merge_alpha : float or None
+        Level of Chow's F test of the merge of adjacent regions that are one plane
+        (:func:`lidarstat.segment._sar_plane_merge.merge_planes`, with the crease test at
+        `gof_alpha`); None: no merge.
 
     Returns
     -------
@@ -235,6 +243,10 @@ def grow_planes(points, free, *, sigma, k=12, alpha=0.05, edge_alpha=0.05, min_p
         Orthogonal residual from the plane (NaN off the planes).
     table : dict of str to ndarray
         :data:`PLANE_COLUMNS`, one row per plane.
+    sigma_h : float
+        Planimetric noise.
+    merged : int
+        Merges of adjacent regions.
     """
     n = len(points)
     labels = np.zeros(n, dtype=np.int64)
@@ -242,7 +254,7 @@ def grow_planes(points, free, *, sigma, k=12, alpha=0.05, edge_alpha=0.05, min_p
     table = {c: np.empty(0) for c in PLANE_COLUMNS}
     idx = np.flatnonzero(free)
     if idx.size < max(min_points, k) or not np.isfinite(sigma) or sigma <= 0:
-        return labels, residual, table, float(sigma)
+        return labels, residual, table, float(sigma), 0
     P = points[idx] - points[idx].min(axis=0)
     nbr = knn_neighbors(P, k).indices.reshape(-1, k)
     lam, vec = _local_pca(P, nbr)
@@ -254,6 +266,11 @@ def grow_planes(points, free, *, sigma, k=12, alpha=0.05, edge_alpha=0.05, min_p
     lab, reg_sz = _grow(P, nbr, planar, lam, vec, sz, sigma_h, z_critical(edge_alpha),
                         chi2_critical(edge_alpha, 2),
                         min_points if min_size is None else min_size)
+    merged = 0
+    if merge_alpha is not None:
+        lab, reg_sz, merged = merge_planes(P, lab, nbr, reg_sz, sigma_h,
+                                           merge_alpha=merge_alpha, crease_alpha=gof_alpha,
+                                           noise=noise_along_normal)
     sizes = np.bincount(lab)[1:]
     rank = np.zeros(sizes.size + 1, dtype=np.int64)
     rank[1 + np.argsort(-sizes, kind="stable")] = np.arange(1, sizes.size + 1)
@@ -301,7 +318,7 @@ def grow_planes(points, free, *, sigma, k=12, alpha=0.05, edge_alpha=0.05, min_p
         residual[gone] = np.nan
         labels = new[labels]
         table = {c: v[keep] for c, v in table.items()}
-    return labels, residual, table, sigma_h
+    return labels, residual, table, sigma_h, merged
 
 
 def segment_planes(points, labels):
