@@ -15,9 +15,10 @@ The 50-million-point catalogue (``moments`` over 50 tiles of one million points 
 from here, otherwise the entry stored in ``results_catalogue.json`` is plotted beside the
 single-file runs.
 
-A run that exceeds ``--timeout`` seconds is stopped and recorded as such (``null`` time):
-a command whose cost grows faster than the others shows as a missing point, not as a
-stalled script.
+A run that exceeds ``--timeout`` seconds, or whose resident memory passes ``--max-mib``,
+is stopped and recorded as such (``null`` time, the memory reached): a command whose cost
+grows faster than the others shows as a missing point, not as a stalled script or a
+machine out of memory.
 
 Usage::
 
@@ -73,8 +74,21 @@ def write_cloud(path: Path, n: int, seed: int = 20261126) -> None:
         "return_number": rnum.astype(np.uint8)}))
 
 
-def run(argv: list[str], env: dict, timeout: float) -> dict:
-    """One whole-process run: wall seconds and peak RSS (MiB), or a timeout / failure."""
+def _rss_mib(pid: int) -> float:
+    """Resident memory of a running process (MiB), 0 once it has gone."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return 0.0
+
+
+def run(argv: list[str], env: dict, timeout: float, max_mib: float | None = None) -> dict:
+    """One whole-process run: wall seconds and peak RSS (MiB), or a timeout / memory stop /
+    failure."""
     cmd = [sys.executable, "-m", "lidarstat.cli", *argv, "-q"]
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -88,6 +102,14 @@ def run(argv: list[str], env: dict, timeout: float) -> dict:
             os.wait4(proc.pid, 0)
             proc.stderr.close()
             return {"seconds": None, "peak_mib": None, "status": f"timeout {timeout:.0f} s"}
+        if max_mib is not None:
+            rss = _rss_mib(proc.pid)
+            if rss > max_mib:
+                proc.kill()
+                os.wait4(proc.pid, 0)
+                proc.stderr.close()
+                return {"seconds": None, "peak_mib": round(rss, 1),
+                        "status": f"stopped over {max_mib:.0f} MiB"}
         time.sleep(0.05)
     wall = time.perf_counter() - t0
     err = proc.stderr.read().decode().strip()
@@ -98,7 +120,7 @@ def run(argv: list[str], env: dict, timeout: float) -> dict:
             "status": "ok"}
 
 
-def measure(commands, sizes, tmp: Path, timeout: float) -> dict:
+def measure(commands, sizes, tmp: Path, timeout: float, max_mib: float | None) -> dict:
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp / "numba"))
     warm = tmp / "warm.laz"
     write_cloud(warm, 20_000)
@@ -112,7 +134,7 @@ def measure(commands, sizes, tmp: Path, timeout: float) -> dict:
         write_cloud(src, n)
         for name in commands:
             dst = tmp / f"out_{name}_{n}.laz"
-            res = run([a.format(i=src, o=dst) for a in COMMANDS[name]], env, timeout)
+            res = run([a.format(i=src, o=dst) for a in COMMANDS[name]], env, timeout, max_mib)
             dst.unlink(missing_ok=True)
             res["points"] = n
             if res["seconds"]:
@@ -137,7 +159,7 @@ def table(results: dict) -> str:
             if r is None:
                 cells.append("")
             elif r["seconds"] is None:
-                cells.append(r["status"].split(":")[0])
+                cells.append(r["status"].split(":")[0])  # timeout / stopped over N MiB
             else:
                 cells.append(f"{r['seconds']:.1f} s, {r['peak_mib']:.0f} MiB")
         lines.append(f"| `{name}` | " + " | ".join(cells) + " |")
@@ -191,6 +213,8 @@ def main(argv=None):
     ap.add_argument("--commands", nargs="+", default=list(COMMANDS), choices=list(COMMANDS))
     ap.add_argument("--timeout", type=float, default=1500.0,
                     help="seconds after which one run is stopped (default 1500)")
+    ap.add_argument("--max-mib", type=float, default=None,
+                    help="resident memory (MiB) at which one run is stopped (default: none)")
     ap.add_argument("--catalogue", type=int, default=None, metavar="N",
                     help="also run the N-point catalogue (benchmarks/catalogue.py --points N)")
     ap.add_argument("--out", default=None, help="results JSON")
@@ -205,7 +229,8 @@ def main(argv=None):
                                "machine_shared": True,
                                "note": "two cores shared with other jobs: seconds are "
                                        "upper bounds; peak memory is not affected"},
-                   "commands": measure(args.commands, args.sizes, tmp, args.timeout)}
+                   "commands": measure(args.commands, args.sizes, tmp, args.timeout,
+                                               args.max_mib)}
         if args.catalogue:
             import catalogue
 
