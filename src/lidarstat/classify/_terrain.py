@@ -46,7 +46,7 @@ import numpy as np
 from ._terrain_kernels import cell_lowest, fill_triangles, grid_bilinear
 
 __all__ = ["TERRAIN_DEFAULTS", "TerrainModel", "TerrainRefinement", "drop_bumps",
-           "drop_opened", "grow_ground", "refine_terrain", "reject_plateaus", "reject_walled",
+           "drop_opened", "grow_ground", "grow_platforms", "refine_terrain", "reject_plateaus", "reject_walled",
            "terrain_step"]
 
 #: The terrain step's lengths in metres (slopes are dimensionless): the grid cell, the
@@ -57,10 +57,12 @@ __all__ = ["TERRAIN_DEFAULTS", "TerrainModel", "TerrainRefinement", "drop_bumps"
 #: border of a grown region, and how many of its 8 neighbours a seed cell must rise
 #: above steeply to be dropped as a bump; the largest share of walls on the border of a
 #: part of the surface; the slope and largest radius of the seeds' progressive opening
-#: (steeper than SMRF's 0.15: the growth, not the opening, decides on steep ground).
+#: (steeper than SMRF's 0.15: the growth, not the opening, decides on steep ground); the
+#: highest step up onto a low platform and the fewest cells of one (:func:`grow_platforms`).
 TERRAIN_DEFAULTS = {"cell": 2.0, "tolerance": 0.5, "slope_tolerance": 1.25, "step": 0.3,
                     "max_slope": 1.0, "below": 1.0, "wall_fraction": 0.2, "bump_sides": 5,
-                    "plateau_fraction": 0.5, "open_slope": 0.5, "open_radius": 18.0}
+                    "plateau_fraction": 0.5, "open_slope": 0.5, "open_radius": 18.0,
+                    "low_step": 1.0, "low_cells": 16}
 
 #: The eight neighbour offsets of a cell.
 _DIRS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
@@ -291,6 +293,51 @@ def reject_walled(grown_z, ground_z, lowest, *, cell, step, max_rise, wall_fract
     return out, int(drop.sum())
 
 
+def grow_platforms(surface_z, lowest, *, cell, max_rise, low_step, min_cells, wall_fraction):
+    """Low platforms joined to the ground over a step no higher than `low_step`.
+
+    A raised terrace, a plinth or a podium stands on a kerb-like wall a few decimetres
+    high all round, so the smooth growth (within `step` of the extrapolated terrain) does
+    not climb it. The growth is repeated with `low_step` instead of `step`; a connected
+    region it adds is kept when it has at least `min_cells` cells (a car or a hedge is
+    smaller) and at most `wall_fraction` of its border pairs (a region cell and an
+    8-neighbour outside it holding points) step down by more than `low_step`: a platform
+    is lower than `low_step` above the ground all round, a roof stands on walls higher
+    than any platform's.
+
+    Returns
+    -------
+    surface_z : (nx, ny) ndarray
+        With the kept regions set to their lowest points.
+    added : int
+        Cells added.
+    """
+    from scipy import ndimage as ndi
+
+    grown = grow_ground(lowest, surface_z, cell=cell, step=low_step, max_rise=max_rise)
+    new = np.isfinite(grown) & ~np.isfinite(surface_z)
+    label, n = ndi.label(new, structure=np.ones((3, 3), bool))
+    if n == 0:
+        return surface_z, 0
+    walls = np.zeros(n + 1)
+    pairs = np.zeros(n + 1)
+    for di, dj in _DIRS:
+        n_low = _shift(lowest, di, dj)
+        n_label = _shift(label, di, dj, fill=-1)
+        pair = new & (n_label != label) & np.isfinite(n_low)
+        with np.errstate(invalid="ignore"):
+            dz = grown - n_low
+        walls += np.bincount(label[pair & (dz > low_step)], minlength=n + 1)
+        pairs += np.bincount(label[pair], minlength=n + 1)
+    size = np.bincount(label.ravel(), minlength=n + 1)
+    ok = (size >= min_cells) & (walls <= wall_fraction * np.maximum(pairs, 1))
+    ok[0] = False
+    keep = ok[label] & new
+    out = surface_z.copy()
+    out[keep] = grown[keep]
+    return out, int(keep.sum())
+
+
 def reject_plateaus(surface_z, lowest, *, cell, step, max_rise, fraction, rounds=3):
     """:func:`_reject_plateaus_once` repeated `rounds` times (a roof in steps loses its
     lowest level first, which walls the next level). Returns ``(surface_z, rejected)``."""
@@ -457,7 +504,7 @@ def _tin(xy, z, surface_z, grid, cell):
 def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max_rise,
                    below, wall_fraction=0.2, bump_sides=5,
                    plateau_fraction=0.5, open_slope=0.5,
-                   open_radius=0.0) -> TerrainRefinement:
+                   open_radius=0.0, low_step=0.0, low_cells=16) -> TerrainRefinement:
     """Grow the ground over smooth continuations, then test every point against it.
 
     Parameters
@@ -492,6 +539,9 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
         Slope (vertical units per horizontal unit) and largest window radius (horizontal
         units) of the progressive opening that seed cells must not stand above
         (:func:`drop_opened`; radius 0 switches it off).
+    low_step, low_cells : float, int
+        Highest step up onto a low platform (vertical units) and the fewest cells of one
+        (:func:`grow_platforms`; a `low_step` not above `step` switches it off).
 
     Returns
     -------
@@ -529,6 +579,10 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
                                         max_rise=max_rise, wall_fraction=wall_fraction)
     surface_z, plateaus = reject_plateaus(surface_z, lowest, cell=cell, step=step,
                                           max_rise=max_rise, fraction=plateau_fraction)
+    if low_step > step:
+        surface_z, _ = grow_platforms(surface_z, lowest, cell=cell, max_rise=max_rise,
+                                      low_step=low_step, min_cells=low_cells,
+                                      wall_fraction=wall_fraction)
     grown = int((np.isfinite(surface_z) & ~np.isfinite(ground_z)).sum())
     grid = _fill(surface_z)
     gx, gy = np.gradient(grid, cell) if min(grid.shape) > 1 else (np.zeros_like(grid),) * 2
@@ -559,5 +613,6 @@ def terrain_step(xy, z, ground, *, ux=1.0, uz=1.0):
                        step=d["step"] / uz, max_rise=d["max_slope"] / aspect,
                        below=d["below"] / uz, wall_fraction=d["wall_fraction"],
                        bump_sides=d["bump_sides"], plateau_fraction=d["plateau_fraction"],
-                       open_slope=d["open_slope"] / aspect, open_radius=d["open_radius"] / ux)
+                       open_slope=d["open_slope"] / aspect, open_radius=d["open_radius"] / ux,
+                       low_step=d["low_step"] / uz, low_cells=d["low_cells"])
     return t.ground, t.height, t.surface, t.tolerance
