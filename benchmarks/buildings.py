@@ -3,7 +3,7 @@
 the same run.
 
 For every AHN3 and IGN file: ground total error and kappa against the producer's ground
-(2), and building precision / recall / F1 of
+(2 and 11; scored as in ``ground_filters.py``), and building precision / recall / F1 of
 
 * ``tested``: the classes `moments` writes (tested local planes, roof patches, roof
   cells: docs/methods/moments.md, "Buildings");
@@ -91,7 +91,10 @@ def run(rel):
                       return_number=rnum, units=units, source=str(path))
         seconds = time.perf_counter() - t
     keep = ~np.isin(ref, LEFT_OUT) & (ref < 19)
-    e = filter_errors(res.ground[keep], ref[keep] == 2)
+    # the ground scored as in ground_filters.py: bare earth and road are ground; on the
+    # IGN files class 1 is left out (there it is everything else, ground included)
+    gk = keep & ~((ref == 1) & rel.startswith("ign_"))
+    e = filter_errors(res.ground[gk], np.isin(ref[gk], (2, 11)))
     multi = (nret > 1) & (rnum < nret)
     old = cell_rule(cloud.xyz[:, :2], res.height, res.ground, multi)
     new = res.classification == 6
