@@ -68,8 +68,22 @@ def test_large_flat_roof_is_not_ground(seed):
     assert e.type_ii < 0.01 and e.total < 0.01
 
 
+@pytest.mark.parametrize("seed", SEEDS)
+def test_low_platform_is_ground_garage_and_cars_are_not(seed):
+    """A plinth 0.8 m high on a vertical rim: the smooth growth cannot climb the rim, the
+    platform growth (steps up to 1 m, regions of at least 16 cells, walls higher than
+    1 m on at most a fifth of the border) can; the garage roof (2.5 m) and the cars
+    (1.5 m, too small) stay objects."""
+    s = _scene("platform", seed)
+    e, res = _errors(s)
+    plinth = np.hypot(s.xyz[:, 0] - 35, s.xyz[:, 1] - 40) < 10.0
+    assert res.ground[plinth].mean() > 0.98
+    assert e.type_ii < 0.01 and e.total < 0.01
+
+
 def test_scenes_exported():
-    assert set(TERRAIN_SCENES) == {"ramp", "embankment", "bridge", "quarry", "flat_roof"}
+    assert set(TERRAIN_SCENES) == {"ramp", "embankment", "bridge", "quarry", "flat_roof",
+                                   "platform"}
     with pytest.raises(ValueError):
         make_terrain_scene("volcano")
 

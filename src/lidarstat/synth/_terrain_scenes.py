@@ -11,7 +11,10 @@ hit is terrain:
   a few buildings;
 * ``bridge``: a deck 6 m above a road, between two embankments; the deck is an object;
 * ``quarry``: a pit 12 m deep cut in three benches (faces 1:0.5, 4 m high);
-* ``flat_roof``: one flat roof of 60 x 40 m, 8 m high, wider than any opening window.
+* ``flat_roof``: one flat roof of 60 x 40 m, 8 m high, wider than any opening window;
+* ``platform``: a round plinth 22 m across, 0.8 m above flat terrain on a vertical rim
+  (terrain, as a raised square or terrace is), beside a flat-roofed garage 2.5 m high and
+  two cars 1.5 m high (objects).
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import numpy as np
 
 __all__ = ["TERRAIN_SCENES", "TerrainScene", "make_terrain_scene"]
 
-TERRAIN_SCENES = ("ramp", "embankment", "bridge", "quarry", "flat_roof")
+TERRAIN_SCENES = ("ramp", "embankment", "bridge", "quarry", "flat_roof", "platform")
 
 
 @dataclass(frozen=True)
@@ -97,8 +100,14 @@ def _flat_roof(x, y):
     return ground, _boxes(x, y, [(20, 80, 20, 60, 8.0)])
 
 
+def _platform(x, y):
+    ground = np.where(np.hypot(x - 35, y - 40) <= 11.0, 0.8, 0.0)
+    return ground, _boxes(x, y, [(62, 80, 25, 37, 2.5), (65, 67, 55, 59.5, 1.5),
+                                 (70, 72, 55, 59.5, 1.5)])
+
+
 _MAKERS = {"ramp": _ramp, "embankment": _embankment, "bridge": _bridge,
-           "quarry": _quarry, "flat_roof": _flat_roof}
+           "quarry": _quarry, "flat_roof": _flat_roof, "platform": _platform}
 
 
 def make_terrain_scene(name: str, *, extent=(100.0, 80.0), density=3.0, sigma=0.05,
