@@ -151,3 +151,30 @@ def test_quadric_sums_of_merged_units_equal_the_union(seed):
     merged = qk.quadric_statistic(MA, GA, GdA, True, 1e-4, T)
     direct = qk.quadric_set_statistic(p - p[0], np.tile(d[0], (200, 1)), True, 1e-4)
     assert merged == pytest.approx(direct, rel=1e-6)
+
+
+def test_quadric_statistic_matches_a_direct_taubin_fit():
+    """The kernel's statistic from moments against a direct Taubin fit (SciPy's generalised
+    symmetric eigensolver on the monomials of the centred points), range noise."""
+    import scipy.linalg as sl
+
+    from lidarstat.segment._quadric_merge_kernels import quadric_set_statistic
+
+    qa, qb = [0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]
+    for seed in range(5):
+        for kind in ("cylinder", "sphere", "saddle"):
+            p, d = _quadric_patch(np.random.default_rng(seed), kind, 120, 0.01, "range")
+            y = p - p.mean(axis=0)
+            m = np.c_[y, np.stack([y[:, a] * y[:, b] for a, b in zip(qa, qb)], axis=1)]
+            jac = np.zeros((len(y), 9, 3))
+            jac[:, 0, 0] = jac[:, 1, 1] = jac[:, 2, 2] = 1.0
+            for q, (a, b) in enumerate(zip(qa, qb)):
+                jac[:, 3 + q, a] += y[:, b]
+                jac[:, 3 + q, b] += y[:, a]
+            mc = m - m.mean(axis=0)
+            _, vec = sl.eigh(mc.T @ mc, np.einsum("nik,njk->ij", jac, jac))
+            f = mc @ vec[:, 0]
+            dg = np.einsum("nik,i,nk->n", jac, vec[:, 0], d)
+            direct = len(y) * (f @ f) / (1e-4 * (dg @ dg))
+            assert quadric_set_statistic(p - p[0], d, True, 1e-4) == pytest.approx(
+                direct, rel=1e-8)

@@ -11,7 +11,8 @@ so the sums of two units add after ``T . T^T`` (:func:`slot_merge`).
 The fit ``f(x) = a^T m`` minimises ``a^T M a / a^T G a`` (Taubin 1991: the algebraic
 residual over the mean squared gradient, about the mean squared distance to the
 surface); the constant is eliminated (Schur complement of ``M``) and the 9 x 9 generalised
-eigenproblem solved through a Cholesky factor of ``G``. A point moved by ``e`` along ``d``
+eigenproblem solved through a Cholesky factor of ``G`` and Jacobi rotations (plain loops:
+no LAPACK call to compile). A point moved by ``e`` along ``d``
 changes ``f`` by ``e (d . grad f)``, so under the model ``sum f^2 / (sigma^2 mean (d .
 grad f)^2)`` is chi-square with ``n - 9`` degrees of freedom (10 coefficients up to scale).
 """
@@ -92,10 +93,103 @@ def _shift_matrix(delta, T):
 
 
 @njit
-def _congruence_add(T, A, out):
-    """``out += T A T^T``."""
-    tmp = T @ A
-    out += tmp @ T.T
+def _congruence(T, A, out, add):
+    """``out = T A T^T`` (``out +=`` when `add`); plain loops (no BLAS call to compile)."""
+    k = T.shape[0]
+    tmp = np.zeros((k, k))
+    for r in range(k):
+        for q in range(k):
+            t = T[r, q]
+            if t != 0.0:
+                for c in range(k):
+                    tmp[r, c] += t * A[q, c]
+    for r in range(k):
+        for c in range(k):
+            v = 0.0
+            for q in range(k):
+                v += tmp[r, q] * T[c, q]
+            if add:
+                out[r, c] += v
+            else:
+                out[r, c] = v
+
+
+@njit
+def _jacobi_min(K, v):
+    """Smallest eigenvalue of the symmetric `K` (overwritten) and its eigenvector in `v`,
+    by cyclic Jacobi rotations."""
+    k = K.shape[0]
+    V = np.eye(k)
+    for _ in range(50):
+        off = 0.0
+        diag = 0.0
+        for r in range(k):
+            diag += K[r, r] * K[r, r]
+            for q in range(r + 1, k):
+                off += K[r, q] * K[r, q]
+        if off <= 1e-30 * diag:
+            break
+        for p in range(k - 1):
+            for q in range(p + 1, k):
+                apq = K[p, q]
+                if apq == 0.0:
+                    continue
+                theta = (K[q, q] - K[p, p]) / (2.0 * apq)
+                t = (1.0 if theta >= 0 else -1.0) / (abs(theta) + np.sqrt(theta * theta + 1.0))
+                c = 1.0 / np.sqrt(t * t + 1.0)
+                sn = t * c
+                for r in range(k):
+                    krp = K[r, p]
+                    krq = K[r, q]
+                    K[r, p] = c * krp - sn * krq
+                    K[r, q] = sn * krp + c * krq
+                for r in range(k):
+                    kpr = K[p, r]
+                    kqr = K[q, r]
+                    K[p, r] = c * kpr - sn * kqr
+                    K[q, r] = sn * kpr + c * kqr
+                for r in range(k):
+                    vrp = V[r, p]
+                    vrq = V[r, q]
+                    V[r, p] = c * vrp - sn * vrq
+                    V[r, q] = sn * vrp + c * vrq
+    j = 0
+    for r in range(1, k):
+        if K[r, r] < K[j, j]:
+            j = r
+    for r in range(k):
+        v[r] = V[r, j]
+    return K[j, j]
+
+
+@njit
+def _cholesky_inverse(N, Li):
+    """``Li = L^-1`` for the Cholesky factor ``N = L L^T``; False when `N` is not
+    positive definite."""
+    k = N.shape[0]
+    L = np.zeros((k, k))
+    for j in range(k):
+        d = N[j, j]
+        for q in range(j):
+            d -= L[j, q] * L[j, q]
+        if not d > 0.0:
+            return False
+        L[j, j] = np.sqrt(d)
+        for r in range(j + 1, k):
+            v = N[r, j]
+            for q in range(j):
+                v -= L[r, q] * L[j, q]
+            L[r, j] = v / L[j, j]
+    for j in range(k):
+        for r in range(k):
+            Li[r, j] = 0.0
+        Li[j, j] = 1.0 / L[j, j]
+        for r in range(j + 1, k):
+            v = 0.0
+            for q in range(j, r):
+                v -= L[r, q] * Li[q, j]
+            Li[r, j] = v / L[r, r]
+    return True
 
 
 @njit
@@ -105,10 +199,10 @@ def slot_merge(MA, GA, GdA, cA, MB, GB, GdB, cB, use_d, T):
     for a in range(3):
         delta[a] = cA[a] - cB[a]
     _shift_matrix(delta, T)
-    _congruence_add(T, MB, MA)
-    _congruence_add(T, GB, GA)
+    _congruence(T, MB, MA, True)
+    _congruence(T, GB, GA, True)
     if use_d:
-        _congruence_add(T, GdB, GdA)
+        _congruence(T, GdB, GdA, True)
 
 
 @njit
@@ -122,8 +216,10 @@ def quadric_statistic(M, G, Gd, use_d, sigma2, T):
     for a in range(3):
         mu[a] = M[0, 1 + a] / n
     _shift_matrix(mu, T)  # about the centroid
-    Mc = T @ M @ T.T
-    Gc = T @ G @ T.T
+    Mc = np.empty((NM, NM))
+    Gc = np.empty((NM, NM))
+    _congruence(T, M, Mc, False)
+    _congruence(T, G, Gc, False)
     var = (Mc[1, 1] + Mc[2, 2] + Mc[3, 3]) / n
     if not var > 0.0:
         return np.inf
@@ -146,16 +242,30 @@ def quadric_statistic(M, G, Gd, use_d, sigma2, T):
         tr += N[r, r]
     for r in range(k):
         N[r, r] += 1e-12 * tr
-    L = np.linalg.cholesky(N)
-    Li = np.linalg.inv(L)
-    K = Li @ C @ Li.T
-    K = 0.5 * (K + K.T)
-    _, V = np.linalg.eigh(K)
-    b = Li.T @ V[:, 0]
-    rss = max(b @ C @ b, 0.0)
-    grad2 = b @ N @ b  # sum |grad f|^2
+    Li = np.empty((k, k))
+    if not _cholesky_inverse(N, Li):
+        return np.inf
+    K = np.empty((k, k))
+    _congruence(Li, C, K, False)
+    for r in range(k):
+        for q in range(r + 1, k):
+            K[r, q] = K[q, r] = 0.5 * (K[r, q] + K[q, r])
+    v = np.empty(k)
+    _jacobi_min(K, v)
+    b = np.zeros(k)
+    for r in range(k):
+        for q in range(k):
+            b[r] += Li[q, r] * v[q]
+    rss = 0.0
+    grad2 = 0.0  # sum |grad f|^2
+    for r in range(k):
+        for q in range(k):
+            rss += b[r] * C[r, q] * b[q]
+            grad2 += b[r] * N[r, q] * b[q]
+    rss = max(rss, 0.0)
     if use_d:
-        Gdc = T @ Gd @ T.T
+        Gdc = np.empty((NM, NM))
+        _congruence(T, Gd, Gdc, False)
         bd = np.empty(k)
         for r in range(k):
             bd[r] = D[r + 1] * b[r]
