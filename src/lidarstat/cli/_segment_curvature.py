@@ -33,8 +33,9 @@ def add_arguments(group):
                        "plane")
     group.add_argument("--merge-alpha", type=opt.probability, default=0.001,
                        dest="merge_alpha",
-                       help="level of the plane test that refuses to merge two planar units "
-                       "whose union is no plane [0.001]")
+                       help="level of the model tests that refuse to merge two units whose "
+                       "union is no plane (planar units) or no quadric (curved units) "
+                       "[0.001]")
     group.add_argument("--refine", action="store_true",
                        help="refine the units by SAR-FS (order 1 planar, 2 curved) and "
                        "intersect adjacent surfaces")

@@ -21,8 +21,10 @@ from . import _unit_merge_kernels as _mk
 from ._grow import relabel
 from ._result import Segmentation, segment_table
 
-#: Smallest unit whose merges are tested (a plane test needs degrees of freedom).
+#: Smallest planar unit whose merges are tested (a plane test needs degrees of freedom).
 MERGE_MIN_POINTS = 10
+#: Smallest curved unit whose merges are tested (a quadric has 9 free parameters).
+QUADRIC_MIN_POINTS = 30
 
 
 @renamed_parameters(min_size="min_points")
@@ -32,12 +34,19 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_points=30,
     passes the model test.
 
     Region growing is a union-find over the accepted edges of the growth graph, the most
-    similar normals first. The union of two planar units of at least
-    :data:`MERGE_MIN_POINTS` points each is refused when each passes the plane test and
-    their union fails it: the orthogonal-regression residual sum of squares over its
-    expectation, ``lambda_min / (sigma^2 mean_i (d_i . n)^2)``, against chi2(n - 3) at
-    `merge_alpha` (``d_i`` the noise direction of the curvature run). Two faces meeting
-    at a crease flatter than `max_angle` thus stay two units.
+    similar normals first. The union of two units is refused when each passes its model
+    test and their union fails it, at `merge_alpha`:
+
+    * planar units of at least :data:`MERGE_MIN_POINTS` points each: the
+      orthogonal-regression residual sum of squares over its expectation,
+      ``lambda_min / (sigma^2 mean_i (d_i . n)^2)``, against chi2(n - 3) (``d_i`` the
+      noise direction of the curvature run);
+    * curved units (every other HK type; a cylinder is a quadric) of at least
+      :data:`QUADRIC_MIN_POINTS` points each: the Taubin quadric fitted from the units'
+      moments up to degree 4, ``sum f^2 / (sigma^2 mean_i (d_i . grad f)^2)`` against
+      chi2(n - 9) (:mod:`._quadric_merge_kernels`); a merge test costs O(1).
+
+    Two faces meeting at a crease flatter than `max_angle` thus stay two units.
 
     Parameters
     ----------
@@ -52,7 +61,7 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_points=30,
     min_points : int
         Smallest cluster kept.
     merge_alpha : float
-        Level of the plane test of a merge.
+        Level of the plane and quadric tests of a merge.
     sensor : (3,) array_like, optional
         Scanner position, for range noise.
 
@@ -68,7 +77,8 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_points=30,
 
 
 def _units(points, curv, *, grow_radius, max_angle, min_points, merge_alpha, sensor):
-    """Labels, types and the number of refused merges of :func:`curvature_units`."""
+    """Labels, types and the numbers of refused merges (planar, curved) of
+    :func:`curvature_units`."""
     from ..features import noise_directions
     from ..stats import chi2_critical
 
@@ -98,8 +108,9 @@ def _units(points, curv, *, grow_radius, max_angle, min_points, merge_alpha, sen
     parent = np.arange(pts.shape[0], dtype=np.int64)
     refused = _mk.grow_tested(src[keep].astype(np.int64), dst[keep].astype(np.int64), local,
                               np.ascontiguousarray(dirs), noise_normal,
-                              st == SurfaceType.PLANAR, float(curv.sigma) ** 2, crit,
-                              MERGE_MIN_POINTS, parent)
+                              st == SurfaceType.PLANAR, ok & (st > SurfaceType.PLANAR),
+                              float(curv.sigma) ** 2, crit, MERGE_MIN_POINTS,
+                              QUADRIC_MIN_POINTS, parent)
     labels = np.where(ok, parent + 1, 0)
     labels = relabel(labels, max(int(min_points), 1))
     c = int(labels.max()) if labels.size else 0
@@ -108,7 +119,7 @@ def _units(points, curv, *, grow_radius, max_angle, min_points, merge_alpha, sen
         lab = labels[labels > 0]
         # the common type of each cluster (all members share it by construction)
         types[lab - 1] = st[labels > 0]
-    return labels, types, int(refused)
+    return labels, types, (int(refused[0]), int(refused[1]))
 
 
 @renamed_parameters(min_size="min_points", threshold="search")
@@ -152,8 +163,8 @@ def segment_curvature(points, *, radius=None, sigma=None, alpha=0.05, max_angle=
     noise, sensor
         Direction of the noise and scanner position (:func:`lidarstat.features.curvature`).
     merge_alpha : float
-        Level of the plane test that refuses a merge of two planar units
-        (:func:`curvature_units`).
+        Level of the plane test (planar units) and of the quadric test (curved units)
+        that refuse a merge (:func:`curvature_units`).
 
     Returns
     -------
@@ -214,7 +225,8 @@ def segment_curvature(points, *, radius=None, sigma=None, alpha=0.05, max_angle=
                             {"radius": radius, "max_angle": max_angle,
                              "grow_radius": grow_radius, "alpha": alpha,
                              "min_points": min_points, "merge_alpha": merge_alpha,
-                             "merges_refused": refused, **_curvature_params(curv)})
+                             "merges_refused": sum(refused),
+                             "merges_refused_curved": refused[1], **_curvature_params(curv)})
     from ._sar_units import refine_raw_clusters
 
     degrees = np.where(types == 1, 1, 2)
@@ -229,7 +241,8 @@ def segment_curvature(points, *, radius=None, sigma=None, alpha=0.05, max_angle=
     seg.fields["surface_type"] = st
     seg.method = "curvature+sar"
     seg.params.update({"radius": radius, "max_angle": max_angle, "grow_radius": grow_radius,
-                       "merge_alpha": merge_alpha, "merges_refused": refused,
+                       "merge_alpha": merge_alpha, "merges_refused": sum(refused),
+                             "merges_refused_curved": refused[1],
                        **_curvature_params(curv)})
     return seg
 
