@@ -84,8 +84,11 @@ def child(args):
         t = time.perf_counter()
         res = ridges(xyz, sigma=0.02, **kw)
         dt = time.perf_counter() - t
+        # the radius of every point: the given one, or the automatic scale's per-point
+        # field (the fit's bandwidth is NaN where no jet was fitted)
+        r = float(np.median(res["radius"])) if args.child == "ridges_auto" else args.radius
         print(json.dumps({"seconds": dt, "ridge_points": int((res["ridge"] > 0).sum()),
-                          "radius_median": float(np.median(res.jets.fit.bandwidth))}))
+                          "radius_median": r}))
         return
     if args.child == "radius_full":
         t = time.perf_counter()
@@ -197,7 +200,18 @@ def main():
                              ours[:, 11:].reshape(-1, 3, 3))
         ok = np.isfinite(coef).all(axis=1) & np.isfinite(ours[:, :11]).all(axis=1)
         scale = np.abs(coef[ok]).max(axis=0)
-        res["max_rel_diff_vs_cgal"] = float((np.abs(coef[ok] - ours[ok, :11]) / scale).max())
+        rel = (np.abs(coef[ok] - ours[ok, :11]) / scale).max(axis=1)
+        res["max_rel_diff_vs_cgal"] = float(rel.max())
+        # the differences are rounding errors of two solvers of one least-squares
+        # problem (CGAL: SVD, ~ eps kappa; fit_jets: normal equations, ~ eps kappa^2):
+        # they follow the condition number kappa of the neighbourhood's design matrix
+        cond = np.fromfile(tmp / "cgal.bin").reshape(n, 21)[:20000, 20][ok]
+        big = cond > 1e4
+        res["diff_vs_cgal"] = {
+            "quantiles_50_99_999": [float(q) for q in np.quantile(rel, [0.5, 0.99, 0.999])],
+            "cond_at_max": float(cond[np.argmax(rel)]),
+            "share_cond_above_1e4": float(big.mean()),
+            "max_rel_diff_cond_below_1e4": float(rel[~big].max()) if (~big).any() else None}
         for mode in modes:
             res[f"ratio_{mode}"] = res["cgal"] / res[f"lidarstat_{mode}"]
     rows = [("CGAL Monge_via_jet_fitting d=4 (kNN given)", res.get("cgal")),

@@ -69,6 +69,9 @@ def run_null_scene(kind, seed):
         row[name] = dict(seconds=round(time.perf_counter() - t0, 2),
                          ridge_points=int((res["ridge"] > 0).sum()), lines=len(res.lines),
                          umbilic=round(float(res["umbilic"].mean()), 4))
+        if "radius" in res.fields:  # nothing to detect: the smallest radius should stay
+            row[name]["smallest_radius_share"] = round(
+                float(np.mean(res["radius"] == res.params["radii"][0])), 4)
     return row
 
 
@@ -108,7 +111,10 @@ def summarise(rows, nulls):
             scenes=len(nulls), ridge_points=int(sum(r[name]["ridge_points"] for r in nulls)),
             lines=int(sum(r[name]["lines"] for r in nulls)),
             umbilic_plane=round(float(np.mean([r[name]["umbilic"] for r in nulls
-                                               if r["kind"] == "plane"])), 4))
+                                               if r["kind"] == "plane"])), 4),
+            smallest_radius_share_min=min((r[name]["smallest_radius_share"] for r in nulls
+                                           if "smallest_radius_share" in r[name]),
+                                          default=None))
     return out
 
 

@@ -8,12 +8,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._shared._choices import Noise
 from .._shared.validation import check_points, check_scalar
 from ..errors import InsufficientNeighborsError, InvalidParameterError
 from ..io import register_field_descriptions
 from ..neighbors import CellIndex, find_duplicates, knn_neighbors, map_rows, run_on_unique
-from ..stats import chi2_quantile, variance_test_satterthwaite
+from ..stats import variance_test_satterthwaite
 from ._jet_fit import (
     _N_MONGE_OF,
     MONGE_NAMES,
@@ -24,7 +23,7 @@ from ._jet_fit import (
     fit_jets,
 )
 from ._jet_scale import CURVATURE_SCALE, choose_rungs, fit_rungs, radius_ladder
-from ._noise import height_variance, resolve_noise
+from ._noise import height_variance, noise_factor, resolve_noise, sigma_from_fits
 from ._quadric import FitStatus, unfitted_reason
 
 logger = logging.getLogger(__name__)
@@ -174,21 +173,25 @@ def _hood_text(meta, fields):
     return f"k {meta.get('k')}"
 
 
-def _estimate_sigma(fit, ok, func):
-    """Median over the fitted jets of the median-unbiased variance of each jet.
+def _estimate_sigma(fit, ok, func, *, noise, points, sensor):
+    """Sigma along the noise direction from the fitted jets (the shared estimator,
+    :func:`lidarstat.features.sigma_from_fits`): the median over the jets of each jet's
+    median-unbiased variance ``Q / (c chi2_0.5(nu))``, divided by the factor
+    ``(d . n)^2`` that turns noise along d into heights along the jet's normal n.
 
-    ``Q / (c sigma^2) ~ chi2(nu)`` (Satterthwaite, ``c = tr(B^2)/tr(B)``, ``nu c = tr(B)``),
-    so ``Q / (c chi2_0.5(nu))`` has median sigma^2 at every jet; the plain ``Q / tr(B)``
-    has median ``sigma^2 chi2_0.5(nu) / nu``, low by 4 % at the ``nu`` of about 16 of the
-    automatic scale's smallest rung.
+    The median-unbiased form matters at the automatic scale's smallest rung (``nu`` about
+    16, where the plain ``Q / tr(B)`` is low by 4 %); the factor matters wherever the
+    cloud has steep faces: z noise seen along the normal of a face of slope theta has
+    std ``sigma cos(theta)``, so a median of the normal residuals over flat and steep jets
+    underestimates the noise of the flat ones, whose jets the chi-square test then
+    rejects.
     """
-    with np.errstate(invalid="ignore", divide="ignore"):
-        nu = fit.trace_b[ok] ** 2 / fit.trace_b2[ok]
-        c = fit.trace_b2[ok] / fit.trace_b[ok]
-        use = np.isfinite(nu) & (nu > 0) & (c > 0)
-        s0 = fit.q[ok][use] / (c[use] * chi2_quantile(0.5, nu[use]))
-    sigma = float(np.sqrt(np.median(s0))) if s0.size else float("nan")
-    logger.info("estimated sigma = %g", sigma)
+    normals = fit.frame[ok, 2, :]
+    f = noise_factor(normals, normals, noise,
+                     points=None if points is None else points[ok], sensor=sensor)
+    with np.errstate(divide="ignore"):  # nu -> 0 (nearly exact jets): no information
+        sigma = sigma_from_fits(fit.q[ok], fit.trace_b[ok], fit.trace_b2[ok], f)
+    logger.info("estimated sigma = %g (noise along %s)", sigma, noise)
     if not sigma > 0:
         raise InvalidParameterError(
             f"{func}: the estimated sigma is {sigma}: the points lie exactly on the jets; "
@@ -210,8 +213,8 @@ def _auto_fit(pts, *, criterion, sigma, noise, sensor, alpha, kw, block_size, pr
                 raise InsufficientNeighborsError(
                     f"{func}: no jet could be fitted at the smallest radius of the automatic "
                     f"scale ({radii[0]:.4g}): {unfitted_reason(sub.status, sub.neighbors, kw['min_neighbors'])}")
-            state["sigma"] = _estimate_sigma(sub, ok, func)
-            state["noise"] = Noise.NORMAL.value
+            state["sigma"] = _estimate_sigma(sub, ok, func, noise=state["noise"],
+                                             points=pts[rows], sensor=sensor_arr)
         s2 = height_variance(np.where(ok[:, None, None], sub.frame, 0.0), state["sigma"],
                              noise=state["noise"], points=pts[rows], sensor=sensor_arr)
         return jet_tests(sub, s2, alpha)
@@ -340,10 +343,9 @@ def jets(points, *, radius=None, k=None, sigma=None, alpha=0.05, degree=4, monge
             f"{func}: no jet could be fitted: {why} (degree {degree} needs "
             f"{(degree + 1) * (degree + 2) // 2 + 1} points, not all on one line); "
             "enlarge `radius`/`k`")
-    if sigma is None:
-        noise = Noise.NORMAL.value
-        sigma = _estimate_sigma(fit, ok, func)
     sensor_arr = None if sensor is None else np.asarray(sensor, dtype=np.float64)
+    if sigma is None:
+        sigma = _estimate_sigma(fit, ok, func, noise=noise, points=pts, sensor=sensor_arr)
     s2 = height_variance(np.where(ok[:, None, None], fit.frame, 0.0), sigma, noise=noise,
                          points=pts, sensor=sensor_arr)
     fields = jet_tests(fit, s2, alpha)
