@@ -48,6 +48,28 @@ def _eigvals3(a00, a01, a02, a11, a12, a22):
     return e0, e1, e2
 
 
+#: The running sums of :func:`_add_offset` before the first neighbour.
+_NO_MOMENTS = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+@njit
+def _add_offset(mom, dx, dy, dz):
+    """The running sums ``(sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)`` of the offsets
+    with offset ``(dx, dy, dz)`` added (a tuple: kept in registers, no allocation)."""
+    return (mom[0] + dx, mom[1] + dy, mom[2] + dz, mom[3] + dx * dx, mom[4] + dx * dy,
+            mom[5] + dx * dz, mom[6] + dy * dy, mom[7] + dy * dz, mom[8] + dz * dz)
+
+
+@njit
+def _prefix_covariance(mom, k):
+    """Covariance ``(c00, c01, c02, c11, c12, c22)`` (divided by k) of the k offsets whose
+    running sums are `mom`."""
+    inv = 1.0 / k
+    mx, my, mz = mom[0] * inv, mom[1] * inv, mom[2] * inv
+    return (mom[3] * inv - mx * mx, mom[4] * inv - mx * my, mom[5] * inv - mx * mz,
+            mom[6] * inv - my * my, mom[7] * inv - my * mz, mom[8] * inv - mz * mz)
+
+
 @njit
 def _xlogx(x):
     return x * math.log(x) if x > 0.0 else 0.0
@@ -68,30 +90,16 @@ def optimal_k_rows(pts, indptr, idx, k_min, k_max, min_spread, out_k, out_entrop
             continue
         i = idx[s]
         px, py, pz = pts[i, 0], pts[i, 1], pts[i, 2]
-        sx = sy = sz = 0.0
-        sxx = sxy = sxz = syy = syz = szz = 0.0
+        mom = _NO_MOMENTS
         best = np.inf
         kbest = n
         for t in range(n):
             j = idx[s + t]
-            dx, dy, dz = pts[j, 0] - px, pts[j, 1] - py, pts[j, 2] - pz
-            sx += dx
-            sy += dy
-            sz += dz
-            sxx += dx * dx
-            sxy += dx * dy
-            sxz += dx * dz
-            syy += dy * dy
-            syz += dy * dz
-            szz += dz * dz
+            mom = _add_offset(mom, pts[j, 0] - px, pts[j, 1] - py, pts[j, 2] - pz)
             k = t + 1
             if k < k_min and k < n:
                 continue
-            inv = 1.0 / k
-            mx, my, mz = sx * inv, sy * inv, sz * inv
-            l0, l1, l2 = _eigvals3(sxx * inv - mx * mx, sxy * inv - mx * my,
-                                   sxz * inv - mx * mz, syy * inv - my * my,
-                                   syz * inv - my * mz, szz * inv - mz * mz)
+            l0, l1, l2 = _eigvals3(*_prefix_covariance(mom, k))
             l0 = max(l0, 0.0)
             l1 = max(l1, 0.0)
             l2 = max(l2, 0.0)
@@ -156,27 +164,14 @@ def tested_k_rows(pts, indptr, idx, k_min, k_max, sigma2, dirs, crit, min_share2
         dr = r if per_dir else r - r
         i = idx[s]
         px, py, pz = pts[i, 0], pts[i, 1], pts[i, 2]
-        sx = sy = sz = 0.0
-        sxx = sxy = sxz = syy = syz = szz = 0.0
+        mom = _NO_MOMENTS
         for t in range(n):
             j = idx[s + t]
-            dx, dy, dz = pts[j, 0] - px, pts[j, 1] - py, pts[j, 2] - pz
-            sx += dx
-            sy += dy
-            sz += dz
-            sxx += dx * dx
-            sxy += dx * dy
-            sxz += dx * dz
-            syy += dy * dy
-            syz += dy * dz
-            szz += dz * dz
+            mom = _add_offset(mom, pts[j, 0] - px, pts[j, 1] - py, pts[j, 2] - pz)
             k = t + 1
             if k < k_min or k < 4 or k == n:
                 continue
-            inv = 1.0 / k
-            mx, my, mz = sx * inv, sy * inv, sz * inv
-            c00, c01, c02 = sxx * inv - mx * mx, sxy * inv - mx * my, sxz * inv - mx * mz
-            c11, c12, c22 = syy * inv - my * my, syz * inv - my * mz, szz * inv - mz * mz
+            c00, c01, c02, c11, c12, c22 = _prefix_covariance(mom, k)
             l0, l1, l2 = _eigvals3(c00, c01, c02, c11, c12, c22)
             l0 = max(l0, 0.0)
             share2 = 1.0

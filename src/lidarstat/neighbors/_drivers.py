@@ -38,7 +38,7 @@ import numpy as np
 from numba import prange
 
 from .._shared._jit import closure_cache, njit_parallel
-from ._kernels import _cell_ranges, _scan_within
+from ._kernels import STORE_ALL, _cell_ranges, _scan
 
 _CHUNK = 64
 _CELL_CHUNK = 64
@@ -107,8 +107,8 @@ def make_drivers(fit_point, workspace, skip) -> Drivers:
                     if active[i] == 0:
                         skip(r, outs)
                         continue
-                    n = _scan_within(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2,
-                                     idx_buf, dist_buf)
+                    n = _scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, 3,
+                              idx_buf, dist_buf, 0, STORE_ALL)
                     fit_point(i, pts, idx_buf, dist_buf, 0, n, r, params, ws, buf, outs)
 
     kernels = (fit_point, workspace, skip)

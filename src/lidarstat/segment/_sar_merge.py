@@ -114,23 +114,58 @@ def _chow(ma, mb, alpha):
     return chow_test(rab, ra, rb, r, na, nb, alpha=alpha)
 
 
+def find_root(parent, u):
+    """Root of `u` in the union-find forest `parent` (path halving, in place)."""
+    while parent[u] != u:
+        parent[u] = parent[parent[u]]
+        u = parent[u]
+    return u
+
+
+def contact_pairs(a, b, n_labels, min_contacts):
+    """The label pairs linked at least `min_contacts` times by the links ``a[i] - b[i]``.
+
+    Links with a label 0 or within one label are ignored. Returns the pairs as keys
+    ``lo * (n_labels + 1) + hi`` (``lo < hi``, ascending) and their numbers of links.
+    """
+    a = np.asarray(a, dtype=np.int64)
+    b = np.asarray(b, dtype=np.int64)
+    keep = (a > 0) & (b > 0) & (a != b)
+    lo, hi = np.minimum(a[keep], b[keep]), np.maximum(a[keep], b[keep])
+    keys, counts = np.unique(lo * (n_labels + 1) + hi, return_counts=True)
+    cand = counts >= min_contacts
+    return keys[cand], counts[cand]
+
+
+def crease_refuses_fits(part_a, part_b, union, alpha):
+    """The crease test of a merge from three fits ``(rss, df, sigma2)``: True when both
+    parts pass the test of their residual sum of squares against the noise
+    (``rss / sigma2 ~ chi2(df)``, upper tail at `alpha`) and the union rejects it. A
+    fit without degrees of freedom does not refuse."""
+    rejects = []
+    for rss, df, sigma2 in (part_a, part_b, union):
+        if df <= 0:
+            return False
+        rejects.append(bool(chi2_test(rss / sigma2, df, alpha=alpha).reject))
+    return (not rejects[0]) and (not rejects[1]) and rejects[2]
+
+
 def crease_refuses(mom_a, mom_b, sigma2, alpha):
     """The crease test of a merge: True when the union of two point sets fails the test
     against the noise that each set passes.
 
     Each set's residual sum of squares about its own least-squares surface (from the
     normal-equation moments) is referred to ``sigma2 chi2(n - r)``, upper tail at
-    `alpha`; the merge is refused when both parts pass and the union (moments summed)
-    rejects: two faces meeting at a crease each fit a plane, their union does not. When a
-    part already fails, the test cannot tell a crease from roughness and does not refuse.
+    `alpha` (:func:`crease_refuses_fits`); the merge is refused when both parts pass and
+    the union (moments summed) rejects: two faces meeting at a crease each fit a plane,
+    their union does not. When a part already fails, the test cannot tell a crease from
+    roughness and does not refuse.
     """
-    tests = []
+    fits = []
     for mom in (mom_a, mom_b, tuple(x + y for x, y in zip(mom_a, mom_b))):
         rss, r, n = _rss(mom)
-        if n <= r:
-            return False
-        tests.append(bool(chi2_test(rss / sigma2, n - r, alpha=alpha).reject))
-    return (not tests[0]) and (not tests[1]) and tests[2]
+        fits.append((rss, n - r, sigma2))
+    return crease_refuses_fits(*fits, alpha)
 
 
 def merge_groups(points, unit_labels, units, graph, alpha, search, *, sigma2=None,
@@ -144,20 +179,11 @@ def merge_groups(points, unit_labels, units, graph, alpha, search, *, sigma2=Non
     chain of pairwise merges cannot join two faces across a crease."""
     n_units = len(units)
     parent = np.arange(n_units + 1)
-
-    def find(u):
-        while parent[u] != u:
-            parent[u] = parent[parent[u]]
-            u = parent[u]
-        return u
-
     if n_units < 2:
         return parent
     pts_c, seg_c = area_contacts(points, graph, unit_labels, search)
-    a = unit_labels[pts_c]
-    lo, hi = np.minimum(a, seg_c), np.maximum(a, seg_c)
     base = n_units + 1
-    keys, counts = np.unique(lo.astype(np.int64) * base + hi, return_counts=True)
+    keys, _ = contact_pairs(unit_labels[pts_c], seg_c, n_units, 4)
     origin = points[:, :2].min(axis=0)
     scale = max(float(np.ptp(points[:, :2], axis=0).max()), 1.0)
     z0 = float(points[:, 2].min())
@@ -178,13 +204,13 @@ def merge_groups(points, unit_labels, units, graph, alpha, search, *, sigma2=Non
     def gmom(r):
         return group.get(r) or mom(r)
 
-    for key in keys[counts >= 4]:
+    for key in keys:
         ua, ub = int(key // base), int(key % base)
         if units[ua - 1].degree != units[ub - 1].degree or units[ua - 1].frame is not None \
                 or units[ub - 1].frame is not None:
             continue
         if not _chow(mom(ua), mom(ub), alpha).reject:
-            ra, rb = find(ua), find(ub)
+            ra, rb = find_root(parent, ua), find_root(parent, ub)
             if ra == rb:
                 continue
             ma, mb = gmom(ra), gmom(rb)
@@ -195,7 +221,7 @@ def merge_groups(points, unit_labels, units, graph, alpha, search, *, sigma2=Non
             parent[hi_r] = lo_r
             group[lo_r] = tuple(x + y for x, y in zip(ma, mb))
             group.pop(hi_r, None)
-    return np.array([find(u) for u in range(n_units + 1)])
+    return np.array([find_root(parent, u) for u in range(n_units + 1)])
 
 
 def refit_group(points, idx, group, w_radius):

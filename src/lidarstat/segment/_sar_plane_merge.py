@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..stats import chi2_test, chow_test
+from ..stats import chow_test
+from ._sar_merge import contact_pairs, crease_refuses_fits, find_root
 
 #: Level of Chow's F test of the merge (as the merge of the SAR units).
 MERGE_ALPHA = 0.01
@@ -73,13 +74,8 @@ def merge_planes(P, labels, nbr, region_sz, sigma_h, *, merge_alpha=MERGE_ALPHA,
     R = int(labels.max()) if labels.size else 0
     if R < 2:
         return labels, np.asarray(region_sz, dtype=np.float64), 0
-    a = np.repeat(labels, nbr.shape[1])
-    b = labels[nbr.ravel()]
-    keep = (a > 0) & (b > 0) & (a != b)
-    lo, hi = np.minimum(a[keep], b[keep]), np.maximum(a[keep], b[keep])
-    keys, counts = np.unique(lo * (R + 1) + hi, return_counts=True)
-    cand = counts >= MIN_CONTACTS
-    keys, counts = keys[cand], counts[cand]
+    keys, counts = contact_pairs(np.repeat(labels, nbr.shape[1]), labels[nbr.ravel()], R,
+                                 MIN_CONTACTS)
     keys = keys[np.argsort(-counts, kind="stable")]
     o = P.mean(axis=0)
     X = P - o
@@ -92,19 +88,13 @@ def merge_planes(P, labels, nbr, region_sz, sigma_h, *, merge_alpha=MERGE_ALPHA,
     sz = np.asarray(region_sz, dtype=np.float64).copy()
     parent = np.arange(R + 1)
 
-    def find(u):
-        while parent[u] != u:
-            parent[u] = parent[parent[u]]
-            u = parent[u]
-        return u
-
-    def passes(m, rss, nrm, s_z):
-        s_n = float(noise(nrm[2], s_z, sigma_h))
-        return not bool(chi2_test(rss / s_n ** 2, m - 3, alpha=crease_alpha).reject)
+    def fit(m, rss, nrm, s_z):
+        return rss, m - 3, float(noise(nrm[2], s_z, sigma_h)) ** 2
 
     merged = 0
     for key in keys:
-        ra, rb = find(int(key // (R + 1))), find(int(key % (R + 1)))
+        ra = find_root(parent, int(key // (R + 1)))
+        rb = find_root(parent, int(key % (R + 1)))
         if ra == rb:
             continue
         na, nb = n[ra], n[rb]
@@ -116,8 +106,9 @@ def merge_planes(P, labels, nbr, region_sz, sigma_h, *, merge_alpha=MERGE_ALPHA,
         if chow_test(rss_u, rss_a, rss_b, 3, int(na), int(nb), alpha=merge_alpha).reject:
             continue
         s_z = sz[ra] if size[ra] >= size[rb] else sz[rb]
-        if crease_alpha is not None and passes(na, rss_a, nrm_a, sz[ra]) and \
-                passes(nb, rss_b, nrm_b, sz[rb]) and not passes(na + nb, rss_u, nrm_u, s_z):
+        if crease_alpha is not None and crease_refuses_fits(
+                fit(na, rss_a, nrm_a, sz[ra]), fit(nb, rss_b, nrm_b, sz[rb]),
+                fit(na + nb, rss_u, nrm_u, s_z), crease_alpha):
             continue
         root, other = (ra, rb) if size[ra] >= size[rb] else (rb, ra)
         parent[other] = root
@@ -125,7 +116,7 @@ def merge_planes(P, labels, nbr, region_sz, sigma_h, *, merge_alpha=MERGE_ALPHA,
         s1[root] += s1[other]
         s2[root] += s2[other]
         merged += 1
-    roots = np.array([find(u) for u in range(R + 1)])
+    roots = np.array([find_root(parent, u) for u in range(R + 1)])
     uniq = np.unique(roots[1:])
     new = np.zeros(R + 1, dtype=np.int64)
     new[uniq] = np.arange(1, uniq.size + 1)
