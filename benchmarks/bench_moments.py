@@ -178,6 +178,7 @@ STEPS = (
     ("classes", "lidarstat.classify._moments", "asprs_classes"),
     ("fields (input order)", "lidarstat.classify._moments", "_expand"),
     ("write", "lidarstat.io", "write"),
+    ("write", "lidarstat.io", "rewrite"),  # LAS/LAZ out: the input's records copied
 )
 
 

@@ -83,18 +83,23 @@ class BuildingTests:
     params: dict = field(default_factory=dict)
 
 
-def ground_sigma(ground_xyz, k):
+def ground_sigma(ground_xyz, k, overwrite=False):
     """Noise std from the orthogonal planes of the ground's ``k``-neighbourhoods (None
     with fewer than ``k + 1`` ground points); on a large ground, of the points in an even
-    spread of 8 m blocks."""
+    spread of 8 m blocks. With `overwrite` the array is centred in place (no copy)."""
     m = len(ground_xyz)
     if m <= k:
         return None
-    pts = ground_xyz - ground_xyz.mean(axis=0)
+    mean = ground_xyz.mean(axis=0)
+    pts = ground_xyz if overwrite else ground_xyz.copy()
+    pts -= mean
     if m > 2 * _GROUND_QUERIES:  # whole 8 m blocks, spread evenly: full neighbourhoods
-        ij = np.floor((pts[:, :2] - pts[:, :2].min(axis=0)) / 8.0).astype(np.int64)
+        lo = pts[:, :2].min(axis=0)
         every = int(np.ceil(m / (2 * _GROUND_QUERIES)))
-        pts = pts[(ij[:, 0] * 7 + ij[:, 1] * 3) % every == 0]
+        block = np.floor((pts[:, 0] - lo[0]) / 8.0).astype(np.int64) * 7  # column by
+        block += np.floor((pts[:, 1] - lo[1]) / 8.0).astype(np.int64) * 3  # column
+        pts = pts[block % every == 0]
+        del block
         m = len(pts)
     pts = np.ascontiguousarray(pts)
     query = np.arange(0, m, max(1, m // _GROUND_QUERIES))
@@ -148,7 +153,7 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
     estimated = sigma is None
     idx = np.flatnonzero(candidate)
     if estimated:
-        sigma = ground_sigma(xyz[ground], k)
+        sigma = ground_sigma(xyz[ground], k, overwrite=True)
     params = {"building_alpha": alpha, "k": k, "return_share": return_share,
               "sigma_estimated": estimated, "n_patches": 0, "n_roof_patches": 0}
     building = np.zeros(n, bool)

@@ -105,6 +105,7 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
             xy[dup.first], z[dup.first], k=k, step=step, slope=slope,
             above_fraction=above_fraction, min_points=min_points, chunk=chunk,
             rank=sub_rank))
+    del dup  # every point distinct: its three identity arrays are not needed
     n = z.size
     if n < 2 * min_points:
         return np.zeros(n, bool)

@@ -264,6 +264,12 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     origin = column_min(pts)
     origin[:2] = np.floor(origin[:2] / p.window) * p.window
     perm, roots = root_windows(pts[:, :2] - origin[:2], p.window)
+    # the input position of every point in window order (and of the low noise): the
+    # fields go back to the caller's order through these alone
+    kept = np.flatnonzero(~noise) if noise.any() else None
+    dest = canon[perm] if kept is None else canon[kept[perm]]
+    low = canon[np.flatnonzero(noise)]
+    del canon, kept
     xy = np.empty((perm.size, 2))  # column by column: no (N, 2) temporaries
     for j in range(2):
         np.subtract(pts[:, j][perm], origin[j], out=xy[:, j])
@@ -284,6 +290,7 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         ground, height, surf = drop_raised_patches(xy, z, perm, ground, height, surf,
                                                    surface_cell=surface_cell / ux,
                                                    step=0.3 / uz)
+    del perm  # the ranks of the ground steps' ties
     tolerance = np.full(len(z), np.inf)
     if terrain and method is MomentsMethod.MOMENTS:
         ground, height, surf, tolerance = terrain_step(xy, z, ground, ux=ux, uz=uz)
@@ -319,14 +326,14 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                   n_low_noise=int(noise.sum()), units={"horizontal_m": ux, "vertical_m": uz},
                   terrain=terrain, buildings=blds.params)
     # back to the input order, low noise included: one scatter per field through the
-    # composed order (window order -> without low noise -> sorted -> input)
-    kept = np.flatnonzero(~noise) if noise.any() else None
-    dest = canon[perm] if kept is None else canon[kept[perm]]
-    low = canon[np.flatnonzero(noise)]
-    del perm, kept
-    cls, cluster_id, height, ground, cut, tolerance = _expand(
-        dest, low, n, cls, cluster_id, height, ground, cut, tolerance,
-        fill=(ASPRS["low_noise"], 0, np.nan, False, np.nan, np.nan))
+    # composed order `dest` (window order -> without low noise -> sorted -> input)
+    # one field at a time, each window-order array released as its copy is made
+    cls = _expand(dest, low, n, cls, fill=(ASPRS["low_noise"],))[0]
+    cluster_id = _expand(dest, low, n, cluster_id, fill=(0,))[0]
+    height = _expand(dest, low, n, height, fill=(np.nan,))[0]
+    ground = _expand(dest, low, n, ground, fill=(False,))[0]
+    cut = _expand(dest, low, n, cut, fill=(np.nan,))[0]
+    tolerance = _expand(dest, low, n, tolerance, fill=(np.nan,))[0]
     if low.size and surf is not None:  # heights of the low noise under the final surface
         q = pts_noise - origin
         height[low] = heights(q[:, 2], surf(q[:, :2]))

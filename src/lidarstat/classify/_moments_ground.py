@@ -83,7 +83,8 @@ def heights(z, surface):
     them fall below the cut would depend on the last bits of the interpolation (1e-15),
     i.e. on how the TIN is evaluated, not on the data.
     """
-    return np.round(z - surface, 6)
+    h = np.subtract(z, surface)
+    return np.round(h, 6, out=h)
 
 
 def ground_cut(xy, z, rank, roots, p: MomentsOptions, inten, *, opening_window, opening_cell,
@@ -124,7 +125,9 @@ def ground_cut(xy, z, rank, roots, p: MomentsOptions, inten, *, opening_window, 
         if ground.sum() < 3:
             ground[:] = True
         if not last:
+            fields = None  # this pass's window fields: the cut above holds what is needed
             surf = ground_surface(xy[ground], z[ground], cell=surface_cell, rank=rank[ground])
+            height = None  # the heights of this pass go before the next are made
             height = heights(z, surf(xy))
     return ground, height, cut, surf, fields, steps, windows
 

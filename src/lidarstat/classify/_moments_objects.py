@@ -31,7 +31,8 @@ def building_step(xy, z, height, ground, multi, units, *, min_object_height, min
     for j in range(2):
         np.multiply(xy[:, j], ux, out=xyz[:, j])
     np.multiply(z, uz, out=xyz[:, 2])
-    return building_tests(xyz, obj, ground, multi, height * uz, alpha=options.building_alpha,
+    return building_tests(xyz, obj, ground, multi, height if uz == 1 else height * uz,
+                          alpha=options.building_alpha,
                           sigma=options.sigma, min_points=options.min_points,
                           min_height=min_height)
 

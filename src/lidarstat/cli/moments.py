@@ -13,7 +13,7 @@ from ._common import (add_alpha, add_noise, add_run_outputs, add_seed, add_worke
 
 def _run(args):
     from ..classify import moments
-    from ..io import linear_units, read, write
+    from ..io import linear_units, read, rewrite, write
     from ..report import write_moments_report
 
     out = Path(args.output)
@@ -30,6 +30,11 @@ def _run(args):
         from ..errors import InvalidPointsError
 
         raise InvalidPointsError(f"{args.input}: the file holds no points")
+    # LAS/LAZ in and out: the output is the input's records copied chunk by chunk with
+    # the new fields, so only the attributes the classification reads stay in memory
+    stream = {Path(args.input).suffix.lower(), out.suffix.lower()} <= {".las", ".laz"}
+    if stream:
+        cloud.attributes = {k: v for k, v in cloud.attributes.items() if k in _READS}
     get = (lambda name: cloud[name] if name in cloud else None)
     units = linear_units(cloud.crs, units=args.units, scale=args.scale,
                          header=cloud.las_header, source=str(args.input))
@@ -47,7 +52,13 @@ def _run(args):
         terrain=not args.no_terrain, source=str(args.input),
         building_alpha=args.building_alpha, sigma=args.sigma)
     elapsed = time.perf_counter() - t0
-    write(out, cloud, fields=res.to_fields())
+    fields = res.to_fields()
+    if stream:
+        rewrite(args.input, out, lambda start, chunk: {
+            name: a[start:start + len(chunk)] for name, a in fields.items()})
+    else:
+        write(out, cloud, fields=fields)
+    del fields
     if args.dtm:
         from ..io import write_geotiff
         from ..pipeline import terrain_model
@@ -71,6 +82,10 @@ def _run(args):
                                                "params": res.params,
                                                "units": units.to_dict()})
     return 0
+
+
+#: Attributes of the input the classification reads.
+_READS = ("intensity", "number_of_returns", "return_number")
 
 
 #: Values of the enums ``MomentsMethod``, ``ElevationRule`` and ``RoadRule`` of
