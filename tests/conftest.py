@@ -5,8 +5,14 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import numpy as np
-import pytest
+# The test processes (two xdist workers, and the commands they start) share two cores.
+# Numba's OpenMP threads otherwise spin after each parallel region, taking the other
+# worker's core; passive waiting measured 374 s against 401 s for the suite on a warm cache.
+# Set before NumPy and Numba load the OpenMP runtime; a value the caller set is kept.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 # Repository root is tests/..; the shared data lives beside the repository.
 SHARED_DATA = Path(
