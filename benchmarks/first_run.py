@@ -17,6 +17,12 @@ labels are kept, so ``before`` and ``after`` sit side by side). ``--warmup`` run
 ``lidarstat warmup`` once in a fresh cache dir first (its wall time is recorded) and then
 every command's first run on that cache: what a user who follows the install
 instructions waits.
+
+``--suite ['PYTEST ARGS']`` (one quoted string) instead runs the test suite (or the given
+test files) with pytest's options from ``pyproject.toml`` on a fresh ``NUMBA_CACHE_DIR`` (cold cache), then
+``--suite-warm`` again on it, and stores under the ``suite`` key its wall time, the CPU
+seconds of the whole process tree (user + sys, xdist workers included) and the Numba
+compile seconds and compile CPU seconds that ``tests/conftest.py`` prints.
 """
 
 from __future__ import annotations
@@ -24,6 +30,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
+import resource
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -131,7 +140,14 @@ def main():
                     help="run `lidarstat warmup` on the fresh cache before the commands")
     ap.add_argument("--machine-shared", action="store_true",
                     help="note in the results that other jobs ran on the machine")
+    ap.add_argument("--suite", nargs="?", const="", metavar="'PYTEST ARGS'",
+                    help="time pytest (the whole suite, or these arguments, one quoted "
+                         "string) on a cold cache")
+    ap.add_argument("--suite-warm", action="store_true",
+                    help="with --suite: run it again on the same cache (warm)")
     args = ap.parse_args()
+    if args.suite is not None:
+        return suite(args)
     import lidarstat
 
     results = {"package": str(Path(lidarstat.__file__).parent), "commands": {},
@@ -160,6 +176,45 @@ def main():
                   flush=True)
             save(args, results)  # each command as it ends: a long run stopped keeps them
     save(args, results)
+
+
+_NUMBA_LINE = re.compile(r"Numba: (\d+) compilations, (\d+) s compiling \((\d+) s CPU\)")
+
+
+def suite_run(pytest_args, cache_dir):
+    """One pytest run on `cache_dir`: wall, CPU of the process tree, compile figures."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir))
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                           *pytest_args], cwd=HERE.parent, env=env, capture_output=True,
+                          text=True, check=False)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    tail = proc.stdout.strip().splitlines()[-3:]
+    m = _NUMBA_LINE.search(proc.stdout)
+    return {"rc": proc.returncode, "wall_s": round(wall, 1), "cpu_s": round(cpu, 1),
+            "compilations": int(m.group(1)) if m else 0,
+            "compile_s": int(m.group(2)) if m else 0,
+            "compile_cpu_s": int(m.group(3)) if m else 0, "summary": tail}
+
+
+def suite(args):
+    """The suite (or the given tests) on a cold cache, then optionally warm."""
+    pytest_args = shlex.split(args.suite)
+    results = {"pytest_args": pytest_args, "cpus": os.cpu_count(),
+               "machine_shared": args.machine_shared}
+    with tempfile.TemporaryDirectory() as tmp:
+        results["cold"] = suite_run(pytest_args, tmp)
+        print("cold", results["cold"], flush=True)
+        if args.suite_warm:
+            results["warm"] = suite_run(pytest_args, tmp)
+            print("warm", results["warm"], flush=True)
+    out = Path(args.out)
+    store = json.loads(out.read_text()) if out.exists() else {}
+    store.setdefault("suite", {})[args.label] = results
+    out.write_text(json.dumps(store, indent=1, sort_keys=True) + "\n")
 
 
 def save(args, results):
