@@ -19,21 +19,28 @@ def _shallow_crease(seed, slope=0.01, n=60, spacing=0.1, sigma=0.01):
     return np.c_[x, y, z], x
 
 
+def _two_units_one_per_side(pts, x, curv, seg):
+    """The two large units of `seg` lie each (at least 90 %) on one side of the crease at
+    x = 0, and without the merge test (a level no union fails) they are one unit; returns
+    the large units' labels."""
+    lab = seg.labels
+    big = [k for k in range(1, lab.max() + 1) if (lab == k).sum() > 1000]
+    assert len(big) == 2
+    for k in big:
+        assert abs(np.sign(x[lab == k]).mean()) > 0.8
+    merged = segment_curvature(pts, sigma=0.01, merge_alpha=1e-300, curv=curv)
+    assert merged.params["merges_refused"] == 0
+    assert (merged.labels == 1).sum() > 0.9 * sum((lab == k).sum() for k in big)
+    return big
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_merge_across_a_shallow_crease_is_refused(seed):
     pts, x = _shallow_crease(seed)
     curv = curvature(pts, sigma=0.01)
     seg = segment_curvature(pts, sigma=0.01, curv=curv)
-    lab = seg.labels
     assert seg.params["merges_refused"] >= 1
-    big = [k for k in range(1, lab.max() + 1) if (lab == k).sum() > 1000]
-    assert len(big) == 2
-    for k in big:  # each unit (at least 90 %) on one side of the crease
-        assert abs(np.sign(x[lab == k]).mean()) > 0.8
-    # without the merge test (a level no union fails) the two faces are one unit
-    merged = segment_curvature(pts, sigma=0.01, merge_alpha=1e-300, curv=curv)
-    assert merged.params["merges_refused"] == 0
-    assert (merged.labels == 1).sum() > 0.9 * sum((lab == k).sum() for k in big)
+    _two_units_one_per_side(pts, x, curv, seg)
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -62,16 +69,9 @@ def test_merge_of_two_quadrics_across_a_crease_is_refused(seed):
     pts, x = _curved_crease(seed, 0.04)
     curv = curvature(pts, sigma=0.01)
     seg = segment_curvature(pts, sigma=0.01, curv=curv)
-    lab = seg.labels
     assert seg.params["merges_refused_curved"] >= 1
-    big = [k for k in range(1, lab.max() + 1) if (lab == k).sum() > 1000]
-    assert len(big) == 2
+    big = _two_units_one_per_side(pts, x, curv, seg)
     assert set(seg.table["surface_type"][np.array(big) - 1].tolist()) == {3}
-    for k in big:  # each unit (at least 90 %) on one side of the crease
-        assert abs(np.sign(x[lab == k]).mean()) > 0.8
-    merged = segment_curvature(pts, sigma=0.01, merge_alpha=1e-300, curv=curv)
-    assert merged.params["merges_refused"] == 0
-    assert (merged.labels == 1).sum() > 0.9 * sum((lab == k).sum() for k in big)
 
 
 @pytest.mark.parametrize("seed", range(3))
