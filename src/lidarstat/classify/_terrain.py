@@ -399,5 +399,5 @@ def terrain_step(xy, z, ground, *, ux=1.0, uz=1.0):
                        open_slope=d["open_slope"] / aspect, open_radius=d["open_radius"] / ux,
                        low_step=d["low_step"] / uz, low_cells=d["low_cells"],
                        fence=d["fence"], fence_points=d["fence_points"],
-                       fence_radius=max(1, int(round(d["fence_radius"] / d["cell"]))))
+                       fence_radius=max(1, round(d["fence_radius"] / d["cell"])))
     return t.ground, t.height, t.surface, t.tolerance
