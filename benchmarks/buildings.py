@@ -127,10 +127,56 @@ def run(rel):
     row["missed_height_quartiles"] = ([round(float(q), 2) for q in
                                        np.quantile(res.height[missed], [0.25, 0.5, 0.75])]
                                       if missed.any() else None)
+    row["false_and_true_evidence"] = evidence(cloud.xyz, ev, res.to_fields()["building_patch"],
+                                              multi, new & keep, truth, res.height)
     if omit.any():
         row["omitted_points"] = int(np.sum(omit & keep))
         row["tested_outside_omissions"] = scores(new[keep & ~omit], truth[keep & ~omit])
     return row, (cloud.xyz, truth, old, new)
+
+
+def evidence(xyz, ev, patch, multi, pred, truth, height, k=30):
+    """What tells false building points from true ones: quartiles, over each group and
+    deciding rule (1 roof patch, 2 roof cell), of the share of non-last returns among
+    the `k` nearest candidates, of the share of those on a roof patch, and (roof-patch
+    points) the planimetric width of their patch (sqrt(12) times the std along its minor
+    axis: a hedge is a narrow patch); and how many false and true roof-patch points lie
+    on narrow, low patches (narrower than 2.5 m, median height under 3 m: a hedge's
+    shape, and a shed's)."""
+    from scipy.spatial import cKDTree
+
+    cand = np.flatnonzero(ev > 0)
+    if cand.size <= k:
+        return {}
+    _, nb = cKDTree(xyz[cand]).query(xyz[cand], k=k)
+    multi_share = np.full(len(ev), np.nan)
+    roof_share = np.full(len(ev), np.nan)
+    multi_share[cand] = multi[cand][nb].mean(axis=1)
+    roof_share[cand] = (ev[cand][nb] == 1).mean(axis=1)
+    width = np.full(len(ev), np.nan)
+    narrow_low = np.zeros(len(ev), bool)
+    on = pred & (ev == 1)
+    for p in np.unique(patch[on]):
+        m = on & (patch == p)
+        if m.sum() >= 3:
+            s = np.linalg.svd(xyz[m, :2] - xyz[m, :2].mean(axis=0), compute_uv=False)
+            width[m] = np.sqrt(12.0) * s[1] / np.sqrt(m.sum())
+            narrow_low[m] = width[m][0] < 2.5 and np.median(height[m]) < 3.0
+    out = {"narrow_low_patch_points": {"false": int(np.sum(narrow_low & ~truth)),
+                                       "true": int(np.sum(narrow_low & truth))}}
+    for group, sel in (("false", pred & ~truth), ("true", pred & truth)):
+        for rule in (1, 2):
+            m = sel & (ev == rule)
+            if not m.any():
+                continue
+            q = {"points": int(m.sum())}
+            for name, v in (("neighbour_multi_share", multi_share),
+                            ("neighbour_roof_share", roof_share), ("patch_width_m", width)):
+                if np.isfinite(v[m]).any():
+                    q[name] = [round(float(x), 3) for x in np.nanquantile(v[m], [0.25, 0.5,
+                                                                                  0.75])]
+            out[f"{group}_{'roof_patch' if rule == 1 else 'roof_cell'}"] = q
+    return out
 
 
 def figure(data, out, name="AHN3 Amsterdam 9702"):

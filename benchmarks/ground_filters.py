@@ -166,6 +166,32 @@ def table(rows, names=METHODS):
     return "\n".join(out)
 
 
+def totals_table(rows_i, rows_p, names=METHODS):
+    """The method page's short table: total error % per file (kappa for `moments`), the
+    ISPRS samples by their mean and worst sample."""
+    out = ["| file | " + " | ".join(f"{n} total %" for n in names) + " |",
+           "|---|" + "---:|" * len(names)]
+
+    def cells(vals):
+        return " | ".join(vals)
+
+    if rows_i:
+        mean = [f"{np.mean([r[n]['total'] for r in rows_i]):.2f}" for n in names]
+        mean[0] += f" ({np.mean([r[names[0]]['kappa'] for r in rows_i]):.3f})"
+        out.append(f"| ISPRS, mean of {len(rows_i)} samples (kappa) | {cells(mean)} |")
+        worst = max(rows_i, key=lambda r: r[names[0]]["total"])
+        out.append(f"| ISPRS, worst sample ({worst['name']}) | "
+                   + cells(f"{worst[n]['total']:.2f}" for n in names) + " |")
+    for r in rows_p:
+        vals = [f"{r[n]['total']:.2f}" for n in names]
+        vals[0] += f" ({r[names[0]]['kappa']:.3f})"
+        out.append(f"| {r['name']} | {cells(vals)} |")
+    if rows_p:
+        mean = [f"{np.mean([r[n]['total'] for r in rows_p]):.2f}" for n in names]
+        out.append(f"| producer files, mean | {cells(mean)} |")
+    return "\n".join(out)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="samp21 and samp71 only")
@@ -185,7 +211,8 @@ def main(argv=None):
                 {"isprs": rows_i, "producer": rows_p, "smrf_parameters": SMRF,
                  "machine": "two cores shared with other jobs (seconds are indicative)",
                  "machine_shared": True,
-                 "markdown": md}, indent=1))
+                 "markdown": md, "markdown_totals": totals_table(rows_i, rows_p)},
+                indent=1))
         return md
 
     for rel in isprs:

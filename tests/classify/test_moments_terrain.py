@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from lidarstat.classify import filter_errors, moments
-from lidarstat.classify._terrain import (drop_opened, grow_ground, refine_terrain,
-                                         reject_plateaus, reject_walled)
+from lidarstat.classify._terrain import (TERRAIN_DEFAULTS, drop_opened, grow_ground,
+                                         noise_fence, refine_terrain, reject_plateaus,
+                                         reject_walled)
 from lidarstat.synth import TERRAIN_SCENES, make_terrain_scene
 
 SEEDS = (0, 1)
@@ -81,9 +82,49 @@ def test_low_platform_is_ground_garage_and_cars_are_not(seed):
     assert e.type_ii < 0.01 and e.total < 0.01
 
 
+@pytest.mark.parametrize("seed", SEEDS)
+def test_low_objects_above_the_noise_are_not_ground(seed):
+    """Low walls and planters 0.25-0.45 m high on terrain scanned with 0.02 m noise: all
+    within the fixed 0.5 m tolerance, but 12-22 noise standard deviations up, so the
+    noise fence (median + 7 robust SDs of the ground around them, about 0.2 m) takes
+    them out; no ground point is lost. With 0.05 m noise the same objects are within
+    the fence (the test has no power there, as it should not)."""
+    s = make_terrain_scene("low_objects", extent=(100.0, 80.0), density=1.0, sigma=0.02,
+                           rng=seed)
+    e, res = _errors(s)
+    assert e.type_i < 0.001 and e.type_ii < 0.25
+    assert np.median(res.tolerance[s.ground]) < 0.3
+    t = refine_terrain(s.xyz[:, :2], s.xyz[:, 2], s.ground, cell=2.0, tolerance=0.5,
+                       slope_tolerance=1.25, step=0.3, max_rise=1.0, below=1.0)
+    assert t.ground[~s.ground].mean() > 0.9  # without the fence: objects kept as ground
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_noise_fence_follows_the_local_noise(seed):
+    """Heights of ground points, 0.02 m noise on one half and 0.08 m on the other, with
+    a quarter of them surface vertices (height exactly 0, left out of the spread): the
+    bound is the median + 7 robust SDs of each half's heights (within 15 %), and a point
+    0.3 m up is above it on the smooth half only."""
+    g = np.random.default_rng(seed)
+    xy = g.uniform(0, 80, (20000, 2))
+    sd = np.where(xy[:, 0] < 40, 0.02, 0.08)
+    h = np.abs(g.normal(0, 1, 20000)) * sd
+    h[g.random(20000) < 0.25] = 0.0
+    probe = np.array([[20.0, 40.0], [60.0, 40.0]])
+    xy, h = np.r_[xy, probe], np.r_[h, 0.3, 0.3]
+    bound = noise_fence(xy, h, np.r_[np.ones(20000, bool), False, False], cell=2.0,
+                        fence=7.0, min_points=64, max_radius=8)
+    half = 0.6745  # median of |N(0, 1)|
+    mad = 1.4826 * 0.3991  # MAD of |N(0, 1)|, scaled as the fence scales it
+    for sel, s in ((xy[:, 0] < 38, 0.02), (xy[:, 0] > 42, 0.08)):
+        assert np.median(bound[sel]) == pytest.approx(s * (half + 7 * mad), rel=0.15)
+    assert h[-2] > bound[-2] and h[-1] < bound[-1]
+    assert TERRAIN_DEFAULTS["fence"] == 7.0
+
+
 def test_scenes_exported():
     assert set(TERRAIN_SCENES) == {"ramp", "embankment", "bridge", "quarry", "flat_roof",
-                                   "platform"}
+                                   "platform", "low_objects"}
     with pytest.raises(ValueError):
         make_terrain_scene("volcano")
 

@@ -149,8 +149,9 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         After the moments cut, grow the ground over smooth continuations (embankments,
         ramps, steep banks the cut left out), take back grown regions walled on most of
         their border (bridges, roofs), and test every point against the grown surface
-        with a slope-dependent tolerance (:func:`~._terrain.refine_terrain`; the
-        skewness-balancing baseline never uses it).
+        with a slope-dependent tolerance and a fence on the local ground's noise
+        (:func:`~._terrain.refine_terrain`; the skewness-balancing baseline never uses
+        it).
     building_alpha : float
         Level of the building tests: the chi-square test of each object point's local
         plane, the normal test of its distance to a neighbour's accepted plane, the

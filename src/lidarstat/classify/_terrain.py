@@ -34,7 +34,12 @@ and:
    filled by linear interpolation (nearest cell outside their hull);
 5. **test**: a point is ground when its height above the surface lies within
    ``[-(below + s * slope), tolerance + s * slope]``, ``slope`` the surface's gradient
-   at the point (Pingel et al. 2013's slope-dependent elevation threshold).
+   at the point (Pingel et al. 2013's slope-dependent elevation threshold);
+6. **noise fence**: and when its height is within ``fence`` robust standard deviations
+   (plus ``s * slope``) of the median height of the ground around it, both taken over the
+   ground points of a block of cells that are not vertices of the surface
+   (:func:`noise_fence`): on smooth, dense ground the fixed tolerance takes low objects
+   (cars, kerbs, low walls 0.2-0.5 m high) as ground, the ground's own spread does not.
 
 Each of these is a raster operation (vectorised over cells) or a compiled loop over the
 points (:mod:`._terrain_kernels`).
@@ -54,11 +59,11 @@ from ._terrain_grid import (
     reject_plateaus,
     reject_walled,
 )
-from ._terrain_kernels import cell_lowest, fill_triangles, grid_bilinear
+from ._terrain_kernels import block_spread, cell_lowest, fill_triangles, grid_bilinear
 
 __all__ = ["TERRAIN_DEFAULTS", "TerrainModel", "TerrainRefinement", "drop_bumps",
-           "drop_opened", "grow_ground", "grow_platforms", "refine_terrain", "reject_plateaus", "reject_walled",
-           "terrain_step"]
+           "drop_opened", "grow_ground", "grow_platforms", "noise_fence", "refine_terrain",
+           "reject_plateaus", "reject_walled", "terrain_step"]
 
 #: The terrain step's lengths in metres (slopes are dimensionless): the grid cell, the
 #: tolerance on flat ground and its growth per unit slope (the values of Pingel et al.
@@ -69,11 +74,14 @@ __all__ = ["TERRAIN_DEFAULTS", "TerrainModel", "TerrainRefinement", "drop_bumps"
 #: above steeply to be dropped as a bump; the largest share of walls on the border of a
 #: part of the surface; the slope and largest radius of the seeds' progressive opening
 #: (steeper than SMRF's 0.15: the growth, not the opening, decides on steep ground); the
-#: highest step up onto a low platform and the fewest cells of one (:func:`grow_platforms`).
+#: highest step up onto a low platform and the fewest cells of one (:func:`grow_platforms`);
+#: the noise fence in robust standard deviations, the fewest ground points it is taken
+#: over and the largest half-width of their block (:func:`noise_fence`).
 TERRAIN_DEFAULTS = {"cell": 2.0, "tolerance": 0.5, "slope_tolerance": 1.25, "step": 0.3,
                     "max_slope": 1.0, "below": 1.0, "wall_fraction": 0.2, "bump_sides": 5,
                     "plateau_fraction": 0.5, "open_slope": 0.5, "open_radius": 18.0,
-                    "low_step": 1.0, "low_cells": 16}
+                    "low_step": 1.0, "low_cells": 16, "fence": 7.0, "fence_points": 64,
+                    "fence_radius": 16.0}
 
 
 @dataclass(frozen=True)
@@ -134,7 +142,8 @@ class TerrainRefinement:
     height : (N,) ndarray of float64
         Height above the terrain surface.
     tolerance : (N,) ndarray of float64
-        Upper bound of the test at each point (``tolerance + s * slope``).
+        Upper bound of the test at each point (``tolerance + s * slope``, or the noise
+        fence plus ``s * slope`` where that is lower).
     surface : TerrainModel
     grown_cells, rejected_cells : int
         Cells the growth added and kept, and cells it added but the wall test took back.
@@ -209,10 +218,67 @@ def _tin(xy, z, surface_z, grid, cell):
     return TinSurface(P, V, 1.0)
 
 
+def noise_fence(xy, height, ground, *, cell, fence, min_points=64, max_radius=8):
+    """Upper bound of a ground point's height from the spread of the ground around it.
+
+    The heights above the surface of the ground points that are not its vertices (a
+    vertex's height is 0 by construction and says nothing of the noise) are gathered per
+    ``cell`` square; for every cell the block of ``(2w + 1)^2`` cells around it, ``w``
+    the smallest radius (up to `max_radius` cells) holding at least `min_points` of
+    them, gives their median ``m`` and robust standard deviation ``s = 1.4826 MAD``
+    (:func:`~._terrain_kernels.block_spread`). A point's bound is ``m + fence * s``
+    (``inf`` where a block holds fewer than 3 heights): the residual of a point to the
+    surface tested against the local ground's own noise rather than a fixed tolerance.
+    The median and MAD ignore up to half of the block, so the low objects the fence is
+    there to find do not widen it.
+
+    Parameters
+    ----------
+    xy : (N, 2) ndarray
+        Planimetric coordinates, all >= 0.
+    height : (N,) ndarray
+        Heights above the surface (rounded: a vertex's height is exactly 0).
+    ground : (N,) ndarray of bool
+        The ground points whose heights give the spread.
+    cell : float
+        Cell side (coordinate units).
+    fence : float
+        Robust standard deviations above the median.
+    min_points, max_radius : int
+        Fewest heights of a block, largest block radius (cells).
+
+    Returns
+    -------
+    (N,) ndarray of float64
+    """
+    n = len(height)
+    nx = int(np.floor(xy[:, 0].max() / cell)) + 1 if n else 1
+    ny = int(np.floor(xy[:, 1].max() / cell)) + 1 if n else 1
+    key = np.floor(xy[:, 0] / cell).astype(np.int64) * ny
+    key += np.floor(xy[:, 1] / cell).astype(np.int64)
+    np.clip(key, 0, nx * ny - 1, out=key)
+    src = ground & (height != 0)
+    k_src = key[src]
+    order = np.argsort(k_src, kind="stable")
+    values = np.ascontiguousarray(height[src][order], dtype=np.float64)
+    offsets = np.zeros(nx * ny + 1, np.int64)
+    np.cumsum(np.bincount(k_src, minlength=nx * ny), out=offsets[1:])
+    cells = np.unique(key[ground])
+    centre = np.full(nx * ny, np.nan)
+    spread = np.full(nx * ny, np.nan)
+    if cells.size:
+        block_spread(offsets, values, nx, ny, cells, int(min_points), int(max_radius),
+                     centre, spread)
+    bound = centre[key] + fence * spread[key]
+    bound[~np.isfinite(bound)] = np.inf
+    return bound
+
+
 def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max_rise,
                    below, wall_fraction=0.2, bump_sides=5,
                    plateau_fraction=0.5, open_slope=0.5,
-                   open_radius=0.0, low_step=0.0, low_cells=16) -> TerrainRefinement:
+                   open_radius=0.0, low_step=0.0, low_cells=16, fence=0.0,
+                   fence_points=64, fence_radius=8) -> TerrainRefinement:
     """Grow the ground over smooth continuations, then test every point against it.
 
     Parameters
@@ -250,6 +316,10 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
     low_step, low_cells : float, int
         Highest step up onto a low platform (vertical units) and the fewest cells of one
         (:func:`grow_platforms`; a `low_step` not above `step` switches it off).
+    fence, fence_points, fence_radius : float, int, int
+        The noise fence in robust standard deviations, the fewest ground heights it is
+        taken over and the largest radius of their block in cells (:func:`noise_fence`;
+        `fence` 0 switches it off).
 
     Returns
     -------
@@ -300,6 +370,11 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
     extra = slope_tolerance * model.slope_at(xy)
     upper = tolerance + extra
     keep = (height <= upper) & (height >= -(below + extra))
+    if fence > 0 and keep.any():
+        upper = np.minimum(upper, noise_fence(xy, height, keep, cell=cell, fence=fence,
+                                              min_points=fence_points,
+                                              max_radius=fence_radius) + extra)
+        keep &= height <= upper
     return TerrainRefinement(ground=keep, height=height, tolerance=upper, surface=model,
                              grown_cells=grown, rejected_cells=rejected,
                              plateau_cells=plateaus)
@@ -322,5 +397,7 @@ def terrain_step(xy, z, ground, *, ux=1.0, uz=1.0):
                        below=d["below"] / uz, wall_fraction=d["wall_fraction"],
                        bump_sides=d["bump_sides"], plateau_fraction=d["plateau_fraction"],
                        open_slope=d["open_slope"] / aspect, open_radius=d["open_radius"] / ux,
-                       low_step=d["low_step"] / uz, low_cells=d["low_cells"])
+                       low_step=d["low_step"] / uz, low_cells=d["low_cells"],
+                       fence=d["fence"], fence_points=d["fence_points"],
+                       fence_radius=max(1, round(d["fence_radius"] / d["cell"])))
     return t.ground, t.height, t.surface, t.tolerance

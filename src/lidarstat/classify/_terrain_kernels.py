@@ -7,7 +7,7 @@ from numba import prange
 
 from .._shared._jit import njit, njit_parallel
 
-__all__ = ["cell_lowest", "fill_triangles", "grid_bilinear"]
+__all__ = ["block_spread", "cell_lowest", "fill_triangles", "grid_bilinear"]
 
 
 @njit
@@ -81,3 +81,45 @@ def fill_triangles(tri, ij, val, grid, empty):  # pragma: no cover - compiled
                 if l0 >= eps and l1 >= eps and l2 >= eps:
                     grid[i, j] = l0 * val[a] + l1 * val[b] + l2 * val[c]
                     empty[i, j] = False
+
+
+@njit_parallel
+def block_spread(offsets, values, nx, ny, cells, min_points, max_radius, centre,
+                 spread):  # pragma: no cover - compiled
+    """Median and robust standard deviation (1.4826 MAD) of the values of a block of
+    cells around each cell of `cells`.
+
+    ``values`` are sorted by cell (flat index ``i * ny + j``) with ``offsets`` (``nx * ny
+    + 1``) their CSR offsets. The block of cell ``(i, j)`` is the ``(2w + 1)``-cell square
+    around it, ``w`` the smallest radius up to `max_radius` holding at least `min_points`
+    values. ``centre[c]`` and ``spread[c]`` are written for every ``c`` of `cells`
+    (NaN with fewer than 3 values within `max_radius`).
+    """
+    for t in prange(cells.size):
+        c = cells[t]
+        i = c // ny
+        j = c % ny
+        n = 0
+        w = 1
+        while True:
+            n = 0
+            for a in range(max(0, i - w), min(nx, i + w + 1)):
+                n += offsets[a * ny + min(ny - 1, j + w) + 1] - offsets[a * ny + max(0, j - w)]
+            if n >= min_points or w >= max_radius:
+                break
+            w += 1
+        if n < 3:
+            centre[c] = np.nan
+            spread[c] = np.nan
+            continue
+        buf = np.empty(n)
+        k = 0
+        for a in range(max(0, i - w), min(nx, i + w + 1)):
+            lo = offsets[a * ny + max(0, j - w)]
+            hi = offsets[a * ny + min(ny - 1, j + w) + 1]
+            for q in range(lo, hi):
+                buf[k] = values[q]
+                k += 1
+        m = np.median(buf)
+        centre[c] = m
+        spread[c] = 1.4826 * np.median(np.abs(buf - m))

@@ -14,7 +14,10 @@ hit is terrain:
 * ``flat_roof``: one flat roof of 60 x 40 m, 8 m high, wider than any opening window;
 * ``platform``: a round plinth 22 m across, 0.8 m above flat terrain on a vertical rim
   (terrain, as a raised square or terrace is), beside a flat-roofed garage 2.5 m high and
-  two cars 1.5 m high (objects).
+  two cars 1.5 m high (objects);
+* ``low_objects``: gently sloping terrain (2 %) with low objects 0.25-0.45 m high and
+  1-1.5 m wide (low walls, planters, kerbs of raised beds: objects), within the fixed 0.5 m tolerance of a
+  ground filter but far above the noise of a dense scan.
 """
 
 from __future__ import annotations
@@ -25,7 +28,8 @@ import numpy as np
 
 __all__ = ["TERRAIN_SCENES", "TerrainScene", "make_terrain_scene"]
 
-TERRAIN_SCENES = ("ramp", "embankment", "bridge", "quarry", "flat_roof", "platform")
+TERRAIN_SCENES = ("ramp", "embankment", "bridge", "quarry", "flat_roof", "platform",
+                  "low_objects")
 
 
 @dataclass(frozen=True)
@@ -106,8 +110,20 @@ def _platform(x, y):
                                  (70, 72, 55, 59.5, 1.5)])
 
 
+def _low_objects(x, y):
+    ground = 0.02 * x + 0.01 * y
+    boxes = [(8, 20, 10, 11, 0.3), (30, 31.5, 30, 34, 0.4), (50, 51, 5, 45, 0.25),
+             (62, 70, 52, 53.5, 0.45), (75, 90, 20, 21, 0.35), (15, 16, 55, 70, 0.3)]
+    top = _boxes(x, y, [(x0, x1, y0, y1, 0.0) for x0, x1, y0, y1, _ in boxes])
+    for x0, x1, y0, y1, h in boxes:  # each box's height above the sloping terrain
+        inside = (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+        top[inside] = ground[inside] + h
+    return ground, top
+
+
 _MAKERS = {"ramp": _ramp, "embankment": _embankment, "bridge": _bridge,
-           "quarry": _quarry, "flat_roof": _flat_roof, "platform": _platform}
+           "quarry": _quarry, "flat_roof": _flat_roof, "platform": _platform,
+           "low_objects": _low_objects}
 
 
 def make_terrain_scene(name: str, *, extent=(100.0, 80.0), density=3.0, sigma=0.05,
