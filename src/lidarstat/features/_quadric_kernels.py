@@ -21,7 +21,6 @@ from __future__ import annotations
 import numpy as np
 
 from .._shared._jit import njit
-from .._shared._kernels import eigh3 as _eigh3  # noqa: F401 (the covariance kernels' import)
 from ..neighbors import make_drivers
 from ._frame_kernels import _local_frame, _tricube, cholesky_inverse_n
 
