@@ -4,8 +4,6 @@ inverse of a small SPD normal matrix."""
 
 from __future__ import annotations
 
-import numpy as np
-
 from .._shared._jit import njit
 from .._shared._kernels import add_outer3, cholesky_lower, lower_inverse, mirror3
 from .._shared._kernels import eigh3 as _eigh3
@@ -124,6 +122,29 @@ def pca_rotation(evecs, px, py, pz, sensor, has_sensor, R):
     R[2, 0] = n0
     R[2, 1] = n1
     R[2, 2] = n2
+
+
+@njit
+def to_frame(buf, nk, R, inv_b):
+    """Offsets ``buf[:nk, :3]`` to local coordinates in place: ``(u, v, h) = R d`` with the
+    tangent coordinates u, v scaled by `inv_b` (the fits' conditioning) and the height h
+    not; the weights ``buf[:, 3]`` are left alone."""
+    r00 = R[0, 0]
+    r01 = R[0, 1]
+    r02 = R[0, 2]
+    r10 = R[1, 0]
+    r11 = R[1, 1]
+    r12 = R[1, 2]
+    r20 = R[2, 0]
+    r21 = R[2, 1]
+    r22 = R[2, 2]
+    for t in range(nk):
+        d0 = buf[t, 0]
+        d1 = buf[t, 1]
+        d2 = buf[t, 2]
+        buf[t, 0] = (r00 * d0 + r01 * d1 + r02 * d2) * inv_b
+        buf[t, 1] = (r10 * d0 + r11 * d1 + r12 * d2) * inv_b
+        buf[t, 2] = r20 * d0 + r21 * d1 + r22 * d2
 
 
 @njit

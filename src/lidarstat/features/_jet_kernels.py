@@ -33,7 +33,7 @@ import numpy as np
 
 from .._shared._jit import njit
 from ..neighbors import make_drivers
-from ._frame_kernels import FRAME_PCA, _local_frame, cholesky_inverse_n
+from ._frame_kernels import FRAME_PCA, _local_frame, cholesky_inverse_n, to_frame
 from ._monge_kernels import (
     _MAXM,
     _MAXMOM,
@@ -81,9 +81,18 @@ def _monomials(u, v, nmom_deg, out):
         t += k + 1
 
 
-# ----------------------------------------------------------------------- Monge coefficients
+@njit
+def _norm1(a, m):
+    """1-norm (largest absolute column sum) of the leading m x m block of `a`."""
+    norm = 0.0
+    for c in range(m):
+        acc = 0.0
+        for r in range(m):
+            acc += abs(a[r, c])
+        if acc > norm:
+            norm = acc
+    return norm
 
-# ------------------------------------------------------------------------------ jet fit
 
 @njit
 def _workspace(m):
@@ -153,15 +162,6 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
     if not (_local_frame(buf, p, px0, py0, pz0, FRAME_PCA, sensor, has_sensor, R, cov, ev, evec)
             and ev[1] > 0.0):
         return SINGULAR, p
-    e0 = R[0, 0]
-    e1 = R[0, 1]
-    e2 = R[0, 2]
-    f0 = R[1, 0]
-    f1 = R[1, 1]
-    f2 = R[1, 2]
-    n0 = R[2, 0]
-    n1 = R[2, 1]
-    n2 = R[2, 2]
     # pass 2: local coordinates (U, V scaled by 1/b), moments of the monomials
     inv_b = 1.0 / b
     weighted_stats = weighted
@@ -171,19 +171,11 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
         mom[2, k] = 0.0
     for a in range(m):
         rhs[a] = 0.0
+    to_frame(buf, p, R, inv_b)
     for t in range(p):
-        dx = buf[t, 0]
-        dy = buf[t, 1]
-        dz = buf[t, 2]
         w = buf[t, 3]
-        u = (e0 * dx + e1 * dy + e2 * dz) * inv_b
-        v = (f0 * dx + f1 * dy + f2 * dz) * inv_b
-        h = n0 * dx + n1 * dy + n2 * dz
-        buf[t, 0] = u
-        buf[t, 1] = v
-        buf[t, 2] = h
-        _monomials(u, v, nmd, mono)
-        wh = w * h
+        _monomials(buf[t, 0], buf[t, 1], nmd, mono)
+        wh = w * buf[t, 2]
         for a in range(m):
             rhs[a] += wh * mono[a]
         if weighted_stats:
@@ -219,22 +211,10 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
                 N2[c, a] = N2[a, c]
                 N3[c, a] = N3[a, c]
     # 1-norm of the equilibrated N (for the condition number)
-    norm1 = 0.0
-    for c in range(m):
-        acc = 0.0
-        for a in range(m):
-            acc += abs(N[a, c])
-        if acc > norm1:
-            norm1 = acc
+    norm1 = _norm1(N, m)
     if not cholesky_inverse_n(N, m, 1e-13, L, Ninv):
         return SINGULAR, p
-    ninv1 = 0.0
-    for c in range(m):
-        acc = 0.0
-        for a in range(m):
-            acc += abs(Ninv[a, c])
-        if acc > ninv1:
-            ninv1 = acc
+    ninv1 = _norm1(Ninv, m)
     # beta (scaled, equilibrated) = Ninv D^-1 rhs / fact
     for a in range(m):
         rhs[a] = rhs[a] / (COL_FACT[a] * dsc[a])
@@ -308,9 +288,8 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
         x0 = mbasis[r, 0]
         x1 = mbasis[r, 1]
         x2 = mbasis[r, 2]
-        frame_out[r, 0] = x0 * e0 + x1 * f0 + x2 * n0
-        frame_out[r, 1] = x0 * e1 + x1 * f1 + x2 * n1
-        frame_out[r, 2] = x0 * e2 + x1 * f2 + x2 * n2
+        for c in range(3):
+            frame_out[r, c] = x0 * R[0, c] + x1 * R[1, c] + x2 * R[2, c]
     for t in range(_N_MONGE_OF[dm], NMONGE):
         monge_out[t] = np.nan
     if not want_se:
