@@ -20,15 +20,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import sys
 import time
 
 import numpy as np
-
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests", "independent"))
-
-import indep_parts as ip  # noqa: E402
+from _parts import ip, scenes
 
 
 def accuracy(seeds, k):
@@ -36,26 +31,21 @@ def accuracy(seeds, k):
     from lidarstat.segment import hoover, segment_covariance
 
     rows = []
-    for seed in range(seeds):
-        rng = np.random.default_rng(1000 + seed)
-        for gen in (ip.range_image, ip.tls_scan):
-            for kind in ("flange", "block"):
-                scan = gen(rng, kind)
-                res = covariance(scan.points, k=k, sensor=scan.sensor, keep_neighbors=True)
-                seg = segment_covariance(scan.points, res)
-                nbh = res.features.neighborhoods
-                reach = (res.features["OptimalRadius"] if k is None
-                         else nbh.distances[nbh.indptr[1:] - 1])
-                edge = res.point_class == 2
-                other = ip.other_face_distance(scan)
-                near = (scan.crease_distance < scan.spacing) & (other < 2 * scan.spacing)
-                cnt = np.bincount(scan.face)
-                h = hoover(seg.labels, np.where(cnt[scan.face] >= 300, scan.face, 0), 0.8)
-                rows.append(dict(seed=seed, scene=gen.__name__, part=kind,
-                                 points=int(len(edge)), flagged=int(edge.sum()),
-                                 flagged_right=int((other[edge] <= reach[edge]).sum()),
-                                 near=int(near.sum()), near_found=int(edge[near].sum()),
-                                 hoover_correct=h.correct, surfaces=h.n_truth))
+    for seed, scene, kind, scan, truth in scenes(seeds):
+        res = covariance(scan.points, k=k, sensor=scan.sensor, keep_neighbors=True)
+        seg = segment_covariance(scan.points, res)
+        nbh = res.features.neighborhoods
+        reach = (res.features["OptimalRadius"] if k is None
+                 else nbh.distances[nbh.indptr[1:] - 1])
+        edge = res.point_class == 2
+        other = ip.other_face_distance(scan)
+        near = (scan.crease_distance < scan.spacing) & (other < 2 * scan.spacing)
+        h = hoover(seg.labels, truth, 0.8)
+        rows.append(dict(seed=seed, scene=scene, part=kind,
+                         points=int(len(edge)), flagged=int(edge.sum()),
+                         flagged_right=int((other[edge] <= reach[edge]).sum()),
+                         near=int(near.sum()), near_found=int(edge[near].sum()),
+                         hoover_correct=h.correct, surfaces=h.n_truth))
     tot = {key: sum(r[key] for r in rows) for key in
            ("flagged", "flagged_right", "near", "near_found", "hoover_correct", "surfaces")}
     return dict(k=k, precision=tot["flagged_right"] / tot["flagged"],

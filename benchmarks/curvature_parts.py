@@ -14,18 +14,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import sys
 import time
 
-import numpy as np
-
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests", "independent"))
-
-import indep_parts as ip
-
-#: Faces scored by Hoover's measure (as in covariance_parts.py and the tests).
-MIN_SURFACE = 300
+from _parts import MIN_SURFACE, scenes
 
 
 def accuracy(seeds):
@@ -33,28 +24,22 @@ def accuracy(seeds):
     from lidarstat.segment import hoover, segment_curvature
 
     rows = []
-    for seed in range(seeds):
-        rng = np.random.default_rng(1000 + seed)
-        for gen in (ip.range_image, ip.tls_scan):
-            for kind in ("flange", "block"):
-                scan = gen(rng, kind)
-                curv = curvature(scan.points, sensor=scan.sensor)
-                cnt = np.bincount(scan.face)
-                truth = np.where(cnt[scan.face] >= MIN_SURFACE, scan.face, 0)
-                row = {"seed": seed, "scene": gen.__name__, "part": kind,
-                       "points": int(scan.points.shape[0])}
-                for name, level in (("tested", None), ("untested", 1e-300)):
-                    kw = {} if level is None else {"merge_alpha": level}
-                    t0 = time.process_time()
-                    seg = segment_curvature(scan.points, sensor=scan.sensor, curv=curv, **kw)
-                    cpu = time.process_time() - t0
-                    h = hoover(seg.labels, truth, 0.8)
-                    row[name] = {"hoover_correct": h.correct, "surfaces": h.n_truth,
-                                 "merges_refused": seg.params["merges_refused"],
-                                 "merges_refused_curved": seg.params["merges_refused_curved"],
-                                 "cpu_seconds": cpu}
-                rows.append(row)
-                print(row, flush=True)
+    for seed, scene, kind, scan, truth in scenes(seeds):
+        curv = curvature(scan.points, sensor=scan.sensor)
+        row = {"seed": seed, "scene": scene, "part": kind,
+               "points": int(scan.points.shape[0])}
+        for name, level in (("tested", None), ("untested", 1e-300)):
+            kw = {} if level is None else {"merge_alpha": level}
+            t0 = time.process_time()
+            seg = segment_curvature(scan.points, sensor=scan.sensor, curv=curv, **kw)
+            cpu = time.process_time() - t0
+            h = hoover(seg.labels, truth, 0.8)
+            row[name] = {"hoover_correct": h.correct, "surfaces": h.n_truth,
+                         "merges_refused": seg.params["merges_refused"],
+                         "merges_refused_curved": seg.params["merges_refused_curved"],
+                         "cpu_seconds": cpu}
+        rows.append(row)
+        print(row, flush=True)
     out = {}
     for name in ("tested", "untested"):
         c = sum(r[name]["hoover_correct"] for r in rows)

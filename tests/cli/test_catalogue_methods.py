@@ -65,21 +65,27 @@ def test_ridges_jets_do_not_depend_on_the_tiling(tmp_path, capsys):
           "0.05", "-q"], capsys)
     ridge_names = {"ridge", "ridge_line", "umbilic", "extremality"}
     (_, a), (_, b) = (_by_xyz(_gather(tmp_path / "out", whole)), _by_xyz((xyz, whole)))
+    _assert_same_jets(a, b, set(b) - ridge_names)
+    np.testing.assert_array_equal(a["umbilic"], b["umbilic"])
+    assert np.mean(a["ridge"] == b["ridge"]) > 0.99
+    assert len(list((tmp_path / "out").glob("*.ridges.geojson"))) == 9
+
+
+def _assert_same_jets(a, b, names):
+    """The fields `names` of the tiled run `a` equal the whole cloud's `b`: the same
+    neighbour counts, and the floats where the fit is well posed."""
     np.testing.assert_array_equal(a["neighbors"], b["neighbors"])
     # a degree-4 jet has 15 coefficients: fits on fewer than twice that many points are
     # near-singular (condition numbers of 1e4 and more), their floats compared on the
     # decisions only, as the quadrics' fits on 7-9 points are
     posed = b["neighbors"] >= 30
-    for name in set(b) - ridge_names:
+    for name in names:
         if np.issubdtype(b[name].dtype, np.floating):
             scale = np.nanpercentile(np.abs(b[name]), 99) if np.isfinite(b[name]).any() else 1
             np.testing.assert_allclose(a[name][posed], b[name][posed], rtol=1e-6,
                                        atol=1e-6 * scale, equal_nan=True, err_msg=name)
         else:
             np.testing.assert_array_equal(a[name], b[name], err_msg=name)
-    np.testing.assert_array_equal(a["umbilic"], b["umbilic"])
-    assert np.mean(a["ridge"] == b["ridge"]) > 0.99
-    assert len(list((tmp_path / "out").glob("*.ridges.geojson"))) == 9
 
 
 def _agreement(a, b):
@@ -229,15 +235,7 @@ def test_ridges_automatic_scale_is_decided_for_the_area(tmp_path, capsys):
     (_, a), (_, b) = (_by_xyz(_gather(tmp_path / "out", expected)),
                       _by_xyz((whole.xyz, expected)))
     np.testing.assert_array_equal(a["radius"], b["radius"])
-    np.testing.assert_array_equal(a["neighbors"], b["neighbors"])
-    posed = b["neighbors"] >= 30  # as in the fixed-radius test above
-    for name in b:
-        if np.issubdtype(b[name].dtype, np.floating):
-            scale = np.nanpercentile(np.abs(b[name]), 99) if np.isfinite(b[name]).any() else 1
-            np.testing.assert_allclose(a[name][posed], b[name][posed], rtol=1e-6,
-                                       atol=1e-6 * scale, equal_nan=True, err_msg=name)
-        else:
-            np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    _assert_same_jets(a, b, b)
 
 
 @pytest.mark.parametrize("method, words", [("sar", "radius"), ("curvature", "radii"),

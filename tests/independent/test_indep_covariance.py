@@ -109,19 +109,11 @@ def _spread_queries(xy, k_radius, size):
 def test_plane_test_size_z_noise(slope):
     """Size of the plane test (alpha 0.05, k = 30, the true sigma) on flat and steep
     faces of a z-noise range image: within the 99.9 % binomial interval."""
-    from scipy.stats import binom
-
-    alpha, rejected, tested = 0.05, 0, 0
-    for seed in range(6):
-        rng = np.random.default_rng(seed)
-        pts, xy = _plane_image(rng, slope, 0.05)
+    def plane_p(pts):
         feats = covariance_features(pts, k=30)
-        cls = classify_covariance(feats, sigma=0.05, noise="z", points=pts)
-        q = _spread_queries(xy, 3.5 / np.cos(np.radians(slope)) ** 0.5, 120)
-        rejected += int((cls["plane_p"][q] < alpha).sum())
-        tested += q.size
-    lo, hi = binom.interval(0.999, tested, alpha)
-    assert lo <= rejected <= hi, (rejected, tested)
+        return classify_covariance(feats, sigma=0.05, noise="z", points=pts)["plane_p"]
+
+    _assert_plane_test_size(slope, plane_p)
 
 
 @pytest.mark.parametrize("slope", [0.0, 60.0])
@@ -129,15 +121,20 @@ def test_plane_test_size_z_noise_automatic_scale(slope):
     """The same at the automatic scale (each point's prefix chosen by its plane test):
     within the 99.9 % binomial interval on flat and steep faces (4.1 % of 864 and 6.8 %
     of 384 neighbourhoods)."""
+    _assert_plane_test_size(slope, lambda pts: covariance(pts, sigma=0.05)["plane_p"])
+
+
+def _assert_plane_test_size(slope, plane_p):
+    """Rejections at level 0.05 of `plane_p(points)` on 120 spread queries of six z-noise
+    range images of a face of `slope` degrees: within the 99.9 % binomial interval."""
     from scipy.stats import binom
 
     alpha, rejected, tested = 0.05, 0, 0
     for seed in range(6):
         rng = np.random.default_rng(seed)
         pts, xy = _plane_image(rng, slope, 0.05)
-        res = covariance(pts, sigma=0.05)
         q = _spread_queries(xy, 3.5 / np.cos(np.radians(slope)) ** 0.5, 120)
-        rejected += int((res["plane_p"][q] < alpha).sum())
+        rejected += int((plane_p(pts)[q] < alpha).sum())
         tested += q.size
     lo, hi = binom.interval(0.999, tested, alpha)
     assert lo <= rejected <= hi, (rejected, tested)

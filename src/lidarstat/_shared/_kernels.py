@@ -1,7 +1,10 @@
 """Numba kernels shared by several subpackages (features, classify, segment).
 
 :func:`eigh3` is the one 3x3 symmetric eigen-solver of the local models (covariance
-normals, PCA frames of the quadric and jet fits, the visible-boundary and scale kernels).
+normals, PCA frames of the quadric and jet fits, the visible-boundary and scale kernels);
+:func:`cholesky_lower` and :func:`lower_inverse` are the one Cholesky factorisation and
+triangular inverse of the small normal matrices (quadric and jet fits, the Taubin quadric of
+a merge).
 """
 
 from __future__ import annotations
@@ -10,7 +13,7 @@ import numpy as np
 
 from ._jit import njit
 
-__all__ = ["eigh3"]
+__all__ = ["add_outer3", "cholesky_lower", "eigh3", "lower_inverse", "mirror3", "uf_find"]
 
 
 @njit
@@ -97,3 +100,39 @@ def uf_find(parent, i):  # pragma: no cover - compiled
         parent[i] = parent[parent[i]]
         i = parent[i]
     return i
+
+
+@njit
+def cholesky_lower(a, m, tol, L):  # pragma: no cover - compiled
+    """Cholesky factor of the SPD leading m x m block of `a` into the lower triangle of `L`
+    (``a = L L'``; the upper triangle of `L` is not touched); False as soon as a pivot is not
+    above `tol`."""
+    for j in range(m):
+        sjj = a[j, j]
+        for k in range(j):
+            sjj -= L[j, k] * L[j, k]
+        if not sjj > tol:
+            return False
+        L[j, j] = np.sqrt(sjj)
+        for r in range(j + 1, m):
+            s = a[r, j]
+            for k in range(j):
+                s -= L[r, k] * L[j, k]
+            L[r, j] = s / L[j, j]
+    return True
+
+
+@njit
+def lower_inverse(L, m, inv):  # pragma: no cover - compiled
+    """Inverse of the lower-triangular leading m x m block of `L` into `inv` (forward
+    substitution, column by column; the upper triangle of `inv` is zeroed)."""
+    for j in range(m):
+        for r in range(m):
+            inv[r, j] = 0.0
+    for j in range(m):
+        inv[j, j] = 1.0 / L[j, j]
+        for r in range(j + 1, m):
+            acc = 0.0
+            for k in range(j, r):
+                acc -= L[r, k] * inv[k, j]
+            inv[r, j] = acc / L[r, r]

@@ -151,13 +151,8 @@ def reject_walled(grown_z, ground_z, lowest, *, cell, step, max_rise, wall_fract
         return grown_z, 0
     walls = np.zeros(n + 1)
     smooth = np.zeros(n + 1)
-    for di, dj in _DIRS:
-        n_low = _shift(lowest, di, dj)
-        n_label = _shift(label, di, dj, fill=-1)
-        bound = step + max_rise * cell * np.hypot(di, dj)
-        pair = grown & (n_label != label) & np.isfinite(n_low)
-        with np.errstate(invalid="ignore"):
-            dz = grown_z - n_low
+    for dist, pair, dz in _border_steps(grown, label, lowest, grown_z):
+        bound = step + max_rise * cell * dist
         walls += np.bincount(label[pair & (dz > bound)], minlength=n + 1)
         smooth += np.bincount(label[pair & (np.abs(dz) <= bound)], minlength=n + 1)
     bad = walls > wall_fraction * np.maximum(walls + smooth, 1)
@@ -166,6 +161,20 @@ def reject_walled(grown_z, ground_z, lowest, *, cell, step, max_rise, wall_fract
     out = grown_z.copy()
     out[drop] = np.inf
     return out, int(drop.sum())
+
+
+def _border_steps(region, label, lowest, z):
+    """For each of the 8 directions, the border pairs of the labelled regions (a `region`
+    cell and its neighbour in that direction, outside the cell's region, holding points)
+    and the step down across them: yields ``(distance in cells, pair mask, z - lowest of
+    the neighbour)``."""
+    for di, dj in _DIRS:
+        n_low = _shift(lowest, di, dj)
+        n_label = _shift(label, di, dj, fill=-1)
+        pair = region & (n_label != label) & np.isfinite(n_low)
+        with np.errstate(invalid="ignore"):
+            dz = z - n_low
+        yield np.hypot(di, dj), pair, dz
 
 
 def grow_platforms(surface_z, lowest, *, cell, max_rise, low_step, min_cells, wall_fraction):
@@ -196,12 +205,7 @@ def grow_platforms(surface_z, lowest, *, cell, max_rise, low_step, min_cells, wa
         return surface_z, 0
     walls = np.zeros(n + 1)
     pairs = np.zeros(n + 1)
-    for di, dj in _DIRS:
-        n_low = _shift(lowest, di, dj)
-        n_label = _shift(label, di, dj, fill=-1)
-        pair = new & (n_label != label) & np.isfinite(n_low)
-        with np.errstate(invalid="ignore"):
-            dz = grown - n_low
+    for _, pair, dz in _border_steps(new, label, lowest, grown):
         walls += np.bincount(label[pair & (dz > low_step)], minlength=n + 1)
         pairs += np.bincount(label[pair], minlength=n + 1)
     size = np.bincount(label.ravel(), minlength=n + 1)

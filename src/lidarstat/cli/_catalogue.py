@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 from . import _catalogue_methods as _methods
+from . import _catalogue_segment as _segment
 from . import _options as opt
 from ._catalogue_moments import MOMENTS, area_report
 from ._catalogue_reports import REPORTS, write_area_report, write_report
@@ -112,7 +113,7 @@ TILE_METHODS = {
     "moments": MOMENTS,
     "covariance": _methods.COVARIANCE,
     "ridges": _methods.RIDGES,
-    "segment": _methods.SEGMENT,
+    "segment": _segment.SEGMENT,
 }
 
 #: Options of every catalogue run (destinations), whatever the command.

@@ -1,4 +1,5 @@
-"""The tile functions of ``covariance``, ``ridges`` and ``segment`` on a catalogue.
+"""The tile functions of ``covariance``, ``ridges`` and ``segment`` on a catalogue
+(``segment``'s in ``_catalogue_segment``) and the area-wide helpers they share.
 
 Each command has three parts, as in :data:`lidarstat.cli._catalogue.TILE_METHODS`:
 
@@ -41,9 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["AREA_SAMPLE_TILES", "COVARIANCE", "RIDGES", "SEGMENT", "TILE_OPTIONS",
-           "area_ladder", "curvature_ladder", "jet_ladder", "knn_reach", "sample_tiles",
-           "segment_scale"]
+__all__ = ["AREA_SAMPLE_TILES", "COVARIANCE", "RIDGES", "TILE_OPTIONS", "area_ladder",
+           "curvature_ladder", "jet_ladder", "knn_reach", "sample_tiles"]
 
 #: The options each command's tile function passes on (destinations). Any other option
 #: given with a catalogue is refused rather than ignored, so an option added to a command
@@ -136,6 +136,11 @@ def knn_reach(cat, k: int) -> float:
 
 def _outputs(args, cat) -> dict:
     return {f.path: p for f, p in zip(cat.files, cat.outputs(args.output, args.template))}
+
+
+def _offsets(cat) -> dict:
+    """Tile path -> points in the tiles before it: per-tile ids made unique."""
+    return dict(zip((f.path for f in cat.files), cat.point_offsets()))
 
 
 def _say(args, text):
@@ -305,161 +310,3 @@ def _ridges_fields(args, extra):
 
 
 RIDGES = (_ridges_buffer, _ridges_fields, _ridges_prepare)
-
-
-# ----------------------------------------------------------------------------- segment
-#: Buffer of a segmentation, in neighbourhood reaches.
-SEGMENT_REACHES = 4.0
-
-
-def segment_scale(args, cat) -> dict:
-    """What ``segment`` chooses from the data, chosen once for the area: options for
-    every tile's run. Empty when the scale is given (``--radius``, ``--k``) or is
-    local (the covariance method's per-point k).
-
-    * ``sar``: the bandwidth ``radius`` by ``--criterion``, the median of its selection
-      on a sample of tiles (:data:`AREA_SAMPLE_TILES`);
-    * ``curvature``: the ladder ``scales`` (:func:`area_ladder` of
-      :func:`lidarstat.features.scale_ladder`) and, without ``--sigma``, one noise
-      sigma estimated on the largest tile at the ladder's middle radius;
-    * ``ridges``: the jets' ``radius``, the smallest rung of the area's ladder
-      (:func:`lidarstat.features.radius_ladder`), as the one-file run takes it from its
-      cloud.
-    """
-    if args.radius is not None or getattr(args, "k", None) is not None:
-        return {}
-    if args.method == "sar":
-        def select():
-            from ..features import select_plane_bandwidth
-            from ..io import read
-
-            b = [select_plane_bandwidth(read(cat.files[i].path).xyz,
-                                        criterion=args.criterion, rng=0).bandwidth
-                 for i in sample_tiles(cat)]
-            return {"radius": float(np.median(b))}
-
-        return _cached(args, "segment_scale", select)
-    if args.method == "curvature":
-        def ladder():
-            scales = area_ladder(cat, curvature_ladder)
-            out = {"scales": scales}
-            if args.sigma is None:
-                from ..features import estimate_sigma
-                from ..io import read
-
-                out["sigma"] = _scalar_sigma(estimate_sigma(
-                    read(cat.files[_largest(cat)].path).xyz, scales[len(scales) // 2],
-                    noise=args.noise, frame=args.frame, sensor=args.sensor), "segment")
-            return out
-
-        return _cached(args, "segment_scale", ladder)
-    if args.method == "ridges":
-        return _cached(args, "segment_scale",
-                       lambda: {"radius": area_ladder(cat, jet_ladder)[0]})
-    return {}
-
-
-def _segment_buffer(args, cat):
-    from importlib import import_module
-
-    from .segment import SEGMENT_METHODS
-
-    method = import_module(SEGMENT_METHODS[args.method])
-    area = segment_scale(args, cat)
-    if args.radius is not None:
-        reach = args.radius
-    elif "radius" in area:
-        reach = area["radius"]
-    elif "scales" in area:
-        reach = max(area["scales"])
-    elif args.k is not None or hasattr(method, "DEFAULT_K"):
-        reach = knn_reach(cat, args.k if args.k is not None else method.DEFAULT_K)
-    else:  # the covariance method's automatic scale: at most OPTIMAL_K_MAX
-        from ..features import OPTIMAL_K_MAX
-
-        reach = knn_reach(cat, OPTIMAL_K_MAX)
-    return SEGMENT_REACHES * reach
-
-
-def _offsets(cat) -> dict:
-    """Tile path -> points in the tiles before it: per-tile ids made unique."""
-    return dict(zip((f.path for f in cat.files), cat.point_offsets()))
-
-
-def _segment_prepare(args, cat):
-    area = segment_scale(args, cat)
-    words = {"radius": lambda v: f"radius {v:.4g}", "sigma": lambda v: f"sigma {v:.4g}",
-             "scales": lambda v: f"radii {_ladder_text(v)}"}
-    if area:
-        _say(args, "automatic scale: " + ", ".join(words[k](v) for k, v in area.items())
-             + " decided for the area, used for every tile")
-    return {"outputs": _outputs(args, cat), "offsets": _offsets(cat), "area": area}
-
-
-def _segment_fields(args, extra):
-    from importlib import import_module
-
-    from ..io import PointCloud
-    from .segment import SEGMENT_METHODS
-
-    method = import_module(SEGMENT_METHODS[args.method])
-    area = dict(extra.get("area", {}))
-    scales, run_args = area.pop("scales", None), args
-    if area:  # the area's radius (and sigma) as if given on the command line
-        from argparse import Namespace
-
-        run_args = Namespace(**{**vars(args), **area})
-
-    def run(xyz):
-        if scales is None:
-            return method.run(run_args, PointCloud(xyz))
-        from ..features import curvature
-
-        curv = curvature(xyz, sigma=run_args.sigma, alpha=args.alpha, frame=args.frame,
-                         noise=args.noise, sensor=args.sensor, scales=scales)
-        return method.run(run_args, PointCloud(xyz), curv=curv)
-
-    def fields(tile):
-        seg = run(tile.xyz)
-        f = seg.to_fields()
-        n = tile.n_core
-        labels = np.asarray(f["segment_id"]).astype(np.int64)
-        core = labels[:n]
-        # the tile's segments, numbered 1.. in order of first appearance among its points
-        present, first = np.unique(core[core > 0], return_index=True)
-        present = present[np.argsort(first)]
-        renumber = np.zeros(int(labels.max()) + 1 if labels.size else 1, np.int64)
-        offset = extra["offsets"][tile.extent.path]
-        renumber[present] = offset + np.arange(1, present.size + 1)
-        f["segment_id"] = renumber[labels].astype(np.uint32)
-        out = Path(extra["outputs"][tile.extent.path])
-        stem = out.name.split(".")[0]
-        table = {k: np.asarray(v) for k, v in seg.table.items()}
-        ids = np.asarray(table["segment_id"]).astype(np.int64)
-        keep = np.isin(ids, present)
-        table = {k: v[keep] if v.shape[:1] == ids.shape else v for k, v in table.items()}
-        table["segment_id"] = renumber[ids[keep]].astype(np.int64)
-        _write_table(out.with_name(stem + ".segments.csv"), table)
-        if seg.lines is not None:
-            _lines_in_tile(seg.lines, tile.extent).write(
-                out.with_name(stem + ".lines.geojson"), crs=tile.core.crs)
-        return f, {"segments": int(present.size)}
-
-    return fields
-
-
-def _write_table(path, table):
-    """The tile's rows of the segment table as CSV (scalar columns), atomically."""
-    import csv
-
-    from .._shared._atomic import atomic_path
-
-    cols = {k: np.asarray(v) for k, v in table.items() if np.asarray(v).ndim == 1}
-    with atomic_path(path) as tmp, open(tmp, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(list(cols))
-        for row in zip(*(c.tolist() for c in cols.values())):
-            w.writerow(row)
-
-
-SEGMENT = (_segment_buffer, _segment_fields, _segment_prepare)

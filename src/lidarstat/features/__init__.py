@@ -6,9 +6,9 @@ from ._curvature_result import FIELDS, CurvatureResult
 from ._noise import (fit_factor, fit_height_variance, fit_normals, height_variance,
                      noise_directions, noise_factor, resolve_noise, sigma_from_fits)
 from ._curvature_scale import point_spacing, scale_ladder
-from ._covariance import FIELDS as COVARIANCE_FIELDS
-from ._covariance import (OPTIMAL_K_MAX, OPTIMAL_K_MIN, CovarianceResult, EigenMode,
-                          PointClass, covariance_features, eigen_features)
+from ._covariance import OPTIMAL_K_MAX, OPTIMAL_K_MIN, covariance_features
+from ._covariance_result import FIELDS as COVARIANCE_FIELDS
+from ._covariance_result import CovarianceResult, EigenMode, PointClass, eigen_features
 from ._covariance_scale import prefix_features, tested_scale
 from ._cylinder import cylinder_test
 from ._hk import SurfaceType, hk_surface_types

@@ -27,13 +27,14 @@ from __future__ import annotations
 import numpy as np
 from numba import prange
 
+from .._shared._jit import njit, njit_parallel
+from .._shared._kernels import eigh3 as _eigh3
 from ..neighbors import GRID_CELL_CHUNK as _CELL_CHUNK
 from ..neighbors import grid_block_ranges as _block_ranges
 from ..neighbors import grid_candidate_count as _count
 from ..neighbors import grid_knn_point as _knn_point
 from ..neighbors import grid_knn_scratch as _scratch
-from .._shared._jit import njit, njit_parallel
-from ._quadric_kernels import _eigh3
+from ._frame_kernels import orient_normal
 
 # columns of the per-point output of covariance_rows
 C_L0 = 0  # eigenvalues, ascending (lambda0 <= lambda1 <= lambda2)
@@ -173,17 +174,8 @@ def _covariance_one(pos, pts, idx, s, e, sensor, has_sensor, cov, evals, evecs, 
     _eigh3(cov, evals, evecs)
     for a in range(3):
         out[C_L0 + a] = max(evals[a], 0.0)
-    n0 = evecs[0, 0]
-    n1 = evecs[1, 0]
-    n2 = evecs[2, 0]
-    if has_sensor:
-        flip = n0 * (sensor[0] - px) + n1 * (sensor[1] - py) + n2 * (sensor[2] - pz) < 0.0
-    else:
-        flip = n2 < 0.0
-    if flip:
-        n0 = -n0
-        n1 = -n1
-        n2 = -n2
+    n0, n1, n2 = orient_normal(evecs[0, 0], evecs[1, 0], evecs[2, 0], px, py, pz, sensor,
+                               has_sensor)
     out[C_NX] = n0
     out[C_NY] = n1
     out[C_NZ] = n2

@@ -4,10 +4,8 @@ inverse of a small SPD normal matrix."""
 
 from __future__ import annotations
 
-import numpy as np
-
 from .._shared._jit import njit
-from .._shared._kernels import add_outer3, mirror3
+from .._shared._kernels import add_outer3, cholesky_lower, lower_inverse, mirror3
 from .._shared._kernels import eigh3 as _eigh3
 
 FRAME_Z = 0
@@ -88,30 +86,65 @@ def _local_frame(buf, nk, px, py, pz, frame, sensor, has_sensor, R, cov, evals, 
             R[2, k] = -1.0
         return True
     # PCA frame: n = smallest eigenvector, oriented to the sensor or up
-    flip = False
+    pca_rotation(evecs, px, py, pz, sensor, has_sensor, R)
+    return True
+
+
+@njit
+def orient_normal(n0, n1, n2, px, py, pz, sensor, has_sensor):
+    """The unit normal ``(n0, n1, n2)`` of the point at (px, py, pz), flipped if needed so
+    that it points toward the sensor (`has_sensor`) or up (non-negative z)."""
     if has_sensor:
-        dot = n0 * (sensor[0] - px) + n1 * (sensor[1] - py) + n2 * (sensor[2] - pz)
-        flip = dot < 0.0
+        flip = n0 * (sensor[0] - px) + n1 * (sensor[1] - py) + n2 * (sensor[2] - pz) < 0.0
     else:
         flip = n2 < 0.0
     if flip:
-        n0 = -n0
-        n1 = -n1
-        n2 = -n2
+        return -n0, -n1, -n2
+    return n0, n1, n2
+
+
+@njit
+def pca_rotation(evecs, px, py, pz, sensor, has_sensor, R):
+    """Rows e1, e2, n of `R` from the ascending eigenvectors (columns of `evecs`) of a
+    neighbourhood's covariance: n the smallest, oriented by :func:`orient_normal`, e1 the
+    largest and ``e2 = n x e1`` (a direct frame)."""
+    n0, n1, n2 = orient_normal(evecs[0, 0], evecs[1, 0], evecs[2, 0], px, py, pz, sensor,
+                               has_sensor)
     e0 = evecs[0, 2]
     e1 = evecs[1, 2]
     e2 = evecs[2, 2]
     R[0, 0] = e0
     R[0, 1] = e1
     R[0, 2] = e2
-    # e2 = n x e1
     R[1, 0] = n1 * e2 - n2 * e1
     R[1, 1] = n2 * e0 - n0 * e2
     R[1, 2] = n0 * e1 - n1 * e0
     R[2, 0] = n0
     R[2, 1] = n1
     R[2, 2] = n2
-    return True
+
+
+@njit
+def to_frame(buf, nk, R, inv_b):
+    """Offsets ``buf[:nk, :3]`` to local coordinates in place: ``(u, v, h) = R d`` with the
+    tangent coordinates u, v scaled by `inv_b` (the fits' conditioning) and the height h
+    not; the weights ``buf[:, 3]`` are left alone."""
+    r00 = R[0, 0]
+    r01 = R[0, 1]
+    r02 = R[0, 2]
+    r10 = R[1, 0]
+    r11 = R[1, 1]
+    r12 = R[1, 2]
+    r20 = R[2, 0]
+    r21 = R[2, 1]
+    r22 = R[2, 2]
+    for t in range(nk):
+        d0 = buf[t, 0]
+        d1 = buf[t, 1]
+        d2 = buf[t, 2]
+        buf[t, 0] = (r00 * d0 + r01 * d1 + r02 * d2) * inv_b
+        buf[t, 1] = (r10 * d0 + r11 * d1 + r12 * d2) * inv_b
+        buf[t, 2] = r20 * d0 + r21 * d1 + r22 * d2
 
 
 @njit
@@ -127,30 +160,10 @@ def cholesky_inverse_n(a, m, rel_tol, L, inv):
             scale = a[k, k]
     if not scale > 0.0:
         return False
-    tol = rel_tol * scale
-    for j in range(m):
-        sjj = a[j, j]
-        for k in range(j):
-            sjj -= L[j, k] * L[j, k]
-        if not sjj > tol:
-            return False
-        L[j, j] = np.sqrt(sjj)
-        for r in range(j + 1, m):
-            s = a[r, j]
-            for k in range(j):
-                s -= L[r, k] * L[j, k]
-            L[r, j] = s / L[j, j]
+    if not cholesky_lower(a, m, rel_tol * scale, L):
+        return False
     # inv(L) (lower) into `inv`, then N^-1 = inv(L)' inv(L) via L's upper triangle
-    for j in range(m):
-        for r in range(m):
-            inv[r, j] = 0.0
-    for j in range(m):
-        inv[j, j] = 1.0 / L[j, j]
-        for r in range(j + 1, m):
-            acc = 0.0
-            for k in range(j, r):
-                acc -= L[r, k] * inv[k, j]
-            inv[r, j] = acc / L[r, r]
+    lower_inverse(L, m, inv)
     for r in range(m):
         for c in range(r, m):
             acc = 0.0

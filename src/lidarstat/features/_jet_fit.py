@@ -11,7 +11,7 @@ from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import Neighborhoods, knn_neighbors
 from . import _jet_kernels as _jk
-from ._quadric import check_fit_options, check_neighborhoods
+from ._quadric import check_fit_options, check_neighborhoods, kernel_bandwidth
 
 MONGE_NAMES = ("k1", "k2", "b0", "b1", "b2", "b3", "c0", "c1", "c2", "c3", "c4")
 _N_MONGE_OF = {1: 0, 2: 2, 3: 6, 4: 11}
@@ -197,10 +197,7 @@ def fit_jets(points, neighborhoods: Neighborhoods, *, degree=4, monge_degree=Non
     check_neighborhoods(func, pts, neighborhoods)
     degree, monge_degree, min_neighbors, weight = _check_options(
         func, degree, monge_degree, weight, min_neighbors, sensor)
-    if bandwidth is None:
-        bandwidth = neighborhoods.radius
-    else:
-        bandwidth = check_scalar(bandwidth, "bandwidth", func=func, low=0.0)
+    bandwidth = kernel_bandwidth(func, bandwidth, neighborhoods)
     origin = pts.mean(axis=0)
     local = pts - origin
     sensor_arr, has_sensor = _sensor(sensor, origin)

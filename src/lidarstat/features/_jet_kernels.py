@@ -3,8 +3,9 @@
 Per query point i, with neighbours j, offsets d_j = x_j - x_i and weights w_j (tricube of
 d_ij/b, or 1 for CGAL's unweighted fit), the four steps are:
 
-1. PCA frame: eigenvectors of the (weighted) covariance of the neighbourhood, e1 the
-   largest, n the smallest, n oriented toward the sensor or up, (e1, e2, n) direct.
+1. PCA frame (``_frame_kernels._local_frame``): eigenvectors of the (weighted) covariance
+   of the neighbourhood, e1 the largest, n the smallest, n oriented toward the sensor or up,
+   (e1, e2, n) direct.
 2. Polynomial fit of degree d in that frame, origin at the point: heights h_j on
    ``J(u, v) = sum_k sum_i A[k(k+1)/2 + i] u^(k-i) v^i / ((k-i)! i!)`` (CGAL's ordering
    and Taylor scaling: A holds the partial derivatives), by weighted least squares on
@@ -31,10 +32,8 @@ import math
 import numpy as np
 
 from .._shared._jit import njit
-from .._shared._kernels import add_outer3, mirror3
-from .._shared._kernels import eigh3 as _eigh3
 from ..neighbors import make_drivers
-from ._frame_kernels import cholesky_inverse_n
+from ._frame_kernels import FRAME_PCA, _local_frame, cholesky_inverse_n, to_frame
 from ._monge_kernels import (
     _MAXM,
     _MAXMOM,
@@ -82,16 +81,26 @@ def _monomials(u, v, nmom_deg, out):
         t += k + 1
 
 
-# ----------------------------------------------------------------------- Monge coefficients
+@njit
+def _norm1(a, m):
+    """1-norm (largest absolute column sum) of the leading m x m block of `a`."""
+    norm = 0.0
+    for c in range(m):
+        acc = 0.0
+        for r in range(m):
+            acc += abs(a[r, c])
+        if acc > norm:
+            norm = acc
+    return norm
 
-# ------------------------------------------------------------------------------ jet fit
 
 @njit
 def _workspace(m):
     return (np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(_MAXMOM),
             np.empty((3, _MAXMOM)), np.empty((m, m)), np.empty((m, m)), np.empty((m, m)),
             np.empty((m, m)), np.empty((m, m)), np.empty(m), np.empty(m), np.empty(m),
-            np.empty(NMONGE), np.empty((3, 3)), _monge_workspace(), np.empty((NMONGE, _MAXM)))
+            np.empty(NMONGE), np.empty((3, 3)), _monge_workspace(), np.empty((NMONGE, _MAXM)),
+            np.empty((3, 3)))
 
 
 @njit
@@ -103,7 +112,7 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
     cofactors of the Monge coefficients (times sigma^2: variances), NaN if not wanted.
     """
     (cov, ev, evec, mono, mom, N, N2, N3, L, Ninv, rhs, beta, dsc, mtmp, mbasis, mws,
-     jac) = ws
+     jac, R) = ws
     m = n_coef(d)
     nmd = 2 * d
     nmom = (nmd + 1) * (nmd + 2) // 2
@@ -114,12 +123,9 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
                 b = dist[t]
     if not b > 0.0:
         return TOO_FEW, 0
-    # pass 1: offsets and weights into buf; weighted mean
+    # pass 1: offsets and weights into buf
     p = 0
     sw = 0.0
-    mx = 0.0
-    my = 0.0
-    mz = 0.0
     px0 = pts[i, 0]
     py0 = pts[i, 1]
     pz0 = pts[i, 2]
@@ -141,9 +147,6 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
         buf[p, 2] = dz
         buf[p, 3] = w
         sw += w
-        mx += w * dx
-        my += w * dy
-        mz += w * dz
         p += 1
     if p < min_nb or p <= m:
         return TOO_FEW, p
@@ -155,39 +158,10 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
         uy += buf[t, 1]
         uz += buf[t, 2]
     stats_out[7] = math.sqrt(ux * ux + uy * uy + uz * uz) / (p * b)
-    mx /= sw
-    my /= sw
-    mz /= sw
-    for a in range(3):
-        for c in range(3):
-            cov[a, c] = 0.0
-    for t in range(p):
-        w = buf[t, 3]
-        dx = buf[t, 0] - mx
-        dy = buf[t, 1] - my
-        dz = buf[t, 2] - mz
-        add_outer3(cov, w, dx, dy, dz)
-    mirror3(cov)
-    _eigh3(cov, ev, evec)
-    if not ev[1] > 0.0:
+    # PCA frame (rows e, f, n of R) from the offsets and weights in buf
+    if not (_local_frame(buf, p, px0, py0, pz0, FRAME_PCA, sensor, has_sensor, R, cov, ev, evec)
+            and ev[1] > 0.0):
         return SINGULAR, p
-    n0 = evec[0, 0]
-    n1 = evec[1, 0]
-    n2 = evec[2, 0]
-    if has_sensor:
-        flip = n0 * (sensor[0] - px0) + n1 * (sensor[1] - py0) + n2 * (sensor[2] - pz0) < 0.0
-    else:
-        flip = n2 < 0.0
-    if flip:
-        n0 = -n0
-        n1 = -n1
-        n2 = -n2
-    e0 = evec[0, 2]
-    e1 = evec[1, 2]
-    e2 = evec[2, 2]
-    f0 = n1 * e2 - n2 * e1
-    f1 = n2 * e0 - n0 * e2
-    f2 = n0 * e1 - n1 * e0
     # pass 2: local coordinates (U, V scaled by 1/b), moments of the monomials
     inv_b = 1.0 / b
     weighted_stats = weighted
@@ -197,19 +171,11 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
         mom[2, k] = 0.0
     for a in range(m):
         rhs[a] = 0.0
+    to_frame(buf, p, R, inv_b)
     for t in range(p):
-        dx = buf[t, 0]
-        dy = buf[t, 1]
-        dz = buf[t, 2]
         w = buf[t, 3]
-        u = (e0 * dx + e1 * dy + e2 * dz) * inv_b
-        v = (f0 * dx + f1 * dy + f2 * dz) * inv_b
-        h = n0 * dx + n1 * dy + n2 * dz
-        buf[t, 0] = u
-        buf[t, 1] = v
-        buf[t, 2] = h
-        _monomials(u, v, nmd, mono)
-        wh = w * h
+        _monomials(buf[t, 0], buf[t, 1], nmd, mono)
+        wh = w * buf[t, 2]
         for a in range(m):
             rhs[a] += wh * mono[a]
         if weighted_stats:
@@ -245,22 +211,10 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
                 N2[c, a] = N2[a, c]
                 N3[c, a] = N3[a, c]
     # 1-norm of the equilibrated N (for the condition number)
-    norm1 = 0.0
-    for c in range(m):
-        acc = 0.0
-        for a in range(m):
-            acc += abs(N[a, c])
-        if acc > norm1:
-            norm1 = acc
+    norm1 = _norm1(N, m)
     if not cholesky_inverse_n(N, m, 1e-13, L, Ninv):
         return SINGULAR, p
-    ninv1 = 0.0
-    for c in range(m):
-        acc = 0.0
-        for a in range(m):
-            acc += abs(Ninv[a, c])
-        if acc > ninv1:
-            ninv1 = acc
+    ninv1 = _norm1(Ninv, m)
     # beta (scaled, equilibrated) = Ninv D^-1 rhs / fact
     for a in range(m):
         rhs[a] = rhs[a] / (COL_FACT[a] * dsc[a])
@@ -334,9 +288,8 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
         x0 = mbasis[r, 0]
         x1 = mbasis[r, 1]
         x2 = mbasis[r, 2]
-        frame_out[r, 0] = x0 * e0 + x1 * f0 + x2 * n0
-        frame_out[r, 1] = x0 * e1 + x1 * f1 + x2 * n1
-        frame_out[r, 2] = x0 * e2 + x1 * f2 + x2 * n2
+        for c in range(3):
+            frame_out[r, c] = x0 * R[0, c] + x1 * R[1, c] + x2 * R[2, c]
     for t in range(_N_MONGE_OF[dm], NMONGE):
         monge_out[t] = np.nan
     if not want_se:

@@ -155,6 +155,14 @@ def check_neighborhoods(func, pts, neighborhoods):
         )
 
 
+def kernel_bandwidth(func, bandwidth, neighborhoods):
+    """The tricube radius of a local fit: `bandwidth` checked (> 0), or the neighbourhoods'
+    radius (None for kNN: the kernel then takes each point's farthest neighbour)."""
+    if bandwidth is None:
+        return neighborhoods.radius
+    return check_scalar(bandwidth, "bandwidth", func=func, low=0.0)
+
+
 def check_fit_options(func, *, frame, covariance, min_neighbors, sensor):
     """Validate the options shared by the quadric-based functions."""
     Frame.parse(frame, "frame", func=func)
@@ -214,10 +222,7 @@ def fit_quadrics(points, neighborhoods: Neighborhoods, *, bandwidth=None, frame=
     check_neighborhoods(func, pts, neighborhoods)
     check_fit_options(func, frame=frame, covariance=covariance, min_neighbors=min_neighbors,
                       sensor=sensor)
-    if bandwidth is None:
-        bandwidth = neighborhoods.radius
-    else:
-        bandwidth = check_scalar(bandwidth, "bandwidth", func=func, low=0.0)
+    bandwidth = kernel_bandwidth(func, bandwidth, neighborhoods)
     origin = pts.mean(axis=0)
     local = pts - origin
     sensor_local = None if sensor is None else np.asarray(sensor, float) - origin

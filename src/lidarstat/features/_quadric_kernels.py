@@ -21,9 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from .._shared._jit import njit
-from .._shared._kernels import eigh3 as _eigh3  # noqa: F401 (the covariance kernels' import)
 from ..neighbors import make_drivers
-from ._frame_kernels import _local_frame, _tricube, cholesky_inverse_n
+from ._frame_kernels import _local_frame, _tricube, cholesky_inverse_n, to_frame
 
 # status codes (mirrored by FitStatus in _results.py)
 OK = 0
@@ -48,6 +47,20 @@ _COEF = (1.0, 1.0, 1.0, 0.5, 1.0, 0.5,
          0.5, 0.5, 0.5, 0.25, 0.5, 0.25,
          1.0, 1.0, 1.0, 0.5, 1.0, 0.5,
          0.5, 0.5, 0.5, 0.25, 0.5, 0.25)
+
+
+@njit
+def _acc3(s0, s1, s2, w, w2, w3, mk):
+    """One monomial's three moment sums advanced by a neighbour of weight w:
+    ``(s0 + w mk, s1 + w^2 mk, s2 + w^3 mk)``."""
+    return s0 + w * mk, s1 + w2 * mk, s2 + w3 * mk
+
+
+@njit
+def _put(a, values):
+    """``a[:len(values)] = values`` from a tuple of scalar accumulators."""
+    for k in range(len(values)):
+        a[k] = values[k]
 
 
 @njit
@@ -99,39 +112,24 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
     for a in range(3):
         for c in range(3):
             frame_out[a, c] = R[a, c]
-    # Pass 1: weighted moment sums of the 15 monomials U^i V^j (i + j <= 4) for w, w^2, w^3
-    # (the entries of X'WX, X'W^2X, X'W^3X) and of w h U^i V^j (i + j <= 2) for X'Wh.
-    # scalar accumulators (kept in registers): s{p}_{k} = sum w^(p+1) * monomial k,
-    # g{k} = sum w h * monomial k (k < 6)
+    # Pass 1: local coordinates (u, v, h) into buf, then the weighted moment sums of the 15
+    # monomials U^i V^j (i + j <= 4) for w, w^2, w^3 (the entries of X'WX, X'W^2X, X'W^3X)
+    # and of w h U^i V^j (i + j <= 2) for X'Wh, in scalar accumulators (kept in registers):
+    # s{p}_{k} = sum w^(p+1) * monomial k, g{k} = sum w h * monomial k (k < 6)
+    inv_b = 1.0 / b
+    to_frame(buf, nk, R, inv_b)
     s0_0 = s0_1 = s0_2 = s0_3 = s0_4 = s0_5 = s0_6 = s0_7 = s0_8 = s0_9 = s0_10 = s0_11 = s0_12 = s0_13 = s0_14 = 0.0
     s1_0 = s1_1 = s1_2 = s1_3 = s1_4 = s1_5 = s1_6 = s1_7 = s1_8 = s1_9 = s1_10 = s1_11 = s1_12 = s1_13 = s1_14 = 0.0
     s2_0 = s2_1 = s2_2 = s2_3 = s2_4 = s2_5 = s2_6 = s2_7 = s2_8 = s2_9 = s2_10 = s2_11 = s2_12 = s2_13 = s2_14 = 0.0
     g0 = g1 = g2 = g3 = g4 = g5 = 0.0
-    inv_b = 1.0 / b
-    r00 = R[0, 0]
-    r01 = R[0, 1]
-    r02 = R[0, 2]
-    r10 = R[1, 0]
-    r11 = R[1, 1]
-    r12 = R[1, 2]
-    r20 = R[2, 0]
-    r21 = R[2, 1]
-    r22 = R[2, 2]
-    for t in range(nk):  # the offsets and weights of pass 0, in local coordinates
-        d0 = buf[t, 0]
-        d1 = buf[t, 1]
-        d2 = buf[t, 2]
+    for t in range(nk):
+        u = buf[t, 0]
+        v = buf[t, 1]
         w = buf[t, 3]
-        u = (r00 * d0 + r01 * d1 + r02 * d2) * inv_b
-        v = (r10 * d0 + r11 * d1 + r12 * d2) * inv_b
-        h = r20 * d0 + r21 * d1 + r22 * d2
-        buf[t, 0] = u
-        buf[t, 1] = v
-        buf[t, 2] = h
         uu = u * u
         uv = u * v
         vv = v * v
-        wh = w * h
+        wh = w * buf[t, 2]
         g0 += wh
         g1 += wh * u
         g2 += wh * v
@@ -140,116 +138,28 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
         g5 += wh * vv
         w2 = w * w
         w3 = w2 * w
-        s0_0 += w
-        s1_0 += w2
-        s2_0 += w3
-        mk = u
-        s0_1 += w * mk
-        s1_1 += w2 * mk
-        s2_1 += w3 * mk
-        mk = v
-        s0_2 += w * mk
-        s1_2 += w2 * mk
-        s2_2 += w3 * mk
-        mk = uu
-        s0_3 += w * mk
-        s1_3 += w2 * mk
-        s2_3 += w3 * mk
-        mk = uv
-        s0_4 += w * mk
-        s1_4 += w2 * mk
-        s2_4 += w3 * mk
-        mk = vv
-        s0_5 += w * mk
-        s1_5 += w2 * mk
-        s2_5 += w3 * mk
-        mk = uu * u
-        s0_6 += w * mk
-        s1_6 += w2 * mk
-        s2_6 += w3 * mk
-        mk = uu * v
-        s0_7 += w * mk
-        s1_7 += w2 * mk
-        s2_7 += w3 * mk
-        mk = u * vv
-        s0_8 += w * mk
-        s1_8 += w2 * mk
-        s2_8 += w3 * mk
-        mk = vv * v
-        s0_9 += w * mk
-        s1_9 += w2 * mk
-        s2_9 += w3 * mk
-        mk = uu * uu
-        s0_10 += w * mk
-        s1_10 += w2 * mk
-        s2_10 += w3 * mk
-        mk = uu * uv
-        s0_11 += w * mk
-        s1_11 += w2 * mk
-        s2_11 += w3 * mk
-        mk = uu * vv
-        s0_12 += w * mk
-        s1_12 += w2 * mk
-        s2_12 += w3 * mk
-        mk = uv * vv
-        s0_13 += w * mk
-        s1_13 += w2 * mk
-        s2_13 += w3 * mk
-        mk = vv * vv
-        s0_14 += w * mk
-        s1_14 += w2 * mk
-        s2_14 += w3 * mk
-    mom[0, 0] = s0_0
-    mom[0, 1] = s0_1
-    mom[0, 2] = s0_2
-    mom[0, 3] = s0_3
-    mom[0, 4] = s0_4
-    mom[0, 5] = s0_5
-    mom[0, 6] = s0_6
-    mom[0, 7] = s0_7
-    mom[0, 8] = s0_8
-    mom[0, 9] = s0_9
-    mom[0, 10] = s0_10
-    mom[0, 11] = s0_11
-    mom[0, 12] = s0_12
-    mom[0, 13] = s0_13
-    mom[0, 14] = s0_14
-    mom[1, 0] = s1_0
-    mom[1, 1] = s1_1
-    mom[1, 2] = s1_2
-    mom[1, 3] = s1_3
-    mom[1, 4] = s1_4
-    mom[1, 5] = s1_5
-    mom[1, 6] = s1_6
-    mom[1, 7] = s1_7
-    mom[1, 8] = s1_8
-    mom[1, 9] = s1_9
-    mom[1, 10] = s1_10
-    mom[1, 11] = s1_11
-    mom[1, 12] = s1_12
-    mom[1, 13] = s1_13
-    mom[1, 14] = s1_14
-    mom[2, 0] = s2_0
-    mom[2, 1] = s2_1
-    mom[2, 2] = s2_2
-    mom[2, 3] = s2_3
-    mom[2, 4] = s2_4
-    mom[2, 5] = s2_5
-    mom[2, 6] = s2_6
-    mom[2, 7] = s2_7
-    mom[2, 8] = s2_8
-    mom[2, 9] = s2_9
-    mom[2, 10] = s2_10
-    mom[2, 11] = s2_11
-    mom[2, 12] = s2_12
-    mom[2, 13] = s2_13
-    mom[2, 14] = s2_14
-    rhs[0] = g0
-    rhs[1] = g1
-    rhs[2] = g2
-    rhs[3] = g3
-    rhs[4] = g4
-    rhs[5] = g5
+        s0_0, s1_0, s2_0 = _acc3(s0_0, s1_0, s2_0, w, w2, w3, 1.0)
+        s0_1, s1_1, s2_1 = _acc3(s0_1, s1_1, s2_1, w, w2, w3, u)
+        s0_2, s1_2, s2_2 = _acc3(s0_2, s1_2, s2_2, w, w2, w3, v)
+        s0_3, s1_3, s2_3 = _acc3(s0_3, s1_3, s2_3, w, w2, w3, uu)
+        s0_4, s1_4, s2_4 = _acc3(s0_4, s1_4, s2_4, w, w2, w3, uv)
+        s0_5, s1_5, s2_5 = _acc3(s0_5, s1_5, s2_5, w, w2, w3, vv)
+        s0_6, s1_6, s2_6 = _acc3(s0_6, s1_6, s2_6, w, w2, w3, uu * u)
+        s0_7, s1_7, s2_7 = _acc3(s0_7, s1_7, s2_7, w, w2, w3, uu * v)
+        s0_8, s1_8, s2_8 = _acc3(s0_8, s1_8, s2_8, w, w2, w3, u * vv)
+        s0_9, s1_9, s2_9 = _acc3(s0_9, s1_9, s2_9, w, w2, w3, vv * v)
+        s0_10, s1_10, s2_10 = _acc3(s0_10, s1_10, s2_10, w, w2, w3, uu * uu)
+        s0_11, s1_11, s2_11 = _acc3(s0_11, s1_11, s2_11, w, w2, w3, uu * uv)
+        s0_12, s1_12, s2_12 = _acc3(s0_12, s1_12, s2_12, w, w2, w3, uu * vv)
+        s0_13, s1_13, s2_13 = _acc3(s0_13, s1_13, s2_13, w, w2, w3, uv * vv)
+        s0_14, s1_14, s2_14 = _acc3(s0_14, s1_14, s2_14, w, w2, w3, vv * vv)
+    _put(mom[0], (s0_0, s0_1, s0_2, s0_3, s0_4, s0_5, s0_6, s0_7, s0_8, s0_9, s0_10, s0_11,
+                  s0_12, s0_13, s0_14))
+    _put(mom[1], (s1_0, s1_1, s1_2, s1_3, s1_4, s1_5, s1_6, s1_7, s1_8, s1_9, s1_10, s1_11,
+                  s1_12, s1_13, s1_14))
+    _put(mom[2], (s2_0, s2_1, s2_2, s2_3, s2_4, s2_5, s2_6, s2_7, s2_8, s2_9, s2_10, s2_11,
+                  s2_12, s2_13, s2_14))
+    _put(rhs, (g0, g1, g2, g3, g4, g5))
     rhs[3] *= 0.5
     rhs[5] *= 0.5
     for a in range(6):

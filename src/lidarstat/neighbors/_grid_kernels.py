@@ -140,12 +140,21 @@ def _nearest(bd, bi, m, k, sort, td, ti, tb, sd, si, cnt):
 def _block_ranges(ix0, iy0, iz0, rad, cell_keys, cell_start, dims, ranges):
     """Sorted-position ranges of the occupied cells within `rad` cells of (ix0, iy0, iz0).
 
-    Cells of one (ix, iy) column have consecutive keys: one binary search pair per column.
     `ranges` must hold (2 rad + 1)^2 rows. Returns the number of ranges.
     """
+    return column_ranges(ix0, iy0, rad, max(iz0 - rad, 0), min(iz0 + rad, dims[2] - 1),
+                         cell_keys, cell_start, dims, ranges)
+
+
+@njit
+def column_ranges(ix0, iy0, rad, kz0, kz1, cell_keys, cell_start, dims, ranges):
+    """Sorted-position ranges of the occupied cells of layers kz0..kz1 in the (ix, iy)
+    columns within `rad` cells of (ix0, iy0), column by column (ix, then iy, ascending).
+
+    Cells of one (ix, iy) column have consecutive keys: one binary search pair per column.
+    Returns the number of ranges written to `ranges`.
+    """
     n = 0
-    kz0 = max(iz0 - rad, 0)
-    kz1 = min(iz0 + rad, dims[2] - 1)
     if kz1 < kz0:
         return 0
     for ix in range(max(ix0 - rad, 0), min(ix0 + rad, dims[0] - 1) + 1):

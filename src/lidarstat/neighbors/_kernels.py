@@ -11,6 +11,7 @@ import numpy as np
 from numba import prange
 
 from .._shared._jit import njit, njit_parallel
+from ._grid_kernels import column_ranges
 
 
 @njit
@@ -78,30 +79,12 @@ def _cell_ranges(c, cell_keys, cell_start, dims, ndim, ranges):
 def _ranges_at(ix0, iy0, iz0, cell_keys, cell_start, dims, ndim, ranges):
     """Sorted-position ranges of the occupied cells around cell (ix0, iy0, iz0).
 
-    The three cells (ix, iy, iz0-1..iz0+1) have consecutive keys, so each column is one
-    binary search for its first and one for its last key. Returns the number of ranges.
+    The cells (ix, iy, iz0-1..iz0+1) (iz0 alone for 2-D) of each of the nine columns have
+    consecutive keys (:func:`column_ranges`). Returns the number of ranges.
     """
     zr = 1 if ndim == 3 else 0
-    n = 0
-    for ix in range(ix0 - 1, ix0 + 2):
-        if ix < 0 or ix >= dims[0]:
-            continue
-        for iy in range(iy0 - 1, iy0 + 2):
-            if iy < 0 or iy >= dims[1]:
-                continue
-            kz0 = max(iz0 - zr, 0)
-            kz1 = min(iz0 + zr, dims[2] - 1)
-            if kz1 < kz0:
-                continue
-            k0 = (ix * dims[1] + iy) * dims[2] + kz0
-            k1 = (ix * dims[1] + iy) * dims[2] + kz1
-            a = np.searchsorted(cell_keys, k0)
-            b = np.searchsorted(cell_keys, k1, side="right")
-            if b > a:
-                ranges[n, 0] = cell_start[a]
-                ranges[n, 1] = cell_start[b]
-                n += 1
-    return n
+    return column_ranges(ix0, iy0, 1, max(iz0 - zr, 0), min(iz0 + zr, dims[2] - 1), cell_keys,
+                         cell_start, dims, ranges)
 
 
 #: Modes of :func:`_scan`: count only; store the neighbours at ``start`` (exact room);

@@ -2,14 +2,8 @@
 or with Dask (local or a ``distributed`` cluster)."""
 
 from .._shared._tiles import Tile, TileGrid, map_tiles, tile_grid
-from ._catalogue import (
-                         DEFAULT_TEMPLATE,
-                         BufferedTile,
-                         Catalogue,
-                         TileRun,
-                         process_catalogue,
-                         write_tiles,
-)
+from ._catalogue import DEFAULT_TEMPLATE, BufferedTile, Catalogue, write_tiles
+from ._catalogue_run import TileRun, process_catalogue
 from ._methods import METHODS, SEGMENTATIONS, method_function, segmentation
 from ._stream import process_file
 from ._terrain import GROUND_CODES_DTM, terrain_model

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._shared._jit import njit
+from .._shared._kernels import cholesky_lower, lower_inverse
 
 #: Number of monomials of degree <= 2 in three variables.
 NM = 10
@@ -168,27 +169,9 @@ def _cholesky_inverse(N, Li):
     positive definite."""
     k = N.shape[0]
     L = np.zeros((k, k))
-    for j in range(k):
-        d = N[j, j]
-        for q in range(j):
-            d -= L[j, q] * L[j, q]
-        if not d > 0.0:
-            return False
-        L[j, j] = np.sqrt(d)
-        for r in range(j + 1, k):
-            v = N[r, j]
-            for q in range(j):
-                v -= L[r, q] * L[j, q]
-            L[r, j] = v / L[j, j]
-    for j in range(k):
-        for r in range(k):
-            Li[r, j] = 0.0
-        Li[j, j] = 1.0 / L[j, j]
-        for r in range(j + 1, k):
-            v = 0.0
-            for q in range(j, r):
-                v -= L[r, q] * Li[q, j]
-            Li[r, j] = v / L[r, r]
+    if not cholesky_lower(N, k, 0.0, L):
+        return False
+    lower_inverse(L, k, Li)
     return True
 
 

@@ -49,31 +49,29 @@ def candidates(monge, sd, frames, ok, ratio, z, ctype, cval):
         if not gap > 0.0:
             continue
         if -k2 > ratio * abs(k1) and -k2 > z * sd[i, 1]:
-            ctype[i] = CREST
-            e = monge[i, 5]
-            kpp = monge[i, 10] - 3.0 * k2 * k2 * k2 - 3.0 * monge[i, 4] ** 2 / gap
-            cval[i, 0] = k2
-            cval[i, 1] = e
-            cval[i, 2] = kpp
-            cval[i, 3] = sd[i, 10]
-            cval[i, 10] = sd[i, 5]
-            cval[i, 11] = sd[i, 1]
-            for c in range(3):
-                cval[i, 4 + c] = frames[i, 1, c]
-                cval[i, 7 + c] = frames[i, 0, c]
+            ctype[i] = CREST  # k2 dominant: b2, b3, c4 (Monge columns 4, 5, 10)
+            _store_candidate(cval, i, monge, sd, frames, gap, 1, 5, 10, 4, -1.0, 1, 0)
         elif k1 > ratio * abs(k2) and k1 > z * sd[i, 0]:
-            ctype[i] = RAVINE
-            e = monge[i, 2]
-            kpp = monge[i, 6] - 3.0 * k1 * k1 * k1 + 3.0 * monge[i, 3] ** 2 / gap
-            cval[i, 0] = k1
-            cval[i, 1] = e
-            cval[i, 2] = kpp
-            cval[i, 3] = sd[i, 6]
-            cval[i, 10] = sd[i, 2]
-            cval[i, 11] = sd[i, 0]
-            for c in range(3):
-                cval[i, 4 + c] = frames[i, 0, c]
-                cval[i, 7 + c] = frames[i, 1, c]
+            ctype[i] = RAVINE  # k1 dominant: b1, b0, c0 (Monge columns 3, 2, 6)
+            _store_candidate(cval, i, monge, sd, frames, gap, 0, 2, 6, 3, 1.0, 0, 1)
+
+
+@njit
+def _store_candidate(cval, i, monge, sd, frames, gap, kc, ec, kppc, bc, sgn, dr, tr):
+    """Row i of `cval` for a candidate of the dominant curvature ``k = monge[i, kc]``: its
+    extremality (column `ec`), ``k'' = monge[i, kppc] - 3 k^3 + sgn 3 monge[i, bc]^2 /
+    gap``, their standard deviations, the direction (frame row `dr`) and the ridge's
+    tangent (frame row `tr`)."""
+    k = monge[i, kc]
+    cval[i, 0] = k
+    cval[i, 1] = monge[i, ec]
+    cval[i, 2] = monge[i, kppc] - 3.0 * k * k * k + sgn * (3.0 * monge[i, bc] ** 2 / gap)
+    cval[i, 3] = sd[i, kppc]
+    cval[i, 10] = sd[i, ec]
+    cval[i, 11] = sd[i, kc]
+    for c in range(3):
+        cval[i, 4 + c] = frames[i, dr, c]
+        cval[i, 7 + c] = frames[i, tr, c]
 
 
 @njit_parallel

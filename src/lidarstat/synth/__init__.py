@@ -27,18 +27,17 @@ from ._edges import crease_lines, distance_to_creases
 from ._orthographic import scan_orthographic
 from ._roof_scenes import ROOF_SCENE_KINDS, make_roof_scene
 from ._scenes import SCENES, make_agpart, make_column
+from ._surface_kinds import SURFACE_KINDS, make_surface
 from ._surfaces import (
-    SURFACE_KINDS,
     make_cylinder,
     make_paraboloid,
     make_plane,
     make_scherk,
     make_sphere_cap,
-    make_surface,
 )
+from ._terrain_scenes import TERRAIN_SCENES, TerrainScene, make_terrain_scene
 from ._tls import scan_spherical
 from ._tls_scenes import make_tls_building, make_tls_plant
-from ._terrain_scenes import TERRAIN_SCENES, TerrainScene, make_terrain_scene
 from ._truth import (
     SURFACE_TYPE_NAMES,
     SyntheticCloud,

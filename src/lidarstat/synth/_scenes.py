@@ -19,7 +19,7 @@ from ._als import make_als_town, make_hip_roof_scene
 from ._csg import Box, Cylinder, FaceRegistry, difference, union
 from ._edges import crease_lines
 from ._orthographic import scan_orthographic
-from ._surfaces import SURFACE_KINDS, make_surface
+from ._surface_kinds import SURFACE_KINDS, make_surface
 from ._tls_scenes import make_tls_building, make_tls_plant
 from ._truth import SyntheticCloud, _build
 

@@ -20,107 +20,12 @@ import math
 
 import numpy as np
 
-from .._shared.validation import check_option, check_scalar
+from .._shared.validation import check_scalar
 from ..errors import InvalidParameterError
-from ._truth import SyntheticCloud, _build
+from ._height_grid import _common, _finish, _grid, _monge, _pair, _radius_slope, _unit2
+from ._truth import SyntheticCloud
 
-__all__ = [
-    "make_plane",
-    "make_cylinder",
-    "make_sphere_cap",
-    "make_paraboloid",
-    "make_scherk",
-    "make_surface",
-    "SURFACE_KINDS",
-]
-
-_EDGE_DOC = "XY distance to the border of the sampled domain (lower bound of the 3-D distance)"
-
-
-# ----------------------------------------------------------------------------- helpers
-def _pair(value, name, func):
-    """A positive float or a pair of positive floats -> (float, float)."""
-    if np.ndim(value) == 0:
-        v = check_scalar(value, name, func=func, low=0.0)
-        return v, v
-    vals = list(np.asarray(value, dtype=object).ravel())
-    if len(vals) != 2:
-        raise InvalidParameterError(
-            f"The '{name}' parameter of {func} must be a float or a pair of floats. "
-            f"Got {value!r} instead."
-        )
-    return tuple(check_scalar(v, name, func=func, low=0.0) for v in vals)
-
-
-def _common(func, spacing, sigma, jitter, n, area):
-    """Validate the shared keywords; derive the spacing from `n` when given."""
-    sigma = check_scalar(sigma, "sigma", func=func, low=0.0, closed="left")
-    jitter = check_scalar(jitter, "jitter", func=func, low=0.0, high=0.5, closed="left")
-    if n is not None:
-        n = check_scalar(n, "n", func=func, low=1, closed="left", integer=True)
-        h = math.sqrt(area / n)
-        return (h, h), sigma, jitter
-    return _pair(spacing, "spacing", func), sigma, jitter
-
-
-def _grid(half_x, half_y, spacing, jitter, rng):
-    """Regular grid symmetric about the origin covering [-half_x, half_x] x [-half_y, half_y].
-
-    With ``jitter > 0`` every node moves uniformly by up to ``jitter * spacing`` in x and y.
-    Returns flattened x, y and the (row, col) indices.
-    """
-    dx, dy = spacing
-    nx = int(math.floor(2 * half_x / dx + 1e-9)) + 1
-    ny = int(math.floor(2 * half_y / dy + 1e-9)) + 1
-    if nx * ny > 50_000_000:
-        raise InvalidParameterError(
-            f"the requested grid has {nx * ny} nodes; increase `spacing` or decrease `n`"
-        )
-    xs = (np.arange(nx) - (nx - 1) / 2.0) * dx
-    ys = (np.arange(ny) - (ny - 1) / 2.0) * dy
-    X, Y = np.meshgrid(xs, ys)  # rows = y, cols = x
-    J, I = np.meshgrid(np.arange(nx), np.arange(ny))
-    x, y = X.ravel(), Y.ravel()
-    if jitter > 0:
-        x = x + rng.uniform(-jitter * dx, jitter * dx, x.size)
-        y = y + rng.uniform(-jitter * dy, jitter * dy, y.size)
-    ij = np.stack([I.ravel(), J.ravel()], axis=1).astype(np.int32)
-    return x, y, ij
-
-
-def _monge(fx, fy, fxx, fxy, fyy):
-    """Normal, K and H of the Monge patch from exact derivatives (normal up)."""
-    w2 = 1.0 + fx * fx + fy * fy
-    w = np.sqrt(w2)
-    normal = np.stack([-fx / w, -fy / w, 1.0 / w], axis=1)
-    K = (fxx * fyy - fxy * fxy) / (w2 * w2)
-    H = ((1.0 + fy * fy) * fxx - 2.0 * fx * fy * fxy + (1.0 + fx * fx) * fyy) / (2.0 * w2 * w)
-    return normal, K, H
-
-
-def _finish(name, x, y, z, normal, K, H, edge, ij, sigma, rng, meta, kmin=None, kmax=None):
-    xyz = np.stack([x, y, z], axis=1)
-    meta = dict(meta)
-    meta.setdefault("edge_distance", _EDGE_DOC)
-    meta["ij"] = ij
-    return _build(xyz_true=xyz, normal=normal, K=K, H=H, kmin=kmin, kmax=kmax,
-                  face=np.zeros(x.size, np.int32), edge_distance=edge, sigma=sigma, rng=rng,
-                  name=name, meta=meta)
-
-
-def _unit2(axis, func):
-    a = np.asarray(axis, dtype=np.float64).ravel()
-    if a.size == 3:
-        if a[2] != 0:
-            raise InvalidParameterError(
-                f"The 'axis' parameter of {func} must lie in the XY plane. Got {axis!r} instead."
-            )
-        a = a[:2]
-    if a.size != 2 or not np.all(np.isfinite(a)) or np.hypot(*a) == 0:
-        raise InvalidParameterError(
-            f"The 'axis' parameter of {func} must be a non-zero 2-vector. Got {axis!r} instead."
-        )
-    return a / np.hypot(*a)
+__all__ = ["make_plane", "make_cylinder", "make_sphere_cap", "make_paraboloid", "make_scherk"]
 
 
 # ----------------------------------------------------------------------------- surfaces
@@ -223,11 +128,9 @@ def make_cylinder(radius=1.0, *, length=None, axis=(1.0, 0.0), convex=True, max_
     """
     func = "make_cylinder"
     rng = np.random.default_rng(rng)
-    R = check_scalar(radius, "radius", func=func, low=0.0)
+    R, slope, dmax = _radius_slope(func, radius, max_slope)
     L = 2 * R if length is None else check_scalar(length, "length", func=func, low=0.0)
-    slope = check_scalar(max_slope, "max_slope", func=func, low=0.0, high=89.0, closed="right")
     a = _unit2(axis, func)
-    dmax = R * math.sin(math.radians(slope))
     spacing, sigma, jitter = _common(func, spacing, sigma, jitter, n, L * 2 * dmax)
     # bounding box of the rotated rectangle |s| <= L/2, |d| <= dmax
     hx = abs(a[0]) * L / 2 + abs(a[1]) * dmax
@@ -286,9 +189,7 @@ def make_sphere_cap(radius=1.0, *, convex=True, max_slope=70.0, spacing=0.02, n=
     """
     func = "make_sphere_cap"
     rng = np.random.default_rng(rng)
-    R = check_scalar(radius, "radius", func=func, low=0.0)
-    slope = check_scalar(max_slope, "max_slope", func=func, low=0.0, high=89.0, closed="right")
-    rmax = R * math.sin(math.radians(slope))
+    R, slope, rmax = _radius_slope(func, radius, max_slope)
     spacing, sigma, jitter = _common(func, spacing, sigma, jitter, n, math.pi * rmax ** 2)
     x, y, ij = _grid(rmax, rmax, spacing, jitter, rng)
     r = np.hypot(x, y)
@@ -420,80 +321,3 @@ def make_scherk(scale=1.0, *, extent=None, spacing=0.02, n=None, sigma=0.0, jitt
             "jitter": jitter}
     return _finish("scherk", x, y, z, normal, K, H, edge, ij, sigma, rng, meta,
                    kmin=-root, kmax=root)
-
-
-# kind -> (expected surface type, generator, fixed keyword arguments)
-_KINDS = {
-    "plane": (1, make_plane, {"normal": (0.1, -0.2, 1.0)}),
-    "cylinder": (2, make_cylinder, {"radius": 1.0, "convex": True}),
-    "ridge": (2, make_paraboloid, {"a": -1.0, "b": 0.0}),
-    "trough": (3, make_cylinder, {"radius": 1.0, "convex": False}),
-    "valley": (3, make_paraboloid, {"a": 1.0, "b": 0.0}),
-    "sphere": (4, make_sphere_cap, {"radius": 1.0, "convex": True}),
-    "peak": (4, make_paraboloid, {"a": -1.0, "b": -0.5}),
-    "bowl": (5, make_sphere_cap, {"radius": 1.0, "convex": False}),
-    "pit": (5, make_paraboloid, {"a": 1.0, "b": 0.5}),
-    "saddle_ridge": (6, make_paraboloid, {"a": -1.0, "b": 0.4}),
-    "saddle_valley": (7, make_paraboloid, {"a": 1.0, "b": -0.4}),
-    "minimal_saddle": (8, make_scherk, {"scale": 1.0}),
-}
-
-#: Names accepted by :func:`make_surface`, mapped to the surface type code of every point.
-SURFACE_KINDS = {k: v[0] for k, v in _KINDS.items()}
-
-
-def make_surface(kind, *, spacing=0.02, n=None, sigma=0.0, jitter=0.0, rng=None,
-                 **kwargs) -> SyntheticCloud:
-    """One patch of a given surface type, with exact truth, by name.
-
-    ============== ==== =========================================================
-    kind           type patch (unit curvature scale, XY domain about 2 x 2)
-    ============== ==== =========================================================
-    plane          1    plane with normal (0.1, -0.2, 1)
-    cylinder       2    :func:`make_cylinder`, R = 1, convex
-    ridge          2    :func:`make_paraboloid`, a = -1, b = 0 (parabolic cylinder)
-    trough         3    :func:`make_cylinder`, R = 1, concave
-    valley         3    :func:`make_paraboloid`, a = 1, b = 0
-    sphere         4    :func:`make_sphere_cap`, R = 1, dome
-    peak           4    :func:`make_paraboloid`, a = -1, b = -0.5
-    bowl           5    :func:`make_sphere_cap`, R = 1, bowl
-    pit            5    :func:`make_paraboloid`, a = 1, b = 0.5
-    saddle_ridge   6    :func:`make_paraboloid`, a = -1, b = 0.4
-    saddle_valley  7    :func:`make_paraboloid`, a = 1, b = -0.4
-    minimal_saddle 8    :func:`make_scherk`, c = 1 (H = 0 exactly)
-    ============== ==== =========================================================
-
-    The parameters are chosen so that the type is the same at *every* point of the default
-    patch: for the saddles, the numerator of H is ``(a + b) + a b (b y^2 + a x^2)``, which
-    keeps the sign of a + b for |x|, |y| <= 1 since |a b| max(|a|, |b|) < |a + b|.
-    (Overriding ``extent`` may break this; the per-point ``surface_type`` stays exact.)
-
-    Parameters
-    ----------
-    kind : str
-        One of :data:`SURFACE_KINDS`.
-    spacing, n, sigma, jitter, rng
-        As in :func:`make_plane`.
-    **kwargs
-        Further keywords passed to the generator (they override the defaults above).
-
-    Returns
-    -------
-    SyntheticCloud
-        ``name`` is `kind`.
-
-    Examples
-    --------
-    >>> c = make_surface("saddle_valley", spacing=0.1)
-    >>> sorted(set(c.surface_type.tolist()))
-    [7]
-    """
-    check_option(kind, "kind", _KINDS, func="make_surface")
-    _, gen, fixed = _KINDS[kind]
-    args = {**fixed, **kwargs}
-    cloud = gen(spacing=spacing, n=n, sigma=sigma, jitter=jitter, rng=rng, **args)
-    meta = dict(cloud.meta)
-    meta["surface_kind"] = kind
-    object.__setattr__(cloud, "name", kind)
-    object.__setattr__(cloud, "meta", meta)
-    return cloud
