@@ -234,17 +234,17 @@ def plane_exceedances(tilt_deg, rung, probs, samples=1500, seed=1):
     """Seeds of a plane tilted by `tilt_deg` (noise along z, a jittered unit grid in plan:
     stretched along the slope) whose k'' statistic at rung `rung` exceeds the upper
     `probs` quantiles of the null the automatic scale simulates on those seeds' own
-    patterns (other noise draws), and the number of fitted seeds. The seeds'
-    neighbourhoods are disjoint (independent counts), and the null holds four draws per
-    pattern so that the quantiles' own sampling error is small beside the counts'."""
+    patterns (other noise draws, at the two smallest rungs: ``calibrated_null``), and the
+    number of fitted seeds. The seeds' neighbourhoods are disjoint (independent counts),
+    and the null holds four draws per seed so that the quantiles' own sampling error is
+    small beside the counts'."""
     import math
 
     from scipy.spatial import cKDTree
 
     from lidarstat.features import height_variance, jet_tests
     from lidarstat.features._jet_fit import _fit_cells, _to_fit
-    from lidarstat.features._jet_scale import (pattern_null_sample, radius_ladder,
-                                               upper_quantile)
+    from lidarstat.features._jet_scale import calibrated_null, radius_ladder, upper_quantile
     from lidarstat.neighbors import CellIndex
     from lidarstat.segment._ridges import RIDGE_SCALE, _ridge_statistic
 
@@ -261,9 +261,9 @@ def plane_exceedances(tilt_deg, rung, probs, samples=1500, seed=1):
     y = y + rng.uniform(-0.5, 0.5, y.size)
     sigma = 0.01
     pts = np.c_[x, y, math.tan(math.radians(tilt_deg)) * x + rng.normal(0, sigma, x.size)]
-    ladder = radius_ladder(pts, sample=20000)[rung]
-    assert abs(ladder / r - 1) < 0.05, (ladder, r)
-    r = float(ladder)
+    ladder = radius_ladder(pts, sample=20000)
+    assert abs(ladder[rung] / r - 1) < 0.05, (ladder[rung], r)
+    r = float(ladder[rung])
     grid = 2 * r + 1 + step * np.arange(m)
     gx, gy = (a.ravel()[:samples] for a in np.meshgrid(grid, grid))
     q = np.unique(cKDTree(pts[:, :2]).query(np.c_[gx, gy])[1])
@@ -276,6 +276,6 @@ def plane_exceedances(tilt_deg, rung, probs, samples=1500, seed=1):
     fields = jet_tests(fit, height_variance(fit.frame, sigma, noise="z"), 0.01)
     ok = fit.status == 0
     stat = _ridge_statistic(fit, fields)[ok]
-    null = pattern_null_sample(RIDGE_SCALE, pts, q[ok], fit.frame[ok], r, kw,
-                               samples=4 * int(ok.sum()), rng=rung)
+    null = calibrated_null(RIDGE_SCALE, pts, q[ok], fit.frame[ok], ladder, kw,
+                           samples=4 * int(ok.sum()))
     return [int(np.sum(stat > upper_quantile(null, p))) for p in probs], int(ok.sum())

@@ -7,7 +7,7 @@ seed points (one per cube of side ``r_0``) the jets are fitted rung by rung, sma
 first; a seed keeps the first rung at which its test statistic exceeds its null quantile
 at ``alpha / J`` (normal, Bonferroni over the criterion's tails too, or simulated for a
 calibrated criterion on the seeds' own neighbourhood patterns:
-:func:`pattern_null_sample`) plus a power term, so that a seed with
+:func:`calibrated_null`) plus a power term, so that a seed with
 nothing to detect picks a rung by chance with probability at most ``alpha``. The climb
 stops at the first rung whose jet the chi-square test rejects (eq. 7: a wider
 neighbourhood only adds model bias) or whose neighbourhood is one-sided (a border); a
@@ -48,10 +48,9 @@ class JetScaleCriterion:
     ``statistic(fit, fields)`` returns, per fitted point, a statistic that is one-sided
     standard normal under the null (nothing to detect) for each of ``tails`` tails; a rung
     is chosen when it exceeds ``z_{1 - alpha / (J tails)}``. With ``calibrate`` the
-    statistic's null distribution is not taken as normal but simulated
-    at every rung on the neighbourhood patterns of the seeds still climbing
-    (:func:`pattern_null_sample`): the rung is chosen when it exceeds the simulated
-    ``1 - alpha / J`` quantile (:func:`upper_quantile`).
+    statistic's null distribution is not taken as normal but simulated on the seeds' own
+    neighbourhood patterns (:func:`calibrated_null`): the rung is chosen when it exceeds
+    the simulated ``1 - alpha / J`` quantile (:func:`upper_quantile`).
     """
 
     name: str
@@ -170,12 +169,12 @@ def choose_rungs(points, radii, criterion, alpha, tests, kw, block_size=131072):
         s = np.asarray(criterion.statistic(sub, fields), dtype=np.float64)
         s = np.where(sub.status == 0, s, np.nan)
         stat[open_, j] = s
-        threshold = z_normal
-        if criterion.calibrate:  # the null simulated on these seeds' own patterns
-            ok = sub.status == 0
-            null = pattern_null_sample(criterion, points, rows[ok], sub.frame[ok],
-                                       float(radii[j]), kw, rng=j)
-            threshold = upper_quantile(null, alpha / nr) + z_power
+        if j == 0:
+            threshold = z_normal
+            if criterion.calibrate:  # the null simulated on the seeds' own patterns
+                ok = sub.status == 0
+                null = calibrated_null(criterion, points, rows[ok], sub.frame[ok], radii, kw)
+                threshold = upper_quantile(null, alpha / nr) + z_power
         # the jet must fit at the chosen radius (eq. 7): a rejected jet stops the climb
         # (a wider neighbourhood only adds model bias: a crease, the far side of a
         # feature); a seed whose jet is rejected before anything is detected keeps r_0
@@ -222,6 +221,8 @@ def spread_rungs(points, seeds, chosen, detected, reach, nr):
 #: Simulated null values of a calibrated criterion per rung: the open seeds' own
 #: neighbourhood patterns, each replicated with fresh noise until this many.
 NULL_SAMPLES = 2000
+#: Rungs whose radii the null is simulated at (pooled; :func:`calibrated_null`).
+NULL_RUNGS = 2
 #: Largest number of neighbour entries simulated at once (memory).
 NULL_BLOCK = 2_000_000
 
@@ -301,6 +302,24 @@ def pattern_null_sample(criterion, points, rows, frames, radius, kw, *, samples=
         out.append(stat[fit.status == 0])
         i = j
     return np.sort(np.concatenate(out))
+
+
+def calibrated_null(criterion, points, rows, frames, radii, kw, *, samples=NULL_SAMPLES):
+    """The null sample the automatic scale uses at every rung: :func:`pattern_null_sample`
+    of the seeds `rows` (their frames at the smallest rung), half at each of the
+    ``NULL_RUNGS`` smallest radii, pooled.
+
+    The law of a ratio statistic on a plane depends on the neighbourhood's pattern (the
+    shape of the sampling, which is the same at every rung) far more than on its count:
+    the exceedances of this null's quantiles hold their rates at rungs 0 to 3 of flat and
+    tilted planes (``benchmarks/ridge_family.py``, key ``scale_null``); simulating the
+    smallest rungs keeps the simulation's cost that of a few hundred thousand neighbour
+    pairs.
+    """
+    per = int(math.ceil(samples / NULL_RUNGS))
+    return np.sort(np.concatenate([
+        pattern_null_sample(criterion, points, rows, frames, float(radii[j]), kw,
+                            samples=per, rng=j) for j in range(min(NULL_RUNGS, len(radii)))]))
 
 
 def upper_quantile(sample, prob):
