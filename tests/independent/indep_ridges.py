@@ -228,3 +228,54 @@ def ridge_precision(scene, ridge, *, tol_factor=2.5):
     if not sel.any():
         return 1.0
     return float(np.mean(scene.line_distance[sel] <= tol_factor * scene.spacing))
+
+
+def plane_exceedances(tilt_deg, rung, probs, samples=1500, seed=1):
+    """Seeds of a plane tilted by `tilt_deg` (noise along z, a jittered unit grid in plan:
+    stretched along the slope) whose k'' statistic at rung `rung` exceeds the upper
+    `probs` quantiles of the null the automatic scale simulates on those seeds' own
+    patterns (other noise draws, at the two smallest rungs: ``calibrated_null``), and the
+    number of fitted seeds. The seeds' neighbourhoods are disjoint (independent counts),
+    and the null holds four draws per seed so that the quantiles' own sampling error is
+    small beside the counts'."""
+    import math
+
+    from scipy.spatial import cKDTree
+
+    from lidarstat.features import height_variance, jet_tests
+    from lidarstat.features._jet_fit import _fit_cells, _to_fit
+    from lidarstat.features._jet_scale import calibrated_null, radius_ladder, upper_quantile
+    from lidarstat.neighbors import CellIndex
+    from lidarstat.segment._ridges import RIDGE_SCALE, _ridge_statistic
+
+    rng = np.random.default_rng(seed)
+    m = int(math.ceil(math.sqrt(samples)))
+    # the rung's radius: the ladder of this pattern (a plane's density, up to the stretch)
+    stretch = 1.0 / math.cos(math.radians(tilt_deg))
+    r = 3.92 * math.sqrt(stretch) * math.sqrt(2.0) ** rung
+    step = 2.05 * r  # neighbourhoods (3-D balls of radius r) disjoint: independent seeds
+    side = int(m * step + 4 * r) + 2
+    g = np.arange(side, dtype=np.float64)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    x = x + rng.uniform(-0.5, 0.5, x.size)
+    y = y + rng.uniform(-0.5, 0.5, y.size)
+    sigma = 0.01
+    pts = np.c_[x, y, math.tan(math.radians(tilt_deg)) * x + rng.normal(0, sigma, x.size)]
+    ladder = radius_ladder(pts, sample=20000)
+    assert abs(ladder[rung] / r - 1) < 0.05, (ladder[rung], r)
+    r = float(ladder[rung])
+    grid = 2 * r + 1 + step * np.arange(m)
+    gx, gy = (a.ravel()[:samples] for a in np.meshgrid(grid, grid))
+    q = np.unique(cKDTree(pts[:, :2]).query(np.c_[gx, gy])[1])
+    mask = np.zeros(len(pts), bool)
+    mask[q] = True
+    kw = dict(degree=4, monge_degree=4, weight="tricube", sensor=None, min_neighbors=16,
+              standard_errors=True)
+    out = _fit_cells(CellIndex(pts, r), active=mask, block_size=131072, progress=None, **kw)
+    fit = _to_fit({k: v[q] for k, v in out.items()}, 4, 4, "tricube")
+    fields = jet_tests(fit, height_variance(fit.frame, sigma, noise="z"), 0.01)
+    ok = fit.status == 0
+    stat = _ridge_statistic(fit, fields)[ok]
+    null = calibrated_null(RIDGE_SCALE, pts, q[ok], fit.frame[ok], ladder, kw,
+                           samples=4 * int(ok.sum()))
+    return [int(np.sum(stat > upper_quantile(null, p))) for p in probs], int(ok.sum())

@@ -70,15 +70,37 @@ def _binomial_interval(p, n, level=0.999):
     return p - z * sd, p + z * sd
 
 
+#: Largest truncation bias of a neighbourhood's quadric, per degree of freedom and in
+#: units of the height noise variance, at which the quadric counts as the true model.
+NULL_BIAS = 0.03
+
+
 def _rates(kind, tilt, frame):
     """Rejection rates of the four tests at a fixed radius, on neighbourhoods far enough
-    apart to be independent, over a seed sweep of z-noise patches at `tilt`."""
+    apart to be independent, over a seed sweep of z-noise patches at `tilt`.
+
+    On curved surfaces the tests' null (the quadric holds in the fit's frame) is checked
+    on a noise-free twin of each patch (the same points without their noise): a
+    neighbourhood counts when the chi-square of the twin's residuals against
+    ``NULL_BIAS`` times the height variance is below its median, i.e. when the quadric's
+    own truncation error is far below the noise. Elsewhere a rejection is the test's
+    power, not its size.
+    """
     rej = {"chi2": [], "planarity": [], "H": [], "K": []}
     for seed in range(16):
-        s = make_surface(kind, 1000 * tilt + seed, tilt=tilt, half=40)
+        seed = 1000 * tilt + seed
+        s = make_surface(kind, seed, tilt=tilt, half=40)
         b = 3.5 * s.spacing
-        res = curvature(s.xyz, radius=b, sigma=s.sigma, frame=frame)
         q = lattice(s, 2.2 * b)
+        holds = np.ones(q.size, bool)
+        if kind != "plane":
+            twin = make_surface(kind, seed, tilt=tilt, half=40, sigma=1e-9 * s.sigma)
+            s = make_surface(kind, seed, tilt=tilt, half=40, sigma=s.sigma)
+            bias = curvature(twin.xyz, radius=b, sigma=np.sqrt(NULL_BIAS) * s.sigma,
+                             frame=frame)
+            holds = bias["chi2_p"][q] >= 0.5
+        res = curvature(s.xyz, radius=b, sigma=s.sigma, frame=frame)
+        q = q[holds]
         ok = res["chi2_pass"][q] == 1
         rej["chi2"].append(res["chi2_p"][q] < ALPHA)
         rej["planarity"].append(res["planar_p"][q][ok] < ALPHA)
@@ -98,17 +120,18 @@ def test_test_sizes_on_planes(frame, tilt):
         assert lo <= rej[name].mean() <= hi, (name, rej[name].mean(), rej[name].size)
 
 
-@pytest.mark.parametrize("frame,tilt", [
-    ("pca", 10), ("pca", 75), ("pca", 105), ("auto", 10), ("auto", 75),
-    pytest.param("auto", 105, marks=pytest.mark.xfail(
-        strict=True, reason="auto frame only: the chi-square rejects 8.0 % of 1296 (alpha "
-        "5 %) on overhanging cylinders, where the height axis is far from the normal and "
-        "the noise seen along it varies across the neighbourhood; pca holds 5.4 %; why auto "
-        "stays the paper's variant: docs/methods/curvature.md"))])
+@pytest.mark.parametrize("frame", ["pca", "auto"])
+@pytest.mark.parametrize("tilt", [10, 75, 105])
 def test_test_sizes_on_cylinders(frame, tilt):
     """Cylinders (K = 0 with one principal curvature far from 0), z noise: the chi-square
-    at alpha and the K test at alpha/2, on flat, steep and overhanging patches."""
+    at alpha and the K test at alpha/2, on flat, steep and overhanging patches, where the
+    quadric holds in the fit's frame (``_rates``). In the auto frame on the overhanging
+    patches it does not hold on about a quarter of the neighbourhoods: where z runs
+    nearly inside the tangent plane the height noise along the axis frame,
+    sigma |d.n| / |e.n|, is tiny and the quadric's truncation error in a frame oblique to
+    the surface exceeds it (docs/methods/curvature.md)."""
     rej = _rates("cylinder", tilt, frame)
+    assert rej["chi2"].size >= 600
     for name, nominal in (("chi2", ALPHA), ("K", ALPHA / 2)):
         lo, hi = _binomial_interval(nominal, rej[name].size)
         assert lo <= rej[name].mean() <= hi, (name, rej[name].mean(), rej[name].size)

@@ -19,13 +19,14 @@ from . import _quadric_kernels as _k
 from ._curvature_result import CurvatureResult
 from ._curvature_scale import scale_ladder, walk_ladder
 from ._hk import hk_surface_types
-from ._noise import estimate_sigma, estimate_sigma_index, fit_height_variance, resolve_noise
+from ._noise import (estimate_sigma, estimate_sigma_index, fit_factor_spread,
+                     fit_height_variance, resolve_noise)
 from ._quadric import FitStatus, _run_cells, check_fit_options
 
 logger = logging.getLogger(__name__)
 
 
-def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False):
+def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False, spread=None):
     """Turn raw kernel outputs of one block into curvature, tests and types.
 
     Parameters
@@ -40,6 +41,10 @@ def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False):
         Which family of tests (see docs/methods/curvature.md).
     minimal_detectable : bool
         Also return ``K_min`` and ``H_min`` (eq. 19).
+    spread : float or (M,) ndarray, optional
+        Inequality of the height variances across each neighbourhood
+        (:func:`fit_factor_spread`, default 1: equal): the chi-square's Satterthwaite
+        scale is multiplied by it and its degrees of freedom divided by it.
 
     Returns
     -------
@@ -58,7 +63,9 @@ def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False):
     K, H = col["K"], col["H"]
     fitted = out["status"] == _k.OK
     # v'Wv against its (Satterthwaite) chi-square; the kernel writes the statistic per point
-    chi2_p = chi2_test(col["CHI2"], np.where(col["CHI2DF"] > 0, col["CHI2DF"], np.nan),
+    rho = 1.0 if spread is None else np.asarray(spread, dtype=np.float64)
+    chi2_p = chi2_test(col["CHI2"] / rho,
+                       np.where(col["CHI2DF"] > 0, col["CHI2DF"] / rho, np.nan),
                        alpha=alpha).pvalue
     planar_p, K_p, H_p = col["PLANP"], col["KP"], col["HP"]
     half = alpha / 2
@@ -113,8 +120,10 @@ def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neigh
         sigma2 = fit_height_variance(out["beta"], out["frames"], sigma, noise=noise,
                                      radius=radius, points=index.sorted_points[s0:s1],
                                      sensor=sensor_local)
+        spread = fit_factor_spread(out["beta"], out["frames"], noise, radius=radius,
+                                   points=index.sorted_points[s0:s1], sensor=sensor_local)
         res = curvature_tests(out, sigma2=sigma2, alpha=alpha, test=test,
-                              minimal_detectable=minimal_detectable)
+                              minimal_detectable=minimal_detectable, spread=spread)
         res["z0"] = res["z0"] + index.sorted_points[s0:s1, 2] + index.origin[2]
         if fields is None:
             fields = {k: np.empty(n, dtype=v.dtype) for k, v in res.items()}
@@ -171,6 +180,10 @@ def curvature(points, *, radius=None, sigma=None, alpha=0.05, test="calibrated",
         Minimum neighbours (>= 7 so that the chi-square test has a degree of freedom).
     minimal_detectable : bool
         Also return ``K_min`` and ``H_min`` (eq. 19).
+    spread : float or (M,) ndarray, optional
+        Inequality of the height variances across each neighbourhood
+        (:func:`fit_factor_spread`, default 1: equal): the chi-square's Satterthwaite
+        scale is multiplied by it and its degrees of freedom divided by it.
     power : float
         Automatic scale: detection probability the chosen radius must give the curvature
         seen (eq. 19-21 per point), in [0.5, 1).

@@ -16,6 +16,8 @@ agree on them:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .._shared._choices import Noise
@@ -27,6 +29,7 @@ __all__ = [
     "Noise",
     "estimate_sigma",
     "fit_factor",
+    "fit_factor_spread",
     "fit_height_variance",
     "fit_normals",
     "height_variance",
@@ -149,6 +152,22 @@ def height_variance(frames, sigma, *, noise="z", points=None, sensor=None, norma
     return sigma * sigma * np.where(np.isfinite(f), f, 1.0)
 
 
+def _factor_terms(beta, frames, noise, *, points=None, sensor=None):
+    """Per fit, the factor at a neighbour at planar offset u as ``(a + g . u)^2``: returns
+    ``a`` and ``|g|^2`` (None for ``'normal'`` noise)."""
+    beta = np.asarray(beta, dtype=np.float64)
+    d = noise_directions(noise, beta.shape[0], points=points, sensor=sensor)
+    if d is None:
+        return None
+    g0 = beta[:, 1:3]
+    a3, a4, a5 = beta[:, 3], beta[:, 4], beta[:, 5]
+    dl = np.einsum("nij,nj->ni", frames, d)
+    dt, de = dl[:, :2], dl[:, 2]
+    gd0 = a3 * dt[:, 0] + a4 * dt[:, 1]
+    gd1 = a4 * dt[:, 0] + a5 * dt[:, 1]
+    return de - (g0 * dt).sum(axis=1), gd0 * gd0 + gd1 * gd1
+
+
 def fit_factor(beta, frames, noise, *, radius, points=None, sensor=None):
     """Mean height variance per unit sigma^2 over a fitted quadric's neighbourhood.
 
@@ -180,20 +199,72 @@ def fit_factor(beta, frames, noise, *, radius, points=None, sensor=None):
         At least :data:`FACTOR_FLOOR` (1 where the fit is undefined).
     """
     beta = np.asarray(beta, dtype=np.float64)
-    g0 = beta[:, 1:3]
-    a3, a4, a5 = beta[:, 3], beta[:, 4], beta[:, 5]
     m2 = TRICUBE_M2 * float(radius) ** 2
-    d = noise_directions(noise, beta.shape[0], points=points, sensor=sensor)
-    if d is None:
+    terms = _factor_terms(beta, frames, noise, points=points, sensor=sensor)
+    if terms is None:
+        g0 = beta[:, 1:3]
+        a3, a4, a5 = beta[:, 3], beta[:, 4], beta[:, 5]
         f = 1.0 + (g0 ** 2).sum(axis=1) + m2 * (a3 * a3 + 2 * a4 * a4 + a5 * a5)
     else:
-        dl = np.einsum("nij,nj->ni", frames, d)
-        dt, de = dl[:, :2], dl[:, 2]
-        gd0 = a3 * dt[:, 0] + a4 * dt[:, 1]
-        gd1 = a4 * dt[:, 0] + a5 * dt[:, 1]
-        f = (de - (g0 * dt).sum(axis=1)) ** 2 + m2 * (gd0 * gd0 + gd1 * gd1)
+        a, g2 = terms
+        f = a * a + m2 * g2
     f = np.where(np.isfinite(f), f, 1.0)
     return np.maximum(f, FACTOR_FLOOR)
+
+
+def _tricube_power_moment(power, k):
+    """``int (1-t^3)^power t^(k+1) dt / int (1-t^3)^power t dt`` over [0, 1]: the mean of
+    ``|u/b|^k`` over a uniformly sampled disc under the weight ``w^(power/3)``."""
+    def integral(j):
+        x = (j + 2) / 3.0
+        return math.gamma(x) * math.gamma(power + 1) / math.gamma(x + power + 1) / 3.0
+    return integral(k) / integral(0)
+
+
+#: Mean of u1^2 / b^2 and of u1^4 / b^4 over the disc under the squared tricube weight
+#: (2-D isotropy: ``E[u1^2] = E|u|^2 / 2``, ``E[u1^4] = 3 E|u|^4 / 8``).
+TRICUBE2_M2 = _tricube_power_moment(6, 2) / 2.0
+TRICUBE2_M4 = 3.0 * _tricube_power_moment(6, 4) / 8.0
+
+
+def fit_factor_spread(beta, frames, noise, *, radius, points=None, sensor=None):
+    """How unequal the height variance is across a fitted quadric's neighbourhood.
+
+    The residual sum ``Q = sum w_j v_j^2`` of a fit whose neighbours' height variances are
+    ``sigma^2 f_j`` (:func:`fit_factor`: ``f(u) = (a + g . u)^2`` for noise along d) has,
+    to first order in the fit's leverage, mean ``sigma^2 sum w f`` and variance
+    ``2 sigma^4 sum w^2 f^2``. The Satterthwaite chi-square of equal variances
+    (``sigma^2 f_bar``, ``f_bar`` the w-weighted mean) has the same mean but the variance
+    ``2 sigma^4 f_bar^2 sum w^2``; the ratio
+
+    ``rho = E_{w^2}[f^2] / E_w[f]^2 >= 1``
+
+    multiplies its scale c and divides its degrees of freedom. On a plane ``g = 0`` and
+    ``rho = 1``; it grows where the noise runs nearly inside the tangent plane and the
+    normal turns across the neighbourhood (z noise on steep curved faces), where
+    ``f`` vanishes at some neighbours and not at others. Closed form under isotropy
+    (odd moments vanish): ``E_{w^2}[f^2] = a^4 + 6 a^2 |g|^2 M2 b^2 + |g|^4 M4 b^4`` with
+    the squared-tricube moments ``M2``, ``M4`` (:data:`TRICUBE2_M2`,
+    :data:`TRICUBE2_M4`). For ``'normal'`` noise ``f >= 1`` barely varies: 1.
+
+    Returns
+    -------
+    (M,) ndarray
+        At least 1 (1 where the fit is undefined).
+    """
+    beta = np.asarray(beta, dtype=np.float64)
+    terms = _factor_terms(beta, frames, noise, points=points, sensor=sensor)
+    if terms is None:
+        return np.ones(beta.shape[0])
+    a, g2 = terms
+    b2 = float(radius) ** 2
+    a2 = a * a
+    mean = a2 + TRICUBE_M2 * b2 * g2
+    fourth = a2 * a2 + 6.0 * a2 * g2 * TRICUBE2_M2 * b2 + g2 * g2 * TRICUBE2_M4 * b2 * b2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = fourth / (mean * mean)
+    rho = np.where(np.isfinite(rho), rho, 1.0)
+    return np.maximum(rho, 1.0)
 
 
 def fit_height_variance(beta, frames, sigma, *, noise, radius, points=None, sensor=None):
