@@ -118,7 +118,7 @@ def _planes(pts, nb, rows):
 
 def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=None,
                    min_points=10, min_height=2.0, return_share=0.3, cell=1.0,
-                   k=12) -> BuildingTests:
+                   k=12, ground_xyz=None) -> BuildingTests:
     """Building points among the candidates (module docstring; lengths in metres).
 
     Parameters
@@ -143,6 +143,11 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
         Side of the roof cells.
     k : int
         Neighbours of each local plane.
+    ground_xyz : callable, optional
+        ``ground_xyz() -> (M, 3) ndarray``: the coordinates (metres) of the ground points
+        when they are not rows of `xyz` (then `ground` is not used). A caller that passes
+        only the candidates saves the fields and copies of every other point; the array
+        is made and released inside the noise estimate.
     """
     n = len(xyz)
     fields = {"building_plane_p": np.full(n, np.nan), "building_residual": np.full(n, np.nan),
@@ -153,7 +158,8 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
     estimated = sigma is None
     idx = np.flatnonzero(candidate)
     if estimated:
-        sigma = ground_sigma(xyz[ground], k, overwrite=True)
+        sigma = ground_sigma(xyz[ground] if ground_xyz is None else ground_xyz(), k,
+                             overwrite=True)
     params = {"building_alpha": alpha, "k": k, "return_share": return_share,
               "sigma_estimated": estimated, "n_patches": 0, "n_roof_patches": 0}
     building = np.zeros(n, bool)

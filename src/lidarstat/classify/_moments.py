@@ -304,13 +304,16 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     has_intensity = inten is not None
     del inten
     # 6. buildings (tested roof planes), objects and classes
-    blds = building_step(xy, z, height, ground, multi, (ux, uz),
-                         min_object_height=min_object_height / uz,
-                         min_height=vegetation_heights[1], options=p)
-    cls = asprs_classes(xy, height, ground, road, multi, buildings=blds.building,
+    blds, brows = building_step(xy, z, height, ground, multi, (ux, uz),
+                                min_object_height=min_object_height / uz,
+                                min_height=vegetation_heights[1], options=p)
+    building = np.zeros(len(z), bool)
+    building[brows] = blds.building
+    cls = asprs_classes(xy, height, ground, road, multi, buildings=building,
                         min_object_height=min_object_height / uz,
                         vegetation_heights=tuple(v / uz for v in vegetation_heights),
                         surface_cell=surface_cell / ux, height_spread=4 * surface_cell / uz)
+    del xy, z, multi, road, building  # the window-order inputs: the fields are made next
     params = dict(method=method.value, window=window, min_window=min_window, alpha=alpha,
                   min_points=min_points, smoothing=smoothing, cycle=cycle,
                   bandwidth=bandwidth, surface_cell=surface_cell,
@@ -337,11 +340,12 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     if low.size and surf is not None:  # heights of the low noise under the final surface
         q = pts_noise - origin
         height[low] = heights(q[:, 2], surf(q[:, :2]))
-    building_fields = {}
-    for name in list(blds.fields):  # one field at a time: the window-order copy goes
+    building_fields = {}  # per candidate: the other points (low noise too) get NaN or 0
+    brows = dest[brows]
+    for name in list(blds.fields):
         a = blds.fields.pop(name)
-        building_fields[name] = _expand(dest, low, n, a,
-                                        fill=(np.nan if a.dtype.kind == "f" else 0,))[0]
+        building_fields[name] = np.full(n, np.nan if a.dtype.kind == "f" else 0, a.dtype)
+        building_fields[name][brows] = a
     return MomentsClassification(classification=cls, cluster_id=cluster_id, height=height,
                                  ground=ground, steps=steps, windows=windows, params=params,
                                  cut=cut, tolerance=tolerance, building_fields=building_fields)
