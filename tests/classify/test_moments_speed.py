@@ -8,11 +8,14 @@ from classify.test_moments_classify import _scene
 from lidarstat.classify import _cycle, _moments_ground, _moments_windows, _surface, moments
 
 
-def _scipy_surface(xy_ground, z_ground, *, cell, which="median", rank=None):
+def _scipy_surface(xy_ground, z_ground, *, cell, which="median", rank=None, where=None):
     """The scipy surface: LinearNDInterpolator, the nearest vertices' plane outside."""
     from scipy.interpolate import LinearNDInterpolator
     from scipy.spatial import Delaunay, cKDTree
 
+    if where is not None:  # the ground as copies: the subset the caller names
+        xy_ground, z_ground = xy_ground[where], z_ground[where]
+        rank = None if rank is None else rank[where]
     sel = _surface._cell_pick(xy_ground, z_ground, cell, which, rank)
     P, V = xy_ground[sel], z_ground[sel]
     lin, tree = LinearNDInterpolator(Delaunay(P), V), cKDTree(P)
