@@ -294,3 +294,20 @@ def test_root_windows_equal_tile_grid(seed):
     for a, b in zip(got, ref):
         assert (a.key, a.bounds) == (b.key, b.bounds)
         assert np.array_equal(a.points, b.points) and np.array_equal(a.core, b.core)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_ground_surface_on_rows_equals_the_copied_ground(seed):
+    """`where` gives the surface of the ground's copies (ties in z included)."""
+    g = np.random.default_rng(seed)
+    xy = g.uniform(0, 40, (3000, 2))
+    z = np.round(0.1 * xy[:, 0] + g.normal(0, 0.05, 3000), 2)  # many tied heights
+    rank = g.permutation(3000)
+    rows = np.flatnonzero(g.random(3000) < 0.7)
+    for which in ("median", "min"):
+        for r in (rank, None):
+            a = _surface.ground_surface(xy, z, cell=4.0, which=which, rank=r, where=rows)
+            b = _surface.ground_surface(xy[rows], z[rows], cell=4.0, which=which,
+                                        rank=None if r is None else r[rows])
+            q = g.uniform(-5, 45, (500, 2))
+            assert np.array_equal(a(q), b(q))
