@@ -193,7 +193,7 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
     # foliage: a neighbourhood whose share of non-last returns is significantly above
     # `return_share` never joins a roof
     deg = np.diff(nb.indptr)
-    n_nb_multi = np.add.reduceat(mi[nb.indices].astype(float), nb.indptr[:-1])
+    n_nb_multi = np.add.reduceat(mi[nb.indices].astype(np.int32), nb.indptr[:-1])
     foliage = binomial_test(n_nb_multi, deg, return_share, alpha=alpha).reject
     in_cell = (high & ~foliage & ~roof
                & (pts[:, 2] <= top + np.where(mi, _TOL_MULTI, _TOL_SINGLE)))
