@@ -35,9 +35,11 @@ runs on the *candidates* (points that are neither ground nor closer than
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 
+from .._shared._memory import release_freed
 from ..neighbors import knn_neighbors
 from ..stats import binomial_test, chi2_quantile, chi2_test, z_critical
 from . import _buildings_kernels as _k
@@ -168,6 +170,8 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
         return BuildingTests(building, fields, params)
     pts = np.ascontiguousarray(xyz[idx] - xyz[idx].mean(axis=0))
     nb = knn_neighbors(pts, k)
+    nb = SimpleNamespace(indptr=nb.indptr, indices=nb.indices)  # distances: not used
+    release_freed()  # the search's work arrays, before the tests allocate theirs
     centroid, normal, rss = _planes(pts, nb, idx.size)
     if sigma is None:  # no ground: the candidates' own planes, the same median rule
         sigma = float(np.sqrt(np.median(rss) / chi2_quantile(0.5, k - 3)))
