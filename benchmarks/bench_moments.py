@@ -165,7 +165,9 @@ class _Steps:
 #: function is wrapped where its caller looks it up.
 STEPS = (
     ("read", "lidarstat.io", "read"),
-    ("driver (order, copies, TIN evaluation)", "lidarstat.classify", "moments"),
+    ("driver (checks, copies, reorderings)", "lidarstat.classify", "moments"),
+    ("canonical order", "lidarstat.classify._moments", "canonical_order"),
+    ("TIN evaluation", "lidarstat.classify._surface", "_tin_eval"),
     ("low noise", "lidarstat.classify._moments", "low_outliers"),
     ("windows", "lidarstat.classify._moments", "root_windows"),
     ("ground: opening", "lidarstat.classify._moments_ground", "opening_surface"),
