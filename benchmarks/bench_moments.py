@@ -13,7 +13,9 @@ The row of each size is the median of the repeats. The profile (``--profile``) r
 same command once more in a process that times every named step of ``moments`` (start
 and imports, read, low noise, windows, each part of the ground, terrain, roads,
 buildings, classes, fields, write) and samples its resident memory every 10 ms, giving
-each step's wall time and the peak RSS reached during it.
+each step's wall time and the peak RSS reached during it; ``--profile --profile`` adds a
+second profile in which the freed memory is not handed back to the system between the
+steps (``release_freed``), to show what that saves.
 
 Usage::
 
@@ -163,7 +165,9 @@ class _Steps:
 #: function is wrapped where its caller looks it up.
 STEPS = (
     ("read", "lidarstat.io", "read"),
-    ("driver (order, copies, TIN evaluation)", "lidarstat.classify", "moments"),
+    ("driver (checks, copies, reorderings)", "lidarstat.classify", "moments"),
+    ("canonical order", "lidarstat.classify._moments", "canonical_order"),
+    ("TIN evaluation", "lidarstat.classify._surface", "_tin_eval"),
     ("low noise", "lidarstat.classify._moments", "low_outliers"),
     ("windows", "lidarstat.classify._moments", "root_windows"),
     ("ground: opening", "lidarstat.classify._moments_ground", "opening_surface"),
@@ -190,10 +194,17 @@ def _since_process_start():
         return float(fh.read().split()[0]) - start
 
 
-def child_profile(inp, out):
-    """``lidarstat moments IN OUT --no-report -q`` with every named step timed."""
+def child_profile(inp, out, trim=True):
+    """``lidarstat moments IN OUT --no-report -q`` with every named step timed.
+
+    `trim` False: the freed memory is not handed back between the steps
+    (``lidarstat._shared._memory.release_freed`` does nothing), to show what that saves."""
     import importlib
 
+    if not trim:
+        import lidarstat._shared._memory as mem
+
+        mem._TRIM = None
     steps = _Steps()
     steps.start()
     import lidarstat.classify
@@ -275,30 +286,33 @@ def run_size(n, folder, repeats, env, skip_peers, profile):
                    csf_cpu_s=round(med["csf"][2], 2),
                    csf_peak_rss_mib=round(med["csf"][1]),
                    csf_total_error=round(errors(out_c, truth), 6),
-                   ratio=round(med["lidarstat"][0] / med["csf"][0], 2))
-    if profile:
-        wall, peak, stdout, _ = timed([sys.executable, __file__, "--child", "profile", inp,
-                                    out_l], env)
+                   ratio=round(med["lidarstat"][0] / med["csf"][0], 2),
+                   cpu_ratio=round(med["lidarstat"][2] / med["csf"][2], 2))
+    for mode in ("profile", "profile_no_trim")[:profile]:
+        wall, peak, stdout, _ = timed([sys.executable, __file__, "--child", mode, inp,
+                                       out_l], env)
         prof = json.loads(stdout.strip().splitlines()[-1])
         prof["seconds"]["exit"] = round(wall - prof.pop("ended_s"), 3)
         prof.update(wall_s=wall, gnu_time_peak_rss_mib=round(peak))
-        row["profile"] = prof
+        row[mode] = prof
     return row
 
 
 def print_rows(rows):
-    print("\n| command | points | lidarstat | peer, same run | ratio | peak MiB (lidarstat / peer) |")
-    print("|---|---:|---:|---|---:|---|")
+    print("\n| command | points | lidarstat wall / CPU | CSF 1 m wall / CPU, same run | "
+          "CPU ratio | wall ratio | peak MiB (lidarstat / CSF) |")
+    print("|---|---:|---:|---:|---:|---:|---|")
     for r in rows:
-        peer = f"CSF 1 m {r['csf_s']:.1f} s" if "csf_s" in r else "-"
-        print(f"| `moments` | {r['points']:,} | {r['lidarstat_s']:.1f} s | {peer} | "
-              f"{r.get('ratio', float('nan')):.2f} | {r['lidarstat_peak_rss_mib']} / "
-              f"{r.get('csf_peak_rss_mib', '-')} |")
-    for r in rows:
-        p = r.get("profile")
+        peer = f"{r['csf_s']:.1f} s / {r['csf_cpu_s']:.1f} s" if "csf_s" in r else "-"
+        print(f"| `moments` | {r['points']:,} | {r['lidarstat_s']:.1f} s / "
+              f"{r['lidarstat_cpu_s']:.1f} s | {peer} | "
+              f"{r.get('cpu_ratio', float('nan')):.2f} | {r.get('ratio', float('nan')):.2f} | "
+              f"{r['lidarstat_peak_rss_mib']} / {r.get('csf_peak_rss_mib', '-')} |")
+    for r, mode in ((r, m) for r in rows for m in ("profile", "profile_no_trim")):
+        p = r.get(mode)
         if not p:
             continue
-        print(f"\nprofile, {r['points']:,} points (peak {p['vmhwm_mib']} MiB):")
+        print(f"\n{mode}, {r['points']:,} points (peak {p['vmhwm_mib']} MiB):")
         for k, v in p["seconds"].items():
             print(f"  {k:34s} {v:7.2f} s  {p['cpu_seconds'].get(k, 0):7.2f} s CPU  "
                   f"{p['peak_rss_mib'].get(k, 0):6d} MiB")
@@ -309,12 +323,15 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="200,000 points, one repeat")
     ap.add_argument("--points", type=int, nargs="+", default=[10_000_000])
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--profile", action="store_true", help="also the per-step profile")
+    ap.add_argument("--profile", action="count", default=0,
+                    help="also the per-step profile (twice: also one without handing freed "
+                         "memory back between the steps)")
     ap.add_argument("--skip-peers", action="store_true", help="no CSF")
     ap.add_argument("--work", default=None, help="folder of the clouds (default: a temp dir)")
     ap.add_argument("--out", default=None, help="JSON of the results (rows stored under "
                     "--label; other labels already in the file are kept)")
     ap.add_argument("--label", default="current", help="name of this run in --out")
+    ap.add_argument("--note", default=None, help="what code the run measured (stored in --out)")
     ap.add_argument("--child", nargs=3, metavar=("MODE", "IN", "OUT"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
@@ -322,7 +339,7 @@ def main(argv=None):
         if mode == "csf":
             child_csf(inp, out)
         else:
-            print(json.dumps(child_profile(inp, out)))
+            print(json.dumps(child_profile(inp, out, trim=mode != "profile_no_trim")))
         return
     sizes, repeats = ([200_000], 1) if args.quick else (args.points, args.repeats)
     folder = Path(args.work or tempfile.mkdtemp(prefix="bench_moments_"))
@@ -334,18 +351,21 @@ def main(argv=None):
     rows = []
     for n in sizes:
         rows.append(run_size(n, folder, repeats, env, args.skip_peers, args.profile))
-        print(json.dumps({k: v for k, v in rows[-1].items() if k != "profile"}), flush=True)
+        print(json.dumps({k: v for k, v in rows[-1].items() if not k.startswith("profile")}),
+              flush=True)
     print_rows(rows)
     if args.out:
         out = Path(args.out)
         old = json.loads(out.read_text()) if out.exists() else {}
         runs = old.get("runs") if isinstance(old.get("runs"), dict) else {}
         runs[args.label] = {"repeats": repeats, "load_average": os.getloadavg(),
-                            "rows": rows}
+                            "rows": rows, **({"code": args.note} if args.note else {})}
         out.write_text(json.dumps({
             "what": "whole process (start, read LAS, classify, write LAS), median of "
                     "alternating repeats; peak RSS by GNU time; profile: one more run "
-                    "with every named step timed (wall, CPU of all threads, peak RSS)",
+                    "with every named step timed (wall, CPU of all threads, peak RSS); "
+                    "profile_no_trim: the same without handing freed memory back between "
+                    "the steps",
             "command": "lidarstat moments IN OUT --no-report -q",
             "peer": "CSF (cloth_simulation_filter) cloth 1 m, slope smoothing, laspy read "
                     "and write",

@@ -8,11 +8,14 @@ from classify.test_moments_classify import _scene
 from lidarstat.classify import _cycle, _moments_ground, _moments_windows, _surface, moments
 
 
-def _scipy_surface(xy_ground, z_ground, *, cell, which="median", rank=None):
+def _scipy_surface(xy_ground, z_ground, *, cell, which="median", rank=None, where=None):
     """The scipy surface: LinearNDInterpolator, the nearest vertices' plane outside."""
     from scipy.interpolate import LinearNDInterpolator
     from scipy.spatial import Delaunay, cKDTree
 
+    if where is not None:  # the ground as copies: the subset the caller names
+        xy_ground, z_ground = xy_ground[where], z_ground[where]
+        rank = None if rank is None else rank[where]
     sel = _surface._cell_pick(xy_ground, z_ground, cell, which, rank)
     P, V = xy_ground[sel], z_ground[sel]
     lin, tree = LinearNDInterpolator(Delaunay(P), V), cKDTree(P)
@@ -291,3 +294,20 @@ def test_root_windows_equal_tile_grid(seed):
     for a, b in zip(got, ref):
         assert (a.key, a.bounds) == (b.key, b.bounds)
         assert np.array_equal(a.points, b.points) and np.array_equal(a.core, b.core)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_ground_surface_on_rows_equals_the_copied_ground(seed):
+    """`where` gives the surface of the ground's copies (ties in z included)."""
+    g = np.random.default_rng(seed)
+    xy = g.uniform(0, 40, (3000, 2))
+    z = np.round(0.1 * xy[:, 0] + g.normal(0, 0.05, 3000), 2)  # many tied heights
+    rank = g.permutation(3000)
+    rows = np.flatnonzero(g.random(3000) < 0.7)
+    for which in ("median", "min"):
+        for r in (rank, None):
+            a = _surface.ground_surface(xy, z, cell=4.0, which=which, rank=r, where=rows)
+            b = _surface.ground_surface(xy[rows], z[rows], cell=4.0, which=which,
+                                        rank=None if r is None else r[rows])
+            q = g.uniform(-5, 45, (500, 2))
+            assert np.array_equal(a(q), b(q))

@@ -35,9 +35,11 @@ runs on the *candidates* (points that are neither ground nor closer than
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 
+from .._shared._memory import release_freed
 from ..neighbors import knn_neighbors
 from ..stats import binomial_test, chi2_quantile, chi2_test, z_critical
 from . import _buildings_kernels as _k
@@ -118,7 +120,7 @@ def _planes(pts, nb, rows):
 
 def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=None,
                    min_points=10, min_height=2.0, return_share=0.3, cell=1.0,
-                   k=12) -> BuildingTests:
+                   k=12, ground_xyz=None) -> BuildingTests:
     """Building points among the candidates (module docstring; lengths in metres).
 
     Parameters
@@ -143,6 +145,11 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
         Side of the roof cells.
     k : int
         Neighbours of each local plane.
+    ground_xyz : callable, optional
+        ``ground_xyz() -> (M, 3) ndarray``: the coordinates (metres) of the ground points
+        when they are not rows of `xyz` (then `ground` is not used). A caller that passes
+        only the candidates saves the fields and copies of every other point; the array
+        is made and released inside the noise estimate.
     """
     n = len(xyz)
     fields = {"building_plane_p": np.full(n, np.nan), "building_residual": np.full(n, np.nan),
@@ -153,7 +160,8 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
     estimated = sigma is None
     idx = np.flatnonzero(candidate)
     if estimated:
-        sigma = ground_sigma(xyz[ground], k, overwrite=True)
+        sigma = ground_sigma(xyz[ground] if ground_xyz is None else ground_xyz(), k,
+                             overwrite=True)
     params = {"building_alpha": alpha, "k": k, "return_share": return_share,
               "sigma_estimated": estimated, "n_patches": 0, "n_roof_patches": 0}
     building = np.zeros(n, bool)
@@ -162,6 +170,8 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
         return BuildingTests(building, fields, params)
     pts = np.ascontiguousarray(xyz[idx] - xyz[idx].mean(axis=0))
     nb = knn_neighbors(pts, k)
+    nb = SimpleNamespace(indptr=nb.indptr, indices=nb.indices)  # distances: not used
+    release_freed()  # the search's work arrays, before the tests allocate theirs
     centroid, normal, rss = _planes(pts, nb, idx.size)
     if sigma is None:  # no ground: the candidates' own planes, the same median rule
         sigma = float(np.sqrt(np.median(rss) / chi2_quantile(0.5, k - 3)))
@@ -187,7 +197,7 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
     # foliage: a neighbourhood whose share of non-last returns is significantly above
     # `return_share` never joins a roof
     deg = np.diff(nb.indptr)
-    n_nb_multi = np.add.reduceat(mi[nb.indices].astype(float), nb.indptr[:-1])
+    n_nb_multi = np.add.reduceat(mi[nb.indices].astype(np.int32), nb.indptr[:-1])
     foliage = binomial_test(n_nb_multi, deg, return_share, alpha=alpha).reject
     in_cell = (high & ~foliage & ~roof
                & (pts[:, 2] <= top + np.where(mi, _TOL_MULTI, _TOL_SINGLE)))

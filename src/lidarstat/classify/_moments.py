@@ -28,6 +28,7 @@ import numpy as np
 
 from .._shared._columns import column_min
 from .._shared._deprecate import renamed_parameters
+from .._shared._memory import release_freed
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatDeprecationWarning, LidarstatWarning
 from ._cycle import ElevationRule
@@ -252,6 +253,7 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     pts_noise = pts[noise]  # for their heights under the final surface
     pts, inten, multi, has_returns = _without_low_noise(noise, pts, inten, nret, rnum, source)
     del nret, rnum
+    release_freed()  # between steps: what a step freed goes back to the system
 
     # 2. analysis windows; the points in root-window order, local coordinates. Ties are
     # broken by the index in the sorted order above, not by the caller's order.
@@ -269,6 +271,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     # fields go back to the caller's order through these alone
     kept = np.flatnonzero(~noise) if noise.any() else None
     dest = canon[perm] if kept is None else canon[kept[perm]]
+    if n < 2**31:  # the positions are only scattered through: half the memory
+        dest = dest.astype(np.int32)
     low = canon[np.flatnonzero(noise)]
     del canon, kept
     xy = np.empty((perm.size, 2))  # column by column: no (N, 2) temporaries
@@ -277,6 +281,7 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     z = pts[:, 2][perm]
     z -= origin[2]
     del pts  # the caller's array (or its copy without the low noise): not needed again
+    release_freed()
     inten = None if inten is None else inten[perm]
     multi = multi[perm]
 
@@ -292,9 +297,11 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                                                    surface_cell=surface_cell / ux,
                                                    step=0.3 / uz)
     del perm  # the ranks of the ground steps' ties
+    release_freed()
     tolerance = np.full(len(z), np.inf)
     if terrain and method is MomentsMethod.MOMENTS:
         ground, height, surf, tolerance = terrain_step(xy, z, ground, ux=ux, uz=uz)
+        release_freed()
     # 5. roads
     road, road_step = road_points(xy, inten, ground, p, road_rule=road_rule,
                                   road_cell_points=road_cell_points,
@@ -304,14 +311,19 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         steps.append(road_step)
     has_intensity = inten is not None
     del inten
+    release_freed()
     # 6. buildings (tested roof planes), objects and classes
-    blds = building_step(xy, z, height, ground, multi, (ux, uz),
-                         min_object_height=min_object_height / uz,
-                         min_height=vegetation_heights[1], options=p)
-    cls = asprs_classes(xy, height, ground, road, multi, buildings=blds.building,
+    blds, brows = building_step(xy, z, height, ground, multi, (ux, uz),
+                                min_object_height=min_object_height / uz,
+                                min_height=vegetation_heights[1], options=p)
+    release_freed()
+    building = np.zeros(len(z), bool)
+    building[brows] = blds.building
+    cls = asprs_classes(xy, height, ground, road, multi, buildings=building,
                         min_object_height=min_object_height / uz,
                         vegetation_heights=tuple(v / uz for v in vegetation_heights),
                         surface_cell=surface_cell / ux, height_spread=4 * surface_cell / uz)
+    del xy, z, multi, road, building  # the window-order inputs: the fields are made next
     params = dict(method=method.value, window=window, min_window=min_window, alpha=alpha,
                   min_points=min_points, smoothing=smoothing, cycle=cycle,
                   bandwidth=bandwidth, surface_cell=surface_cell,
@@ -338,11 +350,12 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     if low.size and surf is not None:  # heights of the low noise under the final surface
         q = pts_noise - origin
         height[low] = heights(q[:, 2], surf(q[:, :2]))
-    building_fields = {}
-    for name in list(blds.fields):  # one field at a time: the window-order copy goes
+    building_fields = {}  # per candidate: the other points (low noise too) get NaN or 0
+    brows = dest[brows]
+    for name in list(blds.fields):
         a = blds.fields.pop(name)
-        building_fields[name] = _expand(dest, low, n, a,
-                                        fill=(np.nan if a.dtype.kind == "f" else 0,))[0]
+        building_fields[name] = np.full(n, np.nan if a.dtype.kind == "f" else 0, a.dtype)
+        building_fields[name][brows] = a
     return MomentsClassification(classification=cls, cluster_id=cluster_id, height=height,
                                  ground=ground, steps=steps, windows=windows, params=params,
                                  cut=cut, tolerance=tolerance, building_fields=building_fields)
@@ -398,10 +411,16 @@ def _attribute(a, name, n, source):
 
 
 def _usable_intensity(inten, source):
-    """Intensity as float64, None when absent or constant (with a warning)."""
+    """Intensity, None when absent or constant (with a warning).
+
+    Integers of up to 32 bits (LAS intensity is 16-bit) keep their type: every step
+    that reads them converts its own slice to float64 exactly, so the cloud-sized copy
+    is a quarter of a float64 one. Other values become float64.
+    """
     if inten is not None:
-        inten = inten.astype(np.float64)
-        if not np.isfinite(inten).all():
+        if inten.dtype.kind not in "ui" or inten.dtype.itemsize > 4:
+            inten = inten.astype(np.float64)
+        if inten.dtype.kind == "f" and not np.isfinite(inten).all():
             raise InvalidParameterError(f"{source or 'points'}: `intensity` holds NaN values")
         if np.ptp(inten) == 0:
             inten = None

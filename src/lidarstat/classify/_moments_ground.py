@@ -75,15 +75,16 @@ def _check_raster(shape, cell):
             "(--units, --scale)")
 
 
-def heights(z, surface):
+def heights(z, surface, overwrite=False):
     """Heights above a surface, rounded to 1e-6 of the coordinate unit.
 
     A cut often falls inside a mass of tied heights: the TIN vertices themselves (height
     exactly 0 in exact arithmetic) and points on flat ground. Without rounding, which of
     them fall below the cut would depend on the last bits of the interpolation (1e-15),
-    i.e. on how the TIN is evaluated, not on the data.
+    i.e. on how the TIN is evaluated, not on the data. With `overwrite` the heights are
+    written into `surface` (a float64 array made for this call: no second N-array).
     """
-    h = np.subtract(z, surface)
+    h = np.subtract(z, surface, out=surface if overwrite else None)
     return np.round(h, 6, out=h)
 
 
@@ -111,7 +112,8 @@ def ground_cut(xy, z, rank, roots, p: MomentsOptions, inten, *, opening_window, 
     fields, steps, windows
         The final pass's fields (``cluster_id``), analyses and windows.
     """
-    height = heights(z, opening_surface(xy, z, window=opening_window, cell=opening_cell))
+    height = heights(z, opening_surface(xy, z, window=opening_window, cell=opening_cell),
+                     overwrite=True)
     xyh = np.empty((z.size, 3))
     xyh[:, :2] = xy
     surf = None
@@ -126,9 +128,10 @@ def ground_cut(xy, z, rank, roots, p: MomentsOptions, inten, *, opening_window, 
             ground[:] = True
         if not last:
             fields = None  # this pass's window fields: the cut above holds what is needed
-            surf = ground_surface(xy[ground], z[ground], cell=surface_cell, rank=rank[ground])
+            surf = ground_surface(xy, z, cell=surface_cell, rank=rank,
+                                  where=np.flatnonzero(ground))
             height = None  # the heights of this pass go before the next are made
-            height = heights(z, surf(xy))
+            height = heights(z, surf(xy), overwrite=True)
     return ground, height, cut, surf, fields, steps, windows
 
 
@@ -139,6 +142,6 @@ def drop_raised_patches(xy, z, rank, ground, height, surf, *, surface_cell, step
     raised = ground & raised_patches(xy, z, step=step, rank=rank)
     if raised.any() and (ground & ~raised).sum() >= 3:
         ground = ground & ~raised
-        surf = ground_surface(xy[ground], z[ground], cell=surface_cell, rank=rank[ground])
-        height = heights(z, surf(xy))
+        surf = ground_surface(xy, z, cell=surface_cell, rank=rank, where=np.flatnonzero(ground))
+        height = heights(z, surf(xy), overwrite=True)
     return ground, height, surf

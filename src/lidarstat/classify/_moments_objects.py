@@ -24,17 +24,27 @@ def building_step(xy, z, height, ground, multi, units, *, min_object_height, min
     (horizontal, vertical) metres per unit, `min_height` in metres; `options` is the
     :class:`~._moments_options.MomentsOptions` (``building_alpha``, ``sigma`` in metres,
     ``min_points``).
+
+    Returns ``(tests, rows)``: the test of the candidates alone (objects at least
+    `min_object_height` high; its mask and fields are per candidate) and their rows. The
+    ground's coordinates are copied only inside the noise estimate.
     """
     ux, uz = units
-    obj = ~ground & (height >= min_object_height)
-    xyz = np.empty((z.size, 3))  # metres, filled column by column: no (N, 2) temporaries
-    for j in range(2):
-        np.multiply(xy[:, j], ux, out=xyz[:, j])
-    np.multiply(z, uz, out=xyz[:, 2])
-    return building_tests(xyz, obj, ground, multi, height if uz == 1 else height * uz,
-                          alpha=options.building_alpha,
-                          sigma=options.sigma, min_points=options.min_points,
-                          min_height=min_height)
+    rows = np.flatnonzero(~ground & (height >= min_object_height))
+
+    def metres(at):  # (len(at), 3) in metres, column by column: no (N, 2) temporaries
+        out = np.empty((at.size, 3))
+        for j in range(2):
+            np.multiply(xy[at, j], ux, out=out[:, j])
+        np.multiply(z[at], uz, out=out[:, 2])
+        return out
+
+    h = height[rows] if uz == 1 else height[rows] * uz
+    tests = building_tests(metres(rows), np.ones(rows.size, bool), None, multi[rows], h,
+                           alpha=options.building_alpha, sigma=options.sigma,
+                           min_points=options.min_points, min_height=min_height,
+                           ground_xyz=lambda: metres(np.flatnonzero(ground)))
+    return tests, rows
 
 
 def vegetation_like(xy, height, obj, multi, cell, spread):

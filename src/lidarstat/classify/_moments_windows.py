@@ -16,6 +16,7 @@ import numpy as np
 
 from .._shared._columns import column_max, column_min
 from .._shared._jit import njit
+from .._shared._memory import release_freed
 from .._shared._tiles import Tile, TileGrid, map_tiles
 from ._moments_analysis import paper_clusters, progressive_cut
 from ._moments_options import MomentsOptions
@@ -109,6 +110,8 @@ def _classify_window(xyh, attrs, p, record, final):
         return _WindowOut({"ground": ground, "cut": cut}, gsteps, infos)
     h = xyh[:, 2]
     inten = attrs.get("intensity")
+    if inten is not None:  # the driver may hold integer intensity: float64, exactly
+        inten = inten.astype(np.float64, copy=False)
     n = h.size
     steps = []
     if n < 2 * p.min_points:
@@ -135,6 +138,7 @@ def window_pass(xyh, roots, p: MomentsOptions, inten, scheduler, workers, *, fin
     windows : list of dict
         Every window's box, size, cut and split decision (final pass only).
     """
+    release_freed()  # what the previous step left free, before the windows allocate
     index = {t.key: i for i, t in enumerate(roots)}
     outs = [None] * len(roots)
 
@@ -150,6 +154,7 @@ def window_pass(xyh, roots, p: MomentsOptions, inten, scheduler, workers, *, fin
         o.fields = None  # assembled in `fields`; keep only the ids and records
         steps.extend(replace(s, window=f"{i}{s.window}") for s in o.ground_steps)
         infos.extend({**t, "window": f"{i}{t['window']}"} for t in o.infos)
+    release_freed()  # the windows' own arrays
     if final:  # cluster ids unique in window order, records in window order
         first = 0
         for t, o in zip(roots, outs):

@@ -193,16 +193,58 @@ def cell_median_values(key, values, *, return_cells: bool = False):
     return out
 
 
-def _cell_pick(xy, z, cell, which, rank=None):
+def _cell_pick(xy, z, cell, which, rank=None, where=None):
     """Index of the lowest (``'min'``) or lower-median (``'median'``) point of every cell.
 
     Ties in z go to the lower index, or to the lower `rank` (the points' input indices
     when the caller works on a reordered cloud, so the pick does not depend on the order).
+    With `where` (ascending indices) only those points take part, as if the cloud were
+    ``xy[where]``, and the indices returned are rows of `xy`.
     """
-    order, starts = cell_order(cell_keys(xy, cell))
     rank = np.empty(0, np.int64) if rank is None else np.ascontiguousarray(rank, np.int64)
-    return _pick_per_cell(order, np.ascontiguousarray(z, dtype=np.float64), starts,
-                          which == "median", rank)
+    z = np.ascontiguousarray(z, dtype=np.float64)
+    if where is None:
+        order, starts = cell_order(cell_keys(xy, cell))
+        return _pick_per_cell(order, z, starts, which == "median", rank)
+    where = np.ascontiguousarray(where, dtype=np.int64)
+    xy = np.asarray(xy, dtype=np.float64)
+    order, starts = cell_order(_cell_keys_where(xy, where, cell))
+    order = where[order]  # rows of `xy`: ties by index stay in the subset's order
+    return _pick_per_cell(order, z, starts, which == "median", rank)
+
+
+def _cell_keys_where(xy, where, cell):
+    """:func:`cell_keys` of ``xy[where]`` without the (M, 2) copy."""
+    out = np.empty(where.size, np.int64)
+    if not out.size:
+        return out
+    lo = np.empty(2)
+    hi_y = _where_bounds(xy, where, lo)
+    ncol = int(np.floor((hi_y - lo[1]) / cell)) + 1
+    _cell_keys_at(xy, where, float(lo[0]), float(lo[1]), float(cell), ncol, out)
+    return out
+
+
+@njit
+def _where_bounds(xy, where, lo):  # pragma: no cover - compiled
+    """Column minima of ``xy[where]`` into `lo`; the largest y."""
+    lo[0] = np.inf
+    lo[1] = np.inf
+    hi = -np.inf
+    for t in range(where.size):
+        i = where[t]
+        lo[0] = min(lo[0], xy[i, 0])
+        lo[1] = min(lo[1], xy[i, 1])
+        hi = max(hi, xy[i, 1])
+    return hi
+
+
+@njit
+def _cell_keys_at(xy, where, ox, oy, cell, ncol, out):  # pragma: no cover - compiled
+    for t in range(where.size):
+        i = where[t]
+        out[t] = (np.int64(np.floor((xy[i, 0] - ox) / cell)) * ncol
+                  + np.int64(np.floor((xy[i, 1] - oy) / cell)))
 
 
 # --------------------------------------------------------------------------- TIN kernels
@@ -399,7 +441,8 @@ def _extrapolate(P, V, tree, q, k=8):
     return out
 
 
-def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median", rank=None):
+def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median", rank=None,
+                   where=None):
     """Return ``f(xy) -> z`` interpolating ground points (one per cell) linearly on a TIN.
 
     Parameters
@@ -414,6 +457,10 @@ def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median", r
     which : {'median', 'min'}
     rank : (M,) ndarray of int, optional
         Input index of each point, breaking ties in z (default: the position).
+    where : (K,) ndarray of int, optional
+        Ascending rows of the ground points when `xy_ground`, `z_ground` and `rank` are
+        given for a whole cloud: the same surface as for ``xy_ground[where]``,
+        ``z_ground[where]``, ``rank[where]``, without those copies.
 
     Returns
     -------
@@ -424,5 +471,5 @@ def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median", r
         whole border strip of a sloped scene). Evaluating N points costs O(N) in any
         order.
     """
-    sel = _cell_pick(xy_ground, z_ground, cell, which, rank)
+    sel = _cell_pick(xy_ground, z_ground, cell, which, rank, where)
     return TinSurface(xy_ground[sel], z_ground[sel], cell)

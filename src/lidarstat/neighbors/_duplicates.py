@@ -127,15 +127,12 @@ def find_duplicates(points) -> Duplicates:
 
 
 def _row_hash(pts):
-    """A 64-bit hash (as int64) of each row's coordinate bits; -0.0 hashes as 0.0."""
-    bits = (pts + 0.0).view(np.uint64)
-    h = bits[:, 0] * np.uint64(0x9E3779B97F4A7C15)
-    h ^= bits[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)
-    h ^= bits[:, 2] * np.uint64(0x165667B19E3779F9)
-    h ^= h >> np.uint64(29)
-    h *= np.uint64(0xBF58476D1CE4E5B9)
-    h ^= h >> np.uint64(32)
-    return h.view(np.int64)
+    """A 64-bit hash (as int64) of each row's coordinate bits; -0.0 hashes as 0.0.
+
+    One compiled pass over the rows (:func:`~._kernels.row_hash`): no temporaries of
+    the cloud's size besides the hashes.
+    """
+    return _kernels.row_hash(np.ascontiguousarray(pts, dtype=np.float64)).view(np.int64)
 
 
 def refuse_dominated(dup: Duplicates, *, what: str, max_share: float = 0.5,

@@ -25,27 +25,44 @@ __all__ = ["SequentialMoments", "sequential_moments", "standard_moments", "Densi
 
 # --------------------------------------------------------------------------- kernels
 @njit
-def _prefix_moments(y, mean, m2, m3, m4):  # pragma: no cover - compiled
-    """Central sums M2, M3, M4 and mean of every prefix ``y[:i+1]`` (Pébay's updates)."""
+def _sequential_stats(xs, y, c, s, m, mean, std, skew, kurt, thr):  # pragma: no cover
+    """Every cycle's mean, std, skewness, kurtosis and threshold, in one pass.
+
+    ``y`` are the sorted values `xs` in the robust frame ``(xs - c) / s``; output row
+    ``k`` (``k < m``) is the prefix of length ``n - k``. The arithmetic is that of the
+    NumPy expressions it replaces (``var = m2 / cnt``, ``sqrt(cnt) m3 / m2^1.5``,
+    ``cnt m4 / m2^2``, NaN where ``var <= (1e-12 (|mean| + 1))^2``), value for value.
+    """
+    n = y.shape[0]
     mu = 0.0
     s2 = 0.0
     s3 = 0.0
     s4 = 0.0
-    for i in range(y.shape[0]):
+    for i in range(n):
         n1 = float(i)
-        n = n1 + 1.0
+        cnt = n1 + 1.0
         delta = y[i] - mu
-        dn = delta / n
+        dn = delta / cnt
         dn2 = dn * dn
         term1 = delta * dn * n1
         mu += dn
-        s4 += term1 * dn2 * (n * n - 3.0 * n + 3.0) + 6.0 * dn2 * s2 - 4.0 * dn * s3
-        s3 += term1 * dn * (n - 2.0) - 3.0 * dn * s2
+        s4 += term1 * dn2 * (cnt * cnt - 3.0 * cnt + 3.0) + 6.0 * dn2 * s2 - 4.0 * dn * s3
+        s3 += term1 * dn * (cnt - 2.0) - 3.0 * dn * s2
         s2 += term1
-        mean[i] = mu
-        m2[i] = s2
-        m3[i] = s3
-        m4[i] = s4
+        k = n - 1 - i
+        if k >= m:
+            continue
+        var = s2 / cnt
+        t = 1e-12 * (abs(mu) + 1.0)
+        mean[k] = mu * s + c
+        std[k] = np.sqrt(var) * s
+        thr[k] = xs[i]
+        if var > t * t:
+            skew[k] = np.sqrt(cnt) * s3 / s2 ** 1.5
+            kurt[k] = cnt * s4 / (s2 * s2)
+        else:
+            skew[k] = np.nan
+            kurt[k] = np.nan
 
 
 def _as_values(values, name: str, func: str) -> np.ndarray:
@@ -176,25 +193,13 @@ def sequential_moments(values, *, min_points: int = 4,
         xs = np.sort(x)
     c, s = _robust_frame(xs)
     y = (xs - c) / s
-    mean = np.empty(n)
-    m2 = np.empty(n)
-    m3 = np.empty(n)
-    m4 = np.empty(n)
-    _prefix_moments(y, mean, m2, m3, m4)
-    cnt = np.arange(1, n + 1, dtype=np.float64)
-    var = m2 / cnt
-    tiny = (1e-12 * (np.abs(mean) + 1.0)) ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ok = var > tiny
-        sk = np.where(ok, np.sqrt(cnt) * m3 / np.where(ok, m2, 1.0) ** 1.5, np.nan)
-        ku = np.where(ok, cnt * m4 / np.where(ok, m2, 1.0) ** 2, np.nan)
-    m = n - min_points + 1
-    sl = slice(n - 1, min_points - 2, -1)  # prefix length n - k, k = 0 .. m - 1
+    m = n - min_points + 1  # cycle k leaves the prefix of length n - k, k = 0 .. m - 1
+    mean, std, sk, ku, thr = (np.empty(m) for _ in range(5))
+    _sequential_stats(xs, y, float(c), float(s), m, mean, std, sk, ku, thr)
     return SequentialMoments(
         order=order, sorted_values=xs, cycle=np.arange(m, dtype=np.int64),
         remaining=np.arange(n, n - m, -1, dtype=np.int64),
-        mean=(mean[sl] * s + c), std=np.sqrt(var[sl]) * s, skewness=sk[sl], kurtosis=ku[sl],
-        threshold=xs[sl].copy())
+        mean=mean, std=std, skewness=sk, kurtosis=ku, threshold=thr)
 
 
 def standard_moments(values) -> tuple[float, float]:
