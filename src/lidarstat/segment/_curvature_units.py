@@ -6,7 +6,9 @@ accepted, through neighbours whose normals agree within `max_angle` (the paper c
 *tested* type play that role here, the normal angle stops growth across a crease between
 two units of the same type). Optionally each raw cluster is refined by SAR-FS with the
 polynomial order implied by its type (planar: 1; cylinders and other quadrics: 2), and
-adjacent fitted surfaces are intersected into break lines.
+adjacent fitted surfaces are intersected into break lines. The points without a tested
+class (next to a crease every neighbourhood straddles two faces) join the touching unit
+whose plane or cylinder, fitted to the whole unit, they fit (:mod:`._model_growth`).
 """
 
 from __future__ import annotations
@@ -51,7 +53,11 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_points=30,
       moments up to degree 4, ``sum f^2 / (sigma^2 mean_i (d_i . grad f)^2)`` against
       chi2(n - 9) (:mod:`._quadric_merge_kernels`); a merge test costs O(1).
 
-    Two faces meeting at a crease flatter than `max_angle` thus stay two units.
+    Two faces meeting at a crease flatter than `max_angle` thus stay two units. The
+    growth graph joins the points within `grow_radius` and each point's
+    :data:`GROWTH_K` nearest neighbours. The points no tested class reached (the bands
+    along the creases, narrow faces) then join the touching unit whose plane or cylinder
+    they fit (:mod:`._model_growth`).
 
     Parameters
     ----------
