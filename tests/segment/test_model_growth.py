@@ -65,4 +65,4 @@ def test_no_model_no_growth():
     knn = knn_neighbors(pts, 9)
     src, dst = knn.edges()
     out, joined = grow_by_models(pts, labels, np.r_[src, dst], np.r_[dst, src], models)
-    assert not joined.any()
+    assert not joined.any() and np.array_equal(out, labels)
