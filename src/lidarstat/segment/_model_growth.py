@@ -33,24 +33,26 @@ MAX_SWEEPS = 200
 
 
 def _noise_scale(sigma, dirs, idx, normal):
-    """``sigma max(|d . n|, 0.1)`` at the points `idx` (``sigma`` when `dirs` is None)."""
+    """``sigma max(|d . n|, 0.1)`` at the points `idx` (``sigma`` when `dirs` is None);
+    `sigma` (N,) per point."""
     if dirs is None:
-        return np.full(idx.size, sigma)
-    return sigma * np.maximum(np.abs(np.einsum("ij,ij->i", dirs[idx], normal)), 0.1)
+        return sigma[idx]
+    return sigma[idx] * np.maximum(np.abs(np.einsum("ij,ij->i", dirs[idx], normal)), 0.1)
 
 
 class UnitModels:
-    """One model per unit of `labels`: ``kind`` 0 none, 1 plane, 2 cylinder."""
+    """One model per unit of `labels`: ``kind`` 0 none, 1 plane, 2 cylinder (`sigma` a
+    float or one per point)."""
 
     def __init__(self, points, labels, curved, normals, sigma, *, dirs=None, sensor=None):
         from ._cylinders import refine_cylinder_table, segment_cylinders
         from ._refine import PlaneModels
 
         self.pts = points
-        self.sigma = float(sigma)
+        self.sigma = np.broadcast_to(np.asarray(sigma, dtype=np.float64), (points.shape[0],))
         self.dirs = dirs
         s = int(labels.max()) if labels.size else 0
-        planes = PlaneModels(points, labels, self.sigma, sensor)
+        planes = PlaneModels(points, labels, sigma, sensor)
         self.centroid, self.normal = planes.centroid, planes.normal
         self.kind = np.where(planes.planar, 1, 0).astype(np.uint8)
         cur = np.zeros(s, dtype=bool)
@@ -60,8 +62,8 @@ class UnitModels:
         self.radius = np.full(s, np.nan)
         if cur.any():
             lab_c = np.where(cur[np.maximum(labels, 1) - 1] & (labels > 0), labels, 0)
-            t = segment_cylinders(points, lab_c, normals, self.sigma, sensor=sensor)
-            t = refine_cylinder_table(points, lab_c, t, self.sigma, sensor=sensor)
+            t = segment_cylinders(points, lab_c, normals, sigma, sensor=sensor)
+            t = refine_cylinder_table(points, lab_c, t, sigma, sensor=sensor)
             cyl = np.flatnonzero(np.asarray(t["model"]) == 2)
             cyl = cyl[cur[cyl]]
             self.axis[cyl] = np.c_[t["axis_x"], t["axis_y"], t["axis_z"]][cyl]
