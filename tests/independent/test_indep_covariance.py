@@ -59,10 +59,6 @@ def test_edges_precision_recall(runs):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "57 of 64 surfaces (0.89): the steep cylindrical rims of the range-image flanges, "
-    "strips a few rows wide, are edges at the tested scale as at k = 50 (their rows of "
-    "50 cross the rim's creases); docs/methods/covariance.md"))
 def test_hoover_every_surface(runs):
     correct = total = 0
     for scan, _, seg in runs:

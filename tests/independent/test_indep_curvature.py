@@ -156,3 +156,32 @@ def test_frame_z_kept_for_flat_faces():
     keep = (s.border > (TOP + 0.5) * s.spacing) & _powered(s)
     truth = s.oriented_types(np.c_[res["NormalX"], res["NormalY"], res["NormalZ"]])
     assert (res["surface_type"][keep] == truth[keep]).mean() >= 0.9
+
+
+#: Faces of the machined parts scored by Hoover's measure (as in test_indep_covariance.py).
+MIN_SURFACE = 300
+
+
+@pytest.mark.slow
+def test_segment_hoover_every_surface():
+    """`segment --method curvature` with its defaults on the independent machined parts
+    (``indep_parts.py``: flanged and bored parts at random tilts, range images with z
+    noise, terrestrial scans with range noise): Hoover correct detection (T = 0.8) of at
+    least 90 % of the faces of 300 points or more, pooled over a seed sweep."""
+    import indep_parts as ip
+
+    from lidarstat.segment import hoover, segment_curvature
+
+    correct = total = 0
+    for seed in range(2):
+        rng = np.random.default_rng(1000 + seed)
+        for gen in (ip.range_image, ip.tls_scan):
+            for kind in ("flange", "block"):
+                scan = gen(rng, kind)
+                seg = segment_curvature(scan.points, sensor=scan.sensor)
+                cnt = np.bincount(scan.face)
+                truth = np.where(cnt[scan.face] >= MIN_SURFACE, scan.face, 0)
+                h = hoover(seg.labels, truth, 0.8)
+                correct += h.correct
+                total += h.n_truth
+    assert correct / total >= 0.9, (correct, total)

@@ -132,7 +132,15 @@ def test_curvature_units_and_refinement(rng):
     assert raw.n_segments == 2 and set(raw.table["surface_type"].tolist()) == {1}
     ref = segment_curvature(pts, radius=0.8, sigma=0.005, refine=True)
     assert ref.n_segments == 2 and ref.method == "curvature+sar"
-    assert np.count_nonzero(ref.labels) > np.count_nonzero(raw.labels)
+    # the units take the crease band by their planes (growth by the units' models), each
+    # on its own side beyond 0.1 of the crease (closer, a point fits both planes within 3
+    # noise units); the refinement keeps them
+    assert np.count_nonzero(raw.labels) >= 0.995 * pts.shape[0]
+    lab, far = raw.labels, np.abs(xy[:, 0] - 6) > 0.1
+    left, right = far & (xy[:, 0] < 6) & (lab > 0), far & (xy[:, 0] > 6) & (lab > 0)
+    assert (lab[left] == lab[np.argmin(xy[:, 0])]).all()
+    assert (lab[right] == lab[np.argmax(xy[:, 0])]).all()
+    assert np.count_nonzero(ref.labels) >= np.count_nonzero(raw.labels)
     assert len(ref.lines) == 1
     np.testing.assert_allclose(ref.lines.vertices[0][:, 0], 6.0, atol=0.02)
 

@@ -277,6 +277,30 @@ def surface_tested(feats, classes):
     return (classes.point_class != 0) & (low | consistent)
 
 
+def _grow_cylinders(pts, labels, nbh, cylinders, normals, sigma, nsensor):
+    """Unlabelled points, and outliers of a planar segment's plane, join the touching
+    segment whose fitted plane or cylinder they fit (:mod:`._model_growth`): a narrow
+    cylindrical strip between two creases (a flange's rim seen steeply) is mostly edge
+    points, and its segment grows over them by its cylinder. `normals` are the features'
+    own (at each point's scale): on a strip a few rows wide the larger rows straddle its
+    creases and tilt the cylinder's axis."""
+    from ._model_growth import UnitModels, grow_by_models
+    from ._refine import PlaneModels
+
+    src, dst = nbh.edges()
+    src, dst = np.r_[src, dst], np.r_[dst, src]
+    dirs = None
+    if nsensor is not None:
+        dirs = pts - nsensor
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    models = UnitModels(pts, labels, np.asarray(cylinders["model"]) == 2, normals, sigma,
+                        dirs=dirs, sensor=nsensor)
+    labels, _ = grow_by_models(pts, labels, src, dst, models)
+    out = PlaneModels(pts, labels, sigma, nsensor).outliers()
+    lab, joined = grow_by_models(pts, np.where(out, 0, labels), src, dst, models)
+    return np.where(out & ~joined, labels, lab).astype(np.int32)
+
+
 @renamed_parameters(min_size="min_points")
 def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curvature",
                        min_angle=20.0, reintegration=True, lines=True) -> Segmentation:
@@ -449,6 +473,13 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
     labels, absorbed = absorb_into_cylinders(pts, labels, grow_nbh, cylinders, seg_sigma,
                                              sensor=csensor)
     if absorbed:
+        cylinders = refine_cylinder_table(
+            pts, labels, segment_cylinders(pts, labels, normals, seg_sigma,
+                                           sensor=csensor, point_axes=pt_axes),
+            seg_sigma, sensor=csensor)
+    if (np.asarray(cylinders["model"]) == 2).any():
+        labels = _grow_cylinders(pts, labels, nbh, cylinders, feats.normals, seg_sigma,
+                                 nsensor)
         cylinders = refine_cylinder_table(
             pts, labels, segment_cylinders(pts, labels, normals, seg_sigma,
                                            sensor=csensor, point_axes=pt_axes),

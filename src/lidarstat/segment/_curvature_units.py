@@ -6,7 +6,9 @@ accepted, through neighbours whose normals agree within `max_angle` (the paper c
 *tested* type play that role here, the normal angle stops growth across a crease between
 two units of the same type). Optionally each raw cluster is refined by SAR-FS with the
 polynomial order implied by its type (planar: 1; cylinders and other quadrics: 2), and
-adjacent fitted surfaces are intersected into break lines.
+adjacent fitted surfaces are intersected into break lines. The points without a tested
+class (next to a crease every neighbourhood straddles two faces) join the touching unit
+whose plane or cylinder, fitted to the whole unit, they fit (:mod:`._model_growth`).
 """
 
 from __future__ import annotations
@@ -16,15 +18,20 @@ import numpy as np
 from .._shared._deprecate import renamed_parameters
 from .._shared.validation import check_points, check_scalar
 from ..features import SurfaceType
-from ..neighbors import check_copies, radius_neighbors
+from ..neighbors import check_copies, knn_neighbors, radius_neighbors
 from . import _unit_merge_kernels as _mk
 from ._grow import relabel
+from ._model_growth import UnitModels, grow_by_models
 from ._result import Segmentation, segment_table
 
 #: Smallest planar unit whose merges are tested (a plane test needs degrees of freedom).
 MERGE_MIN_POINTS = 10
 #: Smallest curved unit whose merges are tested (a quadric has 9 free parameters).
 QUADRIC_MIN_POINTS = 30
+#: Rounds of model fit and growth of the units (:mod:`._model_growth`).
+GROWTH_ROUNDS = 3
+#: Nearest neighbours added to the growth graph (beside the points within its radius).
+GROWTH_K = 8
 
 
 @renamed_parameters(min_size="min_points")
@@ -46,7 +53,11 @@ def curvature_units(points, curv, *, grow_radius, max_angle=10.0, min_points=30,
       moments up to degree 4, ``sum f^2 / (sigma^2 mean_i (d_i . grad f)^2)`` against
       chi2(n - 9) (:mod:`._quadric_merge_kernels`); a merge test costs O(1).
 
-    Two faces meeting at a crease flatter than `max_angle` thus stay two units.
+    Two faces meeting at a crease flatter than `max_angle` thus stay two units. The
+    growth graph joins the points within `grow_radius` and each point's
+    :data:`GROWTH_K` nearest neighbours. The points no tested class reached (the bands
+    along the creases, narrow faces) then join the touching unit whose plane or cylinder
+    they fit (:mod:`._model_growth`).
 
     Parameters
     ----------
@@ -89,6 +100,15 @@ def _units(points, curv, *, grow_radius, max_angle, min_points, merge_alpha, sen
     nrm = np.c_[f["NormalX"], f["NormalY"], f["NormalZ"]]
     nbh = radius_neighbors(pts, grow_radius, dim=3)
     src, dst = nbh.edges()
+    del nbh
+    # with the k nearest neighbours (both ways): a steep face of a range image, or a flat
+    # one seen at a grazing angle, is sampled more sparsely across the slope than the
+    # growth radius, and the radius graph alone leaves it in pieces
+    knn = knn_neighbors(pts, GROWTH_K + 1)
+    ks, kd = knn.edges()
+    del knn
+    src, dst = np.r_[src, ks, kd], np.r_[dst, kd, ks]
+    del ks, kd
     cosang = np.abs(np.einsum("ij,ij->i", nrm[src], nrm[dst]))
     edge_ok = (ok[src] & ok[dst] & (st[src] == st[dst])
                & (cosang >= np.cos(np.radians(max_angle))))
@@ -119,6 +139,15 @@ def _units(points, curv, *, grow_radius, max_angle, min_points, merge_alpha, sen
         lab = labels[labels > 0]
         # the common type of each cluster (all members share it by construction)
         types[lab - 1] = st[labels > 0]
+        # the points no tested class reached (the bands along the creases, the narrow
+        # faces) join the touching unit whose plane or cylinder they fit
+        for _ in range(GROWTH_ROUNDS):  # refit on the grown units, grow again
+            models = UnitModels(pts, labels, types > SurfaceType.PLANAR, nrm,
+                                float(curv.sigma), dirs=None if noise_normal else dirs,
+                                sensor=sensor if noise == "range" else None)
+            labels, joined = grow_by_models(pts, labels, src, dst, models)
+            if not joined.any():
+                break
     return labels, types, (int(refused[0]), int(refused[1]))
 
 
