@@ -20,7 +20,7 @@ The serial builds are made by monkeypatching ``numba.njit`` before lidarstat is 
 
     PYTHONPATH=src python benchmarks/parallel_compile.py --compile [--machine-shared]
     PYTHONPATH=src python benchmarks/parallel_compile.py --runtime [--points N]
-        [--only NAME ...] [--machine-shared]
+        [--only NAME ...] [--warm-cache] [--machine-shared]
 
 Stored under the ``parallel_compile`` and ``parallel_runtime`` keys of
 ``benchmarks/results_first_run.json`` (``--runtime`` merges its kernels into what is there,
@@ -203,7 +203,7 @@ def run_compile(tmp):
     }
 
 
-def run_runtime(tmp, points, only, repeat):
+def run_runtime(tmp, points, only, repeat, warm):
     sys.path.insert(0, str(HERE))
     from scaling import write_cloud
 
@@ -212,7 +212,9 @@ def run_runtime(tmp, points, only, repeat):
     argvs = [(name, [a.format(i=cloud, o=Path(tmp) / f"{name}.laz") for a in argv])
              for name, argv in COMMANDS.items() if not only or name in only]
     out = Path(tmp) / "runtime.json"
-    env = dict(os.environ, NUMBA_CACHE_DIR=tempfile.mkdtemp(prefix="numba-rt-", dir=tmp))
+    env = dict(os.environ)
+    if not warm:  # the commands' own kernels compile first: a cold cache costs minutes
+        env["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="numba-rt-", dir=tmp)
     subprocess.run([sys.executable, "-c", RUNTIME_CHILD, str(out), str(repeat), json.dumps(argvs)],
                    env=env, check=True, stdout=subprocess.DEVNULL)
     got = json.loads(out.read_text())
@@ -231,6 +233,9 @@ def main():
     ap.add_argument("--points", type=int, default=2_000_000)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--only", nargs="*", choices=sorted(COMMANDS))
+    ap.add_argument("--warm-cache", action="store_true",
+                    help="--runtime on the package's own Numba cache (the run times do not "
+                         "depend on it; the timed builds always compile)")
     args = ap.parse_args()
     out = Path(args.out)
     store = json.loads(out.read_text()) if out.exists() else {}
@@ -243,7 +248,7 @@ def main():
             print(f"compile CPU: parallel {r['parallel']['compile_cpu_s']:.0f} s, serial "
                   f"{r['serial']['compile_cpu_s']:.0f} s", flush=True)
         if args.runtime:
-            got = run_runtime(tmp, args.points, args.only, args.repeat)
+            got = run_runtime(tmp, args.points, args.only, args.repeat, args.warm_cache)
             store = json.loads(out.read_text()) if out.exists() else {}
             prev = store.get("parallel_runtime", {})
             kernels = {**prev.get("kernels", {}), **got["kernels"]}
