@@ -145,6 +145,8 @@ def main():
                          "string) on a cold cache")
     ap.add_argument("--suite-warm", action="store_true",
                     help="with --suite: run it again on the same cache (warm)")
+    ap.add_argument("--suite-log", metavar="PREFIX",
+                    help="with --suite: write pytest's output to PREFIX.cold (and .warm)")
     args = ap.parse_args()
     if args.suite is not None:
         return suite(args)
@@ -181,8 +183,10 @@ def main():
 _NUMBA_LINE = re.compile(r"Numba: (\d+) compilations, (\d+) s compiling \((\d+) s CPU\)")
 
 
-def suite_run(pytest_args, cache_dir):
-    """One pytest run on `cache_dir`: wall, CPU of the process tree, compile figures."""
+def suite_run(pytest_args, cache_dir, log=None):
+    """One pytest run on `cache_dir`: wall, CPU of the process tree, compile figures.
+
+    `log`, a path, receives pytest's whole output (the durations, when asked for)."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
@@ -191,6 +195,8 @@ def suite_run(pytest_args, cache_dir):
                           text=True, check=False)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if log:
+        Path(log).write_text(proc.stdout + proc.stderr)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     tail = proc.stdout.strip().splitlines()[-3:]
     m = _NUMBA_LINE.search(proc.stdout)
@@ -206,10 +212,10 @@ def suite(args):
     results = {"pytest_args": pytest_args, "cpus": os.cpu_count(),
                "machine_shared": args.machine_shared}
     with tempfile.TemporaryDirectory() as tmp:
-        results["cold"] = suite_run(pytest_args, tmp)
+        results["cold"] = suite_run(pytest_args, tmp, args.suite_log and f"{args.suite_log}.cold")
         print("cold", results["cold"], flush=True)
         if args.suite_warm:
-            results["warm"] = suite_run(pytest_args, tmp)
+            results["warm"] = suite_run(pytest_args, tmp, args.suite_log and f"{args.suite_log}.warm")
             print("warm", results["warm"], flush=True)
     out = Path(args.out)
     store = json.loads(out.read_text()) if out.exists() else {}

@@ -80,6 +80,8 @@ def _attribute_doc(package, name, obj):
                  for m in pkgutil.iter_modules(getattr(package, "__path__", []))]
     for modname in modnames:
         module = importlib.import_module(modname)
+        if not any(value is obj for value in vars(module).values()):
+            continue  # cannot hold it: its source need not be parsed
         docs = ModuleAnalyzer.for_module(modname).find_attr_docs()
         for (cls, attr), lines in docs.items():
             # an alias counts unless the value is a scalar that two names may share

@@ -48,6 +48,9 @@ def shared_file(relpath: str) -> Path:
 # cache saves. Outermost compile events only (a kernel's helpers compile inside it); the
 # CPU seconds (the compiling thread's) do not grow when other jobs share the machine.
 _COMPILES = {"seconds": 0.0, "cpu": 0.0, "count": 0}
+# (kernel and argument types, compile CPU seconds) of every outermost compilation; written
+# to the file named by LIDARSTAT_COMPILE_LOG (JSON) when set, to find what compiles twice.
+_KERNELS: list = []
 
 
 def _count_compiles():
@@ -63,14 +66,19 @@ def _count_compiles():
             if self.depth == 0:
                 self.start = time.perf_counter()
                 self.cpu = time.thread_time()
+                py = getattr(ev.data.get("dispatcher"), "py_func", None)
+                self.key = (f"{getattr(py, '__module__', '?')}.{getattr(py, '__qualname__', '?')}"
+                            f"{ev.data.get('args', '')}")
             self.depth += 1
 
         def on_end(self, ev):
             self.depth -= 1
             if self.depth == 0:
+                cpu = time.thread_time() - self.cpu
                 _COMPILES["seconds"] += time.perf_counter() - self.start
-                _COMPILES["cpu"] += time.thread_time() - self.cpu
+                _COMPILES["cpu"] += cpu
                 _COMPILES["count"] += 1
+                _KERNELS.append([self.key, round(cpu, 2)])
 
     event.register("numba:compile", _Outermost())
 
@@ -83,6 +91,7 @@ def pytest_sessionfinish(session):
     workeroutput = getattr(session.config, "workeroutput", None)
     if workeroutput is not None:
         workeroutput["numba_compiles"] = dict(_COMPILES)
+        workeroutput["numba_kernels"] = list(_KERNELS)
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -91,9 +100,15 @@ def pytest_testnodedown(node, error):
     _COMPILES["seconds"] += theirs.get("seconds", 0.0)
     _COMPILES["cpu"] += theirs.get("cpu", 0.0)
     _COMPILES["count"] += theirs.get("count", 0)
+    _KERNELS.extend(getattr(node, "workeroutput", {}).get("numba_kernels", []))
 
 
 def pytest_terminal_summary(terminalreporter):
+    log = os.environ.get("LIDARSTAT_COMPILE_LOG")
+    if log:
+        import json
+
+        Path(log).write_text(json.dumps(sorted(_KERNELS, key=lambda kv: -kv[1]), indent=0))
     if _COMPILES["count"]:
         terminalreporter.write_line(
             f"Numba: {_COMPILES['count']} compilations, {_COMPILES['seconds']:.0f} s compiling "

@@ -13,59 +13,54 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 
-# Every command the warm-up runs, each in a process of its own forked from one that has
-# imported the CLI (a kernel used by two commands with two dtypes is not a repeat; the
-# fork saves each command the import). On a warm cache the kernels called from Python are
-# loaded with the signatures the command asks for, so a second one shows on a warm cache
-# too; on a cold one, the helpers that kernels call show as well.
+# Every command the warm-up runs, one after the other in one process started for the test
+# (other tests call the kernels through the API with other types). Before each command,
+# every lidarstat dispatcher forgets the specialisations it holds in memory, so the
+# command asks for its own again, loading them from the disk cache, as in a process of
+# its own (a kernel used by two commands with two dtypes is not a repeat). On a warm
+# cache the kernels called from Python are loaded with the signatures the command asks
+# for, so a second one shows on a warm cache too; on a cold one, the helpers that kernels
+# call show as well.
 _SPECIALISATIONS = r"""
-import json, os, sys
+import gc, json, os, sys
 from pathlib import Path
 from lidarstat.cli import main
 from lidarstat.cli.warmup import STEPS
 from numba.core.registry import CPUDispatcher
 
+def dispatchers():
+    return [obj for obj in gc.get_objects() if isinstance(obj, CPUDispatcher)
+            and getattr(obj.py_func, "__module__", "").startswith("lidarstat")]
+
 def signatures():
-    seen, found = set(), {}
-    for name, mod in list(sys.modules.items()):
-        if name.startswith("lidarstat"):
-            for obj in list(vars(mod).values()):
-                if isinstance(obj, CPUDispatcher) and id(obj) not in seen and obj.signatures:
-                    seen.add(id(obj))
-                    py = obj.py_func
-                    # a driver made per kernel (a closure) is named by what it closes over
-                    inner = [getattr(c.cell_contents, "py_func", None)
-                             for c in py.__closure__ or ()]
-                    inner = ",".join(sorted(f.__name__ for f in inner if f is not None))
-                    key = f"{py.__module__}.{py.__qualname__}" + (f"[{inner}]" if inner else "")
-                    found[key] = [str(s) for s in obj.signatures]
-    return found
+    found = {}
+    for obj in dispatchers():
+        if obj.signatures:
+            py = obj.py_func
+            # a driver made per kernel (a closure) is named by what it closes over
+            inner = [getattr(c.cell_contents, "py_func", None) for c in py.__closure__ or ()]
+            inner = ",".join(sorted(f.__name__ for f in inner if f is not None))
+            key = f"{py.__module__}.{py.__qualname__}" + (f"[{inner}]" if inner else "")
+            found.setdefault(key, set()).update(str(s) for s in obj.signatures)
+    return {key: sorted(sigs) for key, sigs in found.items()}
 
 tmp = Path(sys.argv[1])
 report = {}
+stdout, stderr = sys.stdout, sys.stderr
 for i, (label, argv) in enumerate(STEPS):
     argv = [a.format(x=tmp / "x.laz", o=tmp / f"o{i}") for a in argv]
-    out = tmp / f"s{i}.json"
-    pid = os.fork()
-    if pid == 0:
-        code = 1
-        try:
-            sys.stdout = sys.stderr = open(os.devnull, "w")
-            if main(argv) == 0:
-                out.write_text(json.dumps(signatures()))
-                code = 0
-        finally:
-            os._exit(code)
-    _, status = os.waitpid(pid, 0)
-    assert status == 0 and out.exists(), f"{label} failed"
-    report[label] = json.loads(out.read_text())
+    for obj in dispatchers():
+        obj._reset_overloads()
+    sys.stdout = sys.stderr = open(os.devnull, "w")
+    code = main(argv)
+    sys.stdout, sys.stderr = stdout, stderr
+    assert code == 0, f"{label} failed"
+    report[label] = signatures()
 print(json.dumps(report))
 """
 
 
-@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork (POSIX)")
 def test_each_command_compiles_each_kernel_once(tmp_path):
     # processes of their own: other tests call the kernels through the API with other types
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(

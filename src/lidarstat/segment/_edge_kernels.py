@@ -5,9 +5,12 @@ them) allocates several arrays of one entry per neighbour pair: at 2 million poi
 k = 50 that is 100 million pairs and gigabytes per step. These kernels walk the CSR rows
 once to count and once to fill, so only the selected pairs are stored. Each returns
 exactly what the mask expression it replaces returns (same pairs, in CSR order). Rows are
-independent: the kernels run in parallel over chunks of rows (a count-then-fill kernel
-counts per row, then each row that holds a selected edge fills from its prefix-sum
-offset, so the order is CSR order whatever the threads do). :func:`adaptive_edges`, whose gathers (the prefix
+independent: the kernels that do work per entry run in parallel over rows (a
+count-then-fill kernel counts per row, then each row that holds a selected edge fills
+from its prefix-sum offset, so the order is CSR order whatever the threads do);
+:func:`pair_edges` and :func:`first_columns`, which mostly skip rows or copy, run in one
+thread: two do not make them faster (``benchmarks/results_first_run.json``, key
+``parallel_runtime``) and cost about four times the compile time. :func:`adaptive_edges`, whose gathers (the prefix
 normals: 24 bytes a point) do not fit in the cache, visits the rows in the order
 ``visit`` (:meth:`lidarstat.neighbors.Neighborhoods.visit_order`: the kNN search's grid
 order), so consecutive rows gather nearby points from cache; the kernels that gather
@@ -22,7 +25,7 @@ from numba import prange
 
 from .._shared._jit import njit, njit_parallel
 
-_ROWS = 4096  # rows per parallel chunk
+_ROWS = 4096  # rows per chunk
 
 
 @njit_parallel
@@ -69,7 +72,7 @@ def _pair_ok(mode, lp, lq):
     return lp != lq
 
 
-@njit_parallel
+@njit
 def pair_edges(indptr, indices, rows, labels, candidates, mode, fill, offs, src, dst):
     """Edges (p, q) selected by `mode` (:func:`_pair_ok`; `candidates` only for
     ``REINTEGRATION``).
@@ -82,7 +85,7 @@ def pair_edges(indptr, indices, rows, labels, candidates, mode, fill, offs, src,
     m = indptr.size - 1
     nch = (m + _ROWS - 1) // _ROWS
     counts = np.zeros(0 if fill else m, dtype=np.int32)
-    for ch in prange(nch):
+    for ch in range(nch):
         for r in range(ch * _ROWS, min(m, (ch + 1) * _ROWS)):
             if fill and offs[r + 1] == offs[r]:
                 continue
@@ -210,11 +213,12 @@ def adaptive_edges(visit, indptr, indices, rows, joinable, surface, kstar, pn, g
             out[e] = ok
 
 
-@njit_parallel
+@njit
 def first_columns(indices, distances, k, m, out_idx, out_dist):
-    """The first `m` of every `k` entries of fixed-length rows (a copy in two threads)."""
+    """The first `m` of every `k` entries of fixed-length rows (a copy: memory-bound, one
+    thread is as fast as two)."""
     n = indices.size // k
-    for r in prange(n):
+    for r in range(n):
         for t in range(m):
             out_idx[r * m + t] = indices[r * k + t]
             out_dist[r * m + t] = distances[r * k + t]
