@@ -1,7 +1,8 @@
-"""The automatic scales of the covariance features computed block by block
-(:mod:`lidarstat.features._covariance_scale_blocks`) give the same results, bit for bit,
-as the whole-cloud computation: the kNN rows of every point at once, the size rule on
-them, :func:`lidarstat.features.prefix_features` of the chosen prefixes."""
+"""The automatic scales computed block by block give the same results, bit for bit, as
+the whole-cloud computation: for the covariance features
+(:mod:`lidarstat.features._covariance_scale_blocks`) the kNN rows of every point at once,
+the size rule on them, :func:`lidarstat.features.prefix_features` of the chosen
+prefixes; for the jets, a whole-cloud fused fit per rung."""
 
 import numpy as np
 import pytest
@@ -79,3 +80,29 @@ def test_tested_scale_by_blocks_is_the_whole_cloud_computation(seed):
     _same(ref, got)
     assert (got["OptimalKNN"] < OPTIMAL_K_MAX).any()
     assert (got["OptimalKNN"] == OPTIMAL_K_MAX).any()
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_jet_rungs_by_blocks_are_the_whole_cloud_fits(seed):
+    """The jets' automatic scale writes each block's fits to its points' rows: the same
+    arrays as a whole-cloud fused fit per rung merged by rung (the rung -1 rows skipped)."""
+    from lidarstat.features._jet_fit import _fit_cells
+    from lidarstat.features._jet_kernels import SKIPPED
+    from lidarstat.features._jet_scale import fit_rungs, radius_ladder
+    from lidarstat.neighbors import CellIndex
+
+    pts, sensor = _scene(seed, n=1200)
+    radii = radius_ladder(pts, rungs=3)
+    rung = np.random.default_rng(seed).integers(-1, 3, len(pts))
+    kw = dict(degree=4, monge_degree=4, weight="tricube", sensor=sensor, min_neighbors=16,
+              standard_errors=True)
+    got = fit_rungs(pts, radii, rung, kw, block_size=150)
+    for j in range(-1, 3):
+        mask = rung == j
+        ref = _fit_cells(CellIndex(pts, float(radii[max(j, 0)])),
+                         active=mask if j >= 0 else np.zeros(len(pts), bool),
+                         block_size=131072, progress=None, **kw)
+        for key, val in ref.items():
+            np.testing.assert_array_equal(got[key][mask], val[mask], err_msg=key)
+    assert (got["status"][rung < 0] == SKIPPED).all()
+    assert (got["status"][rung >= 0] == 0).mean() > 0.5
