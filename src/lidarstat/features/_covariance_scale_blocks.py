@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._shared import _memory as _mem
 from ..neighbors import CellIndex, Neighborhoods, knn_cell_size
 from . import _covariance_kernels as _ck
 from . import _scan_kernels as _sk
@@ -151,8 +152,9 @@ class _Search:
         self.keep = keep
         self.searched = np.zeros(index.n_cells, dtype=bool) if keep else None
         if keep:
-            self.nbr_idx = np.empty(n * self.k, dtype=self.dtype)
-            self.nbr_dist = np.empty(n * self.k)
+            # written once by the kernel, then streamed: ordinary pages (_memory's doc)
+            self.nbr_idx = _mem.empty(n * self.k, dtype=self.dtype)
+            self.nbr_dist = _mem.empty(n * self.k)
             self.source = None
         else:
             # the kernel writes row i's distances at loc[i] k: loc maps the block's sorted
