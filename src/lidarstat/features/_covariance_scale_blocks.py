@@ -167,11 +167,12 @@ class _Search:
         m = s1 - s0
         if self.keep and self.searched[c0]:
             if self.source is None:
-                self.source = np.empty_like(index.order)
-                self.source[index.order] = np.arange(index.n_points)
+                # input index -> sorted position, in the table's dtype (no int64 copy)
+                self.source = np.empty(index.n_points, dtype=self.dtype)
+                self.source[index.order] = np.arange(index.n_points, dtype=self.dtype)
             rows = index.order[s0:s1]
-            ids = self.nbr_idx.reshape(-1, k)[rows]
-            return self.source[ids].astype(self.dtype), self.nbr_dist.reshape(-1, k)[rows]
+            return (self.source[self.nbr_idx.reshape(-1, k)[rows]],
+                    self.nbr_dist.reshape(-1, k)[rows])
         table = np.empty((m, k), dtype=self.dtype)
         feat = np.empty((m, _ck.NCOL))
         if self.keep:
