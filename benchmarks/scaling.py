@@ -6,9 +6,9 @@ airborne LAZ files of 0.2, 2 and 10 million points (``bench_moments.make_cloud``
 at 10 points/m2 with terrain, buildings, trees and roads; intensity and returns, so that
 ``moments`` sees what it reads from real files). Every run is a fresh process, whole
 process: interpreter start, imports, read, compute, write. Its wall time is measured by the
-parent and its peak resident memory comes from ``os.wait4``. One untimed run per command
-on a small file first fills a benchmark-private Numba cache, so the timed runs load
-compiled kernels (the first-run compile cost is ``benchmarks/first_run.py``'s subject).
+parent, its CPU seconds (user + system) and peak resident memory come from ``os.wait4``.
+One untimed run per command on a small file first fills a benchmark-private Numba cache,
+so the timed runs load compiled kernels (the first-run compile cost is ``benchmarks/first_run.py``'s subject).
 
 The 50-million-point catalogue (``moments`` over 50 tiles of one million points with a
 64 m buffer) is ``benchmarks/catalogue.py --points 50000000``; ``--catalogue N`` runs it
@@ -116,8 +116,8 @@ def run(argv: list[str], env: dict, timeout: float, max_mib: float | None = None
     proc.stderr.close()
     if os.waitstatus_to_exitcode(status) != 0:
         return {"seconds": None, "peak_mib": None, "status": "failed: " + err[-300:]}
-    return {"seconds": round(wall, 2), "peak_mib": round(usage.ru_maxrss / 1024.0, 1),
-            "status": "ok"}
+    return {"seconds": round(wall, 2), "cpu_seconds": round(usage.ru_utime + usage.ru_stime, 2),
+            "peak_mib": round(usage.ru_maxrss / 1024.0, 1), "status": "ok"}
 
 
 def measure(commands, sizes, tmp: Path, timeout: float, max_mib: float | None) -> dict:

@@ -403,8 +403,7 @@ def _tested_features(pts, *, sensor, sigma, noise, alpha, eigen_mode, keep_neigh
     prefixes whose plane test detects a crease with power, else all 50
     (:func:`lidarstat.features.tested_scale`), with the noise given or estimated on the
     k = 50 neighbourhoods (:func:`_noise_scale`)."""
-    from ..features import (OPTIMAL_K_MAX, OPTIMAL_K_MIN, covariance_features,
-                            prefix_features, tested_scale)
+    from ..features import OPTIMAL_K_MAX, OPTIMAL_K_MIN, covariance_features, tested_features
 
     func = "covariance"
     n = pts.shape[0]
@@ -413,7 +412,7 @@ def _tested_features(pts, *, sensor, sigma, noise, alpha, eigen_mode, keep_neigh
                                     f"got {n}")
     k_max = min(OPTIMAL_K_MAX, n)
     k_min = min(OPTIMAL_K_MIN, k_max)
-    full = covariance_features(pts, k=k_max, sensor=sensor, keep_neighbors=True)
+    full = covariance_features(pts, k=k_max, sensor=sensor)
     if noise is None:
         noise = Noise.RANGE if sensor is not None else Noise.Z
     noise = str(Noise.parse(noise, "noise", func=func))
@@ -421,8 +420,8 @@ def _tested_features(pts, *, sensor, sigma, noise, alpha, eigen_mode, keep_neigh
         return full  # refused by classify_covariance, with the other methods' message
     scale, _ = _noise_scale(full, pts, sigma, noise, {}, func)
     alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0, closed="neither")
-    sizes = tested_scale(pts, full.neighborhoods, sigma=scale, noise=noise,
-                         sensor=full.sensor, k_min=k_min, alpha=alpha)
-    return prefix_features(pts, full.neighborhoods, sizes, sensor=sensor,
-                           eigen_mode=eigen_mode, keep_neighbors=keep_neighbors,
-                           progress=progress, rule="tested", k_min=k_min)
+    noise_sensor = full.sensor
+    del full  # the rows are searched again block by block (features._covariance_scale_blocks)
+    return tested_features(pts, k_max, sigma=scale, noise=noise, sensor=noise_sensor,
+                           k_min=k_min, alpha=alpha, eigen_mode=eigen_mode,
+                           keep_neighbors=keep_neighbors, progress=progress)

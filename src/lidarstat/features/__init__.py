@@ -9,7 +9,7 @@ from ._curvature_scale import point_spacing, scale_ladder
 from ._covariance import OPTIMAL_K_MAX, OPTIMAL_K_MIN, covariance_features
 from ._covariance_result import FIELDS as COVARIANCE_FIELDS
 from ._covariance_result import CovarianceResult, EigenMode, PointClass, eigen_features
-from ._covariance_scale import prefix_features, tested_scale
+from ._covariance_scale import prefix_features, tested_features, tested_scale
 from ._cylinder import cylinder_test
 from ._hk import SurfaceType, hk_surface_types
 from ._bandwidth import BandwidthResult, optimal_bandwidth
@@ -23,7 +23,7 @@ from ._plane_regression import (PLANE_FIELDS, AdaptiveBandwidth, LocalPlaneFit,
 from ._plane_bandwidth import BandwidthCriterion, BandwidthSelection, select_plane_bandwidth
 
 __all__ = ["COVARIANCE_FIELDS", "OPTIMAL_K_MIN", "OPTIMAL_K_MAX", "CovarianceResult", "covariance_features", "eigen_features",
-           "prefix_features", "tested_scale",
+           "prefix_features", "tested_features", "tested_scale",
            "BandwidthResult", "optimal_bandwidth", "FIELDS", "CurvatureResult", "FitStatus", "QuadricFit", "curvature",
            "curvature_jacobian", "curvature_tests", "curvatures", "estimate_sigma",
            "fit_quadrics", "height_variance", "principal_jacobian", "fit_factor",

@@ -23,6 +23,7 @@ from .._shared.validation import check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import Neighborhoods
 from ..stats import chi2_quantile
+from ._covariance_scale_blocks import blocked_prefix_features
 from ._noise import noise_directions, resolve_noise
 
 #: The plane test's noise share ``|d . n|`` is floored here in the tested scale (as in
@@ -34,7 +35,7 @@ MIN_SHARE = 0.2
 def optimal_scale(pts, *, sensor, eigen_mode, keep_neighbors, block_size, progress):
     """Features at every point's minimum-eigenentropy neighbourhood size (see
     :func:`covariance_features` with neither `k` nor `radius`)."""
-    from ._covariance import OPTIMAL_K_MAX, OPTIMAL_K_MIN, OPTIMAL_MIN_SPREAD, _knn_table
+    from ._covariance import OPTIMAL_K_MAX, OPTIMAL_K_MIN, OPTIMAL_MIN_SPREAD
     from ._covariance_scale_kernels import optimal_k_rows
 
     n = pts.shape[0]
@@ -43,15 +44,16 @@ def optimal_scale(pts, *, sensor, eigen_mode, keep_neighbors, block_size, progre
             f"covariance_features: the automatic scale needs at least 3 points, got {n}")
     k_max = min(OPTIMAL_K_MAX, n)
     k_min = min(OPTIMAL_K_MIN, k_max)
-    _, _, full, _ = _knn_table(pts, k_max, block_size=block_size, sort=True)
-    local = pts - pts.mean(axis=0)
-    kopt = np.empty(n, dtype=np.int64)
-    entropy = np.empty(n)
-    optimal_k_rows(local, full.indptr, full.indices, k_min, k_max, OPTIMAL_MIN_SPREAD, kopt,
-                   entropy)
-    return prefix_features(pts, full, kopt, sensor=sensor, eigen_mode=eigen_mode,
-                           keep_neighbors=keep_neighbors, block_size=block_size,
-                           progress=progress, rule="eigenentropy", k_min=k_min)
+
+    def choose(local, indptr, idx, rows):
+        kopt = np.empty(rows.size, dtype=np.int64)
+        optimal_k_rows(local, indptr, idx, k_min, k_max, OPTIMAL_MIN_SPREAD, kopt,
+                       np.empty(rows.size))
+        return kopt
+
+    return blocked_prefix_features(pts, k_max, choose, sensor=sensor, eigen_mode=eigen_mode,
+                                   keep_neighbors=keep_neighbors, block_size=block_size,
+                                   progress=progress, rule="eigenentropy", k_min=k_min)
 
 
 def tested_scale(points, neighborhoods, *, sigma, noise=None, sensor=None, k_min=None,
@@ -87,30 +89,82 @@ def tested_scale(points, neighborhoods, *, sigma, noise=None, sensor=None, k_min
     -------
     (N,) int64 ndarray
     """
-    from ._covariance import OPTIMAL_K_MIN
     from ._covariance_scale_kernels import tested_k_rows
 
+    pts = np.asarray(points, dtype=np.float64)
+    k_min, k_max, sigma2, dirs, crit = _tested_setup(
+        pts, sigma, noise, sensor, k_min, alpha, power, np.diff(neighborhoods.indptr),
+        "tested_scale")
+    local = pts - pts.mean(axis=0)
+    out = np.empty(pts.shape[0], dtype=np.int64)
+    tested_k_rows(local, neighborhoods.indptr, neighborhoods.indices, k_min, k_max, sigma2,
+                  dirs, crit, MIN_SHARE ** 2, out)
+    return out
+
+
+def tested_features(points, k_max, *, sigma, noise=None, sensor=None, k_min=None,
+                    alpha=0.05, power=0.9, eigen_mode="raw", keep_neighbors=False,
+                    block_size=262144, progress=None):
+    """Covariance features at every point's tested size among its `k_max` nearest
+    neighbours: :func:`prefix_features` of :func:`tested_scale` on the kNN rows, computed
+    a block of points at a time (the rows of the whole cloud are never held, unless
+    `keep_neighbors`).
+
+    Parameters
+    ----------
+    points : (N, 3) ndarray
+    k_max : int
+        Neighbours searched per point (the row length, at most N).
+    sigma, noise, sensor, k_min, alpha, power
+        As :func:`tested_scale`.
+    eigen_mode, keep_neighbors, block_size, progress
+        As :func:`lidarstat.features.covariance_features`.
+
+    Returns
+    -------
+    CovarianceResult
+        With ``OptimalKNN`` and ``OptimalRadius``; ``meta['rule'] == 'tested'``.
+    """
+    from ._covariance_scale_kernels import tested_k_rows
+
+    pts = np.asarray(points, dtype=np.float64)
+    k_max = int(k_max)
+    k_min, k_max, sigma2, dirs, crit = _tested_setup(
+        pts, sigma, noise, sensor, k_min, alpha, power, np.array([k_max]), "tested_features")
+    per_sigma = sigma2.size > 1
+    per_dir = dirs.shape[0] > 1
+
+    def choose(local, indptr, idx, rows):
+        out = np.empty(rows.size, dtype=np.int64)
+        tested_k_rows(local, indptr, idx, k_min, k_max,
+                      np.ascontiguousarray(sigma2[rows]) if per_sigma else sigma2,
+                      np.ascontiguousarray(dirs[rows]) if per_dir else dirs, crit,
+                      MIN_SHARE ** 2, out)
+        return out
+
+    return blocked_prefix_features(pts, k_max, choose, sensor=sensor, eigen_mode=eigen_mode,
+                                   keep_neighbors=keep_neighbors, block_size=block_size,
+                                   progress=progress, rule="tested", k_min=k_min)
+
+
+def _tested_setup(pts, sigma, noise, sensor, k_min, alpha, power, lengths, func):
+    """Checked options and the kernel's inputs of the tested scale: ``(k_min, k_max,
+    sigma2, dirs, crit)``."""
+    from ._covariance import OPTIMAL_K_MIN
     from ._curvature_scale import stop_pvalue
 
-    func = "tested_scale"
     alpha = check_scalar(alpha, "alpha", func=func, low=0.0, high=1.0, closed="neither")
     power = check_scalar(power, "power", func=func, low=0.0, high=1.0, closed="neither")
     stop_p = stop_pvalue(alpha, power)
-    pts = np.asarray(points, dtype=np.float64)
     n = pts.shape[0]
     noise = resolve_noise(noise, sensor, func=func)
     k_min = OPTIMAL_K_MIN if k_min is None else int(k_min)
-    lengths = np.diff(neighborhoods.indptr)
     k_max = int(lengths.max()) if n else 0
     crit = np.full(k_max + 1, np.inf)
     ks = np.arange(4, k_max + 1)
     crit[ks] = chi2_quantile(1.0 - stop_p, ks - 3)
     sigma2, dirs = _noise_arrays(pts, sigma, noise, sensor, n, func)
-    local = pts - pts.mean(axis=0)
-    out = np.empty(n, dtype=np.int64)
-    tested_k_rows(local, neighborhoods.indptr, neighborhoods.indices, k_min, k_max, sigma2,
-                  dirs, crit, MIN_SHARE ** 2, out)
-    return out
+    return k_min, k_max, sigma2, dirs, crit
 
 
 def prefix_features(points, neighborhoods, sizes, *, sensor=None, eigen_mode="raw",

@@ -25,7 +25,9 @@ import numpy as np
 
 from ..neighbors import CellIndex, knn_neighbors
 from ..stats import normal_quantile, z_critical
-from ._jet_fit import MONGE_NAMES, _fit_cells, _to_fit
+from . import _jet_kernels as _jk
+from ._jet_fit import MONGE_NAMES, _allocate, _fit_cells, _outs, _sensor, _to_fit
+from ._jet_kernels import SKIPPED
 
 #: Expected neighbours of the smallest rung: three times the 16 a degree-4 jet needs.
 BASE_NEIGHBORS = 48
@@ -111,24 +113,49 @@ def scale_seeds(points, cell):
 def fit_rungs(points, radii, rung, kw, block_size=131072, progress=None):
     """Jets of every point at radius ``radii[rung[i]]`` (rung -1: not fitted, SKIPPED).
 
-    One fused radius pass per rung that has points, over the whole cloud.
+    One fused radius pass per rung that has points, over the whole cloud; each block's
+    fits go straight to their points' rows, so the memory is that of the result and one
+    block.
     """
     n = points.shape[0]
-    merged = None
+    merged = _allocate(n)
+    unfitted = rung < 0
+    if unfitted.any():  # as the kernels mark a skipped point
+        merged["status"][unfitted] = SKIPPED
+        for key in ("jet", "monge", "frames", "stats", "mcof"):
+            merged[key][unfitted] = np.nan
+    slot = np.arange(n)
     todo = [j for j in range(len(radii)) if np.any(rung == j)]
     for j in todo:
-        mask = rung == j
-        out = _fit_cells(CellIndex(points, float(radii[j])), active=mask,
-                         block_size=block_size, progress=None, **kw)
-        if merged is None:
-            merged = out
-        else:
-            for key, val in out.items():
-                val_m = merged[key]
-                val_m[mask] = val[mask]
+        _fit_into(points, float(radii[j]), rung == j, kw, block_size, merged, slot)
         if progress is not None:
             progress(int(np.count_nonzero((rung >= 0) & (rung <= j))), n)
     return merged
+
+
+def _fit_into(points, radius, active, kw, block_size, dest, slot):
+    """The jets at `radius` of the points where `active` (bool, input order), written to
+    row ``slot[i]`` of every array of `dest` (:func:`._jet_fit._allocate`) for input
+    index i, a block of cells at a time: the fits of ``_jet_fit._fit_cells`` without its
+    whole-cloud output arrays."""
+    index = CellIndex(points, radius)
+    sensor_arr, has_sensor = _sensor(kw["sensor"], index.origin)
+    params = (float(index.radius), kw["degree"], kw["monge_degree"],
+              kw["weight"] == "tricube", sensor_arr, has_sensor, int(kw["min_neighbors"]),
+              bool(kw["standard_errors"]))
+    act = np.ascontiguousarray(active[index.order], dtype=np.uint8)
+    for c0, c1 in index.cell_blocks(block_size):
+        s0, s1 = int(index.cell_start[c0]), int(index.cell_start[c1])
+        index.bound_pairs(c0, c1)  # the fits' work is the pairs: refuse an impossible block
+        sel = act[s0:s1] != 0
+        if not sel.any():
+            continue
+        part = _allocate(s1 - s0)
+        _jk.fit_jets_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
+                           index.dims, float(index.radius), act, params, _outs(part))
+        rows = slot[index.order[s0:s1][sel]]
+        for key, val in part.items():
+            dest[key][rows] = val[sel]
 
 
 def choose_rungs(points, radii, criterion, alpha, tests, kw, block_size=131072):
@@ -161,10 +188,11 @@ def choose_rungs(points, radii, criterion, alpha, tests, kw, block_size=131072):
         rows = seeds[open_]
         mask = np.zeros(n, bool)
         mask[rows] = True
-        out = _fit_cells(CellIndex(points, float(radii[j])), active=mask,
-                         block_size=block_size, progress=None, **kw)
-        sub = _to_fit({key: val[rows] for key, val in out.items()}, kw["degree"],
-                      kw["monge_degree"], kw["weight"])
+        slot = np.full(n, -1, np.int64)
+        slot[rows] = np.arange(rows.size)
+        out = _allocate(rows.size)
+        _fit_into(points, float(radii[j]), mask, kw, block_size, out, slot)
+        sub = _to_fit(out, kw["degree"], kw["monge_degree"], kw["weight"])
         fields = tests(sub, rows)
         s = np.asarray(criterion.statistic(sub, fields), dtype=np.float64)
         s = np.where(sub.status == 0, s, np.nan)
