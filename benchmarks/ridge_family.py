@@ -75,23 +75,22 @@ def run_null_scene(kind, seed):
     return row
 
 
-def scale_null(rungs=4):
-    """Size of the automatic scale's k'' test on planes: the share of 1,500 independent
-    seeds (disjoint neighbourhoods) whose statistic exceeds the upper quantiles of the
-    null simulated on their own neighbourhood patterns, per rung, on a flat plane and on
-    one tilted by 60 degrees with z noise (sampled on a grid in plan: stretched twice
-    along the slope)."""
-    from indep_ridges import plane_exceedances
+def scale_null(rungs=5, samples=3000):
+    """Quantiles of the automatic scale's k'' statistic on simulated planes, per rung (the
+    calibration pools the smallest rungs), and the calibrated threshold at alpha 0.01."""
+    from lidarstat.features._jet_scale import NULL_RUNGS, SCALE_RUNGS, _null_sample, null_quantile
+    from lidarstat.segment._ridges import RIDGE_SCALE
 
-    from lidarstat.features._jet_scale import SCALE_RUNGS
-
-    probs = (0.01 / SCALE_RUNGS, 0.01, 0.002)
-    out = {"probs": [round(p, 6) for p in probs], "planes": []}
-    for tilt in (0.0, 60.0):
-        for j in range(rungs):
-            hits, n = plane_exceedances(tilt, j, probs, seed=11 + j)
-            out["planes"].append(dict(tilt=tilt, rung=j, seeds=n, exceedances=hits))
-            print(out["planes"][-1], flush=True)
+    kw = dict(degree=4, weight="tricube", min_neighbors=16)
+    out = {"pooled_rungs": NULL_RUNGS,
+           "threshold_alpha_0.01": round(null_quantile(RIDGE_SCALE, 0, 0.01 / SCALE_RUNGS, kw), 3),
+           "normal_bonferroni_alpha_0.01": 3.189, "rungs": []}
+    for j in range(rungs):
+        s = _null_sample(RIDGE_SCALE, j, 4, "tricube", 16, samples=samples, seed=99)
+        q = np.quantile(s, [0.5, 0.99, 0.998])
+        out["rungs"].append(dict(rung=j, samples=int(s.size), q50=round(float(q[0]), 3),
+                                 q99=round(float(q[1]), 3), q998=round(float(q[2]), 3)))
+        print(out["rungs"][-1], flush=True)
     return out
 
 

@@ -6,8 +6,7 @@ neighbours; ``r_0`` holds about :data:`BASE_NEIGHBORS` points at the cloud's den
 seed points (one per cube of side ``r_0``) the jets are fitted rung by rung, smallest
 first; a seed keeps the first rung at which its test statistic exceeds its null quantile
 at ``alpha / J`` (normal, Bonferroni over the criterion's tails too, or simulated for a
-calibrated criterion on the seeds' own neighbourhood patterns:
-:func:`calibrated_null`) plus a power term, so that a seed with
+calibrated criterion: :func:`null_quantile`) plus a power term, so that a seed with
 nothing to detect picks a rung by chance with probability at most ``alpha``. The climb
 stops at the first rung whose jet the chi-square test rejects (eq. 7: a wider
 neighbourhood only adds model bias) or whose neighbourhood is one-sided (a border); a
@@ -18,6 +17,7 @@ else its nearest seed's, and the jets are fitted once more at every point's radi
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -50,9 +50,9 @@ class JetScaleCriterion:
     ``statistic(fit, fields)`` returns, per fitted point, a statistic that is one-sided
     standard normal under the null (nothing to detect) for each of ``tails`` tails; a rung
     is chosen when it exceeds ``z_{1 - alpha / (J tails)}``. With ``calibrate`` the
-    statistic's null distribution is not taken as normal but simulated on the seeds' own
-    neighbourhood patterns (:func:`calibrated_null`): the rung is chosen when it exceeds
-    the simulated ``1 - alpha / J`` quantile (:func:`upper_quantile`).
+    statistic's null distribution is not taken as normal but simulated
+    (:func:`null_quantile`): the rung is chosen when it exceeds the simulated
+    ``1 - alpha / J`` quantile.
     """
 
     name: str
@@ -176,8 +176,10 @@ def choose_rungs(points, radii, criterion, alpha, tests, kw, block_size=131072):
     n = points.shape[0]
     seeds = scale_seeds(points, float(radii[0]))
     nr = len(radii)
-    z_power = normal_quantile(SCALE_POWER)
-    z_normal = z_critical(alpha / (nr * criterion.tails), sides=1) + z_power
+    z = [null_quantile(criterion, j, alpha / nr, kw) + normal_quantile(SCALE_POWER)
+         if criterion.calibrate else
+         z_critical(alpha / (nr * criterion.tails), sides=1) + normal_quantile(SCALE_POWER)
+         for j in range(nr)]
     chosen = np.full(seeds.size, -1, np.int64)
     stopped = np.zeros(seeds.size, bool)
     stat = np.full((seeds.size, nr), np.nan)
@@ -197,12 +199,6 @@ def choose_rungs(points, radii, criterion, alpha, tests, kw, block_size=131072):
         s = np.asarray(criterion.statistic(sub, fields), dtype=np.float64)
         s = np.where(sub.status == 0, s, np.nan)
         stat[open_, j] = s
-        if j == 0:
-            threshold = z_normal
-            if criterion.calibrate:  # the null simulated on the seeds' own patterns
-                ok = sub.status == 0
-                null = calibrated_null(criterion, points, rows[ok], sub.frame[ok], radii, kw)
-                threshold = upper_quantile(null, alpha / nr) + z_power
         # the jet must fit at the chosen radius (eq. 7): a rejected jet stops the climb
         # (a wider neighbourhood only adds model bias: a crease, the far side of a
         # feature); a seed whose jet is rejected before anything is detected keeps r_0
@@ -210,7 +206,7 @@ def choose_rungs(points, radii, criterion, alpha, tests, kw, block_size=131072):
         # extrapolate, and the statistic's null distribution is that of whole ones.
         whole = sub.centroid <= ONE_SIDED
         fits = np.asarray(fields["chi2_pass"], dtype=bool) & whole
-        hit = np.flatnonzero(open_)[(s > threshold) & whole]
+        hit = np.flatnonzero(open_)[(s > z[j]) & whole]
         chosen[hit] = j
         stopped[np.flatnonzero(open_)[~fits]] = True
     detected = chosen >= 0
@@ -246,13 +242,12 @@ def spread_rungs(points, seeds, chosen, detected, reach, nr):
     return rung
 
 
-#: Simulated null values of a calibrated criterion per rung: the open seeds' own
-#: neighbourhood patterns, each replicated with fresh noise until this many.
-NULL_SAMPLES = 2000
-#: Rungs whose radii the null is simulated at (pooled; :func:`calibrated_null`).
+#: Null samples of a calibrated criterion per simulated rung, and the simulated rungs
+#: (the smallest: the null of a ratio statistic depends on the neighbourhood's pattern,
+#: which is the same at every rung up to scale and count; ``benchmarks/ridge_scale_null.py``
+#: measures its quantiles at all seven).
+NULL_SAMPLES = 6000
 NULL_RUNGS = 2
-#: Largest number of neighbour entries simulated at once (memory).
-NULL_BLOCK = 2_000_000
 
 
 def _unit_fields(fit, sigma):
@@ -265,100 +260,64 @@ def _unit_fields(fit, sigma):
     return out
 
 
-def pattern_null_sample(criterion, points, rows, frames, radius, kw, *, samples=NULL_SAMPLES,
-                        rng=0):
-    """Simulated null values of ``criterion.statistic`` on the neighbourhood patterns of
-    `rows` at `radius`.
+@functools.lru_cache(maxsize=64)
+def _null_sample(criterion, rung, degree, weight, min_neighbors, samples=NULL_SAMPLES,
+                 seed=20250):
+    """Sorted simulated null values of ``criterion.statistic`` at rung `rung` of the ladder.
 
-    The null is a plane with normal noise along its normal. The statistics the scale tests
-    (ratios of a coefficient to its standard deviation) do not depend there on the noise
-    level or the plane's orientation, only on the pattern of the neighbourhood (where the
-    neighbours lie on the surface, and their weights). So each neighbourhood of the data
-    is turned into a null one: its neighbours' offsets projected onto the tangent plane
-    of the point's fitted frame (rows e1, e2 of `frames`), their 3-D distances kept (the
-    weights), and normal noise as heights; the jet is fitted and the statistic read.
-    Neighbourhoods are drawn without replacement when there are more than `samples`,
-    else each is used ``ceil(samples / len(rows))`` times with fresh noise. A plane
-    sampled on a grid in plan and tilted by 60 degrees is stretched twice along its
-    slope: its patterns, not an isotropic one, carry the law of its statistic.
-
-    Returns
-    -------
-    ndarray
-        Sorted null values (those of fitted jets).
+    The null is a plane with normal noise along its normal. The statistics the scale
+    tests (ratios of a coefficient to its standard deviation) do not depend on the noise
+    level or the plane's orientation there, only on the pattern of the neighbourhood: a
+    jittered unit grid (each node moved uniformly within its cell) with the ladder of the
+    data (:func:`radius_ladder` of the pattern itself). The statistic is read at
+    `samples` query points on a square grid of step ``1.25 r`` (neighbourhoods that share
+    few points), one patch of the pattern with one noise draw.
     """
-    from ..neighbors import Neighborhoods, radius_neighbors
-    from ._jet_fit import fit_jets
+    rng = np.random.default_rng(seed + rung)
+    r = float(radius_ladder(_pattern(rng, 48))[rung])
+    sigma = 1e-3
+    m = int(math.ceil(math.sqrt(samples)))
+    step = 1.25 * r
+    side = int(math.ceil(m * step + 2 * r)) + 2
+    pts = _pattern(rng, side)
+    pts[:, 2] = rng.normal(0.0, sigma, pts.shape[0])
+    grid = r + 1.0 + step * (np.arange(m) + 0.5)
+    gx, gy = [a.ravel()[:samples] for a in np.meshgrid(grid, grid)]
+    from scipy.spatial import cKDTree
 
-    rows = np.asarray(rows, dtype=np.int64)
-    if rows.size == 0:
-        return np.empty(0)
-    gen = np.random.default_rng(rng)
-    if rows.size > samples:
-        pick = np.sort(gen.choice(rows.size, size=samples, replace=False))
-        rows, frames = rows[pick], frames[pick]
-    nb = radius_neighbors(points, float(radius), query=rows)
-    counts = np.diff(nb.indptr)
-    owner = np.repeat(np.arange(rows.size), counts)
-    off = points[nb.indices] - points[rows][owner]
-    uv = np.c_[np.einsum("ij,ij->i", off, frames[owner, 0]),
-               np.einsum("ij,ij->i", off, frames[owner, 1])]
-    self_pos = np.flatnonzero(nb.indices == rows[owner])
-    has_self = np.zeros(rows.size, bool)
-    has_self[owner[self_pos]] = True
-    first_self = np.full(rows.size, -1, np.int64)
-    first_self[owner[self_pos][::-1]] = self_pos[::-1]
-    order = np.tile(np.flatnonzero(has_self), max(1, math.ceil(samples / max(1, has_self.sum()))))
-    sigma = 1e-3 * float(radius)
-    out = []
-    i = 0
-    while i < order.size:
-        c = np.cumsum(counts[order[i:]])
-        j = i + max(1, int(np.searchsorted(c, NULL_BLOCK, side="right")))
-        blk = order[i:j]
-        cnt = counts[blk]
-        ptr = np.r_[0, np.cumsum(cnt)]
-        src = np.concatenate([np.arange(nb.indptr[r], nb.indptr[r + 1]) for r in blk])
-        syn = np.c_[uv[src], gen.normal(0.0, sigma, src.size)]
-        query = ptr[:-1] + (first_self[blk] - nb.indptr[blk])
-        hood = Neighborhoods(ptr, np.arange(src.size), nb.distances[src], src.size,
-                             radius=float(radius), query=query)
-        fit = fit_jets(syn, hood, degree=kw["degree"], monge_degree=4, weight=kw["weight"],
-                       bandwidth=float(radius), min_neighbors=kw["min_neighbors"],
-                       standard_errors=True)
-        stat = np.asarray(criterion.statistic(fit, _unit_fields(fit, sigma)), dtype=np.float64)
-        out.append(stat[fit.status == 0])
-        i = j
-    return np.sort(np.concatenate(out))
+    _, q = cKDTree(pts[:, :2]).query(np.c_[gx, gy])
+    q = np.unique(q)
+    mask = np.zeros(pts.shape[0], bool)
+    mask[q] = True
+    kw = dict(degree=degree, monge_degree=4, weight=weight, sensor=None,
+              min_neighbors=min_neighbors, standard_errors=True)
+    out = _fit_cells(CellIndex(pts, r), active=mask, block_size=131072, progress=None, **kw)
+    fit = _to_fit({key: val[q] for key, val in out.items()}, degree, 4, weight)
+    stat = np.asarray(criterion.statistic(fit, _unit_fields(fit, sigma)), dtype=np.float64)
+    return np.sort(stat[fit.status == 0])
 
 
-def calibrated_null(criterion, points, rows, frames, radii, kw, *, samples=NULL_SAMPLES):
-    """The null sample the automatic scale uses at every rung: :func:`pattern_null_sample`
-    of the seeds `rows` (their frames at the smallest rung), half at each of the
-    ``NULL_RUNGS`` smallest radii, pooled.
+def _pattern(rng, side):
+    """A jittered unit grid of `side` x `side` nodes from the origin (z = 0)."""
+    g = np.arange(side, dtype=np.float64)
+    x, y = [a.ravel() for a in np.meshgrid(g, g)]
+    return np.c_[x + rng.uniform(-0.5, 0.5, x.size), y + rng.uniform(-0.5, 0.5, y.size),
+                 np.zeros(x.size)]
 
-    The law of a ratio statistic on a plane depends on the neighbourhood's pattern (the
-    shape of the sampling, which is the same at every rung) far more than on its count:
-    the exceedances of this null's quantiles hold their rates at rungs 0 to 3 of flat and
-    tilted planes (``benchmarks/ridge_family.py``, key ``scale_null``); simulating the
-    smallest rungs keeps the simulation's cost that of a few hundred thousand neighbour
-    pairs.
+
+def null_quantile(criterion, rung, prob, kw):
+    """The upper `prob` quantile of a criterion's statistic under the null at a rung.
+
+    Empirical from the pooled :func:`_null_sample` of the ``NULL_RUNGS`` smallest rungs
+    down to ``prob = 20 / samples``; below that the
+    excesses over that quantile are taken as exponential (their mean fitted on the top
+    20 samples), which is conservative for a statistic with a normal-like tail.
     """
-    per = int(math.ceil(samples / NULL_RUNGS))
-    return np.sort(np.concatenate([
-        pattern_null_sample(criterion, points, rows, frames, float(radii[j]), kw,
-                            samples=per, rng=j) for j in range(min(NULL_RUNGS, len(radii)))]))
-
-
-def upper_quantile(sample, prob):
-    """The upper `prob` quantile of a sorted null `sample`: empirical down to
-    ``prob = 20 / len(sample)``; below that the excesses over that quantile are taken as
-    exponential (their mean fitted on the top 20 values), which is conservative for a
-    statistic with a normal-like tail."""
-    s = np.asarray(sample, dtype=np.float64)
+    del rung  # the null does not depend on the rung (module docstring)
+    s = np.sort(np.concatenate([
+        _null_sample(criterion, j, int(kw["degree"]), str(kw["weight"]),
+                     int(kw["min_neighbors"])) for j in range(NULL_RUNGS)]))
     m = s.size
-    if m < 21:
-        return float("inf")
     p0 = 20.0 / m
     if prob >= p0:
         return float(np.quantile(s, 1.0 - prob))
