@@ -282,3 +282,19 @@ def edge_scores(scan, edge, reach):
     recall = float(edge[near].mean()) if near.any() else np.nan
     precision = float(support[edge].mean()) if edge.any() else np.nan
     return precision, recall
+
+
+#: Faces of fewer points than this are not scored by Hoover's measure (truth label 0 in
+#: :func:`hoover_counts`): a bore's wall seen through its opening is a few dozen points.
+MIN_SURFACE = 300
+
+
+def hoover_counts(scan, labels, threshold=0.8):
+    """(correct detections, scored faces) of a segmentation's `labels` against the faces
+    of `scan` with at least :data:`MIN_SURFACE` points, at Hoover's `threshold`."""
+    from lidarstat.segment import hoover
+
+    cnt = np.bincount(scan.face)
+    truth = np.where(cnt[scan.face] >= MIN_SURFACE, scan.face, 0)
+    h = hoover(labels, truth, threshold)
+    return h.correct, h.n_truth

@@ -19,12 +19,9 @@ import pytest
 import indep_parts as ip
 from lidarstat.classify import classify_covariance, covariance
 from lidarstat.features import covariance_features
-from lidarstat.segment import hoover, segment_covariance
+from lidarstat.segment import segment_covariance
 
 SEEDS = range(4)
-#: Surfaces scored by Hoover's measure: faces sampled by at least this many points (a
-#: bore's wall seen through its opening is a few dozen points at these spacings).
-MIN_SURFACE = 300
 
 
 @pytest.fixture(scope="module")
@@ -62,11 +59,9 @@ def test_edges_precision_recall(runs):
 def test_hoover_every_surface(runs):
     correct = total = 0
     for scan, _, seg in runs:
-        cnt = np.bincount(scan.face)
-        truth = np.where(cnt[scan.face] >= MIN_SURFACE, scan.face, 0)
-        h = hoover(seg.labels, truth, 0.8)
-        correct += h.correct
-        total += h.n_truth
+        c, n = ip.hoover_counts(scan, seg.labels)
+        correct += c
+        total += n
     assert correct / total >= 0.9, (correct, total)
 
 

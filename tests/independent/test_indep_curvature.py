@@ -158,10 +158,6 @@ def test_frame_z_kept_for_flat_faces():
     assert (res["surface_type"][keep] == truth[keep]).mean() >= 0.9
 
 
-#: Faces of the machined parts scored by Hoover's measure (as in test_indep_covariance.py).
-MIN_SURFACE = 300
-
-
 @pytest.mark.slow
 def test_segment_hoover_every_surface():
     """`segment --method curvature` with its defaults on the independent machined parts
@@ -170,7 +166,7 @@ def test_segment_hoover_every_surface():
     least 90 % of the faces of 300 points or more, pooled over a seed sweep."""
     import indep_parts as ip
 
-    from lidarstat.segment import hoover, segment_curvature
+    from lidarstat.segment import segment_curvature
 
     correct = total = 0
     for seed in range(2):
@@ -179,9 +175,7 @@ def test_segment_hoover_every_surface():
             for kind in ("flange", "block"):
                 scan = gen(rng, kind)
                 seg = segment_curvature(scan.points, sensor=scan.sensor)
-                cnt = np.bincount(scan.face)
-                truth = np.where(cnt[scan.face] >= MIN_SURFACE, scan.face, 0)
-                h = hoover(seg.labels, truth, 0.8)
-                correct += h.correct
-                total += h.n_truth
+                c, n = ip.hoover_counts(scan, seg.labels)
+                correct += c
+                total += n
     assert correct / total >= 0.9, (correct, total)

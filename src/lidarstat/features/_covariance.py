@@ -12,7 +12,7 @@ from ..errors import InvalidParameterError
 from ..neighbors import CellIndex, Neighborhoods, knn_cell_size
 from . import _covariance_kernels as _ck
 from . import _scan_kernels as _sk
-from ._covariance_result import EIGEN_MODES, CovarianceResult, EigenMode
+from ._covariance_result import EIGEN_MODES, CovarianceResult, EigenMode, add_sensor_fields
 
 logger = logging.getLogger(__name__)
 
@@ -243,18 +243,11 @@ def covariance_features(points, *, k=None, radius=None, neighborhoods=None, sens
     res = _assemble(raw, mean_sv, var_sv, spread, origin, order, k=k, radius=radius,
                     eigen_mode=eigen_mode, neighborhoods=keep)
     if sensor is not None:
-        ray = pts - sensor
-        rng_ = np.linalg.norm(ray, axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cos = np.abs(np.einsum("ij,ij->i", ray, res.normals)) / rng_
-        object.__setattr__(res, "sensor", sensor)
-        object.__setattr__(res, "ray_range", rng_)
-        object.__setattr__(res, "ray_cos", cos)
         if order is not None:
             scan_in = np.empty_like(scan)
             scan_in[order] = scan
             scan = scan_in
-        object.__setattr__(res, "scan_boundary", scan)
+        add_sensor_fields(res, pts, sensor, scan)
     return res
 
 

@@ -204,3 +204,16 @@ def eigen_features(evals, normal, major, *, mode="raw"):
 def _xlogx(x):
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(x > 0, x * np.log(np.where(x > 0, x, 1.0)), 0.0)
+
+
+def add_sensor_fields(res, pts, sensor, scan):
+    """Set the sensor fields of a :class:`CovarianceResult` (``sensor``, ``ray_range``,
+    ``ray_cos``, ``scan_boundary``) for the points `pts` in the result's order."""
+    ray = pts - sensor
+    rng_ = np.linalg.norm(ray, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos = np.abs(np.einsum("ij,ij->i", ray, res.normals)) / rng_
+    object.__setattr__(res, "sensor", sensor)
+    object.__setattr__(res, "ray_range", rng_)
+    object.__setattr__(res, "ray_cos", cos)
+    object.__setattr__(res, "scan_boundary", scan)

@@ -29,6 +29,7 @@ from .._shared import _memory as _mem
 from ..neighbors import CellIndex, Neighborhoods, knn_cell_size
 from . import _covariance_kernels as _ck
 from . import _scan_kernels as _sk
+from ._covariance_result import add_sensor_fields
 
 
 def blocked_prefix_features(points, k_max, choose, *, sensor=None, eigen_mode="raw",
@@ -112,20 +113,10 @@ def blocked_prefix_features(points, k_max, choose, *, sensor=None, eigen_mode="r
     res.fields["OptimalRadius"] = reach[source]
     res.meta.update(scale="optimal", rule=rule, k_min=k_min, k_max=k_max if n else 0)
     if sensor is not None:
-        _add_sensor(res, pts, np.asarray(sensor, float), scan[source])
+        add_sensor_fields(res, pts, np.asarray(sensor, float), scan[source])
     return res
 
 
-def _add_sensor(res, pts, sensor, scan):
-    """The sensor fields of :func:`lidarstat.features.covariance_features`."""
-    ray = pts - sensor
-    rng_ = np.linalg.norm(ray, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos = np.abs(np.einsum("ij,ij->i", ray, res.normals)) / rng_
-    object.__setattr__(res, "sensor", sensor)
-    object.__setattr__(res, "ray_range", rng_)
-    object.__setattr__(res, "ray_cos", cos)
-    object.__setattr__(res, "scan_boundary", scan)
 
 
 def _prefix(table, sizes):
