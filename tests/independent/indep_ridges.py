@@ -228,3 +228,38 @@ def ridge_precision(scene, ridge, *, tol_factor=2.5):
     if not sel.any():
         return 1.0
     return float(np.mean(scene.line_distance[sel] <= tol_factor * scene.spacing))
+
+
+def tilted_plane(rng, tilt_deg, nx, ny, sigma):
+    """A plane z = tan(tilt) x with noise `sigma` along z, sampled on a jittered unit grid
+    of `nx` by `ny` nodes in plan (each node moved uniformly within its cell): stretched
+    by ``1 / cos(tilt)`` along the slope."""
+    gx, gy = np.arange(nx, dtype=np.float64), np.arange(ny, dtype=np.float64)
+    x, y = (a.ravel() for a in np.meshgrid(gx, gy))
+    x = x + rng.uniform(-0.5, 0.5, x.size)
+    y = y + rng.uniform(-0.5, 0.5, y.size)
+    z = np.tan(np.radians(tilt_deg)) * x + rng.normal(0.0, sigma, x.size)
+    return np.c_[x, y, z]
+
+
+def disjoint_plane_seeds(rng, tilt_deg, radius, samples, sigma):
+    """A :func:`tilted_plane` and `samples` seed points on it whose balls of `radius` (in
+    3-D) do not overlap, so that statistics read at the seeds are independent draws.
+
+    The seeds are the points nearest the nodes of a grid in plan of steps
+    ``2 radius cos(tilt) + 2`` along the slope and ``2 radius + 2`` across it (the 2: a
+    point lies within one unit of its node), at least ``2 radius`` from the plane's edges.
+    """
+    from scipy.spatial import cKDTree
+
+    c = np.cos(np.radians(tilt_deg))
+    sx, sy = 2.0 * radius * c + 2.0, 2.0 * radius + 2.0
+    mx = int(np.ceil(np.sqrt(samples * sy / sx)))
+    my = int(np.ceil(samples / mx))
+    x0 = 2.0 * radius + 1.0
+    nx, ny = int(mx * sx + 2 * x0) + 1, int(my * sy + 2 * x0) + 1
+    xyz = tilted_plane(rng, tilt_deg, nx, ny, sigma)
+    gx, gy = (a.ravel()[:samples] for a in np.meshgrid(x0 + sx * np.arange(mx),
+                                                       x0 + sy * np.arange(my)))
+    seeds = np.unique(cKDTree(xyz[:, :2]).query(np.c_[gx, gy])[1])
+    return xyz, seeds
