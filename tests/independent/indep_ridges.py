@@ -19,10 +19,15 @@ trench):
 For a circular axis (radius ``R0`` much larger than the profile) the surface is one of
 revolution; its meridian curvature is the profile curvature of ``s = r - R0``, whose
 extrema sit at the same ``s`` as for a straight axis (``h' = h''' = 0`` on the axis).
+
+For the size of the automatic scale's test: tilted planes with seeds whose
+neighbourhoods do not overlap (:func:`disjoint_plane_seeds`), and the scale's k''
+statistic read there (:func:`plane_scale_statistic`, which calls lidarstat).
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -263,3 +268,44 @@ def disjoint_plane_seeds(rng, tilt_deg, radius, samples, sigma):
                                                        x0 + sy * np.arange(my)))
     seeds = np.unique(cKDTree(xyz[:, :2]).query(np.c_[gx, gy])[1])
     return xyz, seeds
+
+
+@functools.cache
+def _plane_field(tilt_deg, seed, top_rung, samples=2000):
+    """A plane tilted by `tilt_deg` (noise along z) with `samples` seeds whose
+    neighbourhoods at rung `top_rung` (and so at every smaller rung) are disjoint, and
+    the ladder of its pattern (read on a 120 x 120 patch of it)."""
+    from lidarstat.features._jet_scale import radius_ladder
+
+    rng = np.random.default_rng(seed)
+    sigma = 0.01
+    radii = radius_ladder(tilted_plane(rng, tilt_deg, 120, 120, sigma))
+    xyz, seeds = disjoint_plane_seeds(rng, tilt_deg, float(radii[top_rung]), samples, sigma)
+    return xyz, seeds, radii, sigma
+
+
+def plane_scale_statistic(tilt_deg, rung, seed, top_rung, alpha=0.01):
+    """The k'' selection statistic of the automatic scale at the fitted seeds of
+    :func:`_plane_field` at rung `rung` (the tests' fields at the plane's z noise)."""
+    from scipy.spatial import cKDTree
+
+    from lidarstat.features import height_variance, jet_tests
+    from lidarstat.features._jet_fit import _allocate, _to_fit
+    from lidarstat.features._jet_scale import _fit_into
+    from lidarstat.segment._ridges import _ridge_statistic
+
+    xyz, seeds, radii, sigma = _plane_field(tilt_deg, seed, top_rung)
+    r = float(radii[rung])
+    # the check: no two seeds within 2 r in 3-D, so their balls of radius r are disjoint
+    # and the counts below are independent Bernoulli draws
+    assert not cKDTree(xyz[seeds]).query_pairs(2.0 * r), "overlapping neighbourhoods"
+    mask = np.zeros(len(xyz), bool)
+    mask[seeds] = True
+    slot = np.full(len(xyz), -1, np.int64)
+    slot[seeds] = np.arange(seeds.size)
+    out = _allocate(seeds.size)
+    _fit_into(xyz, r, mask, dict(degree=4, monge_degree=4, weight="tricube", sensor=None,
+                                 min_neighbors=16, standard_errors=True), 131072, out, slot)
+    fit = _to_fit(out, 4, 4, "tricube")
+    fields = jet_tests(fit, height_variance(fit.frame, sigma, noise="z"), alpha)
+    return _ridge_statistic(fit, fields)[fit.status == 0]

@@ -12,7 +12,13 @@ import functools
 
 import numpy as np
 import pytest
-from indep_ridges import line_recall, make_null_scene, make_ridge_scene, ridge_precision
+from indep_ridges import (
+    line_recall,
+    make_null_scene,
+    make_ridge_scene,
+    plane_scale_statistic,
+    ridge_precision,
+)
 
 from lidarstat.segment import ridges
 
@@ -119,47 +125,21 @@ def test_sigma_estimate_is_median_unbiased():
     assert all(0.9 <= r <= 1.1 for r in ratios), ratios
 
 
-@functools.cache
-def _plane_field(tilt_deg, seed, top_rung, samples=2000):
-    """A plane tilted by `tilt_deg` (noise along z) with `samples` seeds whose
-    neighbourhoods at rung `top_rung` (and so at every smaller rung) are disjoint, and
-    the ladder of its pattern (read on a 120 x 120 patch of it)."""
-    from indep_ridges import disjoint_plane_seeds, tilted_plane
+def test_a_lone_detection_is_not_confirmed():
+    """A seed's chosen rung counts when a detecting seed within reach chose a rung at
+    most two above it; a lone detection, or one whose neighbours chose far larger rungs,
+    does not (confirmed_detections on seeds 1 apart, reach 2)."""
+    from lidarstat.features._jet_scale import CONFIRM_RUNGS, confirmed_detections
 
-    from lidarstat.features._jet_scale import radius_ladder
-
-    rng = np.random.default_rng(seed)
-    sigma = 0.01
-    radii = radius_ladder(tilted_plane(rng, tilt_deg, 120, 120, sigma))
-    xyz, seeds = disjoint_plane_seeds(rng, tilt_deg, float(radii[top_rung]), samples, sigma)
-    return xyz, seeds, radii, sigma
-
-
-def _plane_statistic(tilt_deg, rung, seed, top_rung, alpha=0.01):
-    """The k'' selection statistic of the automatic scale at the fitted seeds of
-    :func:`_plane_field` at rung `rung` (the tests' fields at the plane's z noise)."""
-    from scipy.spatial import cKDTree
-
-    from lidarstat.features import height_variance, jet_tests
-    from lidarstat.features._jet_fit import _allocate, _to_fit
-    from lidarstat.features._jet_scale import _fit_into
-    from lidarstat.segment._ridges import _ridge_statistic
-
-    xyz, seeds, radii, sigma = _plane_field(tilt_deg, seed, top_rung)
-    r = float(radii[rung])
-    # the check: no two seeds within 2 r in 3-D, so their balls of radius r are disjoint
-    # and the counts below are independent Bernoulli draws
-    assert not cKDTree(xyz[seeds]).query_pairs(2.0 * r), "overlapping neighbourhoods"
-    mask = np.zeros(len(xyz), bool)
-    mask[seeds] = True
-    slot = np.full(len(xyz), -1, np.int64)
-    slot[seeds] = np.arange(seeds.size)
-    out = _allocate(seeds.size)
-    _fit_into(xyz, r, mask, dict(degree=4, monge_degree=4, weight="tricube", sensor=None,
-                                 min_neighbors=16, standard_errors=True), 131072, out, slot)
-    fit = _to_fit(out, 4, 4, "tricube")
-    fields = jet_tests(fit, height_variance(fit.frame, sigma, noise="z"), alpha)
-    return _ridge_statistic(fit, fields)[fit.status == 0]
+    x = np.c_[np.arange(8.0), np.zeros(8), np.zeros(8)]
+    x[5:, 0] += 10.0  # seeds 5-7 far from 0-4
+    chosen = np.array([0, 5, 5, 4, -1, 4, -1, 1])
+    ok = confirmed_detections(x, chosen, 2.0)
+    # 0: its neighbours chose 5 (> 0 + 2); 1-3: confirmed by each other or by 0's smaller
+    # rung; 5: 7 (rung 1, 2 away) confirms it; 7: 5's rung 4 > 1 + 2 does not
+    assert CONFIRM_RUNGS == 2
+    assert ok.tolist() == [False, True, True, True, False, True, False, False]
+    assert confirmed_detections(x[:1], chosen[:1], 2.0).tolist() == [False]
 
 
 _NULL_KW = dict(degree=4, weight="tricube", min_neighbors=16)
@@ -175,7 +155,7 @@ def test_scale_null_quantile_holds_on_fresh_planes(rung):
     from lidarstat.segment._ridges import RIDGE_SCALE
     from lidarstat.stats import binomial_test
 
-    stat = _plane_statistic(0.0, rung, seed=7, top_rung=3)
+    stat = plane_scale_statistic(0.0, rung, seed=7, top_rung=3)
     n = stat.size
     assert n >= 1950
     for prob in (0.01, 0.002):
@@ -198,7 +178,7 @@ def test_scale_selection_size_on_a_steep_plane(rung):
     from lidarstat.segment._ridges import RIDGE_SCALE
     from lidarstat.stats import binomial_test
 
-    stat = _plane_statistic(60.0, rung, seed=1, top_rung=2)
+    stat = plane_scale_statistic(60.0, rung, seed=1, top_rung=2)
     n = stat.size
     assert n >= 1950
     for prob in (0.01 / SCALE_RUNGS, 0.01):
