@@ -145,13 +145,16 @@ def run(n: int = 1, env: dict | None = None) -> dict:
             work = Path(tmp) / f"g{i}"
             work.mkdir()
             out = work / "report.json"
-            procs.append((out, subprocess.Popen(
-                [sys.executable, "-c", _SCRIPT, str(out), str(work), json.dumps(labels)],
-                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)))
-        for out, proc in procs:
-            _, err = proc.communicate()
+            # stderr to a file, not a pipe: a process that fills a pipe no one reads yet
+            # would wait for the one before it
+            with open(work / "stderr.txt", "w") as err:
+                procs.append((out, work / "stderr.txt", subprocess.Popen(
+                    [sys.executable, "-c", _SCRIPT, str(out), str(work), json.dumps(labels)],
+                    stdout=subprocess.DEVNULL, stderr=err, env=env)))
+        for out, err, proc in procs:
+            proc.wait()
             if proc.returncode != 0 or not out.is_file():
-                merged["errors"].append(err[-2000:])
+                merged["errors"].append(err.read_text()[-2000:])
                 continue
             got = json.loads(out.read_text())
             merged["report"].update(got["report"])

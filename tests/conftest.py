@@ -88,12 +88,13 @@ def pytest_configure(config):
 
 
 # ------------------------------------------------------------------ compile once, then test
-# On the xdist controller, before the workers start: the warm-up commands in a few processes
-# at once, at most one per worker (tests/_compile_report.py), so that each kernel the commands use is compiled
-# once into the cache the workers and the CLI subprocesses load from, not by every process
-# that needs it first at the same time; their report is what tests/cli/test_compilation.py
-# checks. Only for the whole suite (no test paths given), where nearly every kernel is
-# needed; LIDARSTAT_TEST_WARMUP=1 asks for it on any run under xdist, =0 never.
+# On the xdist controller, before the workers start: the warm-up commands in a few
+# processes at once, at most one per worker (tests/_compile_report.py), so that each kernel
+# the commands use is compiled once into the cache the workers and the CLI subprocesses
+# load from, not by every process that needs it first at the same time; their report is
+# what tests/cli/test_compilation.py checks. Only for the whole suite (no test paths
+# given), where nearly every kernel is needed; LIDARSTAT_TEST_WARMUP=1 asks for it on any
+# run under xdist, =0 never.
 _WARMUP = {}
 
 
