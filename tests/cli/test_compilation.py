@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -32,8 +33,11 @@ def test_each_command_compiles_each_kernel_once():
     report = got["report"]
     assert {"curvature", "covariance", "ridges", "moments"} <= set(report)
     assert all(report[c] for c in report if c != "synth"), "a command ran no kernel"
+    # a helper given tuples of two lengths (``_put(out, (a, b, ...))``) is two functions
+    # by design: the variants that count differ in anything but a tuple's length
     many = {f"{command}: {kernel}": sigs for command, found in report.items()
-            for kernel, sigs in found.items() if len(sigs) > 1}
+            for kernel, sigs in found.items()
+            if len({re.sub(r"UniTuple\((\w+), \d+\)", r"UniTuple(\1)", s) for s in sigs}) > 1}
     assert not many, json.dumps(many, indent=1)
 
 
@@ -93,6 +97,7 @@ def test_read_only_inputs_compile_no_second_variant():
     from lidarstat.neighbors import CellIndex, find_duplicates, knn_neighbors
     from lidarstat.neighbors import _kernels as nk
     from lidarstat.segment import _refine, _scales
+    from lidarstat.segment._covariance_segments import segment_planes
     from lidarstat.segment._refine import segment_plane_models
     from lidarstat.segment._scales import planar_scales
 
@@ -102,14 +107,16 @@ def test_read_only_inputs_compile_no_second_variant():
     sigma = np.full(300, 0.01)
     for a in (pts, sigma):
         a.flags.writeable = False
+    kernels = [nk.grid_keys, nk.row_hash, _refine._seg_moments, _refine._residual_units,
+               _scales._prefix_planes]
+    before = [set(k.signatures) for k in kernels]  # other tests may have run them
     CellIndex(pts, 0.5)
     find_duplicates(pts)
     segment_plane_models(pts, labels, sigma)
+    segment_planes(pts, labels)
     planar_scales(pts, knn_neighbors(pts, 20), sigma, scales=(10, 20))
-    kernels = [nk.grid_keys, nk.row_hash, _refine._seg_moments, _refine._residual_units,
-               _scales._prefix_planes]
-    readonly = {k.py_func.__name__: [str(s) for s in k.signatures if "', True" in str(s)]
-                for k in kernels}
+    readonly = {k.py_func.__name__: [str(s) for s in set(k.signatures) - old
+                                     if "', True" in str(s)] for k, old in zip(kernels, before)}
     assert not any(readonly.values()), readonly
 
 
