@@ -121,6 +121,10 @@ def pytest_sessionstart(session):
 
     from _compile_report import run
 
+    tr = session.config.pluginmanager.get_plugin("terminalreporter")
+    if tr is not None:
+        tr.write_line("compiling the warm-up commands' kernels before the workers start "
+                      "(LIDARSTAT_TEST_WARMUP=0 skips it)")
     got = run(n)
     for key in ("seconds", "cpu", "count"):
         _COMPILES[key] += got["compiles"][key]
