@@ -100,7 +100,8 @@ _WARMUP = {}
 
 def _warm_up_first(config) -> int:
     """Number of warm-up processes for this run (0: none)."""
-    if hasattr(config, "workerinput") or not config.pluginmanager.hasplugin("dsession"):
+    if (hasattr(config, "workerinput") or not config.pluginmanager.hasplugin("dsession")
+            or config.option.collectonly):
         return 0
     n = len(getattr(config.option, "tx", None) or ())  # the workers xdist starts
     wanted = os.environ.get("LIDARSTAT_TEST_WARMUP")
