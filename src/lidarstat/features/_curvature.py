@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from .._shared._choices import Frame, Test
+from .._shared._jit import kernel_array
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import CellIndex, copies_degenerate, find_duplicates, run_on_unique
@@ -51,7 +52,7 @@ def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False, sprea
     dict of per-point arrays named as in ``FIELDS``.
     """
     m = out["status"].size
-    sigma2 = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma2, dtype=np.float64), (m,)))
+    sigma2 = kernel_array(np.broadcast_to(np.asarray(sigma2, dtype=np.float64), (m,)))
     st = np.empty((m, _ck.NCOL))
     test = Test.parse(test, "test", func="curvature_tests")
     mode = _ck.TEST_PAPER if test == Test.PAPER else _ck.TEST_CALIBRATED
