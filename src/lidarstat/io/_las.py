@@ -411,6 +411,91 @@ def write_file(path: Path, cloud: PointCloud, new: dict, fmt: str) -> None:
                                    f"({short_cause(exc)})") from exc
 
 
+def _copy_records(points, header):
+    """A point record for `header` holding the records of `points` byte for byte.
+
+    `header` is the input's header with new extra bytes appended (see
+    :func:`rewrite_file`): every field of the input keeps its raw bytes (coordinates as
+    the stored integers, bit fields packed as read), so nothing is decoded and encoded
+    again.
+    """
+    rec = laspy.ScaleAwarePointRecord.zeros(len(points), header=header)
+    src, dst = points.array, rec.array
+    size = src.dtype.itemsize
+    if all(dst.dtype.fields.get(name) == field for name, field in src.dtype.fields.items()):
+        # the input's fields lead the output's records at the same offsets: one copy of
+        # each record's first `size` bytes
+        rows = dst.view(np.uint8).reshape(len(dst), dst.dtype.itemsize)
+        rows[:, :size] = np.ascontiguousarray(src).view(np.uint8).reshape(len(src), size)
+    else:
+        for name in src.dtype.names:
+            dst[name] = src[name]
+    return rec
+
+
+def rewrite_file(src: Path, dst: Path, fin: str, fout: str, fields_of, points_per_chunk: int,
+                 check_fields, decode: bool = True) -> int:
+    """Copy the LAS/LAZ file `src` to `dst` with new fields, chunk by chunk.
+
+    Each chunk's records are copied as read (:func:`_copy_records`) and the new fields
+    written over them; ``fields_of(start, chunk)`` sees the chunk decoded as a
+    :class:`PointCloud` (`decode` False: the ``range`` of its positions, nothing
+    decoded). `check_fields(fields, n)` checks the fields of a chunk of `n`
+    points. The file is the one :func:`write_stream` writes from the decoded chunks.
+    Returns the number of points written.
+    """
+    _checked(src, fin, points_per_chunk, None)
+    total = 0
+    try:
+        reader = laspy.open(src, laz_backend=_BACKEND)
+    except NOT_FOREIGN:
+        raise
+    except BaseException as exc:
+        raise _unreadable(src, fin, exc) from exc
+    try:
+        with reader, atomic_path(dst) as tmp:
+            writer = None
+            try:
+                try:
+                    in_header = _strip_laszip(reader.header)
+                    crs = crs_of(in_header) if decode else None
+                except NOT_FOREIGN:
+                    raise
+                except BaseException as exc:
+                    raise _unreadable(src, fin, exc) from exc
+                for points in read_chunks(reader, src, fin, points_per_chunk):
+                    m = len(points)
+                    chunk = (_cloud_from_points(points, in_header, src, fin, crs) if decode
+                             else range(total, total + m))
+                    new = check_fields(fields_of(total, chunk), m)
+                    bare = PointCloud(np.empty((0, 3)), las_header=in_header)
+                    if writer is None:
+                        header, _ = _header_for(dst, bare, new)
+                        writer = laspy.open(tmp, mode="w", header=header,
+                                            do_compress=fout == "laz", laz_backend=_BACKEND)
+                    assign, _ = _plan(dst, bare, new, writer.header)
+                    rec = _copy_records(points, writer.header)
+                    try:
+                        for name, values in assign.items():
+                            rec[name] = values
+                    except (ValueError, OverflowError, TypeError) as exc:
+                        raise InvalidParameterError(
+                            f"{dst}: cannot build LAS points ({short_cause(exc)})") from exc
+                    writer.write_points(rec)
+                    total += m
+                if writer is None:
+                    raise InvalidParameterError(f"{dst}: nothing to write (no points)")
+            finally:
+                if writer is not None:
+                    writer.close()
+    except (OSError, InvalidParameterError, PointCloudReadError):
+        raise
+    except Exception as exc:  # laspy / lazrs errors
+        raise PointCloudWriteError(f"{dst}: cannot write {fout.upper()} file "
+                                   f"({short_cause(exc)})") from exc
+    return total
+
+
 def write_stream(path: Path, chunks, fmt: str) -> int:
     """Write ``(cloud, new_fields)`` chunks one after the other to a LAS/LAZ file.
 
