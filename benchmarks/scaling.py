@@ -175,8 +175,8 @@ def table(results: dict) -> str:
             elif r["seconds"] is None:  # timeout N s / stopped over N MiB / failed
                 cells.append(r["status"].split(":")[0].replace("timeout", "stopped at"))
             else:
-                cells.append(f"{r['seconds']:.1f} s (CPU {r['cpu_seconds']:.1f} s), "
-                             f"{r['peak_mib']:.0f} MiB")
+                cpu = f" (CPU {r['cpu_seconds']:.1f} s)" if "cpu_seconds" in r else ""
+                cells.append(f"{r['seconds']:.1f} s{cpu}, {r['peak_mib']:.0f} MiB")
         lines.append(f"| `{name}` | " + " | ".join(cells) + " |")
     cat = results.get("catalogue")
     if cat:
@@ -199,7 +199,7 @@ def figure(results: dict, path: Path) -> None:
         if not ok:
             continue
         n = [r["points"] for r in ok]
-        line, = ax_t.plot(n, [r["cpu_seconds"] for r in ok], "o-", label=name)
+        line, = ax_t.plot(n, [r.get("cpu_seconds", np.nan) for r in ok], "o-", label=name)
         ax_m.plot(n, [r["peak_mib"] for r in ok], "o-", color=line.get_color(), label=name)
     cat = results.get("catalogue")
     if cat:
