@@ -223,6 +223,17 @@ def figure(results: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def _stored_catalogue(results: dict) -> None:
+    """The largest catalogue entry of ``results_catalogue.json`` (the figure's star)."""
+    stored = HERE / "results_catalogue.json"
+    if stored.exists():
+        entries = {k: v for k, v in json.loads(stored.read_text()).items()
+                   if k.startswith("scale_")}
+        if entries:
+            results["catalogue"] = max(entries.values(), key=lambda e: e["points"])
+            results["catalogue"]["source"] = "results_catalogue.json"
+
+
 def merge(paths, out, fig) -> None:
     """The rows of several results files (a later file's row replaces an earlier one of the
     same command and size) as one results file, table and figure."""
@@ -235,6 +246,8 @@ def merge(paths, out, fig) -> None:
             results["commands"][name] = [by[k] for k in sorted(by)]
         if "catalogue" in part:
             results["catalogue"] = part["catalogue"]
+    if "catalogue" not in results:
+        _stored_catalogue(results)
     results["commands"] = {name: results["commands"][name]
                            for name in sorted(results["commands"],
                                               key=lambda c: list(COMMANDS).index(c))}
@@ -286,13 +299,7 @@ def main(argv=None):
             results["catalogue"] = catalogue.scale(tmp / "catalogue", args.catalogue,
                                                    1_000_000)
     if "catalogue" not in results:
-        stored = HERE / "results_catalogue.json"
-        if stored.exists():
-            entries = {k: v for k, v in json.loads(stored.read_text()).items()
-                       if k.startswith("scale_")}
-            if entries:
-                results["catalogue"] = max(entries.values(), key=lambda e: e["points"])
-                results["catalogue"]["source"] = "results_catalogue.json"
+        _stored_catalogue(results)
     if args.out and Path(args.out).exists():  # keep the sizes and commands not rerun
         old = json.loads(Path(args.out).read_text()).get("commands", {})
         for name, rows in old.items():
