@@ -445,55 +445,47 @@ def rewrite_file(src: Path, dst: Path, fin: str, fout: str, fields_of, points_pe
     Returns the number of points written.
     """
     _checked(src, fin, points_per_chunk, None)
-    total = 0
     try:
         reader = laspy.open(src, laz_backend=_BACKEND)
     except NOT_FOREIGN:
         raise
     except BaseException as exc:
         raise _unreadable(src, fin, exc) from exc
+
+    def parts():
+        try:
+            in_header = _strip_laszip(reader.header)
+            crs = crs_of(in_header) if decode else None
+        except NOT_FOREIGN:
+            raise
+        except BaseException as exc:
+            raise _unreadable(src, fin, exc) from exc
+        bare = PointCloud(np.empty((0, 3)), las_header=in_header)
+        start = 0
+        for points in read_chunks(reader, src, fin, points_per_chunk):
+            m = len(points)
+            chunk = (_cloud_from_points(points, in_header, src, fin, crs) if decode
+                     else range(start, start + m))
+            new = check_fields(fields_of(start, chunk), m)
+            start += m
+            yield bare, new, lambda header, assign, points=points: _copied_record(
+                dst, header, points, assign)
+
+    with reader:
+        return _write_parts(dst, parts(), fout)
+
+
+def _copied_record(path, header, points, assign):
+    """The records of `points` copied as read (:func:`_copy_records`) with the new
+    fields of `assign` written over them."""
+    rec = _copy_records(points, header)
     try:
-        with reader, atomic_path(dst) as tmp:
-            writer = None
-            try:
-                try:
-                    in_header = _strip_laszip(reader.header)
-                    crs = crs_of(in_header) if decode else None
-                except NOT_FOREIGN:
-                    raise
-                except BaseException as exc:
-                    raise _unreadable(src, fin, exc) from exc
-                for points in read_chunks(reader, src, fin, points_per_chunk):
-                    m = len(points)
-                    chunk = (_cloud_from_points(points, in_header, src, fin, crs) if decode
-                             else range(total, total + m))
-                    new = check_fields(fields_of(total, chunk), m)
-                    bare = PointCloud(np.empty((0, 3)), las_header=in_header)
-                    if writer is None:
-                        header, _ = _header_for(dst, bare, new)
-                        writer = laspy.open(tmp, mode="w", header=header,
-                                            do_compress=fout == "laz", laz_backend=_BACKEND)
-                    assign, _ = _plan(dst, bare, new, writer.header)
-                    rec = _copy_records(points, writer.header)
-                    try:
-                        for name, values in assign.items():
-                            rec[name] = values
-                    except (ValueError, OverflowError, TypeError) as exc:
-                        raise InvalidParameterError(
-                            f"{dst}: cannot build LAS points ({short_cause(exc)})") from exc
-                    writer.write_points(rec)
-                    total += m
-                if writer is None:
-                    raise InvalidParameterError(f"{dst}: nothing to write (no points)")
-            finally:
-                if writer is not None:
-                    writer.close()
-    except (OSError, InvalidParameterError, PointCloudReadError):
-        raise
-    except Exception as exc:  # laspy / lazrs errors
-        raise PointCloudWriteError(f"{dst}: cannot write {fout.upper()} file "
-                                   f"({short_cause(exc)})") from exc
-    return total
+        for name, values in assign.items():
+            rec[name] = values
+    except (ValueError, OverflowError, TypeError) as exc:
+        raise InvalidParameterError(
+            f"{path}: cannot build LAS points ({short_cause(exc)})") from exc
+    return rec
 
 
 def write_stream(path: Path, chunks, fmt: str) -> int:
@@ -503,19 +495,31 @@ def write_stream(path: Path, chunks, fmt: str) -> int:
     bytes; memory holds one chunk at a time. The file appears only when complete.
     Returns the number of points written.
     """
+    return _write_parts(path, ((cloud, new, lambda header, assign, cloud=cloud: _record(
+        path, header, cloud, assign)) for cloud, new in chunks), fmt)
+
+
+def _write_parts(path: Path, parts, fmt: str) -> int:
+    """Write ``(cloud, new_fields, make_record)`` parts to a LAS/LAZ file, atomically.
+
+    The first part's cloud (its source header, or none) and new fields fix the header;
+    ``make_record(header, assign)`` builds each part's points. Returns the number of
+    points written.
+    """
     total = 0
     try:
         with atomic_path(path) as tmp:
             writer = None
             try:
-                for cloud, new in chunks:
+                for cloud, new, make_record in parts:
                     if writer is None:
                         header, _ = _header_for(path, cloud, new)
                         writer = laspy.open(tmp, mode="w", header=header,
                                             do_compress=fmt == "laz", laz_backend=_BACKEND)
                     assign, _ = _plan(path, cloud, new, writer.header)
-                    writer.write_points(_record(path, writer.header, cloud, assign))
-                    total += len(cloud)
+                    rec = make_record(writer.header, assign)
+                    writer.write_points(rec)
+                    total += len(rec)
                 if writer is None:
                     raise InvalidParameterError(f"{path}: nothing to write (no points)")
             finally:
