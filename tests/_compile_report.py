@@ -46,30 +46,11 @@ _SCRIPT = r"""
 import gc, json, os, sys, time
 T0 = time.perf_counter()
 from pathlib import Path
-from numba.core import event
 from numba.core.registry import CPUDispatcher
 
 compiles = {"seconds": 0.0, "cpu": 0.0, "count": 0, "kernels": []}
-
-class _Outermost(event.Listener):
-    depth = 0
-    def on_start(self, ev):
-        if self.depth == 0:
-            self.t, self.c = time.perf_counter(), time.thread_time()
-            py = getattr(ev.data.get("dispatcher"), "py_func", None)
-            self.key = (f"{getattr(py, '__module__', '?')}.{getattr(py, '__qualname__', '?')}"
-                        f"{ev.data.get('args', '')}")
-        self.depth += 1
-    def on_end(self, ev):
-        self.depth -= 1
-        if self.depth == 0:
-            cpu = time.thread_time() - self.c
-            compiles["seconds"] += time.perf_counter() - self.t
-            compiles["cpu"] += cpu
-            compiles["count"] += 1
-            compiles["kernels"].append([self.key, round(cpu, 2)])
-
-event.register("numba:compile", _Outermost())
+from _compile_listener import count_compiles
+count_compiles(compiles, compiles["kernels"])
 
 from lidarstat.cli import main
 from lidarstat.cli.warmup import STEPS
@@ -135,7 +116,9 @@ def run(n: int = 1, env: dict | None = None) -> dict:
     events of the processes (outermost ones, as the summary of ``tests/conftest.py``).
     """
     env = dict(os.environ if env is None else env)
-    env["PYTHONPATH"] = os.pathsep.join([str(SRC), env.get("PYTHONPATH", "")])
+    # the package, and this folder for the compile listener the script imports
+    env["PYTHONPATH"] = os.pathsep.join([str(SRC), str(Path(__file__).resolve().parent),
+                                         env.get("PYTHONPATH", "")])
     merged = {"report": {}, "errors": [], "groups": [],
               "compiles": {"seconds": 0.0, "cpu": 0.0, "count": 0, "kernels": []}}
     t0 = time.perf_counter()

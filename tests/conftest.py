@@ -54,33 +54,9 @@ _KERNELS: list = []
 
 
 def _count_compiles():
-    import time
+    from _compile_listener import count_compiles
 
-    from numba.core import event
-
-    class _Outermost(event.Listener):
-        depth = 0
-        start = 0.0
-
-        def on_start(self, ev):
-            if self.depth == 0:
-                self.start = time.perf_counter()
-                self.cpu = time.thread_time()
-                py = getattr(ev.data.get("dispatcher"), "py_func", None)
-                self.key = (f"{getattr(py, '__module__', '?')}.{getattr(py, '__qualname__', '?')}"
-                            f"{ev.data.get('args', '')}")
-            self.depth += 1
-
-        def on_end(self, ev):
-            self.depth -= 1
-            if self.depth == 0:
-                cpu = time.thread_time() - self.cpu
-                _COMPILES["seconds"] += time.perf_counter() - self.start
-                _COMPILES["cpu"] += cpu
-                _COMPILES["count"] += 1
-                _KERNELS.append([self.key, round(cpu, 2)])
-
-    event.register("numba:compile", _Outermost())
+    count_compiles(_COMPILES, _KERNELS)
 
 
 def pytest_configure(config):
