@@ -163,6 +163,16 @@ def read_file(path: Path, fmt: str, max_bytes=None) -> PointCloud:
     return _cloud_from_points(points, header, path, fmt, crs)
 
 
+def _open_reader(path: Path, fmt: str):
+    """``laspy.open`` of `path` for reading; its failure as one line naming the file."""
+    try:
+        return laspy.open(path, laz_backend=_BACKEND)
+    except NOT_FOREIGN:
+        raise
+    except BaseException as exc:
+        raise _unreadable(path, fmt, exc) from exc
+
+
 def iter_file(path: Path, fmt: str, points_per_chunk: int, max_bytes=None
               ) -> Iterator[PointCloud]:
     """Stream a LAS/LAZ file as clouds of at most `points_per_chunk` points.
@@ -171,12 +181,7 @@ def iter_file(path: Path, fmt: str, points_per_chunk: int, max_bytes=None
     header promises: a short file raises :class:`PointCloudReadError` instead of ending early.
     """
     _checked(path, fmt, points_per_chunk, max_bytes)
-    try:
-        reader = laspy.open(path, laz_backend=_BACKEND)
-    except NOT_FOREIGN:
-        raise
-    except BaseException as exc:
-        raise _unreadable(path, fmt, exc) from exc
+    reader = _open_reader(path, fmt)
     with reader:
         try:
             header = _strip_laszip(reader.header)
@@ -445,12 +450,7 @@ def rewrite_file(src: Path, dst: Path, fin: str, fout: str, fields_of, points_pe
     Returns the number of points written.
     """
     _checked(src, fin, points_per_chunk, None)
-    try:
-        reader = laspy.open(src, laz_backend=_BACKEND)
-    except NOT_FOREIGN:
-        raise
-    except BaseException as exc:
-        raise _unreadable(src, fin, exc) from exc
+    reader = _open_reader(src, fin)
 
     def parts():
         try:
