@@ -17,7 +17,9 @@ checked truth. All files run with the default parameters (one parameter set).
 
 Where a producer's class visibly leaves a building out (``REFERENCE_OMISSIONS``), the
 score is also given without it (``tested_outside_omissions``). ``patch_evidence``
-compares the false and true roof patches of every file (``building_evidence.py``).
+compares the false and true roof patches of every file (``building_evidence.py``);
+``joint_evidence``, ``joint_rule_search`` and ``false_patches_rejected_by_reference`` (the
+bound of any rule that rejects roof patches) measure them jointly (``building_joint.py``).
 
 Usage::
 
@@ -46,6 +48,7 @@ from lidarstat.io import linear_units, read  # noqa: E402
 
 DATA = HERE.parent.parent / "shared" / "data"
 import building_evidence  # noqa: E402
+import building_joint  # noqa: E402
 from real_moments import PRODUCER_FILES as FILES  # noqa: E402 (the same files)
 LEFT_OUT = (7, 9, 18)
 FIGURE_FILE = "ahn3_amsterdam/ahn_2386_9702.laz"
@@ -143,13 +146,30 @@ def run(rel):
         patches, cloud.xyz, ev, np.asarray(fields["building_patch"]), new & keep, truth)
     row["patch_evidence"]["relative_return_share_test"] = building_evidence.relative_share_test(
         cloud.xyz, ev, np.asarray(fields["building_patch"]), multi, new & keep, truth)
+    # joint evidence: what surrounds and fills each roof patch (building_joint.py)
+    joint = building_joint.patch_features(
+        cloud.xyz, np.where(keep, ev, 0), np.asarray(fields["building_patch"]),
+        np.asarray(fields["building_plane_p"]), multi, a.get("intensity"), res.height, truth)
+    row["joint_evidence"] = building_joint.summarise(joint)
+    tp = int(np.sum(new & truth & keep))
+    row["counts"] = {"tp": tp, "fp": int(np.sum(new & ~truth & keep)),
+                     "fn": int(np.sum(~new & truth & keep))}
     # the colour channels the file carries, with their largest value (0: not recorded)
     row["colour_channels"] = {c: int(np.max(a[c])) for c in ("red", "green", "blue", "nir")
                               if c in a}
     if omit.any():
         row["omitted_points"] = int(np.sum(omit & keep))
         row["tested_outside_omissions"] = scores(new[keep & ~omit], truth[keep & ~omit])
-    return row, (cloud.xyz, truth, old, new, ref, patches)
+    ctx = (cloud.xyz, ev, np.asarray(fields["building_patch"]), multi, truth, keep)
+    # the re-decision with nothing rejected gives the class written (a check of redecide)
+    row["redecide_identity"] = bool(np.array_equal(
+        building_joint.redecide(*ctx[:4], np.zeros(0, np.int64)), new))
+    # the bound of any patch rule: every roof patch mostly outside class 6 rejected (the
+    # reference's own labels), the roof cells decided again
+    false_ids = joint[joint[:, 2] < 0.5, 0].astype(np.int64) if joint.size else []
+    row["false_patches_rejected_by_reference"] = scores(
+        building_joint.redecide(*ctx[:4], false_ids)[keep], truth[keep])
+    return row, (cloud.xyz, truth, old, new, ref, patches, joint, ctx)
 
 
 def evidence(xyz, ev, patch, multi, pred, truth, height, k=30):
@@ -272,6 +292,8 @@ def main():
     args = ap.parse_args()
     rows = []
     tables = {}
+    joint = {}
+    contexts = {}
     for rel in FILES:
         if not (DATA / rel).is_file():
             print(f"skipped (not found): {DATA / rel}")
@@ -287,9 +309,28 @@ def main():
                             HERE.parent / "docs" / "figures" / "moments_buildings_ign_omission.png")
         if rel in EVIDENCE_FILES:
             tables[EVIDENCE_FILES[rel]] = data[5]
+        joint[rel] = data[6]
+        contexts[rel] = data[7]
     if args.figures and tables:
         building_evidence.figure(tables, HERE.parent / "docs" / "figures"
                                  / "moments_buildings_patch_evidence.png")
+    search = []
+    if SB_FIGURE_FILE in joint:
+        counts = {r["file"]: (r["counts"]["tp"], r["counts"]["fp"], r["counts"]["fn"])
+                  for r in rows}
+        search = building_joint.pair_search(joint, counts, SB_FIGURE_FILE)
+        for rule in search:  # the roof cells decided again without the rejected patches
+            rule["redecided"] = {}
+            for rel, (xyz, ev, patch, multi, truth, keep) in contexts.items():
+                b = building_joint.redecide(xyz, ev, patch, multi,
+                                            building_joint.rejected(joint[rel], rule["terms"]))
+                rule["redecided"][rel] = scores(b[keep], truth[keep])
+        print("two-feature rules, best on St-Barthelemy:", json.dumps(search[:3]))
+    if args.figures and joint:
+        building_joint.figure({EVIDENCE_FILES[r]: joint[r] for r in EVIDENCE_FILES
+                               if r in joint},
+                              HERE.parent / "docs" / "figures"
+                              / "moments_buildings_joint_evidence.png")
     print("\n| file | ground total % | building P/R/F1 % tested | cell rule | s |")
     print("|---|---|---|---|---|")
     for r in rows:
@@ -302,7 +343,8 @@ def main():
                 for k in ("tested", "cells")}
         print(f"mean F1: tested {mean['tested']}, cell rule {mean['cells']}")
     if args.out:
-        Path(args.out).write_text(json.dumps({"files": rows, "machine": "shared, 2 cores",
+        Path(args.out).write_text(json.dumps({"files": rows, "joint_rule_search": search,
+                                              "machine": "shared, 2 cores",
                                               "machine_shared": True}, indent=2))
 
 
