@@ -130,8 +130,11 @@ def cmd_curvature(args):
         fields = res.to_fields()
         if stream:
             del cloud
+            # chunks of a few megabytes of records: each field is copied into records that
+            # stay in the processor's cache
             rewrite(args.input, out, lambda start, chunk: {
-                name: a[start:start + len(chunk)] for name, a in fields.items()}, decode=False)
+                name: a[start:start + len(chunk)] for name, a in fields.items()},
+                decode=False, points_per_chunk=1 << 15)
         else:
             write(out, cloud, fields=fields)
         del fields
