@@ -276,11 +276,13 @@ def child_cgal(args):
 PROFILE_PIECES = (
     ("lidarstat.io", "read", "read"),
     ("lidarstat.io", "write", "write"),
+    ("lidarstat.io", "rewrite", "write"),
     ("lidarstat.features._curvature", "find_duplicates", "duplicates"),
     ("lidarstat.features._curvature", "CellIndex", "index"),
     ("lidarstat.features._curvature", "estimate_sigma_index", "sigma"),
     ("lidarstat.features._curvature", "_run_cells", "search_fit"),
     ("lidarstat.features._curvature", "fit_height_variance", "statistics"),
+    ("lidarstat.features._curvature", "fit_variance_and_spread", "statistics"),
     ("lidarstat.features._curvature", "curvature_tests", "statistics"),
     ("lidarstat.features._curvature", "_single_radius", "_single_radius"),
     ("lidarstat.features._curvature_result", "CurvatureResult.to_fields", "fields"),
@@ -314,6 +316,12 @@ def child_profile(args):
         _app.build_parser()
     import lidarstat.features  # noqa: F401
     import lidarstat.io  # noqa: F401
+
+    for name in ("lidarstat.features._curvature", "lidarstat.io._las"):  # loaded on first use
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            pass
 
     add("imports", time.perf_counter() - t_in, time.process_time() - c_in)
 
@@ -403,6 +411,9 @@ def main_whole(args):
     tmp = Path(args.tmp or tempfile.mkdtemp(prefix="lidarstat_whole_"))
     tmp.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, NUMBA_CACHE_DIR=args.numba_cache or str(tmp / "numba_cache"))
+    # an installed package has its bytecode compiled (pip does it at install): the runs
+    # must not compile the package's Python sources at every start
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     import numba
 
     from lidarstat.io import PointCloud, write
@@ -425,7 +436,7 @@ def main_whole(args):
                     "reads binary PLY (x, y, z as doubles) and writes binary PLY (x, y, z and "
                     "the mean curvature as floats): its Debian build has no LAS plug-in; "
                     "runs alternate lidarstat / CloudCompare; medians; cpu_seconds = user + "
-                    "system of the process"),
+                    "system of the process; Python bytecode cached, as installed"),
                rows={}, profile={}, skipped={})
     if exe is None:
         res["skipped"]["cloudcompare"] = "not installed (apt-get install -y cloudcompare)"

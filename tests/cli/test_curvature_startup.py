@@ -39,8 +39,24 @@ def test_curvature_run_does_not_import_scipy_stats_or_other_methods(tmp_path):
         "from lidarstat.cli._app import main\n"
         f"assert main(['curvature', {str(tmp_path / 'in.las')!r}, {str(tmp_path / 'out.las')!r},"
         " '--radius', '0.6', '-q']) == 0\n"
-        "bad = [m for m in sys.modules if m.startswith(('scipy.stats', 'lidarstat.segment',"
-        " 'lidarstat.classify', 'lidarstat.pipeline', 'lidarstat.report', 'matplotlib', 'dask'))]\n"
+        "bad = [m for m in sys.modules if m.startswith(('scipy.stats', 'scipy.spatial',"
+        " 'lidarstat.segment', 'lidarstat.classify', 'lidarstat.pipeline', 'lidarstat.report',"
+        " 'matplotlib', 'dask', 'pandas', 'rasterio'))]\n"
+        # the other local models of lidarstat.features and the rasters of lidarstat.io
+        "bad += [m for m in ('lidarstat.features._jets', 'lidarstat.features._covariance',"
+        " 'lidarstat.features._cylinder', 'lidarstat.features._plane_regression',"
+        " 'lidarstat.io._raster', 'lidarstat.io._extent') if m in sys.modules]\n"
         "assert not bad, bad\n")
     subprocess.run([sys.executable, "-c", code], check=True)
     assert (tmp_path / "out.las").exists()
+
+
+def test_parsing_imports_no_numerics():
+    """``lidarstat curvature --help`` and a refused option parse without the numerical packages."""
+    code = ("import sys\n"
+            "from lidarstat.cli._app import build_parser\n"
+            "build_parser('curvature')\n"
+            "bad = [m for m in ('numba', 'scipy', 'laspy', 'pyproj', 'matplotlib', 'dask', "
+            "'pandas') if m in sys.modules]\n"
+            "assert not bad, bad\n")
+    subprocess.run([sys.executable, "-c", code], check=True)

@@ -272,6 +272,23 @@ def test_read_fields_selection(tmp_path, rng):
         lio.read(path, fields=["nope"])
 
 
+def test_read_las_fields_selection_decodes_the_same(tmp_path, rng):
+    path = tmp_path / "c.las"
+    n = 500
+    lio.write(path, lio.PointCloud(rng.random((n, 3)) * 100, {
+        "intensity": rng.integers(0, 60000, n).astype(np.uint16),
+        "return_number": rng.integers(1, 4, n).astype(np.uint8),
+        "classification": rng.integers(0, 20, n).astype(np.uint8)}))
+    full = lio.read(path)
+    some = lio.read(path, fields=["return_number", "x"])
+    none = lio.read(path, fields=[])
+    assert list(some.attributes) == ["return_number"] and not none.attributes
+    assert np.array_equal(some.xyz, full.xyz) and np.array_equal(none.xyz, full.xyz)
+    assert np.array_equal(some["return_number"], full["return_number"])
+    with pytest.raises(UnknownFieldError, match="c.las: unknown field 'nope'.*intensity"):
+        lio.read(path, fields=["return_number", "nope"])
+
+
 # --------------------------------------------------------------------- errors
 def test_error_empty_las(tmp_path):
     path = tmp_path / "empty.las"

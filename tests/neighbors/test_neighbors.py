@@ -41,6 +41,15 @@ def test_cell_blocks_cover_every_point_once(rng):
     assert np.all(idx < 10000)
 
 
+def test_to_input_order_inverts_the_sort(rng):
+    pts = rng.random((5000, 3)) * [30, 30, 1]
+    index = CellIndex(pts, 1.0)
+    for values in (rng.random(5000), rng.integers(0, 255, 5000).astype(np.uint8),
+                   rng.integers(-9, 9, 5000).astype(np.int32)):
+        back = index.to_input_order(values[index.order])
+        assert back.dtype == values.dtype and np.array_equal(back, values)
+
+
 def test_knn_sorted_and_includes_self(rng):
     pts = rng.random((1000, 3))
     nb = knn_neighbors(pts, 8)

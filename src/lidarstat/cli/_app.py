@@ -106,7 +106,7 @@ def cmd_info(args):
 
 def cmd_curvature(args):
     from ..features import curvature
-    from ..io import read, write
+    from ..io import read, rewrite, write
 
     out, _ = check_plan([args.input], Output("output", args.output),
                         Output("--summary-json", args.summary_json, "json"))
@@ -115,16 +115,29 @@ def cmd_curvature(args):
     opts = dict(alpha=args.alpha, test=args.test, frame=args.frame, sensor=args.sensor,
                 noise=args.noise, min_neighbors=args.min_neighbors,
                 minimal_detectable=args.minimal_detectable, power=args.power)
+    # LAS/LAZ in and out: the output is the input's records copied as read with the new
+    # fields, so only the coordinates are decoded
+    stream = {Path(args.input).suffix.lower(), out.suffix.lower()} <= {".las", ".laz"}
     t0 = time.perf_counter()
     if args.tile is not None:
         res = _curvature_tiled(args, out, radius, opts)
     else:
-        cloud = read(args.input)
+        cloud = read(args.input, fields=() if stream else None)
         res = curvature(cloud.xyz, radius=radius, sigma=args.sigma,
                         progress=progress(args.quiet), **opts)
     elapsed = time.perf_counter() - t0
     if args.tile is None:
-        write(out, cloud, fields=res.to_fields())
+        fields = res.to_fields()
+        if stream:
+            del cloud
+            # chunks of a few megabytes of records: each field is copied into records that
+            # stay in the processor's cache
+            rewrite(args.input, out, lambda start, chunk: {
+                name: a[start:start + len(chunk)] for name, a in fields.items()},
+                decode=False, points_per_chunk=1 << 15)
+        else:
+            write(out, cloud, fields=fields)
+        del fields
     if not args.quiet:
         print(f"{args.input} -> {out}  ({elapsed:.2f} s)")
         print(res.summary())

@@ -1,26 +1,42 @@
-"""Local models per point: weighted quadric (Taylor) fits, tested curvature, jets and Monge forms."""
+"""Local models per point: weighted quadric (Taylor) fits, tested curvature, jets and Monge forms.
 
-from .._shared._choices import Frame, Noise, Test, Weight
-from ._curvature import curvature, curvature_tests, estimate_sigma
-from ._curvature_result import FIELDS, CurvatureResult
-from ._noise import (fit_factor, fit_height_variance, fit_normals, height_variance,
-                     noise_directions, noise_factor, resolve_noise, sigma_from_fits)
-from ._curvature_scale import point_spacing, scale_ladder
-from ._covariance import OPTIMAL_K_MAX, OPTIMAL_K_MIN, covariance_features
-from ._covariance_result import FIELDS as COVARIANCE_FIELDS
-from ._covariance_result import CovarianceResult, EigenMode, PointClass, eigen_features
-from ._covariance_scale import prefix_features, tested_features, tested_scale
-from ._cylinder import cylinder_test
-from ._hk import SurfaceType, hk_surface_types
-from ._bandwidth import BandwidthResult, optimal_bandwidth
-from ._curvature_formulas import curvature_jacobian, curvatures, principal_jacobian
-from ._jet_fit import MONGE_NAMES, JetFit, PrincipalDirections, fit_jets, principal_directions
-from ._jet_scale import CURVATURE_SCALE, JetScaleCriterion, radius_ladder
-from ._jets import JET_FIELDS, JetResult, jet_tests, jets
-from ._quadric import FitStatus, QuadricFit, fit_quadrics
-from ._plane_regression import (PLANE_FIELDS, AdaptiveBandwidth, LocalPlaneFit,
-                                geary_bandwidths, local_planes)
-from ._plane_bandwidth import BandwidthCriterion, BandwidthSelection, select_plane_bandwidth
+The names are loaded on first use (PEP 562): ``lidarstat curvature`` imports the quadric
+and curvature modules, not the covariance features, jets, cylinders or local planes.
+"""
+
+from importlib import import_module
+
+#: Public name -> the module of this package that defines it (``COVARIANCE_FIELDS`` is
+#: ``_covariance_result.FIELDS``).
+_WHERE = {
+    **dict.fromkeys(("Frame", "Noise", "Test", "Weight"), ".._shared._choices"),
+    **dict.fromkeys(("curvature", "curvature_tests", "estimate_sigma"), "._curvature"),
+    **dict.fromkeys(("FIELDS", "CurvatureResult"), "._curvature_result"),
+    **dict.fromkeys(("fit_factor", "fit_height_variance", "fit_normals", "height_variance",
+                     "noise_directions", "noise_factor", "resolve_noise", "sigma_from_fits"),
+                    "._noise"),
+    **dict.fromkeys(("point_spacing", "scale_ladder"), "._curvature_scale"),
+    **dict.fromkeys(("OPTIMAL_K_MAX", "OPTIMAL_K_MIN", "covariance_features"), "._covariance"),
+    **dict.fromkeys(("COVARIANCE_FIELDS", "CovarianceResult", "EigenMode", "PointClass",
+                     "eigen_features"), "._covariance_result"),
+    **dict.fromkeys(("prefix_features", "tested_features", "tested_scale"),
+                    "._covariance_scale"),
+    "cylinder_test": "._cylinder",
+    **dict.fromkeys(("SurfaceType", "hk_surface_types"), "._hk"),
+    **dict.fromkeys(("BandwidthResult", "optimal_bandwidth"), "._bandwidth"),
+    **dict.fromkeys(("curvature_jacobian", "curvatures", "principal_jacobian"),
+                    "._curvature_formulas"),
+    **dict.fromkeys(("MONGE_NAMES", "JetFit", "PrincipalDirections", "fit_jets",
+                     "principal_directions"), "._jet_fit"),
+    **dict.fromkeys(("CURVATURE_SCALE", "JetScaleCriterion", "radius_ladder"), "._jet_scale"),
+    **dict.fromkeys(("JET_FIELDS", "JetResult", "jet_tests", "jets"), "._jets"),
+    **dict.fromkeys(("FitStatus", "QuadricFit", "fit_quadrics"), "._quadric"),
+    **dict.fromkeys(("PLANE_FIELDS", "AdaptiveBandwidth", "LocalPlaneFit", "geary_bandwidths",
+                     "local_planes"), "._plane_regression"),
+    **dict.fromkeys(("BandwidthCriterion", "BandwidthSelection", "select_plane_bandwidth"),
+                    "._plane_bandwidth"),
+}
+_RENAMED = {"COVARIANCE_FIELDS": "FIELDS"}
 
 __all__ = ["COVARIANCE_FIELDS", "OPTIMAL_K_MIN", "OPTIMAL_K_MAX", "CovarianceResult", "covariance_features", "eigen_features",
            "prefix_features", "tested_features", "tested_scale",
@@ -36,3 +52,16 @@ __all__ = ["COVARIANCE_FIELDS", "OPTIMAL_K_MIN", "OPTIMAL_K_MAX", "CovarianceRes
            "PrincipalDirections", "fit_jets", "jet_tests", "jets", "principal_directions",
            "SurfaceType", "hk_surface_types", "cylinder_test", "PointClass", "EigenMode",
            "Noise", "Test", "Frame", "Weight"]
+
+
+def __getattr__(name: str):
+    where = _WHERE.get(name)
+    if where is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(where, __name__), _RENAMED.get(name, name))
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(__all__)

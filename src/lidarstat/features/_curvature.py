@@ -20,8 +20,8 @@ from . import _quadric_kernels as _k
 from ._curvature_result import CurvatureResult
 from ._curvature_scale import climb_into, scale_ladder, walk_ladder
 from ._hk import hk_surface_types
-from ._noise import (estimate_sigma, estimate_sigma_index, fit_factor_spread,
-                     fit_height_variance, resolve_noise)
+from ._noise import (estimate_sigma, estimate_sigma_index, fit_variance_and_spread,
+                     resolve_noise)
 from ._quadric import FitStatus, _run_cells, check_fit_options
 
 logger = logging.getLogger(__name__)
@@ -121,28 +121,28 @@ def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neigh
         out = _run_cells(index, c0, c1, bandwidth=radius, frame=frame, sensor=sensor_local,
                          min_neighbors=min_neighbors, covariance=covariance,
                          active=active_sorted)
-        sigma2 = fit_height_variance(out["beta"], out["frames"], sigma, noise=noise,
-                                     radius=radius, points=index.sorted_points[s0:s1],
-                                     sensor=sensor_local)
-        spread = fit_factor_spread(out["beta"], out["frames"], noise, radius=radius,
-                                   points=index.sorted_points[s0:s1], sensor=sensor_local)
+        sigma2, spread = fit_variance_and_spread(
+            out["beta"], out["frames"], sigma, noise=noise, radius=radius,
+            points=index.sorted_points[s0:s1], sensor=sensor_local)
         res = curvature_tests(out, sigma2=sigma2, alpha=alpha, test=test,
                               minimal_detectable=minimal_detectable, spread=spread)
         res["z0"] = res["z0"] + index.sorted_points[s0:s1, 2] + index.origin[2]
-        rows = index.order[s0:s1]  # the block's input positions: one scatter per field
         if into is not None:
-            into(rows, res)
+            into(index.order[s0:s1], res)  # the block's input positions
             done += s1 - s0
             if progress is not None:
                 progress(done, n)
             continue
         if fields is None:
             fields = {k: np.empty(n, dtype=v.dtype) for k, v in res.items()}
-        for k, v in res.items():
-            fields[k][rows] = v
+        for k, v in res.items():  # sorted order: contiguous slices
+            fields[k][s0:s1] = v
         done += s1 - s0
         if progress is not None:
             progress(done, n)
+    if fields is not None:
+        for k in list(fields):  # one permutation per field, each replaced as it is done
+            fields[k] = index.to_input_order(fields[k])
     return fields
 
 

@@ -199,8 +199,13 @@ def fit_factor(beta, frames, noise, *, radius, points=None, sensor=None):
         At least :data:`FACTOR_FLOOR` (1 where the fit is undefined).
     """
     beta = np.asarray(beta, dtype=np.float64)
-    m2 = TRICUBE_M2 * float(radius) ** 2
     terms = _factor_terms(beta, frames, noise, points=points, sensor=sensor)
+    return _factor_from_terms(terms, beta, radius)
+
+
+def _factor_from_terms(terms, beta, radius):
+    """:func:`fit_factor` from the :func:`_factor_terms` of the fits."""
+    m2 = TRICUBE_M2 * float(radius) ** 2
     if terms is None:
         g0 = beta[:, 1:3]
         a3, a4, a5 = beta[:, 3], beta[:, 4], beta[:, 5]
@@ -256,6 +261,11 @@ def fit_factor_spread(beta, frames, noise, *, radius, points=None, sensor=None):
     terms = _factor_terms(beta, frames, noise, points=points, sensor=sensor)
     if terms is None:
         return np.ones(beta.shape[0])
+    return _spread_from_terms(terms, radius)
+
+
+def _spread_from_terms(terms, radius):
+    """:func:`fit_factor_spread` from the (not None) :func:`_factor_terms` of the fits."""
     a, g2 = terms
     b2 = float(radius) ** 2
     a2 = a * a
@@ -272,6 +282,16 @@ def fit_height_variance(beta, frames, sigma, *, noise, radius, points=None, sens
     quadric fit use."""
     return sigma * sigma * fit_factor(beta, frames, noise, radius=radius, points=points,
                                       sensor=sensor)
+
+
+def fit_variance_and_spread(beta, frames, sigma, *, noise, radius, points=None, sensor=None):
+    """:func:`fit_height_variance` and :func:`fit_factor_spread` of the same fits, from one
+    evaluation of the noise direction in each fit's frame."""
+    beta = np.asarray(beta, dtype=np.float64)
+    terms = _factor_terms(beta, frames, noise, points=points, sensor=sensor)
+    variance = sigma * sigma * _factor_from_terms(terms, beta, radius)
+    spread = np.ones(beta.shape[0]) if terms is None else _spread_from_terms(terms, radius)
+    return variance, spread
 
 
 def sigma_from_fits(q, trace_b, trace_b2, factor):

@@ -257,7 +257,13 @@ def read(path: str | os.PathLike, *, fields=None, max_bytes: int | None = None) 
         raise PointCloudReadError(f"{path}: no such file")
     if path.is_dir():
         raise PointCloudReadError(f"{path}: is a directory, not a point-cloud file")
-    cloud = _module(fmt).read_file(path, fmt, max_bytes=max_bytes)
+    if fmt in ("las", "laz") and fields is not None:
+        # decode only the attributes asked for
+        keep = [f for f in ([fields] if isinstance(fields, str) else fields)
+                if f.lower() not in _XYZ]
+        cloud = _module(fmt).read_file(path, fmt, max_bytes=max_bytes, keep=keep)
+    else:
+        cloud = _module(fmt).read_file(path, fmt, max_bytes=max_bytes)
     return _finish(cloud, path, fields)
 
 

@@ -105,16 +105,19 @@ def _strip_laszip(header):
     return header
 
 
-def _cloud_from_points(points, header, path: Path, fmt: str, crs) -> PointCloud:
+def _cloud_from_points(points, header, path: Path, fmt: str, crs, keep=None) -> PointCloud:
+    """The decoded cloud of `points`: coordinates and the attributes named in `keep`
+    (default all; every one when `keep` names one the records lack, so that the caller's
+    check of the names sees them all)."""
+    names = [n for n in header.point_format.dimension_names if n not in ("X", "Y", "Z")]
+    if keep is not None and set(keep) <= set(names):
+        names = [n for n in names if n in keep]
     try:
         xyz = np.empty((len(points), 3), dtype=np.float64)
         for j, dim in enumerate("XYZ"):
-            xyz[:, j] = (np.asarray(points[dim], dtype=np.float64) * header.scales[j]
-                         + header.offsets[j])
-        attrs = {}
-        for name in header.point_format.dimension_names:
-            if name not in ("X", "Y", "Z"):
-                attrs[name] = np.array(points[name])
+            np.multiply(points[dim], header.scales[j], out=xyz[:, j])
+            xyz[:, j] += header.offsets[j]
+        attrs = {name: np.array(points[name]) for name in names}
     except NOT_FOREIGN:
         raise
     except BaseException as exc:  # e.g. extra-bytes VLR describing fields the records lack
@@ -144,8 +147,9 @@ def _checked(path: Path, fmt: str, chunk: int | None, max_bytes, allow_empty: bo
     return layout
 
 
-def read_file(path: Path, fmt: str, max_bytes=None) -> PointCloud:
-    """Read a whole LAS/LAZ file into a :class:`PointCloud` (structure checked first)."""
+def read_file(path: Path, fmt: str, max_bytes=None, keep=None) -> PointCloud:
+    """Read a whole LAS/LAZ file into a :class:`PointCloud` (structure checked first);
+    only the attributes named in `keep` are decoded (default all)."""
     _checked(path, fmt, None, max_bytes)
     try:
         las = laspy.read(path, laz_backend=_BACKEND)
@@ -160,7 +164,7 @@ def read_file(path: Path, fmt: str, max_bytes=None) -> PointCloud:
     if len(points) != n_header:
         raise PointCloudReadError(f"{path}: unreadable {fmt.upper()} file (header announces "
                                   f"{n_header} points, {len(points)} found)")
-    return _cloud_from_points(points, header, path, fmt, crs)
+    return _cloud_from_points(points, header, path, fmt, crs, keep)
 
 
 def _open_reader(path: Path, fmt: str):

@@ -220,6 +220,13 @@ def permute_rows(indptr, indices, distances, row_of, order):
 
 
 # ------------------------------------------------------------------ building the index
+@njit_parallel
+def scatter_to(values, order, out):
+    """``out[order[i]] = values[i]``: sorted-order values back to input order, in parallel."""
+    for i in prange(order.size):
+        out[order[i]] = values[i]
+
+
 @njit
 def grid_keys(points, origin, cell, dims, flat, keys):
     """Row-major cell key of every point: ``floor((p - origin) / cell)`` clipped to `dims`.

@@ -87,6 +87,14 @@ class CellIndex:
             self.cell_keys = np.ascontiguousarray(skeys[starts[:-1]])
             self.cell_start = starts
 
+    def to_input_order(self, values):
+        """Per-point `values` (N,) in the sorted order of the index, in input order (one
+        parallel scatter through :attr:`order`)."""
+        values = np.ascontiguousarray(values)
+        out = np.empty_like(values)
+        _kernels.scatter_to(values, self.order, out)
+        return out
+
     @property
     def n_cells(self) -> int:
         """Number of occupied cells."""
