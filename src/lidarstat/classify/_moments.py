@@ -298,10 +298,12 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                                                    step=0.3 / uz)
     del perm  # the ranks of the ground steps' ties
     release_freed()
-    tolerance = np.full(len(z), np.inf)
     if terrain and method is MomentsMethod.MOMENTS:
+        height = surf = None  # replaced by the terrain's: freed before it allocates
         ground, height, surf, tolerance = terrain_step(xy, z, ground, ux=ux, uz=uz)
         release_freed()
+    else:
+        tolerance = np.full(len(z), np.inf)
     # 5. roads
     road, road_step = road_points(xy, inten, ground, p, road_rule=road_rule,
                                   road_cell_points=road_cell_points,
