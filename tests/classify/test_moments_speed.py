@@ -311,3 +311,76 @@ def test_ground_surface_on_rows_equals_the_copied_ground(seed):
                                         rank=None if r is None else r[rows])
             q = g.uniform(-5, 45, (500, 2))
             assert np.array_equal(a(q), b(q))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_in_place_row_kernels_equal_numpy_gathers(seed):
+    from lidarstat.classify._moments_kernels import compact_rows, permute_rows
+
+    g = np.random.default_rng(seed)
+    n = int(g.integers(1, 3000))
+    a = g.normal(size=(n, 3))
+    order = g.permutation(n)
+    b = a.copy()
+    permute_rows(b, order)
+    assert np.array_equal(b, a[order])
+    keep = g.uniform(size=n) < 0.7
+    c = a.copy()
+    m = compact_rows(c, keep)
+    assert m == keep.sum() and np.array_equal(c[:m], a[keep])
+
+
+def test_overwrite_xyz_gives_the_same_fields(rng):
+    """The work arrays in the caller's memory (and in the own copy of non-float input)
+    change no field; low noise makes the in-place removal of rows run too."""
+    xyz, inten, nret, rnum, _ = _scene(rng, 6000)
+    xyz[:3, 2] -= 30.0  # three low-noise points
+    kw = dict(number_of_returns=nret, return_number=rnum, window=50)
+    ref = moments(xyz, inten, **kw)
+    assert ref.params["n_low_noise"] >= 1
+    own = xyz.copy()
+    for got in (moments(own, inten, overwrite_xyz=True, **kw),
+                moments(xyz.tolist(), inten, **kw)):
+        for name, v in ref.to_fields().items():
+            assert np.array_equal(got.to_fields()[name], v, equal_nan=True), name
+    assert not np.array_equal(own, xyz)  # the memory was used
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_noise_fence_equals_the_sorted_key_reference(seed):
+    from lidarstat.classify._terrain import noise_fence
+    from lidarstat.classify._terrain_kernels import block_spread
+
+    g = np.random.default_rng(seed)
+    n = 5000
+    xy = g.uniform(0, 60, (n, 2))
+    h = np.round(g.normal(0, 0.05, n), 3)  # zeros: vertices, left out
+    ground = g.uniform(size=n) < 0.8
+    cell, fence, nx, ny = 2.0, 7.0, 30, 30
+    key = np.floor(xy[:, 0] / cell).astype(np.int64) * ny + np.floor(xy[:, 1] / cell).astype(
+        np.int64)
+    src = ground & (h != 0)
+    values = h[src][np.argsort(key[src], kind="stable")]
+    offsets = np.r_[0, np.cumsum(np.bincount(key[src], minlength=nx * ny))]
+    centre, spread = np.full(nx * ny, np.nan), np.full(nx * ny, np.nan)
+    block_spread(offsets, values, nx, ny, np.unique(key[ground]), 64, 8, centre, spread)
+    ref = centre[key] + fence * spread[key]
+    ref[~np.isfinite(ref)] = np.inf
+    got = noise_fence(xy, h, ground, cell=cell, fence=fence, min_points=64, max_radius=8)
+    assert np.array_equal(got, ref)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_raised_patch_copy_check_finds_every_copy(seed):
+    from lidarstat.classify._continuity import _may_repeat
+    from lidarstat.neighbors import find_duplicates
+
+    g = np.random.default_rng(seed)
+    n = 2000
+    xy, z = np.round(g.uniform(0, 30, (n, 2)), 1), np.round(g.normal(size=n), 1)
+    if seed % 2:
+        xy[:3], z[:3] = xy[-3:], z[-3:]
+    if seed == 2:  # -0.0 and 0.0 are one location
+        xy[0], xy[1], z[1] = (-0.0, 5.0), (0.0, 5.0), z[0]
+    ref = find_duplicates(np.c_[xy, z]).any
+    assert _may_repeat(xy, z) == ref

@@ -93,7 +93,9 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     """
     xy = np.asarray(xy, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
-    dup = find_duplicates(np.c_[xy, z]) if z.size else None
+    # the copies are grouped (an (N, 3) copy and three index arrays) only when the
+    # hashes of the locations say there may be some
+    dup = find_duplicates(np.c_[xy, z]) if z.size and _may_repeat(xy, z) else None
     if dup is not None and dup.any:
         # copies of a point are joined to it (distance 0, same elevation) and share its
         # patch: the graph is built on the distinct points, whose kNN search does not
@@ -135,6 +137,7 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     pos, order = grid.pos, grid.order
     del grid
     lab, ncomp, first = _component_labels(parent, order)
+    del parent, order
     ci, cj, cup = np.concatenate(ci), np.concatenate(cj), np.concatenate(cup)
     other = lab[ci] != lab[cj]
     li = lab[ci[other]]
@@ -171,10 +174,15 @@ class _Grid2D:
             by_rank = np.empty(key.size, np.int64)
             by_rank[rank] = np.arange(key.size)
             key = key[by_rank]
-        self.order, self.cell_start = cell_order(key)
-        self.cell_keys = key[self.order[self.cell_start[:-1]]]
+        order, self.cell_start = cell_order(key)
+        self.cell_keys = key[order[self.cell_start[:-1]]]
         del key
-        self.pos = self.order if by_rank is None else by_rank[self.order]
+        # positions as int32 below 2^31 points: half the memory of the two index arrays
+        index = np.int32 if order.size < 2**31 - 1 else np.int64
+        self.pos = (order if by_rank is None else by_rank[order]).astype(index)
+        del by_rank
+        self.order = order.astype(index)
+        del order
         self.dims = np.array([self.cell_keys[-1] // ny + 1, ny, 1], np.int64)
         self.points = np.zeros((self.pos.size, 3))
         self.points[:, 0] = xy[self.pos, 0] - lo[0]
@@ -282,6 +290,45 @@ def _join_smooth(parent, zs, nbr, smooth, start):  # pragma: no cover - compiled
     return ci, cj, up
 
 
+def _may_repeat(xy, z) -> bool:
+    """False when no two points share a location (every hash of their coordinates'
+    bits distinct); True when two hashes are equal (a copy, or a collision)."""
+    bits = np.ascontiguousarray(xy).view(np.uint64)
+    h = _location_hash(bits[:, 0], bits[:, 1], np.ascontiguousarray(z).view(np.uint64))
+    h.sort()
+    return bool((h[1:] == h[:-1]).any())
+
+
+_NEG_ZERO = np.uint64(0x8000000000000000)  # the bits of -0.0
+
+
+@njit
+def _location_hash(bx, by, bz):  # pragma: no cover - compiled
+    """64-bit hash of the bits of every point's (x, y, z), -0.0 taken as 0.0: the hash
+    of :func:`lidarstat.neighbors.find_duplicates` from the columns (no (N, 3) copy)."""
+    c0 = np.uint64(0x9E3779B97F4A7C15)
+    c1 = np.uint64(0xC2B2AE3D27D4EB4F)
+    c2 = np.uint64(0x165667B19E3779F9)
+    c3 = np.uint64(0xBF58476D1CE4E5B9)
+    out = np.empty(bz.size, np.uint64)
+    for i in range(bz.size):
+        b0 = bx[i]
+        b1 = by[i]
+        b2 = bz[i]
+        if b0 == _NEG_ZERO:
+            b0 = np.uint64(0)
+        if b1 == _NEG_ZERO:
+            b1 = np.uint64(0)
+        if b2 == _NEG_ZERO:
+            b2 = np.uint64(0)
+        h = (b0 * c0) ^ (b1 * c1) ^ (b2 * c2)
+        h ^= h >> np.uint64(29)
+        h *= c3
+        h ^= h >> np.uint64(32)
+        out[i] = h
+    return out
+
+
 @njit
 def _component_labels(parent, order):  # pragma: no cover - compiled
     """Component ids in sorted order, their count and each one's lowest input index."""
@@ -298,4 +345,4 @@ def _component_labels(parent, order):  # pragma: no cover - compiled
             nlab += 1
         lab[i] = root_label[root]
         first[lab[i]] = min(first[lab[i]], order[i])
-    return lab, nlab, first[:nlab]
+    return lab, nlab, first[:nlab].copy()

@@ -33,7 +33,7 @@ from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatDeprecationWarning, LidarstatWarning
 from ._cycle import ElevationRule
 from ._moments_ground import drop_raised_patches, ground_cut, heights
-from ._moments_kernels import canonical_order
+from ._moments_kernels import canonical_order, compact_rows, permute_rows
 from ._moments_objects import asprs_classes, building_step
 from ._moments_options import MomentsMethod, MomentsOptions, unit_factors
 from ._moments_result import ASPRS, MomentsClassification
@@ -61,7 +61,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
             source: str | None = None,
             road_threshold: float | None = None,
             terrain: bool = True, building_alpha: float = 0.01,
-            sigma: float | None = None) -> MomentsClassification:
+            sigma: float | None = None,
+            overwrite_xyz: bool = False) -> MomentsClassification:
     """Classify points as ground, road, building, vegetation or unclassified without training.
 
     Parameters
@@ -160,6 +161,11 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     sigma : float, optional
         Noise std (metres) of the building tests; estimated from the local planes of the
         ground when not given.
+    overwrite_xyz : bool
+        Allow the classification to use the memory of `xyz` (a C-contiguous float64
+        array) for its own work arrays: `xyz` holds no coordinates afterwards. A caller
+        that does not need the coordinates again (a file read only to classify it)
+        saves a copy of them, 24 bytes a point, for the whole run.
 
     Returns
     -------
@@ -204,6 +210,9 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     """
     pts = check_points(xyz, min_points=8, source=source)
     n = len(pts)
+    # the work arrays take the coordinates' memory when it is this call's own copy or the
+    # caller gives it up
+    reuse = bool(overwrite_xyz) or (pts is not xyz and pts.base is None)
     method = MomentsMethod(check_option(method, "method", [m.value for m in MomentsMethod],
                                         func=_FUNC))
     elevation_rule = ElevationRule(check_option(
@@ -244,14 +253,18 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     # bring them in another order than the whole file): every step runs on the points
     # sorted by x, y, z and intensity, and the results go back to the caller's order.
     canon = canonical_order(pts[:, 0], pts[:, 1], pts[:, 2], inten)
-    pts = np.take(pts, canon, axis=0)  # rows by np.take: a third of fancy indexing's time
+    if reuse:
+        permute_rows(pts, canon)
+    else:
+        pts = np.take(pts, canon, axis=0)  # rows by np.take: a third of fancy indexing's time
     inten, nret, rnum = (None if a is None else a[canon] for a in (inten, nret, rnum))
 
     # 1. low noise, out of every analysis
     noise = (low_outliers(pts[:, :2], pts[:, 2], min_depth=0.5 / uz) if low_noise
              else np.zeros(n, bool))
     pts_noise = pts[noise]  # for their heights under the final surface
-    pts, inten, multi, has_returns = _without_low_noise(noise, pts, inten, nret, rnum, source)
+    pts, inten, multi, has_returns = _without_low_noise(noise, pts, inten, nret, rnum, source,
+                                                        in_place=reuse)
     del nret, rnum
     release_freed()  # between steps: what a step freed goes back to the system
 
@@ -275,11 +288,7 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         dest = dest.astype(np.int32)
     low = canon[np.flatnonzero(noise)]
     del canon, kept
-    xy = np.empty((perm.size, 2))  # column by column: no (N, 2) temporaries
-    for j in range(2):
-        np.subtract(pts[:, j][perm], origin[j], out=xy[:, j])
-    z = pts[:, 2][perm]
-    z -= origin[2]
+    xy, z = _window_frame(pts, perm, origin, in_place=reuse)
     del pts  # the caller's array (or its copy without the low noise): not needed again
     release_freed()
     inten = None if inten is None else inten[perm]
@@ -298,10 +307,17 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                                                    step=0.3 / uz)
     del perm  # the ranks of the ground steps' ties
     release_freed()
-    tolerance = np.full(len(z), np.inf)
     if terrain and method is MomentsMethod.MOMENTS:
+        height = surf = None  # replaced by the terrain's: freed before it allocates
         ground, height, surf, tolerance = terrain_step(xy, z, ground, ux=ux, uz=uz)
         release_freed()
+    else:
+        tolerance = np.full(len(z), np.inf)
+    low_height = None  # heights of the low noise under the final surface
+    if low.size and surf is not None:
+        q = pts_noise - origin
+        low_height = heights(q[:, 2], surf(q[:, :2]))
+    del pts_noise, surf  # the surface's TIN: not needed again
     # 5. roads
     road, road_step = road_points(xy, inten, ground, p, road_rule=road_rule,
                                   road_cell_points=road_cell_points,
@@ -347,9 +363,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     ground = _expand(dest, low, n, ground, fill=(False,))[0]
     cut = _expand(dest, low, n, cut, fill=(np.nan,))[0]
     tolerance = _expand(dest, low, n, tolerance, fill=(np.nan,))[0]
-    if low.size and surf is not None:  # heights of the low noise under the final surface
-        q = pts_noise - origin
-        height[low] = heights(q[:, 2], surf(q[:, :2]))
+    if low_height is not None:
+        height[low] = low_height
     building_fields = {}  # per candidate: the other points (low noise too) get NaN or 0
     brows = dest[brows]
     for name in list(blds.fields):
@@ -382,21 +397,46 @@ def _seed(rng) -> int:
     return check_scalar(rng, "rng", func=_FUNC, low=0, closed="left", integer=True)
 
 
-def _without_low_noise(noise, pts, inten, nret, rnum, source):
+def _without_low_noise(noise, pts, inten, nret, rnum, source, in_place=False):
     """The points and attributes left out of the low noise, and the vegetation candidates
-    (non-last returns of multi-return pulses): ``(pts, inten, multi, has_returns)``."""
+    (non-last returns of multi-return pulses): ``(pts, inten, multi, has_returns)``.
+    `in_place`: the points kept are moved to the front of `pts` (no copy)."""
     if noise.any():
         keep = ~noise
         if keep.sum() < 8:
             raise InvalidParameterError(f"{source or 'points'}: fewer than 8 points left "
                                         "after removing low outliers")
-        pts = pts[keep]
+        pts = pts[:compact_rows(pts, keep)] if in_place else pts[keep]
         inten, nret, rnum = (None if a is None else a[keep] for a in (inten, nret, rnum))
     has_returns = nret is not None and rnum is not None
     multi = np.zeros(len(pts), bool)
     if has_returns:
         multi = (nret.astype(int) > 1) & (rnum.astype(int) < nret.astype(int))
     return pts, inten, multi, has_returns
+
+
+def _window_frame(pts, perm, origin, *, in_place):
+    """Planimetric and vertical coordinates of the rows `perm` of `pts` minus `origin`:
+    ``(xy, z)``, C-contiguous. `in_place`: written over the memory of `pts` (a
+    C-contiguous block of rows), the (N, 2) block first and z after it."""
+    m = perm.size
+    if in_place and pts.flags.c_contiguous:
+        cols = [np.subtract(pts[:, j][perm], origin[j]) for j in range(2)]
+        z = pts[:, 2][perm]
+        z -= origin[2]
+        flat = pts.reshape(-1)  # a view: the rows are contiguous
+        xy = flat[:2 * m].reshape(m, 2)
+        for j in range(2):
+            xy[:, j] = cols[j]
+        del cols
+        flat[2 * m:] = z
+        return xy, flat[2 * m:]
+    xy = np.empty((m, 2))  # column by column: no (N, 2) temporaries
+    for j in range(2):
+        np.subtract(pts[:, j][perm], origin[j], out=xy[:, j])
+    z = pts[:, 2][perm]
+    z -= origin[2]
+    return xy, z
 
 
 def _attribute(a, name, n, source):

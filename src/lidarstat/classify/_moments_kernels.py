@@ -14,7 +14,7 @@ import numpy as np
 
 from .._shared._jit import njit
 
-__all__ = ["canonical_order"]
+__all__ = ["canonical_order", "compact_rows", "permute_rows"]
 
 #: Runs of equal x up to this length are sorted by insertion, longer ones by merging.
 _INSERTION_RUN = 24
@@ -114,3 +114,43 @@ def canonical_order(x, y, z, intensity=None) -> np.ndarray:
          else np.ascontiguousarray(intensity, dtype=np.float64))
     _sort_ties(order, x, y, z, w)
     return order
+
+
+@njit
+def permute_rows(a, order):  # pragma: no cover - compiled
+    """``a[i] = a[order[i]]`` for every row of `a`, in place (`order` a permutation):
+    the gather ``a[order]`` without a second array, one cycle of the permutation at a
+    time."""
+    n, k = a.shape
+    done = np.zeros(n, np.bool_)
+    tmp = np.empty(k, a.dtype)
+    for s in range(n):
+        if done[s]:
+            continue
+        for c in range(k):
+            tmp[c] = a[s, c]
+        j = s
+        while True:
+            done[j] = True
+            nxt = order[j]
+            if nxt == s:
+                for c in range(k):
+                    a[j, c] = tmp[c]
+                break
+            for c in range(k):
+                a[j, c] = a[nxt, c]
+            j = nxt
+
+
+@njit
+def compact_rows(a, keep):  # pragma: no cover - compiled
+    """Move the rows of `a` where `keep` to its front, in order (``a[keep]`` in place);
+    returns their number."""
+    m = 0
+    for i in range(a.shape[0]):
+        if keep[i]:
+            if m != i:
+                for c in range(a.shape[1]):
+                    a[m, c] = a[i, c]
+            m += 1
+    return m

@@ -59,7 +59,8 @@ from ._terrain_grid import (
     reject_plateaus,
     reject_walled,
 )
-from ._terrain_kernels import block_spread, cell_lowest, fill_triangles, grid_bilinear
+from ._terrain_kernels import (block_spread, cell_lowest, cell_values, fill_triangles,
+                               first_on_surface, gather_cells, grid_bilinear)
 
 __all__ = ["TERRAIN_DEFAULTS", "TerrainModel", "TerrainRefinement", "drop_bumps",
            "drop_opened", "grow_ground", "grow_platforms", "noise_fence", "refine_terrain",
@@ -198,14 +199,8 @@ def _tin(xy, z, surface_z, grid, cell):
     cells' centres (:class:`TerrainModel`)."""
     from ._surface import TinSurface
 
-    nx, ny = grid.shape
-    ij = np.floor(xy / cell).astype(np.int64)
-    np.clip(ij[:, 0], 0, nx - 1, out=ij[:, 0])
-    np.clip(ij[:, 1], 0, ny - 1, out=ij[:, 1])
-    flat = ij[:, 0] * ny + ij[:, 1]
-    on = np.flatnonzero(z == surface_z.ravel()[flat])
-    cells, first = np.unique(flat[on], return_index=True)
-    pick = on[first]
+    ny = grid.shape[1]
+    pick = first_on_surface(xy, z, np.ascontiguousarray(surface_z), float(cell))
     filled = np.flatnonzero(~np.isfinite(surface_z).ravel())
     # in cell units rounded to 1e-9 cell: the vertices are often co-circular (the filled
     # cells' centres), and which diagonal the triangulation takes must not depend on the
@@ -252,26 +247,49 @@ def noise_fence(xy, height, ground, *, cell, fence, min_points=64, max_radius=8)
     (N,) ndarray of float64
     """
     n = len(height)
+    xy = np.ascontiguousarray(xy, dtype=np.float64)
     nx = int(np.floor(xy[:, 0].max() / cell)) + 1 if n else 1
     ny = int(np.floor(xy[:, 1].max() / cell)) + 1 if n else 1
-    key = np.floor(xy[:, 0] / cell).astype(np.int64) * ny
-    key += np.floor(xy[:, 1] / cell).astype(np.int64)
-    np.clip(key, 0, nx * ny - 1, out=key)
-    src = ground & (height != 0)
-    k_src = key[src]
-    order = np.argsort(k_src, kind="stable")
-    values = np.ascontiguousarray(height[src][order], dtype=np.float64)
-    offsets = np.zeros(nx * ny + 1, np.int64)
-    np.cumsum(np.bincount(k_src, minlength=nx * ny), out=offsets[1:])
-    cells = np.unique(key[ground])
+    # the cells are found point by point in compiled loops: no per-point key arrays
+    offsets, values, has_ground = cell_values(
+        xy, np.ascontiguousarray(height, dtype=np.float64),
+        np.ascontiguousarray(ground, dtype=np.bool_), float(cell), nx, ny)
+    cells = np.flatnonzero(has_ground)
     centre = np.full(nx * ny, np.nan)
     spread = np.full(nx * ny, np.nan)
     if cells.size:
         block_spread(offsets, values, nx, ny, cells, int(min_points), int(max_radius),
                      centre, spread)
-    bound = centre[key] + fence * spread[key]
-    bound[~np.isfinite(bound)] = np.inf
+    del values
+    bound = np.empty(n)
+    gather_cells(xy, float(cell), ny, centre, spread, float(fence), bound)
     return bound
+
+
+#: Points tested against the surface at a time (bounds the temporaries of the test).
+_BLOCK = 1 << 20
+
+
+def _blocks(n):
+    """``(start, stop)`` of consecutive blocks of at most :data:`_BLOCK` points."""
+    return [(s, min(n, s + _BLOCK)) for s in range(0, n, _BLOCK)]
+
+
+def _test_points(model, xy, z, *, tolerance, slope_tolerance, below):
+    """Heights above the surface, upper bounds and the ground test of every point, block
+    by block: ``(height, upper, keep)``.
+
+    ``height = round(z - surface, 6)``, ``upper = tolerance + s slope``, ground when
+    ``-(below + s slope) <= height <= upper`` (``s = slope_tolerance``).
+    """
+    n = len(z)
+    height, upper, keep = np.empty(n), np.empty(n), np.empty(n, bool)
+    for s, e in _blocks(n):
+        h = np.round(z[s:e] - model(xy[s:e]), 6, out=height[s:e])
+        extra = slope_tolerance * model.slope_at(xy[s:e])
+        u = np.add(tolerance, extra, out=upper[s:e])
+        keep[s:e] = (h <= u) & (h >= -(below + extra))
+    return height, upper, keep
 
 
 def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max_rise,
@@ -366,15 +384,16 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
     gx, gy = np.gradient(grid, cell) if min(grid.shape) > 1 else (np.zeros_like(grid),) * 2
     model = TerrainModel(grid=grid, slope=np.hypot(gx, gy), cell=float(cell),
                          tin=_tin(xy, z, surface_z, grid, cell))
-    height = np.round(z - model(xy), 6)
-    extra = slope_tolerance * model.slope_at(xy)
-    upper = tolerance + extra
-    keep = (height <= upper) & (height >= -(below + extra))
+    height, upper, keep = _test_points(model, xy, z, tolerance=tolerance,
+                                       slope_tolerance=slope_tolerance, below=below)
     if fence > 0 and keep.any():
-        upper = np.minimum(upper, noise_fence(xy, height, keep, cell=cell, fence=fence,
-                                              min_points=fence_points,
-                                              max_radius=fence_radius) + extra)
-        keep &= height <= upper
+        bound = noise_fence(xy, height, keep, cell=cell, fence=fence, min_points=fence_points,
+                            max_radius=fence_radius)
+        for s, e in _blocks(len(z)):
+            u = np.minimum(upper[s:e], bound[s:e] + slope_tolerance * model.slope_at(xy[s:e]),
+                           out=upper[s:e])
+            keep[s:e] &= height[s:e] <= u
+        del bound
     return TerrainRefinement(ground=keep, height=height, tolerance=upper, surface=model,
                              grown_cells=grown, rejected_cells=rejected,
                              plateau_cells=plateaus)

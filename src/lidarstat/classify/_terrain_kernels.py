@@ -7,7 +7,8 @@ from numba import prange
 
 from .._shared._jit import njit, njit_parallel
 
-__all__ = ["block_spread", "cell_lowest", "fill_triangles", "grid_bilinear"]
+__all__ = ["block_spread", "cell_lowest", "cell_values", "fill_triangles", "first_on_surface",
+           "gather_cells", "grid_bilinear"]
 
 
 @njit
@@ -123,3 +124,77 @@ def block_spread(offsets, values, nx, ny, cells, min_points, max_radius, centre,
         m = np.median(buf)
         centre[c] = m
         spread[c] = 1.4826 * np.median(np.abs(buf - m))
+
+
+@njit
+def _flat_cell(x, y, cell, ny, ncells):  # pragma: no cover - compiled
+    """Flat cell ``floor(x / cell) * ny + floor(y / cell)`` clipped to ``[0, ncells)``."""
+    c = np.int64(np.floor(x / cell)) * ny + np.int64(np.floor(y / cell))
+    return min(max(c, 0), ncells - 1)
+
+
+@njit
+def cell_values(xy, height, ground, cell, nx, ny):  # pragma: no cover - compiled
+    """The heights of the ground points that are not surface vertices (``height != 0``),
+    sorted by flat cell (input order inside a cell), their CSR offsets (``nx * ny + 1``)
+    and whether each cell holds a ground point: ``(offsets, values, has_ground)``.
+
+    The counting sort of the flat keys ``floor(x / cell) * ny + floor(y / cell)``
+    (clipped to the grid) without an array of keys.
+    """
+    ncells = nx * ny
+    offsets = np.zeros(ncells + 1, np.int64)
+    has_ground = np.zeros(ncells, np.bool_)
+    for i in range(height.size):
+        if ground[i]:
+            c = _flat_cell(xy[i, 0], xy[i, 1], cell, ny, ncells)
+            has_ground[c] = True
+            if height[i] != 0:
+                offsets[c + 1] += 1
+    for c in range(ncells):
+        offsets[c + 1] += offsets[c]
+    values = np.empty(offsets[ncells])
+    fill = offsets[:ncells].copy()
+    for i in range(height.size):
+        if ground[i] and height[i] != 0:
+            c = _flat_cell(xy[i, 0], xy[i, 1], cell, ny, ncells)
+            values[fill[c]] = height[i]
+            fill[c] += 1
+    return offsets, values, has_ground
+
+
+@njit_parallel
+def gather_cells(xy, cell, ny, centre, spread, fence, out):  # pragma: no cover - compiled
+    """``centre + fence * spread`` of every point's flat cell (``inf`` where that is not
+    finite), written to `out`."""
+    ncells = centre.size
+    for i in prange(out.size):
+        c = _flat_cell(xy[i, 0], xy[i, 1], cell, ny, ncells)
+        b = centre[c] + fence * spread[c]
+        out[i] = b if np.isfinite(b) else np.inf
+
+
+@njit
+def first_on_surface(xy, z, surface, cell):  # pragma: no cover - compiled
+    """In cell order, the first point of every cell of `surface` (``(nx, ny)``, ``inf``
+    where empty) whose elevation is the cell's value (cell indices clamped to the grid).
+    """
+    nx, ny = surface.shape
+    first = np.full(nx * ny, -1, np.int64)
+    for i in range(z.size):
+        ix = min(max(np.int64(np.floor(xy[i, 0] / cell)), 0), nx - 1)
+        iy = min(max(np.int64(np.floor(xy[i, 1] / cell)), 0), ny - 1)
+        c = ix * ny + iy
+        if first[c] < 0 and z[i] == surface[ix, iy]:
+            first[c] = i
+    m = 0
+    for c in range(first.size):
+        if first[c] >= 0:
+            m += 1
+    out = np.empty(m, np.int64)
+    m = 0
+    for c in range(first.size):
+        if first[c] >= 0:
+            out[m] = first[c]
+            m += 1
+    return out

@@ -50,7 +50,10 @@ def _run(args):
         low_noise=not args.no_low_noise, road_rule=args.road_rule,
         ground_spread=args.ground_spread, continuity=not args.no_continuity, rng=args.seed,
         terrain=not args.no_terrain, source=str(args.input),
-        building_alpha=args.building_alpha, sigma=args.sigma)
+        building_alpha=args.building_alpha, sigma=args.sigma,
+        # the streamed write copies the input's records: the coordinates read here are
+        # needed again only by a terrain model, so the classification may reuse them
+        overwrite_xyz=stream and not args.dtm)
     elapsed = time.perf_counter() - t0
     fields = res.to_fields()
     if stream:
