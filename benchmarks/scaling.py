@@ -129,9 +129,11 @@ def run(argv: list[str], env: dict, timeout: float, max_mib: float | None = None
 
 
 def measure(commands, sizes, tmp: Path, timeout: float, max_mib: float | None,
-            partial: Path | None = None, cache: Path | None = None) -> dict:
+            partial: Path | None = None, cache: Path | None = None,
+            code: str | None = None) -> dict:
     """Every command at every size; with `partial`, the rows so far are written there after
-    each run (a long run stopped from outside keeps what it measured)."""
+    each run (a long run stopped from outside keeps what it measured); `code` (the commit
+    of the lidarstat that ran) is stored in every row."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache or tmp / "numba"))
     warm = tmp / "warm.laz"
     write_cloud(warm, 20_000)
@@ -148,6 +150,8 @@ def measure(commands, sizes, tmp: Path, timeout: float, max_mib: float | None,
             res = run([a.format(i=src, o=dst) for a in COMMANDS[name]], env, timeout, max_mib)
             dst.unlink(missing_ok=True)
             res["points"] = n
+            if code:
+                res["code"] = code
             if res["seconds"]:
                 res["seconds_per_million"] = round(res["seconds"] / (n / 1e6), 2)
             rows[name].append(res)
@@ -259,6 +263,20 @@ def merge(paths, out, fig) -> None:
         figure(results, Path(fig))
 
 
+def _code_of_runs() -> str | None:
+    """The commit of the lidarstat source the runs import (``git describe`` of its tree),
+    None outside a git checkout."""
+    import lidarstat
+
+    try:
+        out = subprocess.run(["git", "-C", str(Path(lidarstat.__file__).parent), "describe",
+                              "--always", "--dirty"], capture_output=True, text=True,
+                             timeout=30)
+    except OSError:
+        return None
+    return out.stdout.strip() or None
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=list(SIZES))
@@ -275,6 +293,9 @@ def main(argv=None):
     ap.add_argument("--numba-cache", default=None, metavar="DIR",
                     help="Numba cache folder shared by runs side by side (default: one in the "
                          "work folder, filled by the untimed runs)")
+    ap.add_argument("--code", default=None, metavar="LABEL",
+                    help="commit of the lidarstat the runs import, stored in every row "
+                         "(default: git describe of its source tree, when it is a checkout)")
     ap.add_argument("--merge", nargs="+", default=None, metavar="JSON",
                     help="run nothing: combine the rows of these results files (of runs made "
                          "side by side, e.g. one per size) into --out, its table and figure")
@@ -292,7 +313,8 @@ def main(argv=None):
                    "commands": measure(args.commands, args.sizes, tmp, args.timeout,
                                        args.max_mib,
                                        Path(args.out + ".partial") if args.out else None,
-                                       Path(args.numba_cache) if args.numba_cache else None)}
+                                       Path(args.numba_cache) if args.numba_cache else None,
+                                       args.code or _code_of_runs())}
         if args.catalogue:
             import catalogue
 

@@ -98,22 +98,8 @@ def _units(points, curv, *, grow_radius, max_angle, min_points, merge_alpha, sen
     st = np.asarray(f["surface_type"])
     ok = (st > 0) & (np.asarray(f["chi2_pass"]) > 0)
     nrm = np.c_[f["NormalX"], f["NormalY"], f["NormalZ"]]
-    nbh = radius_neighbors(pts, grow_radius, dim=3)
-    src, dst = nbh.edges()
-    del nbh
-    # with the k nearest neighbours (both ways): a steep face of a range image, or a flat
-    # one seen at a grazing angle, is sampled more sparsely across the slope than the
-    # growth radius, and the radius graph alone leaves it in pieces
-    knn = knn_neighbors(pts, GROWTH_K + 1)
-    ks, kd = knn.edges()
-    del knn
-    src, dst = np.r_[src, ks, kd], np.r_[dst, kd, ks]
-    del ks, kd
-    cosang = np.abs(np.einsum("ij,ij->i", nrm[src], nrm[dst]))
-    edge_ok = (ok[src] & ok[dst] & (st[src] == st[dst])
-               & (cosang >= np.cos(np.radians(max_angle))))
-    keep = np.flatnonzero(edge_ok)
-    keep = keep[np.argsort(-cosang[keep], kind="stable")]
+    src, dst = _growth_edges(pts, grow_radius)
+    e_src, e_dst = _similar_edges(src, dst, ok, st, nrm, np.cos(np.radians(max_angle)))
     local = pts - pts.mean(axis=0)
     noise = str(getattr(curv, "noise", "z"))
     if noise == "range" and sensor is None:
@@ -126,11 +112,12 @@ def _units(points, curv, *, grow_radius, max_angle, min_points, merge_alpha, sen
     crit = np.asarray(chi2_critical(merge_alpha, np.arange(1, n_max + 1)), dtype=np.float64)
     crit = np.r_[np.inf, crit]  # index = degrees of freedom
     parent = np.arange(pts.shape[0], dtype=np.int64)
-    refused = _mk.grow_tested(src[keep].astype(np.int64), dst[keep].astype(np.int64), local,
+    refused = _mk.grow_tested(e_src, e_dst, local,
                               np.ascontiguousarray(dirs), noise_normal,
                               st == SurfaceType.PLANAR, ok & (st > SurfaceType.PLANAR),
                               float(curv.sigma) ** 2, crit, MERGE_MIN_POINTS,
                               QUADRIC_MIN_POINTS, parent)
+    del e_src, e_dst
     labels = np.where(ok, parent + 1, 0)
     labels = relabel(labels, max(int(min_points), 1))
     c = int(labels.max()) if labels.size else 0
@@ -149,6 +136,70 @@ def _units(points, curv, *, grow_radius, max_angle, min_points, merge_alpha, sen
             if not joined.any():
                 break
     return labels, types, (int(refused[0]), int(refused[1]))
+
+#: Edges per block of the normal-agreement test (bounds its temporaries: the two
+#: endpoints' normals, 48 bytes an edge).
+EDGE_BLOCK = 1 << 18
+
+
+def _growth_edges(pts, grow_radius):
+    """The growth graph as int32 edge ends (int64 past 2**31 points): the pairs within `grow_radius` (3-D), then
+    each point's :data:`GROWTH_K` nearest neighbours in both directions.
+
+    The k nearest neighbours join because a steep face of a range image, or a flat one
+    seen at a grazing angle, is sampled more sparsely across the slope than the growth
+    radius, and the radius graph alone leaves it in pieces. Each search's table is
+    dropped once its edges are copied into the two preallocated arrays.
+    """
+    itype = np.int32 if pts.shape[0] < 2**31 else np.int64
+    knn = knn_neighbors(pts, GROWTH_K + 1)
+    k_src = np.repeat(knn.query_indices().astype(itype), knn.counts)
+    k_dst = knn.indices.astype(itype)
+    del knn
+    nbh = radius_neighbors(pts, grow_radius, dim=3)
+    m_r, m_k = nbh.indices.size, k_src.size
+    src = np.empty(m_r + 2 * m_k, dtype=itype)
+    dst = np.empty(m_r + 2 * m_k, dtype=itype)
+    src[:m_r] = np.repeat(nbh.query_indices().astype(itype), nbh.counts)
+    dst[:m_r] = nbh.indices
+    del nbh
+    src[m_r:m_r + m_k] = k_src
+    dst[m_r + m_k:] = k_src
+    del k_src
+    dst[m_r:m_r + m_k] = k_dst
+    src[m_r + m_k:] = k_dst
+    del k_dst
+    return src, dst
+
+
+def _similar_edges(src, dst, ok, st, nrm, cos_min):
+    """The edges between two tested points of one HK type whose normals agree within the
+    angle of `cos_min`, the most similar normals first (a stable sort: equal cosines keep
+    the edge order), as int64 ends (the union-find kernel's index type).
+
+    The test runs block by block (:data:`EDGE_BLOCK` edges), so its temporaries are one
+    block's; only the accepted edges' cosines are kept, in float64: the union order
+    follows them, and float32 would turn distinct cosines into ties and change the order.
+    """
+    ks, kd, cos = [], [], []
+    for a in range(0, src.size, EDGE_BLOCK):
+        s, d = src[a:a + EDGE_BLOCK], dst[a:a + EDGE_BLOCK]
+        c = np.abs(np.einsum("ij,ij->i", nrm[s], nrm[d]))
+        good = ok[s] & ok[d] & (st[s] == st[d]) & (c >= cos_min)
+        ks.append(s[good])
+        kd.append(d[good])
+        cos.append(c[good])
+    ks, kd = (np.concatenate(x) if x else np.zeros(0, dtype=src.dtype) for x in (ks, kd))
+    cos = np.concatenate(cos) if cos else np.zeros(0)
+    order = np.argsort(np.negative(cos, out=cos), kind="stable")
+    del cos
+    ks[:] = ks[order]  # sorted in place: one int32 temporary at a time
+    kd[:] = kd[order]
+    del order
+    e_src = ks.astype(np.int64)
+    del ks
+    e_dst = kd.astype(np.int64)
+    return e_src, e_dst
 
 
 @renamed_parameters(min_size="min_points", threshold="search")
