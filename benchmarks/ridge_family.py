@@ -5,10 +5,12 @@ The scenes are those of ``tests/independent/indep_ridges.py`` (plain NumPy, exac
 not ``lidarstat.synth``): Gaussian and cylindrical crest and trench profiles along
 straight and circular axes, random azimuths, widths, heights, spacings (0.01 to 0.02 m)
 and noise (0.5 to 2 mm along z); planes, spheres and cylinders for "no ridge there".
-For every scene and both scales: the recall of each true ridge line (share of its length,
-beyond 0.1 m of the scene's ends, with a detected point of its type within one spacing),
-the precision (share of ridge points within 2.5 spacings of a true line), the number of
-ridge points on the null scenes, the umbilic share and the wall seconds (machine shared:
+For every scene and both scales: the recall of each true line (share of its length,
+beyond 0.1 m of the scene's ends, with a detected point of its type within one spacing:
+crest and ravine lines of the Gaussian profiles, crease lines at the feet of the
+cylindrical ones), the precision (share of crest, ravine and crease points within 2.5
+spacings of a true line), the crease points on the Gaussian scenes (none is true), the
+number of ridge and crease points on the null scenes, the umbilic share and the wall seconds (machine shared:
 timings are indicative, ratios in the same run).
 
 Usage::
@@ -55,6 +57,7 @@ def run_ridge_scene(kind, sign, curved, seed):
         row[name] = dict(seconds=round(dt, 2), recall=[round(r, 3) for _, r in rec],
                          line_types=[int(t) for t, _ in rec],
                          precision=round(ridge_precision(scene, res["ridge"]), 3),
+                         crease_points=int((res["ridge"] == 3).sum()),
                          umbilic=round(float(res["umbilic"].mean()), 4),
                          radius_median=round(float(np.nanmedian(res.jets.fit.bandwidth)), 4))
     return row
@@ -67,7 +70,8 @@ def run_null_scene(kind, seed):
         t0 = time.perf_counter()
         res = ridges(xyz, **kw)
         row[name] = dict(seconds=round(time.perf_counter() - t0, 2),
-                         ridge_points=int((res["ridge"] > 0).sum()), lines=len(res.lines),
+                         ridge_points=int((res["ridge"] > 0).sum()),
+                         crease_points=int((res["ridge"] == 3).sum()), lines=len(res.lines),
                          umbilic=round(float(res["umbilic"].mean()), 4))
         if "radius" in res.fields:  # nothing to detect: the smallest radius should stay
             row[name]["smallest_radius_share"] = round(
@@ -106,9 +110,11 @@ def summarise(rows, nulls):
                 recall_min=round(float(rec.min()), 3),
                 precision_median=round(float(np.median([r[name]["precision"] for r in rs])), 3),
                 precision_min=round(float(min(r[name]["precision"] for r in rs)), 3),
+                crease_points=int(sum(r[name]["crease_points"] for r in rs)),
                 seconds_total=round(float(sum(r[name]["seconds"] for r in rs)), 1))
         out[f"{name}_null"] = dict(
             scenes=len(nulls), ridge_points=int(sum(r[name]["ridge_points"] for r in nulls)),
+            crease_points=int(sum(r[name]["crease_points"] for r in nulls)),
             lines=int(sum(r[name]["lines"] for r in nulls)),
             umbilic_plane=round(float(np.mean([r[name]["umbilic"] for r in nulls
                                                if r["kind"] == "plane"])), 4),
