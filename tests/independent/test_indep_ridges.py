@@ -13,8 +13,7 @@ import functools
 
 import numpy as np
 import pytest
-from indep_ridges import (CREASE, line_recall, make_null_scene, make_ridge_scene,
-                          ridge_precision)
+from indep_ridges import CREASE, line_recall, make_null_scene, make_ridge_scene, ridge_precision
 
 from lidarstat.segment import ridges
 

@@ -199,7 +199,7 @@ def find_creases(local, nb, step, radii, *, sigma, noise, sensor, weight, alpha,
     crease and is dropped. `nb` and `step` are the neighbourhoods and step of the ridge
     tracing."""
     n = local.shape[0]
-    kw = dict(sigma=sigma, noise=noise, sensor=sensor, weight=weight, alpha=alpha)
+    kw = {"sigma": sigma, "noise": noise, "sensor": sensor, "weight": weight, "alpha": alpha}
     radii = np.asarray(radii, float)
     rows = np.arange(n, dtype=np.int64)
     n_eff = float(n)

@@ -8,8 +8,15 @@ import numpy as np
 
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
-from ..features import (JET_FIELDS, MONGE_NAMES, FitStatus, JetScaleCriterion, Weight, jets,
-                        radius_ladder)
+from ..features import (
+    JET_FIELDS,
+    MONGE_NAMES,
+    FitStatus,
+    JetScaleCriterion,
+    Weight,
+    jets,
+    radius_ladder,
+)
 from ..io import register_field_descriptions
 from ..neighbors import find_duplicates, knn_neighbors, map_rows, run_on_unique
 from ..stats import z_critical
@@ -20,8 +27,8 @@ from ._ridge_lines import join_lines, smooth_vertices
 
 #: Per-point fields added by :func:`ridges` to those of :func:`lidarstat.features.jets`.
 RIDGE_FIELDS = {
-    "ridge": ("uint8", "0 none, 1 crest (convex), 2 ravine (concave), 3 crease (the jets' "
-              "misfit crest across a band of rejected jets)"),
+    "ridge": ("uint8", ("0 none, 1 crest (convex), 2 ravine (concave), 3 crease (the jets' "
+                        "misfit crest across a band of rejected jets)")),
     "ridge_line": ("int32", "id of the ridge or crease line (0 none)"),
     "umbilic": ("uint8", "1 where k1 = k2 is accepted and the curvature is significant"),
     "extremality": ("float64", "derivative of the dominant k along its line"),
