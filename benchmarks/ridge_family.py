@@ -40,7 +40,7 @@ from indep_ridges import line_recall, make_null_scene, make_ridge_scene, ridge_p
 
 from lidarstat.segment import ridges  # noqa: E402
 
-SCALES = {"auto": {}, "k50": {"k": 50}}
+SCALES = {"auto": {"creases": True}, "k50": {"k": 50, "creases": True}}
 
 
 def run_ridge_scene(kind, sign, curved, seed):

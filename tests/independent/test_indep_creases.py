@@ -37,7 +37,7 @@ def _fold(seed):
 @functools.cache
 def _fold_result(seed):
     xyz, spacing, dist, along = _fold(seed)
-    return xyz, spacing, dist, along, ridges(xyz)
+    return xyz, spacing, dist, along, ridges(xyz, creases=True)
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -73,9 +73,18 @@ def test_no_crease_on_steep_narrow_gaussian_crests(seed):
     with np.errstate(divide="ignore"):
         scene = make_ridge_scene(400 + seed, kind="gauss", sign=(-1.0) ** seed, width=0.12,
                                  amp=0.4, spacing=0.02, length=0.8)
-    res = ridges(scene.xyz)
+    res = ridges(scene.xyz, creases=True)
     assert int((res["ridge"] == CREASE).sum()) == 0
     assert not (res.lines.attributes["ridge"] == CREASE).any()
+
+
+def test_creases_are_asked_for():
+    """Without `creases` no point gets code 3 and no crease line is traced."""
+    xyz = _fold_result(0)[0]
+    res = ridges(xyz)
+    assert not (res["ridge"] == CREASE).any()
+    assert not (res.lines.attributes["ridge"] == CREASE).any()
+    assert "crease_radius" not in res.params
 
 
 def test_misfit_growth():

@@ -1,4 +1,4 @@
-"""``lidarstat ridges IN OUT``: Monge coefficients, crest/ravine/crease points and lines."""
+"""``lidarstat ridges IN OUT``: Monge coefficients, crest/ravine points and ridge lines."""
 
 from __future__ import annotations
 
@@ -46,8 +46,7 @@ def cmd_ridges(args):
         meta = {"input": str(args.input), "output": str(out), "lines": str(lines_path),
                 "seconds": elapsed, "sigma": res.jets.sigma,
                 "sigma_estimated": res.jets.sigma_estimated, "crest_points": int((r == 1).sum()),
-                "ravine_points": int((r == 2).sum()), "crease_points": int((r == 3).sum()),
-                "n_lines": len(res.lines),
+                "ravine_points": int((r == 2).sum()), "n_lines": len(res.lines),
                 "scale": res.params.get("scale", "fixed"),
                 "params": res.params}
         write_summary_json(args.summary_json, meta)
@@ -70,8 +69,7 @@ def register(sub):
         "ridges", help="fourth-order Monge jets, crest/ravine points and ridge lines",
         description="Fit degree-4 jets in the Monge frame of every point, write k1, k2, "
         "their directions, b0..b3, c0..c4 with standard deviations, a chi-square test of "
-        "the jet, the ridge class (1 crest, 2 ravine, 3 crease: where the jets' test "
-        "rejects along a band) and umbilics, and trace ridge and crease lines.")
+        "the jet, the ridge class (1 crest, 2 ravine) and umbilics, and trace ridge lines.")
     s.add_argument("input")
     s.add_argument("output", help="output file; format from the suffix")
     add_neighbourhood(s, k_min=JET_NEIGHBORS,
@@ -83,7 +81,7 @@ def register(sub):
     add_alpha(s, 0.01, help="level of the jet, curvature and k'' tests")
     add_jet_arguments(s)
     s.add_argument("--lines", default=None,
-                   help="ridge and crease lines (.geojson, .csv, .las/.laz; default OUT stem + "
+                   help="ridge lines (.geojson, .csv, .las/.laz; default OUT stem + "
                    ".ridges.geojson)")
     add_run_outputs(s)
     s.set_defaults(func=cmd_ridges)

@@ -148,7 +148,7 @@ RIDGE_SCALE = JetScaleCriterion("k'' of a ridge", _ridge_statistic, 2, calibrate
 
 def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricube",
            sensor=None, noise=None, ratio=2.0, cross_k=16, min_length=None, min_vertices=3,
-           smooth=5, scale_criterion=None, scales=None, jet_result=None,
+           smooth=5, scale_criterion=None, scales=None, jet_result=None, creases=False,
            progress=None) -> RidgeResult:
     """Crest, ravine and crease points and lines from the fourth-order Monge form of every
     point.
@@ -163,8 +163,9 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     tracing chains them into lines, joins pieces across small aligned gaps, and keeps
     lines at least `min_length` long whose median |k|/sd(k) passes a Bonferroni test at
     level `alpha` over the cloud's independent neighbourhoods (N / median neighbours).
-    Creases (``_ridge_creases``): jets at the ladder's third rung that the chi-square
-    test rejects at that Bonferroni level, the crest of their misfit across the band,
+    With `creases`, crease points (``_ridge_creases``): jets at the ladder's third rung
+    that the chi-square test rejects at that Bonferroni level, the crest of their misfit
+    across the band,
     chained into lines like the ridge points and kept when at least twice that radius
     long and when the misfit grows with the radius like a kink's (at most 4 times to the
     next rung; a smooth surface's truncation grows 32 times). A crest or ravine point
@@ -210,6 +211,11 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
         :func:`lidarstat.features.jets`.
     jet_result : JetResult, optional
         Reuse jets already computed on `points`.
+    creases : bool
+        Also label crease points (code 3) and trace crease lines (docs/methods/jets.md,
+        "Creases"). Off by default: at sharp folds (90 degrees) the misfit's crest lies
+        about 0.4 crease radii beside the fold, where the smoothed curvature's ridge is
+        on it.
     progress : callable, optional
 
     Returns
@@ -233,7 +239,7 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
             pts[dup.first], radius=radius, k=k, sigma=sigma, alpha=alpha, weight=weight,
             sensor=sensor, noise=noise, ratio=ratio, cross_k=cross_k, min_length=min_length,
             min_vertices=min_vertices, smooth=smooth, scale_criterion=scale_criterion,
-            scales=scales, jet_result=jet_result,
+            scales=scales, jet_result=jet_result, creases=creases,
             progress=progress), what=func)
         return replace(res, fields=map_rows(res.fields, dup.n_unique, dup.inverse),
                        jets=map_rows(res.jets, dup.n_unique, dup.inverse))
@@ -277,15 +283,15 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     radii = radii[min(CREASE_RUNG, max(radii.size - 2, 0)):][:2]
     if radii.size < 2:
         radii = np.r_[radii, radii * np.sqrt(2.0)]
-    creases = find_creases(local, nb, step, radii,
-                           sigma=jet_result.sigma, noise=jet_result.meta.get("noise"),
-                           sensor=sensor, weight=weight, alpha=alpha,
-                           min_vertices=min_vertices, smooth=smooth)
-    if creases.mask.any() and (ridge > 0).any():
+    found = find_creases(local, nb, step, radii if creases else radii[:0],
+                         sigma=jet_result.sigma, noise=jet_result.meta.get("noise"),
+                         sensor=sensor, weight=weight, alpha=alpha,
+                         min_vertices=min_vertices, smooth=smooth)
+    if found.mask.any() and (ridge > 0).any():
         from scipy.spatial import cKDTree
 
         on = np.flatnonzero(ridge > 0)
-        d, _ = cKDTree(local[creases.mask]).query(local[on])
+        d, _ = cKDTree(local[found.mask]).query(local[on])
         ridge[on[d <= fit.bandwidth[on]]] = 0
     kabs = np.abs(cval[:, 0])
     order = np.argsort(-np.where(ridge > 0, kabs, -1.0), kind="stable").astype(np.int64)
@@ -316,10 +322,10 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
                                  min_vertices, smooth, line_min, 4.0 * step, z_line)
     line_of = new_id[line_of]
     ridge[line_of == 0] = 0
-    ridge[creases.mask] = CREASE
-    line_of[creases.mask] = creases.line[creases.mask] + len(lines)
+    ridge[found.mask] = CREASE
+    line_of[found.mask] = found.line[found.mask] + len(lines)
     ridge_line = line_of.astype(np.int32)
-    lines = _with_creases(lines, creases, origin)
+    lines = _with_creases(lines, found, origin)
     with np.errstate(invalid="ignore"):
         # umbilic: k1 = k2 accepted (two-sided z of k1 - k2) and the curvature significant
         # (two-sided z of k1 + k2): a plane (k1 = k2 = 0) is not umbilic
@@ -335,7 +341,8 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     if auto:
         r_used = fit.bandwidth[fitted]
         scale["radius_median"] = float(np.median(r_used)) if r_used.size else float("nan")
-    scale.update(crease_radius=float(radii[0]), crease_growth_radius=float(radii[1]))
+    if found.radii.size:
+        scale.update(crease_radius=float(radii[0]), crease_growth_radius=float(radii[1]))
     params = dict(radius=radius, k=k, **scale, sigma=jet_result.sigma,
                   sigma_estimated=jet_result.sigma_estimated, alpha=alpha, degree=4,
                   z_line=z_line, weight=weight, noise=jet_result.meta.get("noise"),
