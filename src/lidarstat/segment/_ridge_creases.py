@@ -203,7 +203,7 @@ def find_creases(local, nb, step, radii, *, sigma, noise, sensor, weight, alpha,
     radii = np.asarray(radii, float)
     rows = np.arange(n, dtype=np.int64)
     n_eff = float(n)
-    spacing = point_spacing(local) if n >= 16 else 0.0
+    spacing = point_spacing(local) if n >= 16 and radii.size else 0.0
     found = []  # per rung: candidates, variance factor, p-value, along direction
     for j, r in enumerate(radii):
         if not rows.size:

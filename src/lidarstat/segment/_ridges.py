@@ -278,12 +278,12 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     # crease point is the crease's smoothed image, not a ridge of a smooth surface
     radii = jet_result.meta.get("radii")
     if radii is None:
-        radii = scales if scales is not None else radius_ladder(pts)
-    radii = np.asarray(radii, float)
+        radii = scales if scales is not None or not creases else radius_ladder(pts)
+    radii = np.asarray(radii if creases else [], float)
     radii = radii[min(CREASE_RUNG, max(radii.size - 2, 0)):][:2]
-    if radii.size < 2:
+    if 0 < radii.size < 2:
         radii = np.r_[radii, radii * np.sqrt(2.0)]
-    found = find_creases(local, nb, step, radii if creases else radii[:0],
+    found = find_creases(local, nb, step, radii,
                          sigma=jet_result.sigma, noise=jet_result.meta.get("noise"),
                          sensor=sensor, weight=weight, alpha=alpha,
                          min_vertices=min_vertices, smooth=smooth)
