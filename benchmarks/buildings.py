@@ -16,14 +16,15 @@ the producers' semi-automatic (AHN3) or human-validated (IGN building) labels, n
 checked truth. All files run with the default parameters (one parameter set).
 
 Where a producer's class visibly leaves a building out (``REFERENCE_OMISSIONS``), the
-score is also given without it (``tested_outside_omissions``).
+score is also given without it (``tested_outside_omissions``). ``patch_evidence``
+compares the false and true roof patches of every file (``building_evidence.py``).
 
 Usage::
 
     python benchmarks/buildings.py --out benchmarks/results_buildings.json --figures
 
-``--figures`` draws the files of ``FIGURES`` (cell rule against tested planes) into
-``docs/figures/``.
+``--figures`` draws the files of ``FIGURES`` (cell rule against tested planes), the
+reference's omission and the patch evidence of ``EVIDENCE_FILES`` into ``docs/figures/``.
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ from lidarstat.classify import _moments_objects, filter_errors, moments  # noqa:
 from lidarstat.io import linear_units, read  # noqa: E402
 
 DATA = HERE.parent.parent / "shared" / "data"
+import building_evidence  # noqa: E402
 from real_moments import PRODUCER_FILES as FILES  # noqa: E402 (the same files)
 LEFT_OUT = (7, 9, 18)
 FIGURE_FILE = "ahn3_amsterdam/ahn_2386_9702.laz"
@@ -54,9 +56,13 @@ FIGURES = {FIGURE_FILE: ("moments_buildings.png", "AHN3 Amsterdam 9702"),
            IGN_FIGURE_FILE: ("moments_buildings_ign.png", "IGN LiDAR HD myria3d tile"),
            SB_FIGURE_FILE: ("moments_buildings_stbarth.png",
                             "IGN St-Barthelemy (vegetation on and beside roofs)")}
+#: Files whose roof patches are drawn (false against true) in the evidence figure.
+EVIDENCE_FILES = {SB_FIGURE_FILE: "St-Barthelemy", FIGURE_FILE: "AHN3 9702",
+                  "ahn3_delft_3dfier/derived/ahn3_cropped_1_bgt.laz": "AHN3 Delft 1",
+                  "ahn3_delft_3dfier/derived/ahn3_cropped_2_bgt.laz": "AHN3 Delft 2"}
 #: Buildings the producer's classes leave out (boxes E, N min and max, metres): on the
 #: myria3d tile a house about 6 m high whose every point is class 1 (unclassified) and
-#: which the tested planes take (see --figure-ign). The score
+#: which the tested planes take (``moments_buildings_ign_omission.png``). The score
 #: ``tested_outside_omissions`` leaves these boxes out.
 REFERENCE_OMISSIONS = {IGN_FIGURE_FILE: [(870214.0, 6617087.3, 870231.0, 6617107.3)]}
 
@@ -127,12 +133,23 @@ def run(rel):
     row["missed_height_quartiles"] = ([round(float(q), 2) for q in
                                        np.quantile(res.height[missed], [0.25, 0.5, 0.75])]
                                       if missed.any() else None)
-    row["false_and_true_evidence"] = evidence(cloud.xyz, ev, res.to_fields()["building_patch"],
+    fields = res.to_fields()
+    row["false_and_true_evidence"] = evidence(cloud.xyz, ev, fields["building_patch"],
                                               multi, new & keep, truth, res.height)
+    patches = building_evidence.patch_table(
+        cloud.xyz, ev, np.asarray(fields["building_patch"]), fields, multi,
+        a.get("intensity"), res.height, res.ground, new & keep, truth)
+    row["patch_evidence"] = building_evidence.summarise(
+        patches, cloud.xyz, ev, np.asarray(fields["building_patch"]), new & keep, truth)
+    row["patch_evidence"]["relative_return_share_test"] = building_evidence.relative_share_test(
+        cloud.xyz, ev, np.asarray(fields["building_patch"]), multi, new & keep, truth)
+    # the colour channels the file carries, with their largest value (0: not recorded)
+    row["colour_channels"] = {c: int(np.max(a[c])) for c in ("red", "green", "blue", "nir")
+                              if c in a}
     if omit.any():
         row["omitted_points"] = int(np.sum(omit & keep))
         row["tested_outside_omissions"] = scores(new[keep & ~omit], truth[keep & ~omit])
-    return row, (cloud.xyz, truth, old, new)
+    return row, (cloud.xyz, truth, old, new, ref, patches)
 
 
 def evidence(xyz, ev, patch, multi, pred, truth, height, k=30):
@@ -185,7 +202,7 @@ def figure(data, out, name="AHN3 Amsterdam 9702"):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    xyz, truth, old, new = data
+    xyz, truth, old, new = data[:4]
     xy = xyz[:, :2] - xyz[:, :2].min(axis=0)
     fig, axes = plt.subplots(1, 2, figsize=(11, 5.4), sharey=True)
     for ax, pred, title in ((axes[0], old, "cell rule"), (axes[1], new, "tested planes")):
@@ -207,6 +224,46 @@ def figure(data, out, name="AHN3 Amsterdam 9702"):
     fig.savefig(out, dpi=80)
 
 
+def omission_figure(data, box, out, margin=12.0):
+    """The house the producer's classes leave out: plan view of the reference classes
+    and of the tested building class around `box` (E, N min and max), and a section of
+    the box's points along x coloured by the reference class."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    xyz, _, _, new, ref = data[:5]
+    e0, n0, e1, n1 = box
+    near = ((xyz[:, 0] > e0 - margin) & (xyz[:, 0] < e1 + margin)
+            & (xyz[:, 1] > n0 - margin) & (xyz[:, 1] < n1 + margin))
+    inside = ((xyz[:, 0] >= e0) & (xyz[:, 0] < e1) & (xyz[:, 1] >= n0) & (xyz[:, 1] < n1))
+    colours = {1: (0.55, 0.55, 0.55), 2: (0.75, 0.6, 0.4), 6: (0.85, 0.1, 0.1)}
+    fig, axes = plt.subplots(1, 3, figsize=(13, 4.4))
+    p = xyz[near]
+    for ax, c, title in ((axes[0], np.array([colours.get(int(r), (0, 0, 0)) for r in
+                                             ref[near]]), "reference: 6 red, 2 brown, 1 grey"),
+                         (axes[1], np.where(new[near, None], (0.85, 0.1, 0.1),
+                                            (0.75, 0.75, 0.75)), "lidarstat: building red")):
+        ax.scatter(p[:, 0] - e0, p[:, 1] - n0, c=c, s=2, linewidths=0)
+        ax.add_patch(matplotlib.patches.Rectangle((0, 0), e1 - e0, n1 - n0, fill=False,
+                                                  ec="k", lw=0.8))
+        ax.set_aspect("equal")
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("x (m)")
+    axes[0].set_ylabel("y (m)")
+    q = xyz[inside]
+    axes[2].scatter(q[:, 1] - n0, q[:, 2], c=[colours.get(int(r), (0, 0, 0))
+                                              for r in ref[inside]], s=2, linewidths=0)
+    axes[2].set_xlabel("y in the box (m)")
+    axes[2].set_ylabel("z (m)")
+    axes[2].set_title("section of the box: a pitched roof on walls", fontsize=9)
+    fig.suptitle("IGN myria3d tile: a house the reference leaves in class 1", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out, dpi=80)
+    plt.close(fig)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=None)
@@ -214,6 +271,7 @@ def main():
                     help="draw the files of FIGURES into docs/figures/")
     args = ap.parse_args()
     rows = []
+    tables = {}
     for rel in FILES:
         if not (DATA / rel).is_file():
             print(f"skipped (not found): {DATA / rel}")
@@ -224,6 +282,14 @@ def main():
         if args.figures and rel in FIGURES:
             png, title = FIGURES[rel]
             figure(data, HERE.parent / "docs" / "figures" / png, title)
+        if args.figures and rel in REFERENCE_OMISSIONS:
+            omission_figure(data, REFERENCE_OMISSIONS[rel][0],
+                            HERE.parent / "docs" / "figures" / "moments_buildings_ign_omission.png")
+        if rel in EVIDENCE_FILES:
+            tables[EVIDENCE_FILES[rel]] = data[5]
+    if args.figures and tables:
+        building_evidence.figure(tables, HERE.parent / "docs" / "figures"
+                                 / "moments_buildings_patch_evidence.png")
     print("\n| file | ground total % | building P/R/F1 % tested | cell rule | s |")
     print("|---|---|---|---|---|")
     for r in rows:

@@ -22,7 +22,9 @@ instructions waits.
 test files) with pytest's options from ``pyproject.toml`` on a fresh ``NUMBA_CACHE_DIR`` (cold cache), then
 ``--suite-warm`` again on it, and stores under the ``suite`` key its wall time, the CPU
 seconds of the whole process tree (user + sys, xdist workers included) and the Numba
-compile seconds and compile CPU seconds that ``tests/conftest.py`` prints.
+compile seconds and compile CPU seconds that ``tests/conftest.py`` prints (the warm-up
+the xdist controller runs before the workers included, and its wall time apart).
+``LIDARSTAT_TEST_WARMUP=0`` or ``=1`` in the environment turns that warm-up off or on.
 """
 
 from __future__ import annotations
@@ -181,6 +183,7 @@ def main():
 
 
 _NUMBA_LINE = re.compile(r"Numba: (\d+) compilations, (\d+) s compiling \((\d+) s CPU\)")
+_WARMUP_LINE = re.compile(r"Warm-up before the workers: (\d+) processes, (\d+) s")
 
 
 def suite_run(pytest_args, cache_dir, log=None):
@@ -200,10 +203,13 @@ def suite_run(pytest_args, cache_dir, log=None):
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     tail = proc.stdout.strip().splitlines()[-3:]
     m = _NUMBA_LINE.search(proc.stdout)
+    w = _WARMUP_LINE.search(proc.stdout)
     return {"rc": proc.returncode, "wall_s": round(wall, 1), "cpu_s": round(cpu, 1),
             "compilations": int(m.group(1)) if m else 0,
             "compile_s": int(m.group(2)) if m else 0,
-            "compile_cpu_s": int(m.group(3)) if m else 0, "summary": tail}
+            "compile_cpu_s": int(m.group(3)) if m else 0,
+            "warmup_processes": int(w.group(1)) if w else 0,
+            "warmup_wall_s": int(w.group(2)) if w else 0, "summary": tail}
 
 
 def suite(args):

@@ -19,6 +19,7 @@ Usage::
                                                                 # key "family" of
                                                                 # benchmarks/results_ridges.json
     PYTHONPATH=src python benchmarks/ridge_family.py --seeds 1 --no-write
+    PYTHONPATH=src python benchmarks/ridge_family.py --size-only  # only family.scale_size
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
 sys.path.insert(0, str(HERE.parent / "tests" / "independent"))
 
-from indep_ridges import line_recall, make_null_scene, make_ridge_scene, ridge_precision  # noqa: E402
+from indep_ridges import (line_recall, make_null_scene, make_ridge_scene,  # noqa: E402
+                          plane_scale_statistic, ridge_precision)
 
 from lidarstat.segment import ridges  # noqa: E402
 
@@ -98,6 +100,37 @@ def scale_null(rungs=5, samples=3000):
     return out
 
 
+def scale_size(seeds=6, rungs=4, tilts=(0.0, 60.0)):
+    """Size of the automatic scale's k'' selection test with the simulated null: per tilt
+    (noise along z), generator seed and rung, the seeds above the null's upper quantiles
+    at alpha / J (alpha 0.01), 0.2 % and 1 %, on 2,000 seeds whose neighbourhoods at the
+    largest rung do not overlap (independent counts; the rungs of one seed share them)."""
+    from indep_ridges import _plane_field
+
+    from lidarstat.features._jet_scale import SCALE_RUNGS, null_quantile
+    from lidarstat.segment._ridges import RIDGE_SCALE
+
+    kw = dict(degree=4, weight="tricube", min_neighbors=16)
+    probs = (0.01 / SCALE_RUNGS, 0.002, 0.01)
+    rows = []
+    for tilt in tilts:
+        for seed in range(1, seeds + 1):
+            for j in range(rungs):
+                s = plane_scale_statistic(tilt, j, seed, rungs - 1)
+                rows.append(dict(tilt=tilt, seed=seed, rung=j, seeds=int(s.size), above=[
+                    int(np.sum(s > null_quantile(RIDGE_SCALE, j, p, kw))) for p in probs]))
+            _plane_field.cache_clear()
+            print(rows[-rungs:], flush=True)
+    total = {}
+    for t in tilts:
+        rs = [r for r in rows if r["tilt"] == t]
+        n = int(sum(r["seeds"] for r in rs))
+        total[f"tilt_{t:g}"] = dict(seeds=n, above=[int(sum(r["above"][i] for r in rs))
+                                                     for i in range(len(probs))],
+                                    expected=[round(n * p, 1) for p in probs])
+    return {"probs": [round(p, 6) for p in probs], "totals": total, "runs": rows}
+
+
 def summarise(rows, nulls):
     out = {}
     for name in SCALES:
@@ -129,8 +162,20 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--out", default=str(HERE / "results_ridges.json"))
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--size-only", action="store_true",
+                    help="recompute only the scale's test size (key family.scale_size)")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore", RuntimeWarning)
+    path = Path(args.out)
+    if args.size_only:
+        size = scale_size()
+        print(json.dumps(size["totals"], indent=1))
+        if not args.no_write:
+            data = json.loads(path.read_text())
+            data["family"]["scale_size"] = size
+            path.write_text(json.dumps(data, indent=1))
+            print(f"written {path}")
+        return
     ridges(make_null_scene(0, "plane", half=0.2)[0])  # compile (not timed)
     ridges(make_null_scene(0, "plane", half=0.2)[0], k=50)
     rows, nulls = [], []
@@ -150,13 +195,14 @@ def main(argv=None):
     summary = summarise(rows, nulls)
     print(json.dumps(summary, indent=1))
     null = scale_null()
+    size = scale_size()
     if not args.no_write:
-        path = Path(args.out)
         data = json.loads(path.read_text()) if path.exists() else {}
         if isinstance(data, list):
             data = {"scenes": data}
         data["family"] = {"summary": summary, "scenes": rows, "null_scenes": nulls,
-                          "seeds": args.seeds, "scale_null": null, "machine_shared": True}
+                          "seeds": args.seeds, "scale_null": null, "scale_size": size,
+                          "machine_shared": True}
         path.write_text(json.dumps(data, indent=1))
         print(f"written {path}")
 

@@ -16,9 +16,10 @@ from here, otherwise the entry stored in ``results_catalogue.json`` is plotted b
 single-file runs.
 
 A run that exceeds ``--timeout`` seconds, or whose resident memory passes ``--max-mib``,
-is stopped and recorded as such (``null`` time, the memory reached): a command whose cost
-grows faster than the others shows as a missing point, not as a stalled script or a
-machine out of memory.
+is stopped and recorded as such (``null`` time, the CPU seconds and memory reached, the
+limit in the table): a command whose cost grows faster than the others shows as a missing
+point, not as a stalled script or a machine out of memory. The figure plots CPU seconds
+(user + system, every thread), which compare across machine loads where wall time does not.
 
 Usage::
 
@@ -26,8 +27,13 @@ Usage::
         --figure docs/figures/scaling.png
     python benchmarks/scaling.py --sizes 200000 --commands curvature moments   # quick
 
-An existing ``--out`` file keeps its rows of the sizes and commands not run again, so the
-sizes can be measured in separate runs.
+An existing ``--out`` file keeps its rows of the sizes and commands not run again. Sizes
+or commands run side by side in separate processes (each with its own ``--out``; the
+rows so far are also in ``OUT.partial`` after every run) are combined without running
+anything::
+
+    python benchmarks/scaling.py --merge small.json big_a.json big_b.json \\
+        --out benchmarks/results_scaling.json --figure docs/figures/scaling.png
 """
 
 from __future__ import annotations
@@ -99,9 +105,11 @@ def run(argv: list[str], env: dict, timeout: float, max_mib: float | None = None
             break
         if time.perf_counter() > deadline:
             proc.kill()
-            os.wait4(proc.pid, 0)
+            _, _, usage = os.wait4(proc.pid, 0)
             proc.stderr.close()
-            return {"seconds": None, "peak_mib": None, "status": f"timeout {timeout:.0f} s"}
+            return {"seconds": None, "cpu_seconds": round(usage.ru_utime + usage.ru_stime, 2),
+                    "peak_mib": round(usage.ru_maxrss / 1024.0, 1),
+                    "status": f"timeout {timeout:.0f} s"}
         if max_mib is not None:
             rss = _rss_mib(proc.pid)
             if rss > max_mib:
@@ -120,8 +128,11 @@ def run(argv: list[str], env: dict, timeout: float, max_mib: float | None = None
             "peak_mib": round(usage.ru_maxrss / 1024.0, 1), "status": "ok"}
 
 
-def measure(commands, sizes, tmp: Path, timeout: float, max_mib: float | None) -> dict:
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp / "numba"))
+def measure(commands, sizes, tmp: Path, timeout: float, max_mib: float | None,
+            partial: Path | None = None, cache: Path | None = None) -> dict:
+    """Every command at every size; with `partial`, the rows so far are written there after
+    each run (a long run stopped from outside keeps what it measured)."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache or tmp / "numba"))
     warm = tmp / "warm.laz"
     write_cloud(warm, 20_000)
     for name in commands:  # fill the Numba cache: the timed runs load compiled kernels
@@ -140,14 +151,17 @@ def measure(commands, sizes, tmp: Path, timeout: float, max_mib: float | None) -
             if res["seconds"]:
                 res["seconds_per_million"] = round(res["seconds"] / (n / 1e6), 2)
             rows[name].append(res)
-            print(f"{name:20s} {n:>10,d}  {res['seconds']} s  {res['peak_mib']} MiB  "
-                  f"{res['status']}", flush=True)
+            print(f"{name:20s} {n:>10,d}  {res['seconds']} s  CPU {res.get('cpu_seconds')} s  "
+                  f"{res['peak_mib']} MiB  {res['status']}", flush=True)
+            if partial is not None:
+                partial.write_text(json.dumps({"commands": rows}, indent=1) + "\n")
         src.unlink()
     return rows
 
 
 def table(results: dict) -> str:
-    """Markdown: one row per command, time (s) and peak (MiB) per size."""
+    """Markdown: one row per command, wall and CPU time (s) and peak (MiB) per size; a
+    stopped run shows why (the time limit or the memory cap)."""
     sizes = sorted({r["points"] for rows in results["commands"].values() for r in rows})
     head = "| command | " + " | ".join(f"{n / 1e6:g}M points" for n in sizes) + " |"
     lines = [head, "|---|" + "---|" * len(sizes)]
@@ -158,10 +172,11 @@ def table(results: dict) -> str:
             r = by.get(n)
             if r is None:
                 cells.append("")
-            elif r["seconds"] is None:
-                cells.append(r["status"].split(":")[0])  # timeout / stopped over N MiB
+            elif r["seconds"] is None:  # timeout N s / stopped over N MiB / failed
+                cells.append(r["status"].split(":")[0].replace("timeout", "stopped at"))
             else:
-                cells.append(f"{r['seconds']:.1f} s, {r['peak_mib']:.0f} MiB")
+                cpu = f" (CPU {r['cpu_seconds']:.1f} s)" if "cpu_seconds" in r else ""
+                cells.append(f"{r['seconds']:.1f} s{cpu}, {r['peak_mib']:.0f} MiB")
         lines.append(f"| `{name}` | " + " | ".join(cells) + " |")
     cat = results.get("catalogue")
     if cat:
@@ -184,15 +199,16 @@ def figure(results: dict, path: Path) -> None:
         if not ok:
             continue
         n = [r["points"] for r in ok]
-        line, = ax_t.plot(n, [r["seconds"] for r in ok], "o-", label=name)
+        line, = ax_t.plot(n, [r.get("cpu_seconds", np.nan) for r in ok], "o-", label=name)
         ax_m.plot(n, [r["peak_mib"] for r in ok], "o-", color=line.get_color(), label=name)
     cat = results.get("catalogue")
     if cat:
-        ax_t.plot([cat["points"]], [cat["seconds"]], "k*", ms=11, label="catalogue (moments)")
+        ax_t.plot([cat["points"]], [cat["seconds"]], "k*", ms=11,
+                  label="catalogue (moments, wall time)")
         ax_m.plot([cat["points"]], [cat["peak_mib"]], "k*", ms=11, label="catalogue (moments)")
     ref = np.array([2e5, 5e7])
     ax_t.plot(ref, 10 * ref / 1e6, ":", color="0.6", label="linear (10 s per million)")
-    for ax, label in ((ax_t, "wall time, whole process (s)"), (ax_m, "peak memory (MiB)")):
+    for ax, label in ((ax_t, "CPU time, whole process (s)"), (ax_m, "peak memory (MiB)")):
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("points")
@@ -205,6 +221,42 @@ def figure(results: dict, path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _stored_catalogue(results: dict) -> None:
+    """The largest catalogue entry of ``results_catalogue.json`` (the figure's star)."""
+    stored = HERE / "results_catalogue.json"
+    if stored.exists():
+        entries = {k: v for k, v in json.loads(stored.read_text()).items()
+                   if k.startswith("scale_")}
+        if entries:
+            results["catalogue"] = max(entries.values(), key=lambda e: e["points"])
+            results["catalogue"]["source"] = "results_catalogue.json"
+
+
+def merge(paths, out, fig) -> None:
+    """The rows of several results files (a later file's row replaces an earlier one of the
+    same command and size) as one results file, table and figure."""
+    parts = [json.loads(Path(p).read_text()) for p in paths]
+    results = {"machine": parts[0]["machine"], "commands": {}, "merged_from": list(paths)}
+    for part in parts:
+        for name, rows in part["commands"].items():
+            by = {r["points"]: r for r in results["commands"].get(name, [])}
+            by.update({r["points"]: r for r in rows})
+            results["commands"][name] = [by[k] for k in sorted(by)]
+        if "catalogue" in part:
+            results["catalogue"] = part["catalogue"]
+    if "catalogue" not in results:
+        _stored_catalogue(results)
+    results["commands"] = {name: results["commands"][name]
+                           for name in sorted(results["commands"],
+                                              key=lambda c: list(COMMANDS).index(c))}
+    results["markdown"] = table(results)
+    print(results["markdown"])
+    if out:
+        Path(out).write_text(json.dumps(results, indent=1) + "\n")
+    if fig:
+        figure(results, Path(fig))
 
 
 def main(argv=None):
@@ -220,7 +272,15 @@ def main(argv=None):
     ap.add_argument("--out", default=None, help="results JSON")
     ap.add_argument("--figure", default=None, help="log-log PNG of time and memory")
     ap.add_argument("--tmp", default=None, help="work folder")
+    ap.add_argument("--numba-cache", default=None, metavar="DIR",
+                    help="Numba cache folder shared by runs side by side (default: one in the "
+                         "work folder, filled by the untimed runs)")
+    ap.add_argument("--merge", nargs="+", default=None, metavar="JSON",
+                    help="run nothing: combine the rows of these results files (of runs made "
+                         "side by side, e.g. one per size) into --out, its table and figure")
     args = ap.parse_args(argv)
+    if args.merge:
+        return merge(args.merge, args.out, args.figure)
 
     with tempfile.TemporaryDirectory(dir=args.tmp) as tmp:
         tmp = Path(tmp)
@@ -230,20 +290,16 @@ def main(argv=None):
                                "note": "two cores shared with other jobs: seconds are "
                                        "upper bounds; peak memory is not affected"},
                    "commands": measure(args.commands, args.sizes, tmp, args.timeout,
-                                               args.max_mib)}
+                                       args.max_mib,
+                                       Path(args.out + ".partial") if args.out else None,
+                                       Path(args.numba_cache) if args.numba_cache else None)}
         if args.catalogue:
             import catalogue
 
             results["catalogue"] = catalogue.scale(tmp / "catalogue", args.catalogue,
                                                    1_000_000)
     if "catalogue" not in results:
-        stored = HERE / "results_catalogue.json"
-        if stored.exists():
-            entries = {k: v for k, v in json.loads(stored.read_text()).items()
-                       if k.startswith("scale_")}
-            if entries:
-                results["catalogue"] = max(entries.values(), key=lambda e: e["points"])
-                results["catalogue"]["source"] = "results_catalogue.json"
+        _stored_catalogue(results)
     if args.out and Path(args.out).exists():  # keep the sizes and commands not rerun
         old = json.loads(Path(args.out).read_text()).get("commands", {})
         for name, rows in old.items():

@@ -54,40 +54,70 @@ _KERNELS: list = []
 
 
 def _count_compiles():
-    import time
+    from _compile_listener import count_compiles
 
-    from numba.core import event
-
-    class _Outermost(event.Listener):
-        depth = 0
-        start = 0.0
-
-        def on_start(self, ev):
-            if self.depth == 0:
-                self.start = time.perf_counter()
-                self.cpu = time.thread_time()
-                py = getattr(ev.data.get("dispatcher"), "py_func", None)
-                self.key = (f"{getattr(py, '__module__', '?')}.{getattr(py, '__qualname__', '?')}"
-                            f"{ev.data.get('args', '')}")
-            self.depth += 1
-
-        def on_end(self, ev):
-            self.depth -= 1
-            if self.depth == 0:
-                cpu = time.thread_time() - self.cpu
-                _COMPILES["seconds"] += time.perf_counter() - self.start
-                _COMPILES["cpu"] += cpu
-                _COMPILES["count"] += 1
-                _KERNELS.append([self.key, round(cpu, 2)])
-
-    event.register("numba:compile", _Outermost())
+    count_compiles(_COMPILES, _KERNELS)
 
 
 def pytest_configure(config):
     _count_compiles()
 
 
+# ------------------------------------------------------------------ compile once, then test
+# On the xdist controller, before the workers start: the warm-up commands in a few
+# processes at once, at most one per worker (tests/_compile_report.py), so that each kernel
+# the commands use is compiled once into the cache the workers and the CLI subprocesses
+# load from, not by every process that needs it first at the same time; their report is
+# what tests/cli/test_compilation.py checks. Only for the whole suite (no test paths
+# given), where nearly every kernel is needed; LIDARSTAT_TEST_WARMUP=1 asks for it on any
+# run under xdist, =0 never.
+_WARMUP = {}
+
+
+def _warm_up_first(config) -> int:
+    """Number of warm-up processes for this run (0: none)."""
+    if (hasattr(config, "workerinput") or not config.pluginmanager.hasplugin("dsession")
+            or config.option.collectonly):
+        return 0
+    n = len(getattr(config.option, "tx", None) or ())  # the workers xdist starts
+    wanted = os.environ.get("LIDARSTAT_TEST_WARMUP")
+    if wanted == "0" or n < 2:
+        return 0
+    if wanted == "1" or config.args_source == pytest.Config.ArgsSource.TESTPATHS:
+        return n
+    return 0
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionstart(session):
+    n = _warm_up_first(session.config)
+    if not n:
+        return
+    import json
+    import tempfile
+
+    from _compile_report import run
+
+    tr = session.config.pluginmanager.get_plugin("terminalreporter")
+    if tr is not None:
+        tr.write_line("compiling the warm-up commands' kernels before the workers start "
+                      "(LIDARSTAT_TEST_WARMUP=0 skips it)")
+    got = run(n)
+    for key in ("seconds", "cpu", "count"):
+        _COMPILES[key] += got["compiles"][key]
+    _KERNELS.extend(got["compiles"]["kernels"])
+    path = Path(tempfile.mkdtemp(prefix="lidarstat-tests-")) / "compile_report.json"
+    path.write_text(json.dumps(got))
+    os.environ["LIDARSTAT_COMPILE_REPORT"] = str(path)  # the workers inherit it
+    _WARMUP.update(wall_s=got["wall_s"], processes=got["processes"], errors=len(got["errors"]),
+                   path=path, groups=got["groups"])
+
+
 def pytest_sessionfinish(session):
+    if "path" in _WARMUP:
+        import shutil
+
+        shutil.rmtree(_WARMUP["path"].parent, ignore_errors=True)
     workeroutput = getattr(session.config, "workeroutput", None)
     if workeroutput is not None:
         workeroutput["numba_compiles"] = dict(_COMPILES)
@@ -109,8 +139,14 @@ def pytest_terminal_summary(terminalreporter):
         import json
 
         Path(log).write_text(json.dumps(sorted(_KERNELS, key=lambda kv: -kv[1]), indent=0))
+    if _WARMUP:
+        terminalreporter.write_line(
+            f"Warm-up before the workers: {_WARMUP['processes']} processes, "
+            f"{_WARMUP['wall_s']:.0f} s ({_WARMUP['errors']} failed; each: "
+            + ", ".join(f"{g['wall_s']:.0f} s wall {g['cpu_s']:.0f} s CPU"
+                        for g in _WARMUP["groups"]) + ")")
     if _COMPILES["count"]:
         terminalreporter.write_line(
             f"Numba: {_COMPILES['count']} compilations, {_COMPILES['seconds']:.0f} s compiling "
             f"({_COMPILES['cpu']:.0f} s CPU) "
-            f"(summed over the test processes; a warm cache loads instead)")
+            f"(summed over the test processes and the warm-up; a warm cache loads instead)")

@@ -261,3 +261,43 @@ def test_automatic_scale_options_are_checked():
         curvature(pts, scales=[])
     res = curvature(pts, sigma=0.001, scales=[0.2, 0.1])
     assert res.radius == (0.1, 0.2) and set(np.unique(res["radius"])) <= {0.1, 0.2}
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_ladder_written_block_by_block_equals_each_rungs_own_fit(seed):
+    """The automatic scale and the multi-radius strategy write each rung's blocks into the
+    chosen fields: every point's fields are those of a whole-cloud fit at its chosen radius,
+    chosen by the rule (smallest rung where the model is accepted and the curvature
+    detected, else the largest accepted, else the first), with blocks smaller than a rung."""
+    from lidarstat.features._curvature_scale import _detected, stop_pvalue
+
+    rng = np.random.default_rng(seed)
+    x, y = rng.uniform(-1, 1, (2, 1500))
+    z = 0.4 * np.sin(2 * x) * y + 0.3 * (x > 0.2) * x + rng.normal(0, 0.003, x.size)
+    pts = np.c_[x, y, z]
+    ladder = (0.12, 0.17, 0.24, 0.34)
+    got = curvature(pts, sigma=0.003, scales=ladder, block_size=200)
+    rungs = [curvature(pts, radius=r, sigma=0.003).fields for r in ladder]
+    p_stop = stop_pvalue(0.05, 0.9)
+    first_det = np.full(x.size, len(ladder))  # smallest rung accepted and detected
+    accepted = np.full(x.size, -1)  # largest rung accepted
+    for k in range(len(ladder)):
+        ok = rungs[k]["chi2_pass"] == 1
+        accepted[ok] = k
+        first_det[ok & _detected(rungs[k], p_stop) & (first_det == len(ladder))] = k
+    chosen = np.where(first_det < len(ladder), first_det, np.maximum(accepted, 0))
+    assert 0 < (first_det < len(ladder)).mean() < 1 and len(np.unique(chosen)) == len(ladder)
+    assert np.array_equal(got["radius"], np.asarray(ladder)[chosen])
+    for name, v in got.fields.items():
+        if name == "radius":
+            continue
+        want = np.choose(chosen, [np.asarray(r[name]) for r in rungs])
+        np.testing.assert_array_equal(v, want, err_msg=name)
+    multi = curvature(pts, radius=ladder, sigma=0.003, block_size=200)
+    first_ok = np.full(x.size, 0)
+    for k in reversed(range(len(ladder))):
+        first_ok[rungs[k]["chi2_pass"] == 1] = k
+    np.testing.assert_array_equal(multi["radius"], np.asarray(ladder)[first_ok])
+    for name in ("K", "H", "status", "chi2_p", "NormalZ"):
+        want = np.choose(first_ok, [np.asarray(r[name]) for r in rungs])
+        np.testing.assert_array_equal(multi[name], want, err_msg=name)

@@ -161,11 +161,12 @@ def test_closed_form_chi2_tails_match_scipy():
 
     from lidarstat.features._curvature_kernels import chi2_sf_small_df, normal_two_sided
 
-    for df in (1, 2, 3):
+    # df as the kernel's caller gives it (float64): an int would compile a second variant
+    for df in (1.0, 2.0, 3.0):
         for x in (0.0, 1e-8, 0.5, 3.0, 7.81, 40.0, 700.0):
             assert chi2_sf_small_df(x, df) == pytest.approx(stats.chi2.sf(x, df), rel=1e-12,
                                                             abs=1e-300)
-    assert np.isnan(chi2_sf_small_df(np.nan, 3)) and np.isnan(chi2_sf_small_df(1.0, 4))
+    assert np.isnan(chi2_sf_small_df(np.nan, 3.0)) and np.isnan(chi2_sf_small_df(1.0, 4.0))
     for z in (0.0, 1.0, 1.96, 6.0, 30.0):
         assert normal_two_sided(z, 1.0) == pytest.approx(2 * stats.norm.sf(z), rel=1e-12,
                                                          abs=1e-300)

@@ -19,10 +19,15 @@ trench):
 For a circular axis (radius ``R0`` much larger than the profile) the surface is one of
 revolution; its meridian curvature is the profile curvature of ``s = r - R0``, whose
 extrema sit at the same ``s`` as for a straight axis (``h' = h''' = 0`` on the axis).
+
+For the size of the automatic scale's test: tilted planes with seeds whose
+neighbourhoods do not overlap (:func:`disjoint_plane_seeds`), and the scale's k''
+statistic read there (:func:`plane_scale_statistic`, which calls lidarstat).
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -227,3 +232,79 @@ def ridge_precision(scene, ridge, *, tol_factor=2.5):
     if not sel.any():
         return 1.0
     return float(np.mean(scene.line_distance[sel] <= tol_factor * scene.spacing))
+
+
+def tilted_plane(rng, tilt_deg, nx, ny, sigma):
+    """A plane z = tan(tilt) x with noise `sigma` along z, sampled on a jittered unit grid
+    of `nx` by `ny` nodes in plan (each node moved uniformly within its cell): stretched
+    by ``1 / cos(tilt)`` along the slope."""
+    gx, gy = np.arange(nx, dtype=np.float64), np.arange(ny, dtype=np.float64)
+    x, y = (a.ravel() for a in np.meshgrid(gx, gy))
+    x = x + rng.uniform(-0.5, 0.5, x.size)
+    y = y + rng.uniform(-0.5, 0.5, y.size)
+    z = np.tan(np.radians(tilt_deg)) * x + rng.normal(0.0, sigma, x.size)
+    return np.c_[x, y, z]
+
+
+def disjoint_plane_seeds(rng, tilt_deg, radius, samples, sigma):
+    """A :func:`tilted_plane` and `samples` seed points on it whose balls of `radius` (in
+    3-D) do not overlap, so that statistics read at the seeds are independent draws.
+
+    The seeds are the points nearest the nodes of a grid in plan of steps
+    ``2 radius cos(tilt) + 2`` along the slope and ``2 radius + 2`` across it (the 2: a
+    point lies within one unit of its node), at least ``2 radius`` from the plane's edges.
+    """
+    from scipy.spatial import cKDTree
+
+    c = np.cos(np.radians(tilt_deg))
+    sx, sy = 2.0 * radius * c + 2.0, 2.0 * radius + 2.0
+    mx = int(np.ceil(np.sqrt(samples * sy / sx)))
+    my = int(np.ceil(samples / mx))
+    x0 = 2.0 * radius + 1.0
+    nx, ny = int(mx * sx + 2 * x0) + 1, int(my * sy + 2 * x0) + 1
+    xyz = tilted_plane(rng, tilt_deg, nx, ny, sigma)
+    gx, gy = (a.ravel()[:samples] for a in np.meshgrid(x0 + sx * np.arange(mx),
+                                                       x0 + sy * np.arange(my)))
+    seeds = np.unique(cKDTree(xyz[:, :2]).query(np.c_[gx, gy])[1])
+    return xyz, seeds
+
+
+@functools.cache
+def _plane_field(tilt_deg, seed, top_rung, samples=2000):
+    """A plane tilted by `tilt_deg` (noise along z) with `samples` seeds whose
+    neighbourhoods at rung `top_rung` (and so at every smaller rung) are disjoint, and
+    the ladder of its pattern (read on a 120 x 120 patch of it)."""
+    from lidarstat.features._jet_scale import radius_ladder
+
+    rng = np.random.default_rng(seed)
+    sigma = 0.01
+    radii = radius_ladder(tilted_plane(rng, tilt_deg, 120, 120, sigma))
+    xyz, seeds = disjoint_plane_seeds(rng, tilt_deg, float(radii[top_rung]), samples, sigma)
+    return xyz, seeds, radii, sigma
+
+
+def plane_scale_statistic(tilt_deg, rung, seed, top_rung, alpha=0.01):
+    """The k'' selection statistic of the automatic scale at the fitted seeds of
+    :func:`_plane_field` at rung `rung` (the tests' fields at the plane's z noise)."""
+    from scipy.spatial import cKDTree
+
+    from lidarstat.features import height_variance, jet_tests
+    from lidarstat.features._jet_fit import _allocate, _to_fit
+    from lidarstat.features._jet_scale import _fit_into
+    from lidarstat.segment._ridges import _ridge_statistic
+
+    xyz, seeds, radii, sigma = _plane_field(tilt_deg, seed, top_rung)
+    r = float(radii[rung])
+    # the check: no two seeds within 2 r in 3-D, so their balls of radius r are disjoint
+    # and the counts below are independent Bernoulli draws
+    assert not cKDTree(xyz[seeds]).query_pairs(2.0 * r), "overlapping neighbourhoods"
+    mask = np.zeros(len(xyz), bool)
+    mask[seeds] = True
+    slot = np.full(len(xyz), -1, np.int64)
+    slot[seeds] = np.arange(seeds.size)
+    out = _allocate(seeds.size)
+    _fit_into(xyz, r, mask, dict(degree=4, monge_degree=4, weight="tricube", sensor=None,
+                                 min_neighbors=16, standard_errors=True), 131072, out, slot)
+    fit = _to_fit(out, 4, 4, "tricube")
+    fields = jet_tests(fit, height_variance(fit.frame, sigma, noise="z"), alpha)
+    return _ridge_statistic(fit, fields)[fit.status == 0]

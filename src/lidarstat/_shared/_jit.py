@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 
 import numba
+import numpy as np
 
 _DEFAULTS = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
@@ -32,6 +33,18 @@ def njit(*args, **kwargs):
 def njit_parallel(func):
     """``numba.njit(parallel=True)`` with lidarstat's defaults, one signature per types."""
     return one_signature(numba.njit(parallel=True, **_DEFAULTS)(func))
+
+
+def kernel_array(a, dtype=np.float64):
+    """`a` as a C-contiguous, writable array of `dtype`, the one array type kernels take.
+
+    Numba types a read-only array apart from a writable one, so a kernel called with both
+    (a view from ``np.broadcast_to``, a synthetic cloud's read-only truth arrays, a
+    caller's read-only buffer) is compiled twice. This copies only an array that is
+    read-only, of another dtype or not C-contiguous; a writable C array of `dtype` is
+    returned as it is.
+    """
+    return np.require(a, dtype=dtype, requirements=["C", "W"])
 
 
 def _call_type(ty):

@@ -244,7 +244,7 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     # bring them in another order than the whole file): every step runs on the points
     # sorted by x, y, z and intensity, and the results go back to the caller's order.
     canon = canonical_order(pts[:, 0], pts[:, 1], pts[:, 2], inten)
-    pts = pts[canon]
+    pts = np.take(pts, canon, axis=0)  # rows by np.take: a third of fancy indexing's time
     inten, nret, rnum = (None if a is None else a[canon] for a in (inten, nret, rnum))
 
     # 1. low noise, out of every analysis

@@ -55,7 +55,7 @@ def _run(args):
     fields = res.to_fields()
     if stream:
         rewrite(args.input, out, lambda start, chunk: {
-            name: a[start:start + len(chunk)] for name, a in fields.items()})
+            name: a[start:start + len(chunk)] for name, a in fields.items()}, decode=False)
     else:
         write(out, cloud, fields=fields)
     del fields

@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from .._shared._choices import Frame, Test
+from .._shared._jit import kernel_array
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import CellIndex, copies_degenerate, find_duplicates, run_on_unique
@@ -17,7 +18,7 @@ from ..stats import chi2_test, z_critical
 from . import _curvature_kernels as _ck
 from . import _quadric_kernels as _k
 from ._curvature_result import CurvatureResult
-from ._curvature_scale import scale_ladder, walk_ladder
+from ._curvature_scale import climb_into, scale_ladder, walk_ladder
 from ._hk import hk_surface_types
 from ._noise import (estimate_sigma, estimate_sigma_index, fit_factor_spread,
                      fit_height_variance, resolve_noise)
@@ -51,7 +52,7 @@ def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False, sprea
     dict of per-point arrays named as in ``FIELDS``.
     """
     m = out["status"].size
-    sigma2 = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma2, dtype=np.float64), (m,)))
+    sigma2 = kernel_array(np.broadcast_to(np.asarray(sigma2, dtype=np.float64), (m,)))
     st = np.empty((m, _ck.NCOL))
     test = Test.parse(test, "test", func="curvature_tests")
     mode = _ck.TEST_PAPER if test == Test.PAPER else _ck.TEST_CALIBRATED
@@ -99,11 +100,14 @@ def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False, sprea
     return res
 
 def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neighbors,
-                   minimal_detectable, block_size, progress=None, active=None):
+                   minimal_detectable, block_size, progress=None, active=None, into=None):
     """The curvature pipeline at the index's radius, block by block; fields in input order.
 
     `active` (bool per input point) restricts the work to some points (multi-scale); the
-    other rows are NaN / unclassified.
+    other rows are NaN / unclassified. With `into`, each block's fields go to
+    `into(rows, block_fields)` (`rows`: the block's input positions) and nothing is kept
+    or returned: a rung of a ladder writes into the chosen fields without a second set of
+    fields for the whole cloud.
     """
     radius = index.radius
     active_sorted = None if active is None else active[index.order].astype(np.uint8)
@@ -125,9 +129,15 @@ def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neigh
         res = curvature_tests(out, sigma2=sigma2, alpha=alpha, test=test,
                               minimal_detectable=minimal_detectable, spread=spread)
         res["z0"] = res["z0"] + index.sorted_points[s0:s1, 2] + index.origin[2]
+        rows = index.order[s0:s1]  # the block's input positions: one scatter per field
+        if into is not None:
+            into(rows, res)
+            done += s1 - s0
+            if progress is not None:
+                progress(done, n)
+            continue
         if fields is None:
             fields = {k: np.empty(n, dtype=v.dtype) for k, v in res.items()}
-        rows = index.order[s0:s1]  # the block's input positions: one scatter per field
         for k, v in res.items():
             fields[k][rows] = v
         done += s1 - s0
@@ -256,6 +266,7 @@ def curvature(points, *, radius=None, sigma=None, alpha=0.05, test="calibrated",
         est_index = index if est_radius == radii[0] else CellIndex(pts, est_radius)
         sigma = estimate_sigma_index(est_index, noise=noise, frame=frame, sensor=sensor,
                                      min_neighbors=min_neighbors)
+        del est_index  # an index of its own at the middle rung: not kept during the fits
         logger.info("estimated sigma = %g", sigma)
         if not sigma > 0:
             raise InvalidParameterError(
@@ -270,13 +281,15 @@ def curvature(points, *, radius=None, sigma=None, alpha=0.05, test="calibrated",
     n = pts.shape[0]
     if automatic:
         steps = len(radii)
+        first = [index]  # the first rung's index, dropped once that rung is fitted
+        del index
 
-        def run(r, active):
+        def run(r, active, into):
             k = radii.index(r)
             prog = None if progress is None else (
                 lambda done, total: progress(k * total + done, steps * total))
-            idx = index if k == 0 else CellIndex(pts, r)
-            return _single_radius(idx, active=active, progress=prog, **kw)
+            idx = first.pop() if k == 0 else CellIndex(pts, r)
+            return _single_radius(idx, active=active, progress=prog, into=into, **kw)
 
         fields, chosen = walk_ladder(run, radii, n=n, alpha=alpha, power=power)
         fields["radius"] = chosen
@@ -284,18 +297,16 @@ def curvature(points, *, radius=None, sigma=None, alpha=0.05, test="calibrated",
             progress(n, n)
     else:
         fields = _single_radius(index, progress=progress, **kw)
+        del index
         if len(radii) > 1:
             chosen = np.full(n, radii[0])
             pending = fields["chi2_pass"] == 0
             for r in radii[1:]:
                 if not pending.any():
                     break
-                nxt = _single_radius(CellIndex(pts, r), active=pending, **kw)
-                take = pending & (nxt["chi2_pass"] == 1)
-                for k in fields:
-                    fields[k][take] = nxt[k][take]
-                chosen[take] = r
-                pending &= ~take
+                _single_radius(CellIndex(pts, r), active=pending, **kw,
+                               into=climb_into(fields, chosen, pending, r,
+                                               stop=lambda res, take: take))
             fields["radius"] = chosen
     return CurvatureResult(fields=fields, radius=radii[0] if len(radii) == 1 and not automatic
                            else radii, sigma=float(sigma), sigma_estimated=estimated,

@@ -62,8 +62,12 @@ def stop_pvalue(alpha, power):
 
 
 def walk_ladder(run, radii, *, n, alpha, power):
-    """Per point, the radius of the design above; `run(radius, active)` returns the
-    fields of :func:`curvature` at one radius for the `active` points (None: all).
+    """Per point, the radius of the design above.
+
+    `run(radius, active, into)` computes the fields of :func:`curvature` at one radius for
+    the `active` points (None: all): with `into` None it returns them for every point,
+    otherwise it hands each block to `into(rows, block_fields)` (`rows`: the block's input
+    positions) and keeps nothing, so that a rung writes straight into the chosen fields.
 
     A point is fitted at every rung until its curvature is detected with `power`; it keeps
     the fields of the smallest rung where that happens, else of the largest rung whose
@@ -72,19 +76,34 @@ def walk_ladder(run, radii, *, n, alpha, power):
     Returns the fields at the chosen radii and the chosen radius per point.
     """
     p_stop = stop_pvalue(alpha, power)
-    fields = run(radii[0], None)
+    fields = run(radii[0], None, None)
     chosen = np.full(n, radii[0])
     pending = ~((fields["chi2_pass"] == 1) & _detected(fields, p_stop))
     for r in radii[1:]:
         if not pending.any():
             break
-        nxt = run(r, pending)
-        take = pending & (nxt["chi2_pass"] == 1)
-        for k in fields:
-            fields[k][take] = nxt[k][take]
-        chosen[take] = r
-        pending &= ~(take & _detected(nxt, p_stop))
+        run(r, pending, climb_into(fields, chosen, pending, r,
+                                   stop=lambda res, take: take & _detected(res, p_stop)))
     return fields, chosen
+
+
+def climb_into(fields, chosen, pending, radius, *, stop):
+    """The block writer of one rung: a pending point whose model test accepts the quadric
+    at `radius` takes that rung's fields and radius; it leaves the climb where
+    `stop(block_fields, taken)` is true.
+
+    `fields`, `chosen` and `pending` (per input point) are updated in place. A rung reads
+    `pending` once, before its first block (the points it fits), and every point lies in
+    exactly one block, so clearing a block's rows does not change the rung's work.
+    """
+    def into(rows, res):
+        take = pending[rows] & (res["chi2_pass"] == 1)
+        dest = rows[take]
+        for k, v in fields.items():
+            v[dest] = res[k][take]
+        chosen[dest] = radius
+        pending[rows[stop(res, take)]] = False
+    return into
 
 
 def _detected(fields, p_stop):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._shared._jit import kernel_array
 from ._cylinder_kernels import cylinder_rows
 
 
@@ -48,8 +49,7 @@ def cylinder_test(points, query, indptr, idx, axes, sigma, *, sensor=None,
     centre = np.empty((m, 3))
     has_sensor = sensor is not None
     sens = (np.asarray(sensor, dtype=np.float64) - origin) if has_sensor else np.zeros(3)
-    sig = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma, dtype=np.float64),
-                                               (pts.shape[0],)))
+    sig = kernel_array(np.broadcast_to(np.asarray(sigma, dtype=np.float64), (pts.shape[0],)))
     cylinder_rows(local, np.ascontiguousarray(query, dtype=np.int64),
                   np.ascontiguousarray(indptr, dtype=np.int64),
                   np.ascontiguousarray(idx, dtype=np.int64),  # one compiled variant

@@ -11,8 +11,10 @@ nothing to detect picks a rung by chance with probability at most ``alpha``. The
 stops at the first rung whose jet the chi-square test rejects (eq. 7: a wider
 neighbourhood only adds model bias) or whose neighbourhood is one-sided (a border); a
 seed where no rung detects anything takes the smallest rung (nothing to gain by
-smoothing). Every point takes the smallest rung of the detecting seeds within ``r_0``,
-else its nearest seed's, and the jets are fitted once more at every point's radius.
+smoothing). A seed's detection counts only when a neighbouring seed's confirms it
+(:func:`confirmed_detections`). Every point takes the smallest rung of the detecting
+seeds within ``r_0``, else its nearest seed's, and the jets are fitted once more at
+every point's radius.
 """
 
 from __future__ import annotations
@@ -41,6 +43,13 @@ SCALE_POWER = 0.8
 #: neighbourhood the scale may grow from: a half disc (a straight border) has 0.42, a
 #: whole disc of 48 random points exceeds 0.25 with probability about 0.002.
 ONE_SIDED = 0.35
+#: Distance, in smallest radii, within which a seed's detection must be confirmed by
+#: another's (:func:`confirmed_detections`): the seeds of the neighbouring cubes.
+CONFIRM_REACH = 2.0
+#: Rungs above its own at which a neighbouring seed's detection confirms a seed's: a
+#: seed up to two smallest radii from a feature sees it once its radius has grown by
+#: about that distance, a factor 2 (two rungs).
+CONFIRM_RUNGS = 2
 
 
 @dataclass(frozen=True)
@@ -209,9 +218,36 @@ def choose_rungs(points, radii, criterion, alpha, tests, kw, block_size=131072):
         hit = np.flatnonzero(open_)[(s > z[j]) & whole]
         chosen[hit] = j
         stopped[np.flatnonzero(open_)[~fits]] = True
-    detected = chosen >= 0
+    detected = confirmed_detections(points[seeds], chosen, CONFIRM_REACH * float(radii[0]))
     chosen[~detected] = 0
     return spread_rungs(points, seeds, chosen, detected, float(radii[0]), nr), seeds, stat
+
+
+def confirmed_detections(seed_points, chosen, reach):
+    """Seeds whose detection (``chosen >= 0``) another detecting seed within `reach`
+    confirms by a rung at most :data:`CONFIRM_RUNGS` above its own.
+
+    Each seed's test errs with probability up to ``alpha`` over the ladder, and a
+    cloud has many seeds: a few detect by chance, most often at a small rung where the
+    feature around them (if any) is detected at a larger one; as the smallest rung
+    within reach wins (:func:`spread_rungs`), such a lone rung would cut a hole of two
+    smallest radii into a line traced at the larger one. A feature the scale serves
+    (a ridge line, longer than two radii) is seen by the seeds of neighbouring cubes
+    at about the same rung; two neighbouring chance detections at about the same rung
+    are rare (the square of a small probability).
+    """
+    from scipy.spatial import cKDTree
+
+    det = np.flatnonzero(chosen >= 0)
+    ok = np.zeros(chosen.size, bool)
+    if det.size < 2:
+        return ok
+    pairs = cKDTree(seed_points[det]).query_pairs(reach, output_type="ndarray")
+    if pairs.size:
+        a, b = det[pairs[:, 0]], det[pairs[:, 1]]
+        ok[a[chosen[b] <= chosen[a] + CONFIRM_RUNGS]] = True
+        ok[b[chosen[a] <= chosen[b] + CONFIRM_RUNGS]] = True
+    return ok
 
 
 def spread_rungs(points, seeds, chosen, detected, reach, nr):

@@ -379,12 +379,13 @@ def iter_chunks(path: str | os.PathLike, points_per_chunk: int = 1_000_000, *,
 
 
 def rewrite(src: str | os.PathLike, dst: str | os.PathLike, fields_of, *,
-            points_per_chunk: int = 1_000_000) -> Path:
+            points_per_chunk: int = 1_000_000, decode: bool = True) -> Path:
     """Copy `src` to `dst` with new per-point fields computed chunk by chunk.
 
     LAS/LAZ to LAS/LAZ is streamed: one chunk of `points_per_chunk` points is in memory
     at a time, every original field, VLR and CRS is kept, and `dst` appears only when
-    complete. Other formats are read and written whole.
+    complete; the records are copied as read, only the new fields are written into
+    them. Other formats are read and written whole.
 
     Parameters
     ----------
@@ -394,11 +395,19 @@ def rewrite(src: str | os.PathLike, dst: str | os.PathLike, fields_of, *,
         ``fields_of(start, chunk) -> dict`` of arrays for the points ``start ..
         start + len(chunk)`` of the file (`chunk` is a :class:`PointCloud`).
     points_per_chunk : int
+    decode : bool
+        False when `fields_of` needs only the chunk's length: `chunk` is then the
+        ``range`` of its points' positions in the file and the LAS/LAZ records are not
+        decoded into arrays.
 
     Returns
     -------
     Path
     """
+    from .._shared.validation import check_scalar
+
+    points_per_chunk = check_scalar(points_per_chunk, "points_per_chunk", func="rewrite",
+                                    low=1, closed="left", integer=True)
     src, dst = Path(src), Path(dst)
     fin, fout = _format_of(src), _format_of(dst)
     if dst.exists() and src.exists() and os.path.samefile(src, dst):
@@ -409,13 +418,12 @@ def rewrite(src: str | os.PathLike, dst: str | os.PathLike, fields_of, *,
     if fin in ("las", "laz") and fout in ("las", "laz"):
         from . import _las
 
-        def chunks():
-            start = 0
-            for chunk in iter_chunks(src, points_per_chunk):
-                yield chunk, _check_fields(dst, fields_of(start, chunk), len(chunk))
-                start += len(chunk)
-
-        _las.write_stream(dst, chunks(), fout)
+        if not src.exists():
+            raise PointCloudReadError(f"{src}: no such file")
+        if src.is_dir():
+            raise PointCloudReadError(f"{src}: is a directory, not a point-cloud file")
+        _las.rewrite_file(src, dst, fin, fout, fields_of, points_per_chunk,
+                          lambda fields, n: _check_fields(dst, fields, n), decode=decode)
         return dst
     cloud = read(src)
-    return write(dst, cloud, fields=fields_of(0, cloud))
+    return write(dst, cloud, fields=fields_of(0, cloud if decode else range(len(cloud))))

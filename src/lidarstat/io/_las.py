@@ -163,6 +163,16 @@ def read_file(path: Path, fmt: str, max_bytes=None) -> PointCloud:
     return _cloud_from_points(points, header, path, fmt, crs)
 
 
+def _open_reader(path: Path, fmt: str):
+    """``laspy.open`` of `path` for reading; its failure as one line naming the file."""
+    try:
+        return laspy.open(path, laz_backend=_BACKEND)
+    except NOT_FOREIGN:
+        raise
+    except BaseException as exc:
+        raise _unreadable(path, fmt, exc) from exc
+
+
 def iter_file(path: Path, fmt: str, points_per_chunk: int, max_bytes=None
               ) -> Iterator[PointCloud]:
     """Stream a LAS/LAZ file as clouds of at most `points_per_chunk` points.
@@ -171,12 +181,7 @@ def iter_file(path: Path, fmt: str, points_per_chunk: int, max_bytes=None
     header promises: a short file raises :class:`PointCloudReadError` instead of ending early.
     """
     _checked(path, fmt, points_per_chunk, max_bytes)
-    try:
-        reader = laspy.open(path, laz_backend=_BACKEND)
-    except NOT_FOREIGN:
-        raise
-    except BaseException as exc:
-        raise _unreadable(path, fmt, exc) from exc
+    reader = _open_reader(path, fmt)
     with reader:
         try:
             header = _strip_laszip(reader.header)
@@ -411,6 +416,78 @@ def write_file(path: Path, cloud: PointCloud, new: dict, fmt: str) -> None:
                                    f"({short_cause(exc)})") from exc
 
 
+def _copy_records(points, header):
+    """A point record for `header` holding the records of `points` byte for byte.
+
+    `header` is the input's header with new extra bytes appended (see
+    :func:`rewrite_file`): every field of the input keeps its raw bytes (coordinates as
+    the stored integers, bit fields packed as read), so nothing is decoded and encoded
+    again.
+    """
+    rec = laspy.ScaleAwarePointRecord.zeros(len(points), header=header)
+    src, dst = points.array, rec.array
+    size = src.dtype.itemsize
+    if all(dst.dtype.fields.get(name) == field for name, field in src.dtype.fields.items()):
+        # the input's fields lead the output's records at the same offsets: one copy of
+        # each record's first `size` bytes
+        rows = dst.view(np.uint8).reshape(len(dst), dst.dtype.itemsize)
+        rows[:, :size] = np.ascontiguousarray(src).view(np.uint8).reshape(len(src), size)
+    else:
+        for name in src.dtype.names:
+            dst[name] = src[name]
+    return rec
+
+
+def rewrite_file(src: Path, dst: Path, fin: str, fout: str, fields_of, points_per_chunk: int,
+                 check_fields, decode: bool = True) -> int:
+    """Copy the LAS/LAZ file `src` to `dst` with new fields, chunk by chunk.
+
+    Each chunk's records are copied as read (:func:`_copy_records`) and the new fields
+    written over them; ``fields_of(start, chunk)`` sees the chunk decoded as a
+    :class:`PointCloud` (`decode` False: the ``range`` of its positions, nothing
+    decoded). `check_fields(fields, n)` checks the fields of a chunk of `n`
+    points. The file is the one :func:`write_stream` writes from the decoded chunks.
+    Returns the number of points written.
+    """
+    _checked(src, fin, points_per_chunk, None)
+    reader = _open_reader(src, fin)
+
+    def parts():
+        try:
+            in_header = _strip_laszip(reader.header)
+            crs = crs_of(in_header) if decode else None
+        except NOT_FOREIGN:
+            raise
+        except BaseException as exc:
+            raise _unreadable(src, fin, exc) from exc
+        bare = PointCloud(np.empty((0, 3)), las_header=in_header)
+        start = 0
+        for points in read_chunks(reader, src, fin, points_per_chunk):
+            m = len(points)
+            chunk = (_cloud_from_points(points, in_header, src, fin, crs) if decode
+                     else range(start, start + m))
+            new = check_fields(fields_of(start, chunk), m)
+            start += m
+            yield bare, new, lambda header, assign, points=points: _copied_record(
+                dst, header, points, assign)
+
+    with reader:
+        return _write_parts(dst, parts(), fout)
+
+
+def _copied_record(path, header, points, assign):
+    """The records of `points` copied as read (:func:`_copy_records`) with the new
+    fields of `assign` written over them."""
+    rec = _copy_records(points, header)
+    try:
+        for name, values in assign.items():
+            rec[name] = values
+    except (ValueError, OverflowError, TypeError) as exc:
+        raise InvalidParameterError(
+            f"{path}: cannot build LAS points ({short_cause(exc)})") from exc
+    return rec
+
+
 def write_stream(path: Path, chunks, fmt: str) -> int:
     """Write ``(cloud, new_fields)`` chunks one after the other to a LAS/LAZ file.
 
@@ -418,19 +495,31 @@ def write_stream(path: Path, chunks, fmt: str) -> int:
     bytes; memory holds one chunk at a time. The file appears only when complete.
     Returns the number of points written.
     """
+    return _write_parts(path, ((cloud, new, lambda header, assign, cloud=cloud: _record(
+        path, header, cloud, assign)) for cloud, new in chunks), fmt)
+
+
+def _write_parts(path: Path, parts, fmt: str) -> int:
+    """Write ``(cloud, new_fields, make_record)`` parts to a LAS/LAZ file, atomically.
+
+    The first part's cloud (its source header, or none) and new fields fix the header;
+    ``make_record(header, assign)`` builds each part's points. Returns the number of
+    points written.
+    """
     total = 0
     try:
         with atomic_path(path) as tmp:
             writer = None
             try:
-                for cloud, new in chunks:
+                for cloud, new, make_record in parts:
                     if writer is None:
                         header, _ = _header_for(path, cloud, new)
                         writer = laspy.open(tmp, mode="w", header=header,
                                             do_compress=fmt == "laz", laz_backend=_BACKEND)
                     assign, _ = _plan(path, cloud, new, writer.header)
-                    writer.write_points(_record(path, writer.header, cloud, assign))
-                    total += len(cloud)
+                    rec = make_record(writer.header, assign)
+                    writer.write_points(rec)
+                    total += len(rec)
                 if writer is None:
                     raise InvalidParameterError(f"{path}: nothing to write (no points)")
             finally:

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._shared._jit import kernel_array
 from .._shared.validation import check_points
 from ..errors import DuplicatePointsError, LidarstatError
 from . import _kernels
@@ -132,7 +133,7 @@ def _row_hash(pts):
     One compiled pass over the rows (:func:`~._kernels.row_hash`): no temporaries of
     the cloud's size besides the hashes.
     """
-    return _kernels.row_hash(np.ascontiguousarray(pts, dtype=np.float64)).view(np.int64)
+    return _kernels.row_hash(kernel_array(pts)).view(np.int64)
 
 
 def refuse_dominated(dup: Duplicates, *, what: str, max_share: float = 0.5,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._shared._columns import column_max, column_min
+from .._shared._jit import kernel_array
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError, TooManyNeighborsError
 from . import _budget, _kernels
@@ -43,7 +44,7 @@ class CellIndex:
     """
 
     def __init__(self, points, radius, *, dim=3):
-        points = check_points(points)
+        points = kernel_array(check_points(points))  # one compiled type: C, writable
         radius = check_scalar(radius, "radius", func="CellIndex", low=0.0)
         if dim not in (2, 3):
             raise InvalidParameterError(f"The 'dim' parameter of CellIndex must be 2 or 3. Got {dim!r} instead.")

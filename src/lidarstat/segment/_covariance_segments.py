@@ -29,6 +29,7 @@ import numpy as np
 
 from .._shared import _memory as _mem
 from .._shared._deprecate import renamed_parameters
+from .._shared._jit import kernel_array
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..features import PointClass
@@ -90,8 +91,7 @@ def segment_planes(points, labels):
     labels = np.ascontiguousarray(labels, dtype=np.int64)
     s = int(labels.max()) if labels.size else 0
     # one Numba pass of moments about each segment's first point (no O(N) temporaries)
-    ref, mom = _seg_moments(np.ascontiguousarray(points, dtype=np.float64), labels,
-                            np.ones(labels.size), s)
+    ref, mom = _seg_moments(kernel_array(points), labels, np.ones(labels.size), s)
     cnt = mom[:, 0]
     cen_file, normal, w = _planes(ref, mom)
     normal = normal * np.where(normal[:, 2] < 0, -1.0, 1.0)[:, None]

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import special as _sp
 
-from .._shared._jit import njit
+from .._shared._jit import kernel_array, njit
 
 
 def _rays(points, sensor):
@@ -176,9 +176,10 @@ class PlaneModels:
     """Trimmed planes of the segments of `labels` (see :func:`segment_plane_models`)."""
 
     def __init__(self, points, labels, sigma, sensor=None, nsigma=3.0):
-        self.pts = np.ascontiguousarray(points, dtype=np.float64)
-        self.sig = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma, dtype=np.float64),
-                                                        (self.pts.shape[0],)))
+        # C, writable arrays: the one type the kernels are compiled for
+        self.pts = kernel_array(points)
+        self.sig = kernel_array(np.broadcast_to(np.asarray(sigma, dtype=np.float64),
+                                                (self.pts.shape[0],)))
         r = _rays(self.pts, sensor)
         self.has_rays = r is not None
         self.rays = np.ascontiguousarray(r) if r is not None else np.zeros((1, 3))
@@ -406,8 +407,7 @@ def strip_segments(points, labels, nbh, sigma, *, candidates, sensor=None, alpha
 
     labels = np.asarray(labels).astype(np.int32, copy=True)
     pts = np.asarray(points, dtype=np.float64)
-    sig = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma, dtype=np.float64),
-                                               labels.shape))
+    sig = kernel_array(np.broadcast_to(np.asarray(sigma, dtype=np.float64), labels.shape))
     free = np.asarray(candidates, dtype=bool)
     if free.sum() < min_points:
         return labels

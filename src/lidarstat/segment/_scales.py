@@ -25,7 +25,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .._shared._jit import njit_parallel
+from .._shared._jit import kernel_array, njit_parallel
 from .._shared._kernels import eigh3 as _eigh3
 from ..stats import chi2_critical, chi2_test
 
@@ -166,7 +166,7 @@ def planar_scales(points, nbh, sigma, *, sensor=None, alpha=0.05, scales=SCALES)
     sizes = np.asarray(sorted(int(m) for m in scales), dtype=np.int64)
     crit = np.asarray(chi2_critical(alpha, sizes - 3.0), dtype=np.float64)  # chi2(m - 3)
     n = pts.shape[0]
-    sig = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma, dtype=np.float64), (n,)))
+    sig = kernel_array(np.broadcast_to(np.asarray(sigma, dtype=np.float64), (n,)))
     sens = (np.asarray(sensor, dtype=np.float64) - origin) if sensor is not None \
         else np.zeros(3)
     kstar = np.empty(n, dtype=np.int32)

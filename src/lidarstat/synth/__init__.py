@@ -35,7 +35,8 @@ from ._surfaces import (
     make_scherk,
     make_sphere_cap,
 )
-from ._terrain_scenes import TERRAIN_SCENES, TerrainScene, make_terrain_scene
+from ._terrain_scenes import (GARDEN_PARTS, TERRAIN_SCENES, TerrainScene, make_garden_scene,
+                              make_terrain_scene)
 from ._tls import scan_spherical
 from ._tls_scenes import make_tls_building, make_tls_plant
 from ._truth import (
@@ -74,6 +75,8 @@ __all__ = [
     "TERRAIN_SCENES",
     "TerrainScene",
     "make_terrain_scene",
+    "make_garden_scene",
+    "GARDEN_PARTS",
     "make_tls_plant",
     "scan_spherical",
     "crease_lines",
