@@ -37,7 +37,7 @@ def _fold(seed):
 @functools.cache
 def _fold_result(seed):
     xyz, spacing, dist, along = _fold(seed)
-    return xyz, spacing, dist, along, ridges(xyz, creases=True)
+    return xyz, spacing, dist, along, ridges(xyz)
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -73,18 +73,34 @@ def test_no_crease_on_steep_narrow_gaussian_crests(seed):
     with np.errstate(divide="ignore"):
         scene = make_ridge_scene(400 + seed, kind="gauss", sign=(-1.0) ** seed, width=0.12,
                                  amp=0.4, spacing=0.02, length=0.8)
-    res = ridges(scene.xyz, creases=True)
+    res = ridges(scene.xyz)
     assert int((res["ridge"] == CREASE).sum()) == 0
     assert not (res.lines.attributes["ridge"] == CREASE).any()
 
 
-def test_creases_are_asked_for():
-    """Without `creases` no point gets code 3 and no crease line is traced."""
+def test_creases_false_leaves_them_out():
+    """With ``creases=False`` no point gets code 3 and no crease line is traced."""
     xyz = _fold_result(0)[0]
-    res = ridges(xyz)
+    res = ridges(xyz, creases=False)
     assert not (res["ridge"] == CREASE).any()
     assert not (res.lines.attributes["ridge"] == CREASE).any()
     assert "crease_radius" not in res.params
+
+
+def test_crease_radius_from_the_noise():
+    """The crease rung is the smallest over which a 45-degree kink rises 35 sigma, not
+    below the third rung nor above the last but one."""
+    from lidarstat.segment._ridge_creases import KINK_RISE, MIN_CREASE_RUNG, crease_rung
+
+    radii = 0.05 * np.sqrt(2.0) ** np.arange(7)
+    rise = radii * np.tan(np.radians(22.5))
+    for j in range(MIN_CREASE_RUNG, 6):
+        sigma = rise[j] / KINK_RISE  # rung j rises exactly 35 sigma
+        assert crease_rung(radii, sigma) == j
+        assert crease_rung(radii, sigma * 1.01) == min(j + 1, 5)
+    assert crease_rung(radii, 1e-6) == MIN_CREASE_RUNG
+    assert crease_rung(radii, 1.0) == 5
+    assert crease_rung(radii[:1], 1e-3) == 0
 
 
 def test_misfit_growth():

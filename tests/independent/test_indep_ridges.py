@@ -44,7 +44,7 @@ def _scored(seed, kind, sign, curved):
 
 
 def _score(scene):
-    res = ridges(scene.xyz, creases=True)
+    res = ridges(scene.xyz)
     rec = line_recall(scene, res["ridge"], scene.xyz, margin=MARGIN)
     return res, rec, ridge_precision(scene, res["ridge"])
 
@@ -90,7 +90,7 @@ def test_cylindrical_profile_ridges_found_at_the_automatic_scale():
 @functools.cache
 def _null(kind, seed):
     xyz, info = make_null_scene(300 + seed, kind, half=0.3)
-    return xyz, info, ridges(xyz, creases=True)
+    return xyz, info, ridges(xyz)
 
 
 @pytest.mark.parametrize("kind", ["plane", "sphere", "cylinder"])

@@ -9,7 +9,8 @@ What locates a crease is the chi-square test of the jet (eq. 7): a jet whose
 neighbourhood holds the crease cannot fit it, and its misfit is largest when the crease
 passes through its centre. So:
 
-1. jets of degree 4 at the ladder's rung :data:`CREASE_RUNG` (about 190 points);
+1. jets of degree 4 at the crease radius (:func:`crease_rung`: the smallest rung of
+   the ladder over which a kink of the design angle rises well above the noise);
 2. candidates: jets the chi-square rejects at the Bonferroni level ``alpha / n_eff``
    over the cloud's independent neighbourhoods (so that a smooth cloud has, with
    probability about ``1 - alpha``, none);
@@ -53,17 +54,49 @@ TOLERANCE = 0.2
 #: COS_ALONG along.
 COS_ACROSS = 0.87
 COS_ALONG = 0.5
-#: Rung of the radius ladder (``lidarstat.features.radius_ladder``, about 48 2^j points)
-#: whose jets locate the creases: the third, about 190 points, the smallest at which
-#: the chi-square test has the power for the scene family's creases (slopes of 45 to 70
-#: degrees meeting flat ground, spacings of 0.01 to 0.02 m, noise up to 2 mm); the next
-#: rung gives the misfit's growth.
-CREASE_RUNG = 2
+#: Design angle of the crease radius, degrees: the smallest change of the tangent
+#: plane's direction across a crease that the radius is chosen to find (the paper's a
+#: priori curvature K_0 of eq. 19-21, for a kink).
+DESIGN_ANGLE = 45.0
+#: Rise of a kink of :data:`DESIGN_ANGLE` over the crease radius, in noise standard
+#: deviations: a symmetric V of that angle leaves ``r tan(angle / 2)`` between its sides
+#: and its tangent plane at one radius from the crease, and the jets' misfit grows as
+#: its square over sigma^2. The crease points are the centre line of the band of
+#: rejected jets, which must be about a radius wide to have one. Measured on the scene
+#: family's cylindrical profiles and the machined parts (``benchmarks/ridge_family.py``,
+#: docs/methods/jets.md): rungs whose rise is below about 30 sigma leave parts of the
+#: family's lines unfound; above about 40 the machined parts' close folds merge their
+#: bands and the crease points leave the folds. 35 lies between.
+KINK_RISE = 35.0
+
+
+#: Smallest rung of the crease radius: the third of the ladder (about 190 points, a
+#: radius of about 8 spacings), so that the band of rejected jets holds enough points
+#: across on each side of its centre line even where the noise is low.
+MIN_CREASE_RUNG = 2
+
+
+def crease_rung(radii, sigma):
+    """Index into the ladder `radii` of the crease radius: the smallest rung, from
+    :data:`MIN_CREASE_RUNG` on, over which a kink of :data:`DESIGN_ANGLE` rises
+    :data:`KINK_RISE` noise standard deviations (``r tan(angle / 2) >= KINK_RISE
+    sigma``), at most the last but one (the next rung gives the misfit's growth)."""
+    radii = np.asarray(radii, float)
+    if radii.size < 2:
+        return 0
+    need = KINK_RISE * float(sigma) / np.tan(np.radians(DESIGN_ANGLE) / 2.0)
+    j = max(int(np.searchsorted(radii, need * (1.0 - 1e-9))), MIN_CREASE_RUNG)
+    return min(j, radii.size - 2)
+
+
 #: Largest median growth of a crease line's excess misfit from one rung to the next
-#: (radius times sqrt 2). A kink leaves residuals proportional to the radius, so its
-#: excess variance factor grows as r^2 (x 2 per rung); the truncation of a smooth
-#: surface by a degree-4 jet leaves residuals of order r^5 (x 32 per rung). 4 is r^4.
-MAX_GROWTH = 4.0
+#: (radius times sqrt 2): a kink's. A kink leaves residuals proportional to the radius,
+#: so its excess variance factor grows as r^2 (x 2 per rung; 1.7 to 1.8 measured on
+#: folds and the feet of cylindrical profiles, where the jets straddle the crease
+#: unevenly); the truncation of a smooth surface by a degree-4 jet leaves residuals of
+#: order r^5 (x 32 per rung), and a narrow smooth crest seen by jets wider than itself
+#: still grows faster than a kink (2.4 to 3.7 measured).
+MAX_GROWTH = 2.0
 
 
 def across_directions(fields):
@@ -77,9 +110,20 @@ def across_directions(fields):
 
 def crease_points(points, fields, *, alpha, n_eff, radius=0.0, spacing=None):
     """Boolean mask of the crease points of `points` (local coordinates) from the jet
-    `fields` (``status``, ``chi2_p``, ``sigma0_sq``, ``k1``, ``k2``, ``d1*``, ``d2*``) at
-    `radius`: the reaches along and across are at least :data:`REACH` times it (the
-    misfit's crest across the band is as wide as the neighbourhood)."""
+    `fields` (``status``, ``chi2_p``, ``k1``, ``k2``, ``d1*``, ``d2*``) at `radius`.
+
+    The band of jets rejected at the Bonferroni level is centred on the crease: a jet
+    whose neighbourhood holds the crease on either side of its centre cannot fit it.
+    Its misfit is not: at a sharp fold it peaks on each side, where the jet straddles
+    the fold asymmetrically, and dips on the fold, where an even polynomial fits the
+    symmetric V best. So a point's score is the band's depth on its poorer side: the
+    number of rejected jets within `radius` across the crease on that side (in a cone of
+    30 degrees about the direction of the larger principal curvature), the smaller of the
+    two sides' counts, averaged along the crease. It is largest on the band's centre line
+    and falls by a row of points per spacing off it; a candidate is a crease point when
+    no neighbour across the crease (within :data:`ACROSS` spacings or :data:`REACH`
+    radii) scores more than :data:`TOLERANCE` above it, with neighbours on both sides.
+    """
     n = points.shape[0]
     mask = np.zeros(n, bool)
     status = np.asarray(fields["status"])
@@ -92,7 +136,8 @@ def crease_points(points, fields, *, alpha, n_eff, radius=0.0, spacing=None):
         spacing = point_spacing(points)
     across_reach = max(ACROSS * spacing, REACH * radius)
     along_reach = max(ALONG * spacing, REACH * radius)
-    reach = max(across_reach, along_reach) / spacing
+    band_reach = max(across_reach, float(radius))
+    reach = max(band_reach, along_reach) / spacing
     k = min(max(CREASE_K, int(np.ceil(1.5 * np.pi * reach * reach))), n)
     idx = np.zeros((n, k), np.int64)
     dist = np.full((n, k), np.inf)
@@ -102,34 +147,79 @@ def crease_points(points, fields, *, alpha, n_eff, radius=0.0, spacing=None):
         idx[at] = nb.indices.reshape(-1, k)
         dist[at] = nb.distances.reshape(-1, k)
 
-    query(np.flatnonzero(strong))
-    raw = np.asarray(fields["sigma0_sq"], dtype=np.float64)
-    known = np.isfinite(raw)  # points without a jet at this radius are left out
-    stat = np.nan_to_num(raw, nan=0.0)
-    across_dir = across_directions(fields)[0]
+    normals = np.full((n, 3), np.nan)
+    across_dir = np.zeros((n, 3))
+    axis_dir = np.zeros((n, 3))
+
+    def fold_across(at):
+        """Across the crease at `at`, in the point's tangent plane: normal to the crease
+        line, the least axis of the neighbours' normals within the band's reach (the
+        normals turn about the crease line, so they span the plane normal to it)."""
+        ok = dist[at] <= band_reach
+        todo = np.setdiff1d(np.unique(idx[at][ok]), np.flatnonzero(np.isfinite(normals[:, 0])))
+        if todo.size:
+            normals[todo] = _pca_normals(points, todo)
+        nn = np.nan_to_num(normals[idx[at]]) * ok[..., None]
+        m = np.einsum("nki,nkj->nij", nn, nn)
+        axis = np.linalg.eigh(m)[1][:, :, 0]
+        axis_dir[at] = axis
+        c = np.cross(axis, normals[at])
+        across_dir[at] = c / np.maximum(np.linalg.norm(c, axis=1), 1e-12)[:, None]
+
+    def cosines(at):
+        """Per neighbour: the sine of its offset's angle to the crease line, signed by
+        the side (the sign of the offset along the across direction): the surface bends
+        at the crease, so the offsets to the other side leave the tangent plane."""
+        off = points[idx[at]] - points[at][:, None, :]
+        d = dist[at]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c = np.einsum("nkj,nj->nk", off, axis_dir[at]) / d
+            side = np.where(np.einsum("nkj,nj->nk", off, across_dir[at]) >= 0, 1.0, -1.0)
+        return np.where(d > 0, side * np.sqrt(np.clip(1.0 - c * c, 0.0, 1.0)), 0.0), d
+
     rows = np.flatnonzero(strong)
-    off = points[idx[rows]] - points[rows][:, None, :]
-    d = dist[rows]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos = np.einsum("nkj,nj->nk", off, np.nan_to_num(across_dir[rows])) / d
-    cos = np.where(d > 0, cos, 0.0)
-    # the misfit averaged along the crease, at every point a candidate compares with
+    query(rows)
+    fold_across(rows)
+    cos, d = cosines(rows)
+    # the score at every point a candidate compares with
     near = np.unique(idx[rows][(np.abs(cos) >= COS_ACROSS) & (d <= across_reach)])
-    query(np.setdiff1d(near, rows))
+    more = np.setdiff1d(near, rows)
+    query(more)
+    fold_across(more)
     need = np.union1d(near, rows)
-    off_n = points[idx[need]] - points[need][:, None, :]
-    d_n = dist[need]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos_n = np.einsum("nkj,nj->nk", off_n, np.nan_to_num(across_dir[need])) / d_n
-    along = (((np.abs(np.where(d_n > 0, cos_n, 0.0)) <= COS_ALONG) & (d_n <= along_reach))
-             | (d_n == 0)) & known[idx[need]]
+    cos_n, d_n = cosines(need)
+    along = ((np.abs(cos_n) <= COS_ALONG) & (d_n <= along_reach)) | (d_n == 0)
+    # the depth of every point an average along the crease takes in
+    extra = np.setdiff1d(np.unique(idx[need][along]), need)
+    query(extra)
+    fold_across(extra)
+    scored = np.union1d(need, extra)
+    cos_s, d_s = cosines(scored)
+    cone = (np.abs(cos_s) >= COS_ACROSS) & (d_s > 0) & (d_s <= band_reach) & strong[idx[scored]]
+    depth = np.zeros(n)
+    depth[scored] = np.minimum((cone & (cos_s > 0)).sum(axis=1),
+                               (cone & (cos_s < 0)).sum(axis=1))
     smooth = np.zeros(n)
-    smooth[need] = (stat[idx[need]] * along).sum(axis=1) / np.maximum(along.sum(axis=1), 1)
+    smooth[need] = (depth[idx[need]] * along).sum(axis=1) / np.maximum(along.sum(axis=1), 1)
     across = (np.abs(cos) >= COS_ACROSS) & (d > 0) & (d <= across_reach)
     higher = ((1.0 - TOLERANCE) * smooth[idx[rows]] > smooth[rows][:, None]) & across
     both = (across & (cos > 0)).any(axis=1) & (across & (cos < 0)).any(axis=1)
-    mask[rows[~higher.any(axis=1) & both]] = True
+    mask[rows[~higher.any(axis=1) & both & (smooth[rows] > 0)]] = True
     return mask
+
+
+#: Neighbours of the plane fits whose normals give the direction across a crease.
+NORMAL_K = 10
+
+
+def _pca_normals(points, at):
+    """Unit normals at `at`: the least axis of the covariance of the :data:`NORMAL_K`
+    nearest points."""
+    k = min(NORMAL_K, points.shape[0])
+    nb = knn_neighbors(points, k, query=at)
+    x = points[nb.indices.reshape(-1, k)]
+    x = x - x.mean(axis=1, keepdims=True)
+    return np.linalg.eigh(np.einsum("nki,nkj->nij", x, x))[1][:, :, 0]
 
 
 def variance_factor(points, query, radius, *, sigma, noise, sensor, weight, alpha):

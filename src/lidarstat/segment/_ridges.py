@@ -22,13 +22,13 @@ from ..neighbors import find_duplicates, knn_neighbors, map_rows, run_on_unique
 from ..stats import z_critical
 from . import _ridge_kernels as _rk
 from ._result import Polylines
-from ._ridge_creases import CREASE, CREASE_RUNG, find_creases
+from ._ridge_creases import CREASE, crease_rung, find_creases
 from ._ridge_lines import join_lines, smooth_vertices
 
 #: Per-point fields added by :func:`ridges` to those of :func:`lidarstat.features.jets`.
 RIDGE_FIELDS = {
-    "ridge": ("uint8", ("0 none, 1 crest (convex), 2 ravine (concave), 3 crease (the jets' "
-                        "misfit crest across a band of rejected jets)")),
+    "ridge": ("uint8", ("0 none, 1 crest (convex), 2 ravine (concave), 3 crease (the centre "
+                        "line of a band of rejected jets)")),
     "ridge_line": ("int32", "id of the ridge or crease line (0 none)"),
     "umbilic": ("uint8", "1 where k1 = k2 is accepted and the curvature is significant"),
     "extremality": ("float64", "derivative of the dominant k along its line"),
@@ -102,7 +102,9 @@ class RidgeResult:
                  "  scale: " + self._scale_text(),
                  f"  crest points  {int((r == 1).sum()):>9d}",
                  f"  ravine points {int((r == 2).sum()):>9d}",
-                 f"  crease points {int((r == CREASE).sum()):>9d}",
+                 f"  crease points {int((r == CREASE).sum()):>9d}"
+                 + (f" (crease radius {self.params['crease_radius']:.4g})"
+                    if "crease_radius" in self.params else ""),
                  f"  umbilic       {int(self.fields['umbilic'].sum()):>9d}",
                  f"  ridge lines   {len(self.lines):>9d}"]
         if len(self.lines):
@@ -148,7 +150,7 @@ RIDGE_SCALE = JetScaleCriterion("k'' of a ridge", _ridge_statistic, 2, calibrate
 
 def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricube",
            sensor=None, noise=None, ratio=2.0, cross_k=16, min_length=None, min_vertices=3,
-           smooth=5, scale_criterion=None, scales=None, jet_result=None, creases=False,
+           smooth=5, scale_criterion=None, scales=None, jet_result=None, creases=True,
            progress=None) -> RidgeResult:
     """Crest, ravine and crease points and lines from the fourth-order Monge form of every
     point.
@@ -163,13 +165,14 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     tracing chains them into lines, joins pieces across small aligned gaps, and keeps
     lines at least `min_length` long whose median |k|/sd(k) passes a Bonferroni test at
     level `alpha` over the cloud's independent neighbourhoods (N / median neighbours).
-    With `creases`, crease points (``_ridge_creases``): jets at the ladder's third rung
-    that the chi-square test rejects at that Bonferroni level, the crest of their misfit
-    across the band,
-    chained into lines like the ridge points and kept when at least twice that radius
-    long and when the misfit grows with the radius like a kink's (at most 4 times to the
-    next rung; a smooth surface's truncation grows 32 times). A crest or ravine point
-    whose jet holds a crease point is dropped: its k'' is the crease's, smoothed.
+    Crease points (``_ridge_creases``): jets at the crease radius (the smallest rung of
+    the ladder over which a kink of 45 degrees rises 35 noise standard deviations) that
+    the chi-square test rejects at that Bonferroni level, the centre line of their band
+    (where the band is as deep on both sides), chained into lines like the ridge points
+    and kept when at least twice that radius long and when the misfit grows with the
+    radius like a kink's (at most 4 times to the next rung; a smooth surface's truncation
+    grows 32 times). A crest or ravine point whose jet holds a crease point is dropped:
+    its k'' is the crease's, smoothed.
 
     Parameters
     ----------
@@ -212,10 +215,8 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     jet_result : JetResult, optional
         Reuse jets already computed on `points`.
     creases : bool
-        Also label crease points (code 3) and trace crease lines (docs/methods/jets.md,
-        "Creases"). Off by default: at sharp folds (90 degrees) the misfit's crest lies
-        about 0.4 crease radii beside the fold, where the smoothed curvature's ridge is
-        on it.
+        Label crease points (code 3) and trace crease lines (docs/methods/jets.md,
+        "Creases"); False leaves them out (and skips their jets).
     progress : callable, optional
 
     Returns
@@ -274,13 +275,13 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     _rk.crossings(local, nb.indptr, nb.indices, ctype, cval, z1, cos_max, ridge, where, count)
     # tracing over the same neighbourhoods; step: median distance to the farthest of them
     step = float(np.median(nb.distances[nb.indptr[1:] - 1])) if n else 0.0
-    # creases at the ladder's rung CREASE_RUNG; a ridge point whose jet holds a
+    # creases at the crease radius (crease_rung); a ridge point whose jet holds a
     # crease point is the crease's smoothed image, not a ridge of a smooth surface
     radii = jet_result.meta.get("radii")
     if radii is None:
         radii = scales if scales is not None or not creases else radius_ladder(pts)
     radii = np.asarray(radii if creases else [], float)
-    radii = radii[min(CREASE_RUNG, max(radii.size - 2, 0)):][:2]
+    radii = radii[crease_rung(radii, jet_result.sigma):][:2]
     if 0 < radii.size < 2:
         radii = np.r_[radii, radii * np.sqrt(2.0)]
     found = find_creases(local, nb, step, radii,
