@@ -6,25 +6,23 @@ circular arc standing on flat ground) is no ridge of a smooth surface: the paper
 ridge, an extremum of a principal curvature along its line, is there that of the
 curvature the jets smooth into the crease, and it lies one to three spacings away.
 What locates a crease is the chi-square test of the jet (eq. 7): a jet whose
-neighbourhood holds the crease cannot fit it, and its misfit is largest when the crease
-passes through its centre. So:
+neighbourhood holds the crease cannot fit it, so the rejected jets form a band about the
+crease. So:
 
 1. jets of degree 4 at the crease radius (:func:`crease_rung`: the smallest rung of
-   the ladder over which a kink of the design angle rises well above the noise);
+   the ladder, from :data:`MIN_CREASE_RUNG`, over which a kink of the design angle
+   rises well above the noise);
 2. candidates: jets the chi-square rejects at the Bonferroni level ``alpha / n_eff``
    over the cloud's independent neighbourhoods (so that a smooth cloud has, with
    probability about ``1 - alpha``, none);
-3. the misfit ``sigma0_sq`` is averaged along the crease (over the neighbours within
-   :data:`ALONG` spacings or :data:`REACH` radii, whichever is larger, whose offset
-   lies within 60 degrees of the line direction) and a candidate is a crease point
-   when no neighbour across the crease (within :data:`ACROSS` spacings or
-   :data:`REACH` radii, and 30 degrees of the direction of the larger principal
-   curvature, the one the crease bends) has a misfit more than :data:`TOLERANCE`
-   above its own, with neighbours on both sides: the crest of the misfit across the
-   band of rejected jets;
+3. the centre line of their band (:func:`crease_points`): the misfit itself peaks on
+   each side of a sharp fold, not on it, so a point's score is the band's depth on its
+   poorer side across the crease (directions from the plane normals, which turn about
+   the crease), averaged along it, and a candidate is a crease point where no neighbour
+   across scores more than :data:`TOLERANCE` above it;
 4. crease points are chained into lines like ridge points (``ridges``), and a line is
    kept when it is at least twice the crease radius long and its misfit grows with the
-   radius like a kink's, not like a smooth surface's (:func:`misfit_growth`).
+   radius no faster than a kink's (:func:`misfit_growth`, :data:`MAX_GROWTH`).
 """
 
 from __future__ import annotations
@@ -47,7 +45,7 @@ ALONG = 3.5
 ACROSS = 3.0
 #: Least reach along and across, in jet radii.
 REACH = 0.5
-#: A crease point's misfit is at least (1 - TOLERANCE) times its largest neighbour's
+#: A crease point's depth is at least (1 - TOLERANCE) times its largest neighbour's
 #: across the crease.
 TOLERANCE = 0.2
 #: |cos| of the angle to the across direction: at least COS_ACROSS across, at most

@@ -166,12 +166,13 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     lines at least `min_length` long whose median |k|/sd(k) passes a Bonferroni test at
     level `alpha` over the cloud's independent neighbourhoods (N / median neighbours).
     Crease points (``_ridge_creases``): jets at the crease radius (the smallest rung of
-    the ladder over which a kink of 45 degrees rises 35 noise standard deviations) that
+    the ladder, from the third, over which a kink of 45 degrees rises 35 noise standard
+    deviations) that
     the chi-square test rejects at that Bonferroni level, the centre line of their band
     (where the band is as deep on both sides), chained into lines like the ridge points
     and kept when at least twice that radius long and when the misfit grows with the
-    radius like a kink's (at most 4 times to the next rung; a smooth surface's truncation
-    grows 32 times). A crest or ravine point whose jet holds a crease point is dropped:
+    radius no faster than a kink's (at most twice to the next rung; a smooth surface's
+    truncation grows up to 32 times). A crest or ravine point whose jet holds a crease point is dropped:
     its k'' is the crease's, smoothed.
 
     Parameters
