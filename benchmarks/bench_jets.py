@@ -82,7 +82,7 @@ def child(args):
     if args.child in ("ridges_radius", "ridges_auto"):
         kw = {"radius": args.radius} if args.child == "ridges_radius" else {}
         t = time.perf_counter()
-        res = ridges(xyz, sigma=0.02, **kw)
+        res = ridges(xyz, sigma=0.02, creases=False, **kw)  # the ridge steps CGAL has
         dt = time.perf_counter() - t
         # the radius of every point: the given one, or the automatic scale's per-point
         # field (the fit's bandwidth is NaN where no jet was fitted)

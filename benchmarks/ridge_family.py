@@ -5,10 +5,12 @@ The scenes are those of ``tests/independent/indep_ridges.py`` (plain NumPy, exac
 not ``lidarstat.synth``): Gaussian and cylindrical crest and trench profiles along
 straight and circular axes, random azimuths, widths, heights, spacings (0.01 to 0.02 m)
 and noise (0.5 to 2 mm along z); planes, spheres and cylinders for "no ridge there".
-For every scene and both scales: the recall of each true ridge line (share of its length,
-beyond 0.1 m of the scene's ends, with a detected point of its type within one spacing),
-the precision (share of ridge points within 2.5 spacings of a true line), the number of
-ridge points on the null scenes, the umbilic share and the wall seconds (machine shared:
+For every scene and both scales: the recall of each true line (share of its length,
+beyond 0.1 m of the scene's ends, with a detected point of its type within one spacing:
+crest and ravine lines of the Gaussian profiles, crease lines at the feet of the
+cylindrical ones), the precision (share of crest, ravine and crease points within 2.5
+spacings of a true line), the crease points on the Gaussian scenes (none is true), the
+number of ridge and crease points on the null scenes, the umbilic share and the wall seconds (machine shared:
 timings are indicative, ratios in the same run).
 
 Usage::
@@ -18,6 +20,8 @@ Usage::
                                                                 # benchmarks/results_ridges.json
     PYTHONPATH=src python benchmarks/ridge_family.py --seeds 1 --no-write
     PYTHONPATH=src python benchmarks/ridge_family.py --size-only  # only family.scale_size
+    PYTHONPATH=src python benchmarks/ridge_family.py --family-only  # the scale's null and
+                                                                   # size kept
 """
 
 from __future__ import annotations
@@ -57,7 +61,9 @@ def run_ridge_scene(kind, sign, curved, seed):
         row[name] = dict(seconds=round(dt, 2), recall=[round(r, 3) for _, r in rec],
                          line_types=[int(t) for t, _ in rec],
                          precision=round(ridge_precision(scene, res["ridge"]), 3),
+                         crease_points=int((res["ridge"] == 3).sum()),
                          umbilic=round(float(res["umbilic"].mean()), 4),
+                         crease_radius=round(float(res.params.get("crease_radius", np.nan)), 4),
                          radius_median=round(float(np.nanmedian(res.jets.fit.bandwidth)), 4))
     return row
 
@@ -69,7 +75,8 @@ def run_null_scene(kind, seed):
         t0 = time.perf_counter()
         res = ridges(xyz, **kw)
         row[name] = dict(seconds=round(time.perf_counter() - t0, 2),
-                         ridge_points=int((res["ridge"] > 0).sum()), lines=len(res.lines),
+                         ridge_points=int((res["ridge"] > 0).sum()),
+                         crease_points=int((res["ridge"] == 3).sum()), lines=len(res.lines),
                          umbilic=round(float(res["umbilic"].mean()), 4))
         if "radius" in res.fields:  # nothing to detect: the smallest radius should stay
             row[name]["smallest_radius_share"] = round(
@@ -127,6 +134,46 @@ def scale_size(seeds=6, rungs=4, tilts=(0.0, 60.0)):
     return {"probs": [round(p, 6) for p in probs], "totals": total, "runs": rows}
 
 
+def machined_parts(sigma=0.0015):
+    """Crease and ridge points of the synthetic machined parts (``lidarstat.synth``
+    agpart and column, range scans with 90-degree folds, spacing 0.02 dm) with the jets
+    at radius 0.2 as in ``tests/segment/test_ridges.py``: the share within 2.5 spacings
+    (0.05) of a true edge."""
+    from lidarstat.synth import make_agpart, make_column
+
+    out = {}
+    for name, make in (("agpart", make_agpart), ("column", make_column)):
+        sc = make(sigma=sigma, rng=0)
+        for creases in (True, False):
+            t0 = time.process_time()
+            res = ridges(sc.xyz, radius=0.2, sigma=sigma, alpha=0.01, creases=creases)
+            rp = res["ridge"] > 0
+            out[f"{name}_{'creases' if creases else 'no_creases'}"] = dict(
+                points=len(sc.xyz), ridge_points=int(rp.sum()),
+                crease_points=int((res["ridge"] == 3).sum()),
+                within_2_5_spacings=round(float(np.mean(sc.edge_distance[rp] < 0.05)), 4),
+                crease_radius=res.params.get("crease_radius"),
+                cpu_seconds=round(time.process_time() - t0, 1))
+            print(name, creases, out[f"{name}_{'creases' if creases else 'no_creases'}"],
+                  flush=True)
+    return out
+
+
+def per_spacing(rows, name="auto"):
+    """Crease lines of the cylindrical profiles per scene spacing."""
+    out = []
+    for sp in sorted({r["spacing"] for r in rows if r["kind"] == "cyl"}):
+        rs = [r for r in rows if r["kind"] == "cyl" and r["spacing"] == sp]
+        rec = np.concatenate([r[name]["recall"] for r in rs])
+        out.append(dict(spacing=sp, sigma=sorted({r["sigma"] for r in rs}),
+                        crease_radius=sorted({r[name]["crease_radius"] for r in rs}),
+                        lines=int(rec.size), lines_found_90=int(np.sum(rec >= 0.9)),
+                        recall_median=round(float(np.median(rec)), 3),
+                        recall_min=round(float(rec.min()), 3),
+                        precision_min=round(float(min(r[name]["precision"] for r in rs)), 3)))
+    return out
+
+
 def summarise(rows, nulls):
     out = {}
     for name in SCALES:
@@ -139,9 +186,11 @@ def summarise(rows, nulls):
                 recall_min=round(float(rec.min()), 3),
                 precision_median=round(float(np.median([r[name]["precision"] for r in rs])), 3),
                 precision_min=round(float(min(r[name]["precision"] for r in rs)), 3),
+                crease_points=int(sum(r[name]["crease_points"] for r in rs)),
                 seconds_total=round(float(sum(r[name]["seconds"] for r in rs)), 1))
         out[f"{name}_null"] = dict(
             scenes=len(nulls), ridge_points=int(sum(r[name]["ridge_points"] for r in nulls)),
+            crease_points=int(sum(r[name]["crease_points"] for r in nulls)),
             lines=int(sum(r[name]["lines"] for r in nulls)),
             umbilic_plane=round(float(np.mean([r[name]["umbilic"] for r in nulls
                                                if r["kind"] == "plane"])), 4),
@@ -158,6 +207,9 @@ def main(argv=None):
     ap.add_argument("--no-write", action="store_true")
     ap.add_argument("--size-only", action="store_true",
                     help="recompute only the scale's test size (key family.scale_size)")
+    ap.add_argument("--family-only", action="store_true",
+                    help="keep the scale's null and size (family.scale_null, scale_size) "
+                         "from the results file: they do not depend on the creases")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore", RuntimeWarning)
     path = Path(args.out)
@@ -187,16 +239,20 @@ def main(argv=None):
             nulls.append(run_null_scene(kind, seed))
             print(nulls[-1], flush=True)
     summary = summarise(rows, nulls)
+    summary["auto_cyl_per_spacing"] = per_spacing(rows)
     print(json.dumps(summary, indent=1))
-    null = scale_null()
-    size = scale_size()
+    parts = machined_parts()
+    data = json.loads(path.read_text()) if path.exists() else {}
+    if isinstance(data, list):
+        data = {"scenes": data}
+    if args.family_only:
+        null, size = data["family"]["scale_null"], data["family"]["scale_size"]
+    else:
+        null, size = scale_null(), scale_size()
     if not args.no_write:
-        data = json.loads(path.read_text()) if path.exists() else {}
-        if isinstance(data, list):
-            data = {"scenes": data}
         data["family"] = {"summary": summary, "scenes": rows, "null_scenes": nulls,
-                          "seeds": args.seeds, "scale_null": null, "scale_size": size,
-                          "machine_shared": True}
+                          "machined_parts": parts, "seeds": args.seeds, "scale_null": null,
+                          "scale_size": size, "machine_shared": True}
         path.write_text(json.dumps(data, indent=1))
         print(f"written {path}")
 

@@ -39,7 +39,7 @@ def main():
     cloud = read(PUMP)
     xyz = cloud.xyz
     t0 = time.perf_counter()
-    res = ridges(xyz, sensor=(0.0, 0.0, 0.0))
+    res = ridges(xyz, sensor=(0.0, 0.0, 0.0), creases=False)
     dt = time.perf_counter() - t0
     print(res.summary())
     r = res["ridge"]

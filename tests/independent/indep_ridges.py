@@ -12,9 +12,9 @@ trench):
   ravine of a trench) and, on each flank, the line where the profile curvature
   ``kappa = h'' / (1 + h'^2)^1.5`` is extremal (ravines of a crest, crests of a trench).
 * ``cyl``: a circular arc of radius R rising ``A`` above the ground (``A < R``), width
-  ``2 sqrt(2 R A - A^2)``; its feet are creases (normal discontinuities) and are the
-  ridge lines (ravines of a crest, crests of a trench). The arc itself has constant
-  curvature: no ridge on it.
+  ``2 sqrt(2 R A - A^2)``; its feet are creases (normal discontinuities), the true
+  lines (type ``CREASE``, the ``ridge`` code of a crease point). The arc itself has
+  constant curvature: no ridge on it.
 
 For a circular axis (radius ``R0`` much larger than the profile) the surface is one of
 revolution; its meridian curvature is the profile curvature of ``s = r - R0``, whose
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-CREST, RAVINE = 1, 2
+CREST, RAVINE, CREASE = 1, 2, 3
 
 
 @dataclass
@@ -78,8 +78,7 @@ def ridge_offsets(kind, amp, width, sign):
         main, flank = (CREST, RAVINE) if sign > 0 else (RAVINE, CREST)
         return [(0.0, main), (-sf, flank), (sf, flank)]
     half = float(np.sqrt(2 * width * amp - amp * amp))
-    foot = RAVINE if sign > 0 else CREST
-    return [(-half, foot), (half, foot)]
+    return [(-half, CREASE), (half, CREASE)]
 
 
 def make_ridge_scene(rng, *, kind="gauss", sign=1.0, curved=False, spacing=None, sigma=None,

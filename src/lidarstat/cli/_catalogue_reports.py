@@ -71,7 +71,8 @@ def _covariance(args, f):
                "no tested neighbourhood (undetermined)": pc == 0})
 
 
-_RIDGE_CLASSES = {0: ("none", "#e0e0e0"), 1: ("crest", "#c62828"), 2: ("ravine", "#1565c0")}
+_RIDGE_CLASSES = {0: ("none", "#e0e0e0"), 1: ("crest", "#c62828"), 2: ("ravine", "#1565c0"),
+                  3: ("crease", "#2e7d32")}
 
 
 def _ridges(args, f):

@@ -14,12 +14,13 @@ from ..neighbors import check_copies, knn_neighbors
 from ..stats import z_critical
 from . import _ridge_kernels as _rk
 from ._grow import components
-from ._result import Segmentation, segment_table
+from ._result import Polylines, Segmentation, segment_table
+from ._ridge_creases import CREASE
 from ._ridges import RidgeResult
 
 #: Per-point fields of :func:`ridge_segments` beside ``segment_id``.
 SEGMENT_FIELDS = {
-    "ridge": ("uint8", "0 none, 1 crest, 2 ravine (ridge points of ridges())"),
+    "ridge": ("uint8", "0 none, 1 crest, 2 ravine, 3 crease (points of ridges())"),
     "crease": ("uint8", "0 none, 1 convex, 2 concave: on the boundary between two units"),
     "barrier": ("uint8", "1 ridge band or jet rejected by the chi-square test"),
 }
@@ -31,8 +32,8 @@ def ridge_segments(points, ridge_result: RidgeResult, *, grow_k=8, width=None, m
                    extend=None):
     """Direct segmentation: surface units are the regions that creases and ridges separate.
 
-    1. **Barrier.** Ridge points, the points within `width` of a ridge line (sampled every
-       width/4) or of its straight extensions beyond both ends (along the end tangent, up
+    1. **Barrier.** Crest, ravine and crease points, the points within `width` of a crest
+       or ravine line (sampled every width/4) or of its straight extensions beyond both ends (along the end tangent, up
        to `extend`, as long as the cloud has a point within `width`: the detector fails
        within about a jet radius of a border or of another crease, where lines stop short
        of face corners), and every point whose degree-4 jet the
@@ -54,9 +55,10 @@ def ridge_segments(points, ridge_result: RidgeResult, *, grow_k=8, width=None, m
        scores the median, over its five nearest, of the height of the point above their
        fitted degree-4 Monge surfaces, and the smallest score wins (the point lies on the
        surface that continues smoothly through it, not on the one across a crease).
-       Points of the ridge band (within `width` of a ridge line, where the surface may be
-       smooth and both sides' jets fit) join the unit of their nearest unit point
-       instead.
+       Points of the ridge band (crest and ravine points and those within `width` of
+       their lines, where the surface may be smooth and both sides' jets fit) join the
+       unit of their nearest unit point instead; crease points, where it is not smooth,
+       are assigned by the jets.
     4. **Creases.** Points with one of their `grow_k` neighbours in another unit within 1.5
        `width` lie on the boundary between two units: ``crease`` 1 where the crease is convex, 2 concave (the
        unit normals open away from, or toward, each other across it).
@@ -102,21 +104,26 @@ def ridge_segments(points, ridge_result: RidgeResult, *, grow_k=8, width=None, m
     width = check_scalar(width, "width", func=func, low=0.0)
     lines = ridge_result.lines
     ridge = ridge_result.fields["ridge"]
-    ridge_band = ridge > 0
+    ridge_band = (ridge == 1) | (ridge == 2)
+    crease_points = ridge == CREASE  # a barrier, assigned by the jets like rejected ones
     if extend is None:
         extend = ridge_result.params.get("radius")
         if extend is None:
             extend = float(np.nanmedian(ridge_result.jets.fit.bandwidth))
     extend = check_scalar(extend, "extend", func=func, low=0.0, closed="left")
-    if len(lines):
-        sampled, _ = lines.sample(width / 4.0)
+    smooth_lines = lines.attributes["ridge"] != CREASE if len(lines) else np.zeros(0, bool)
+    if smooth_lines.any():
+        sampled = Polylines([v for v, s in zip(lines.vertices, smooth_lines) if s]).sample(
+            width / 4.0)[0]
         tree = cKDTree(local)
-        ext = [_extend_ends(v - origin, tree, width, extend) for v in lines.vertices]
+        ext = [_extend_ends(v - origin, tree, width, extend)
+               for v, s in zip(lines.vertices, smooth_lines) if s]
         sampled = np.vstack([sampled - origin] + [e for e in ext if len(e)])
         dist, _ = cKDTree(sampled).query(local, k=1)
         ridge_band |= dist < width
     # rejected jets are barriers; unfitted points (too few neighbours) are no evidence
-    band = ridge_band | (ridge_result.fields["status"] == FitStatus.MODEL_REJECTED)
+    band = ridge_band | crease_points | (ridge_result.fields["status"] ==
+                                         FitStatus.MODEL_REJECTED)
     fit = ridge_result.jets.fit
     monge = np.ascontiguousarray(fit.monge)
     frames = np.ascontiguousarray(fit.frame)

@@ -8,17 +8,28 @@ import numpy as np
 
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
-from ..features import JET_FIELDS, MONGE_NAMES, FitStatus, JetScaleCriterion, Weight, jets
+from ..features import (
+    JET_FIELDS,
+    MONGE_NAMES,
+    FitStatus,
+    JetScaleCriterion,
+    Weight,
+    jets,
+    radius_ladder,
+)
 from ..io import register_field_descriptions
 from ..neighbors import find_duplicates, knn_neighbors, map_rows, run_on_unique
 from ..stats import z_critical
 from . import _ridge_kernels as _rk
 from ._result import Polylines
+from ._ridge_creases import CREASE, crease_rung, find_creases
+from ._ridge_lines import join_lines, smooth_vertices
 
 #: Per-point fields added by :func:`ridges` to those of :func:`lidarstat.features.jets`.
 RIDGE_FIELDS = {
-    "ridge": ("uint8", "0 none, 1 crest (convex), 2 ravine (concave)"),
-    "ridge_line": ("int32", "id of the ridge line (0 none)"),
+    "ridge": ("uint8", ("0 none, 1 crest (convex), 2 ravine (concave), 3 crease (the centre "
+                        "line of a band of rejected jets)")),
+    "ridge_line": ("int32", "id of the ridge or crease line (0 none)"),
     "umbilic": ("uint8", "1 where k1 = k2 is accepted and the curvature is significant"),
     "extremality": ("float64", "derivative of the dominant k along its line"),
 }
@@ -26,6 +37,8 @@ register_field_descriptions(RIDGE_FIELDS)
 #: Attributes of each ridge line.
 LINE_ATTRIBUTES = ("line_id", "ridge", "n_vertices", "n_points", "length", "strength",
                    "sharpness", "mean_k", "position_sd", "k_z")
+#: Attributes of the crease lines' test (NaN on ridge lines).
+CREASE_ATTRIBUTES = ("misfit", "misfit_p", "misfit_growth")
 
 
 @dataclass(frozen=True)
@@ -35,16 +48,22 @@ class RidgeResult:
     Attributes
     ----------
     fields : dict of str -> (N,) ndarray
-        The fields of :func:`lidarstat.features.jets` plus ``ridge``, ``ridge_line``,
-        ``umbilic``, ``extremality`` (input order).
+        The fields of :func:`lidarstat.features.jets` plus ``ridge`` (0 none, 1 crest, 2
+        ravine, 3 crease), ``ridge_line``, ``umbilic``, ``extremality`` (input order).
     lines : lidarstat.segment.Polylines
-        Ridge lines; vertices are interpolated zero crossings of the extremality;
-        attributes ``line_id``, ``ridge`` (1 crest, 2 ravine), ``n_vertices``, ``n_points``
+        Ridge lines, then crease lines. A ridge line's vertices are interpolated zero
+        crossings of the extremality, a crease line's the moving average of its crease
+        points; attributes ``line_id``, ``ridge`` (1 crest, 2 ravine, 3 crease),
+        ``n_vertices``, ``n_points``
         (points absorbed), ``length``, ``strength`` (integral of |k| ds), ``sharpness``
         (integral of |k''| ds, k'' the second derivative of k along its line),
         ``mean_k`` and ``position_sd`` (median over vertices of sd(e)/|k''|: the standard
         deviation of a crossing's position across the line), ``k_z`` (median over the
-        vertices of |k| / sd(k)).
+        vertices of |k| / sd(k)); these are NaN on crease lines, whose test is in
+        ``misfit`` (median variance factor of the jets at the crease radius, in units of
+        the noise), ``misfit_p`` (median p-value of their chi-square test) and
+        ``misfit_growth`` (median growth of the excess variance factor from the crease
+        radius to the next rung), NaN on ridge lines.
     jets : lidarstat.features.JetResult
     params : dict
     """
@@ -83,12 +102,16 @@ class RidgeResult:
                  "  scale: " + self._scale_text(),
                  f"  crest points  {int((r == 1).sum()):>9d}",
                  f"  ravine points {int((r == 2).sum()):>9d}",
+                 f"  crease points {int((r == CREASE).sum()):>9d}"
+                 + (f" (crease radius {self.params['crease_radius']:.4g})"
+                    if "crease_radius" in self.params else ""),
                  f"  umbilic       {int(self.fields['umbilic'].sum()):>9d}",
                  f"  ridge lines   {len(self.lines):>9d}"]
         if len(self.lines):
             a = self.lines.attributes
             lines.append(f"    crests {int((a['ridge'] == 1).sum())}, ravines "
-                         f"{int((a['ridge'] == 2).sum())}, total length "
+                         f"{int((a['ridge'] == 2).sum())}, creases "
+                         f"{int((a['ridge'] == CREASE).sum())}, total length "
                          f"{float(a['length'].sum()):.6g}")
         return "\n".join(lines)
 
@@ -127,9 +150,10 @@ RIDGE_SCALE = JetScaleCriterion("k'' of a ridge", _ridge_statistic, 2, calibrate
 
 def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricube",
            sensor=None, noise=None, ratio=2.0, cross_k=16, min_length=None, min_vertices=3,
-           smooth=5, scale_criterion=None, scales=None, jet_result=None,
+           smooth=5, scale_criterion=None, scales=None, jet_result=None, creases=True,
            progress=None) -> RidgeResult:
-    """Crest and ravine points and lines from the fourth-order Monge form of every point.
+    """Crest, ravine and crease points and lines from the fourth-order Monge form of every
+    point.
 
     Steps (docs/methods/jets.md): jets of degree 4 (:func:`lidarstat.features.jets`);
     candidates where one principal curvature is significant (z test at `alpha`) and
@@ -141,6 +165,15 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     tracing chains them into lines, joins pieces across small aligned gaps, and keeps
     lines at least `min_length` long whose median |k|/sd(k) passes a Bonferroni test at
     level `alpha` over the cloud's independent neighbourhoods (N / median neighbours).
+    Crease points (``_ridge_creases``): jets at the crease radius (the smallest rung of
+    the ladder, from the third, over which a kink of 45 degrees rises 35 noise standard
+    deviations) that
+    the chi-square test rejects at that Bonferroni level, the centre line of their band
+    (where the band is as deep on both sides), chained into lines like the ridge points
+    and kept when at least twice that radius long and when the misfit grows with the
+    radius no faster than a kink's (at most twice to the next rung; a smooth surface's
+    truncation grows up to 32 times). A crest or ravine point whose jet holds a crease point is dropped:
+    its k'' is the crease's, smoothed.
 
     Parameters
     ----------
@@ -182,6 +215,9 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
         :func:`lidarstat.features.jets`.
     jet_result : JetResult, optional
         Reuse jets already computed on `points`.
+    creases : bool
+        Label crease points (code 3) and trace crease lines (docs/methods/jets.md,
+        "Creases"); False leaves them out (and skips their jets).
     progress : callable, optional
 
     Returns
@@ -205,7 +241,7 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
             pts[dup.first], radius=radius, k=k, sigma=sigma, alpha=alpha, weight=weight,
             sensor=sensor, noise=noise, ratio=ratio, cross_k=cross_k, min_length=min_length,
             min_vertices=min_vertices, smooth=smooth, scale_criterion=scale_criterion,
-            scales=scales, jet_result=jet_result,
+            scales=scales, jet_result=jet_result, creases=creases,
             progress=progress), what=func)
         return replace(res, fields=map_rows(res.fields, dup.n_unique, dup.inverse),
                        jets=map_rows(res.jets, dup.n_unique, dup.inverse))
@@ -240,6 +276,25 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     _rk.crossings(local, nb.indptr, nb.indices, ctype, cval, z1, cos_max, ridge, where, count)
     # tracing over the same neighbourhoods; step: median distance to the farthest of them
     step = float(np.median(nb.distances[nb.indptr[1:] - 1])) if n else 0.0
+    # creases at the crease radius (crease_rung); a ridge point whose jet holds a
+    # crease point is the crease's smoothed image, not a ridge of a smooth surface
+    radii = jet_result.meta.get("radii")
+    if radii is None:
+        radii = scales if scales is not None or not creases else radius_ladder(pts)
+    radii = np.asarray(radii if creases else [], float)
+    radii = radii[crease_rung(radii, jet_result.sigma):][:2]
+    if 0 < radii.size < 2:
+        radii = np.r_[radii, radii * np.sqrt(2.0)]
+    found = find_creases(local, nb, step, radii,
+                         sigma=jet_result.sigma, noise=jet_result.meta.get("noise"),
+                         sensor=sensor, weight=weight, alpha=alpha,
+                         min_vertices=min_vertices, smooth=smooth)
+    if found.mask.any() and (ridge > 0).any():
+        from scipy.spatial import cKDTree
+
+        on = np.flatnonzero(ridge > 0)
+        d, _ = cKDTree(local[found.mask]).query(local[on])
+        ridge[on[d <= fit.bandwidth[on]]] = 0
     kabs = np.abs(cval[:, 0])
     order = np.argsort(-np.where(ridge > 0, kabs, -1.0), kind="stable").astype(np.int64)
     order = order[: int((ridge > 0).sum())]
@@ -269,7 +324,10 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
                                  min_vertices, smooth, line_min, 4.0 * step, z_line)
     line_of = new_id[line_of]
     ridge[line_of == 0] = 0
+    ridge[found.mask] = CREASE
+    line_of[found.mask] = found.line[found.mask] + len(lines)
     ridge_line = line_of.astype(np.int32)
+    lines = _with_creases(lines, found, origin)
     with np.errstate(invalid="ignore"):
         # umbilic: k1 = k2 accepted (two-sided z of k1 - k2) and the curvature significant
         # (two-sided z of k1 + k2): a plane (k1 = k2 = 0) is not umbilic
@@ -285,6 +343,8 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     if auto:
         r_used = fit.bandwidth[fitted]
         scale["radius_median"] = float(np.median(r_used)) if r_used.size else float("nan")
+    if found.radii.size:
+        scale.update(crease_radius=float(radii[0]), crease_growth_radius=float(radii[1]))
     params = dict(radius=radius, k=k, **scale, sigma=jet_result.sigma,
                   sigma_estimated=jet_result.sigma_estimated, alpha=alpha, degree=4,
                   z_line=z_line, weight=weight, noise=jet_result.meta.get("noise"),
@@ -294,72 +354,11 @@ def ridges(points, *, radius=None, k=None, sigma=None, alpha=0.01, weight="tricu
     return RidgeResult(fields=fields, lines=lines, jets=jet_result, params=params)
 
 
-def _smooth(v, w):
-    """Moving average of polyline vertices over `w` vertices (shrinking at the ends)."""
-    if w <= 1 or len(v) < 3:
-        return v
-    h = w // 2
-    c = np.vstack([np.zeros((1, 3)), np.cumsum(v, axis=0)])
-    i = np.arange(len(v))
-    lo = np.maximum(i - np.minimum(h, np.minimum(i, len(v) - 1 - i)), 0)
-    hi = np.minimum(i + (i - lo), len(v) - 1) + 1
-    return (c[hi] - c[lo]) / (hi - lo)[:, None]
-
-
-def _join_lines(chains, vert, ridge, join):
-    """Greedily join chains of the same type whose ends are within `join` and aligned.
-
-    Tracing stops at gaps of a few points where a test failed by chance; two pieces are
-    joined when the gap vector continues both end directions (cosines above 0.7). Runs
-    once per pair of lines, not per point. Returns the joined chains and, per input chain,
-    the index of the chain it ended in.
-    """
-    chains = [c for c in chains]
-    owner = list(range(len(chains)))
-    alive = [len(c) >= 2 for c in chains]
-
-    def end(c, first):
-        a, b = (c[0], c[1]) if first else (c[-1], c[-2])
-        t = vert[a] - vert[b]
-        n = np.linalg.norm(t)
-        return vert[a], (t / n if n > 0 else t)
-
-    merged = True
-    while merged:
-        merged = False
-        for i in range(len(chains)):
-            if not alive[i]:
-                continue
-            for j in range(i + 1, len(chains)):
-                if not alive[j] or ridge[chains[i][0]] != ridge[chains[j][0]]:
-                    continue
-                for fi in (False, True):
-                    for fj in (True, False):
-                        pi, ti = end(chains[i], fi)
-                        pj, tj = end(chains[j], fj)
-                        gap = pj - pi
-                        d = np.linalg.norm(gap)
-                        if not 0 < d <= join:
-                            continue
-                        g = gap / d
-                        if g @ ti > 0.7 and -(g @ tj) > 0.7:
-                            ci = chains[i][::-1] if fi else chains[i]
-                            cj = chains[j] if fj else chains[j][::-1]
-                            chains[i] = np.concatenate([ci, cj])
-                            alive[j] = False
-                            owner = [i if o == j else o for o in owner]
-                            merged = True
-                            break
-                    if not alive[j]:
-                        break
-    return chains, alive, owner
-
-
 def _build_lines(nl, out_pts, out_start, line_of, vert, ridge, cval, min_vertices, smooth,
                  line_min, join, z_line):
     members = np.bincount(line_of, minlength=nl + 1)[1:]
     chains = [out_pts[out_start[li]:out_start[li + 1]] for li in range(nl)]
-    chains, alive, owner = _join_lines(chains, vert, ridge, join)
+    chains, alive, owner = join_lines(chains, vert, ridge, join)
     verts, attrs = [], {name: [] for name in LINE_ATTRIBUTES}
     new_id = np.zeros(nl + 1, np.int64)
     final = {}
@@ -369,7 +368,7 @@ def _build_lines(nl, out_pts, out_start, line_of, vert, ridge, cval, min_vertice
         ids = chains[li]
         if ids.size < min_vertices:
             continue
-        v = _smooth(vert[ids], smooth)
+        v = smooth_vertices(vert[ids], smooth)
         seg = np.linalg.norm(np.diff(v, axis=0), axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             kz = float(np.median(np.abs(cval[ids, 0]) / cval[ids, 11]))
@@ -396,3 +395,24 @@ def _build_lines(nl, out_pts, out_start, line_of, vert, ridge, cval, min_vertice
     dtypes = dict(line_id=np.int32, ridge=np.uint8, n_vertices=np.int32, n_points=np.int32)
     attributes = {k: np.asarray(v, dtype=dtypes.get(k, np.float64)) for k, v in attrs.items()}
     return Polylines(verts, attributes), new_id
+
+
+def _with_creases(lines, creases, origin):
+    """Ridge lines followed by the crease lines (``ridge`` 3), every attribute on both:
+    the curvature ones NaN on crease lines, the misfit ones NaN on ridge lines."""
+    nr, nc = len(lines), len(creases.vertices)
+    a, c = lines.attributes, creases.attributes
+    attrs = {}
+    for name in LINE_ATTRIBUTES:
+        if name == "line_id":
+            extra = np.arange(nr + 1, nr + nc + 1)
+        elif name == "ridge":
+            extra = np.full(nc, CREASE)
+        elif name in c:
+            extra = c[name]
+        else:
+            extra = np.full(nc, np.nan)
+        attrs[name] = np.concatenate([a[name], np.asarray(extra, a[name].dtype)])
+    for name in CREASE_ATTRIBUTES:
+        attrs[name] = np.concatenate([np.full(nr, np.nan), np.asarray(c[name], float)])
+    return Polylines(list(lines.vertices) + [v + origin for v in creases.vertices], attrs)
