@@ -207,7 +207,7 @@ def permute_rows(indptr, indices, distances, row_of, order):
     for r in range(m):
         s = row_of[r]
         new_ptr[r + 1] = new_ptr[r] + indptr[s + 1] - indptr[s]
-    new_idx = np.empty(new_ptr[m], dtype=np.int64)
+    new_idx = np.empty(new_ptr[m], dtype=indices.dtype)
     new_dist = np.empty(new_ptr[m], dtype=np.float64)
     for r in prange(m):
         s = row_of[r]
