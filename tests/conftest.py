@@ -63,6 +63,37 @@ def pytest_configure(config):
     _count_compiles()
 
 
+# ------------------------------------------------------------------ file order under xdist
+#: Files whose few tests take long (a g++ build of the CGAL driver, the Sphinx build,
+#: whole-catalogue runs, statistical sweeps, a SAR fit in a fixture): sent to the workers
+#: first. xdist's own order (``--loadscope-reorder``: the files with the most tests first)
+#: sends them last, and the suite then ends with one worker running one of them while the
+#: other has nothing left; ``pyproject.toml`` turns it off (``--no-loadscope-reorder``)
+#: for this order: these files, then the others by decreasing number of tests.
+_LONG_FILES = (
+    "tests/features/test_jets.py",
+    "tests/test_docs.py",
+    "tests/cli/test_catalogue_cli.py",
+    "tests/segment/test_sar_gof.py",
+    "tests/segment/test_sar_accuracy.py",
+    "tests/cli/test_kill.py",
+    "tests/pipeline/test_catalogue.py",
+    "tests/io/test_e57_sensor.py",
+    "tests/stats/test_sar_tests.py",
+)
+
+
+def pytest_collection_modifyitems(session, config, items):
+    if not hasattr(config, "workerinput"):  # one process: the collection order
+        return
+    files = {}
+    for item in items:
+        files.setdefault(item.nodeid.split("::", 1)[0], []).append(item)
+    first = {name: rank for rank, name in enumerate(_LONG_FILES)}
+    order = sorted(files, key=lambda f: (first.get(f, len(first)), -len(files[f])))
+    items[:] = [item for f in order for item in files[f]]
+
+
 # ------------------------------------------------------------------ compile once, then test
 # On the xdist controller, before the workers start: the warm-up commands in a few
 # processes at once, at most one per worker (tests/_compile_report.py), so that each kernel
