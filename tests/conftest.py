@@ -64,22 +64,25 @@ def pytest_configure(config):
 
 
 # ------------------------------------------------------------------ file order under xdist
-#: Files whose few tests take long (a g++ build of the CGAL driver, the Sphinx build,
-#: whole-catalogue runs, statistical sweeps, a SAR fit in a fixture): sent to the workers
-#: first. xdist's own order (``--loadscope-reorder``: the files with the most tests first)
-#: sends them last, and the suite then ends with one worker running one of them while the
-#: other has nothing left; ``pyproject.toml`` turns it off (``--no-loadscope-reorder``)
-#: for this order: these files, then the others by decreasing number of tests.
+#: The files of the longest total run time on a cold cache (``slowest_files_s`` of
+#: ``benchmarks/results_first_run.json``, key ``suite``), the longest first: sent to the
+#: workers first. xdist's own order (``--loadscope-reorder``: the files with the most
+#: tests first) sends those of few long tests (a g++ build of the CGAL driver, the Sphinx
+#: build, whole-catalogue runs) last, and the suite then ends with one worker running one
+#: of them while the other has nothing left; ``pyproject.toml`` turns it off
+#: (``--no-loadscope-reorder``) for this order: these files, then the others by decreasing
+#: number of tests.
 _LONG_FILES = (
     "tests/features/test_jets.py",
     "tests/test_docs.py",
     "tests/cli/test_catalogue_cli.py",
-    "tests/segment/test_sar_gof.py",
-    "tests/segment/test_sar_accuracy.py",
-    "tests/cli/test_kill.py",
-    "tests/pipeline/test_catalogue.py",
+    "tests/classify/test_covariance_classes.py",
+    "tests/cli/test_catalogue_methods.py",
+    "tests/segment/test_sar_segmentation.py",
     "tests/io/test_e57_sensor.py",
-    "tests/stats/test_sar_tests.py",
+    "tests/segment/test_covariance_segments.py",
+    "tests/independent/test_indep_curvature.py",
+    "tests/report/test_command_reports.py",
 )
 
 
