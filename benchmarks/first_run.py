@@ -25,6 +25,10 @@ seconds of the whole process tree (user + sys, xdist workers included) and the N
 compile seconds and compile CPU seconds that ``tests/conftest.py`` prints (the warm-up
 the xdist controller runs before the workers included, and its wall time apart).
 ``LIDARSTAT_TEST_WARMUP=0`` or ``=1`` in the environment turns that warm-up off or on.
+``--suite-cache DIR`` keeps the cold run's cache in DIR, for
+``benchmarks/specialisations.py DIR`` (which kernels the suite compiled more than once);
+``LIDARSTAT_COMPILE_LOG=FILE`` in the environment has ``tests/conftest.py`` list every
+compilation with its CPU seconds.
 """
 
 from __future__ import annotations
@@ -147,6 +151,9 @@ def main():
                          "string) on a cold cache")
     ap.add_argument("--suite-warm", action="store_true",
                     help="with --suite: run it again on the same cache (warm)")
+    ap.add_argument("--suite-cache", metavar="DIR",
+                    help="with --suite: a new folder for the Numba cache, kept after the run "
+                         "(for benchmarks/specialisations.py DIR); default a temporary one")
     ap.add_argument("--suite-log", metavar="PREFIX",
                     help="with --suite: write pytest's output to PREFIX.cold (and .warm)")
     args = ap.parse_args()
@@ -218,6 +225,9 @@ def suite(args):
     results = {"pytest_args": pytest_args, "cpus": os.cpu_count(),
                "machine_shared": args.machine_shared}
     with tempfile.TemporaryDirectory() as tmp:
+        if args.suite_cache:
+            tmp = Path(args.suite_cache)
+            tmp.mkdir(parents=True)  # a new folder: the run starts on a cold cache
         results["cold"] = suite_run(pytest_args, tmp, args.suite_log and f"{args.suite_log}.cold")
         print("cold", results["cold"], flush=True)
         if args.suite_warm:

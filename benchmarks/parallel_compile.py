@@ -181,6 +181,7 @@ COMMANDS = {
     "segment-sar": ["segment", "{i}", "{o}", "--method", "sar", "--radius", "1"],
     "ridges": ["ridges", "{i}", "{o}", "--radius", "2"],
     "segment-ridges": ["segment", "{i}", "{o}", "--method", "ridges", "--radius", "2"],
+    "moments": ["moments", "{i}", "{o}"],
 }
 
 

@@ -63,6 +63,40 @@ def pytest_configure(config):
     _count_compiles()
 
 
+# ------------------------------------------------------------------ file order under xdist
+#: The files of the longest total run time on a cold cache (``slowest_files_s`` of
+#: ``benchmarks/results_first_run.json``, key ``suite``), the longest first: sent to the
+#: workers first. xdist's own order (``--loadscope-reorder``: the files with the most
+#: tests first) sends those of few long tests (a g++ build of the CGAL driver, the Sphinx
+#: build, whole-catalogue runs) last, and the suite then ends with one worker running one
+#: of them while the other has nothing left; ``pyproject.toml`` turns it off
+#: (``--no-loadscope-reorder``) for this order: these files, then the others by decreasing
+#: number of tests.
+_LONG_FILES = (
+    "tests/features/test_jets.py",
+    "tests/test_docs.py",
+    "tests/cli/test_catalogue_cli.py",
+    "tests/classify/test_covariance_classes.py",
+    "tests/cli/test_catalogue_methods.py",
+    "tests/segment/test_sar_segmentation.py",
+    "tests/io/test_e57_sensor.py",
+    "tests/segment/test_covariance_segments.py",
+    "tests/independent/test_indep_curvature.py",
+    "tests/report/test_command_reports.py",
+)
+
+
+def pytest_collection_modifyitems(session, config, items):
+    if not hasattr(config, "workerinput"):  # one process: the collection order
+        return
+    files = {}
+    for item in items:
+        files.setdefault(item.nodeid.split("::", 1)[0], []).append(item)
+    first = {name: rank for rank, name in enumerate(_LONG_FILES)}
+    order = sorted(files, key=lambda f: (first.get(f, len(first)), -len(files[f])))
+    items[:] = [item for f in order for item in files[f]]
+
+
 # ------------------------------------------------------------------ compile once, then test
 # On the xdist controller, before the workers start: the warm-up commands in a few
 # processes at once, at most one per worker (tests/_compile_report.py), so that each kernel

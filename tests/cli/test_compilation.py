@@ -41,6 +41,19 @@ def test_each_command_compiles_each_kernel_once():
     assert not many, json.dumps(many, indent=1)
 
 
+def test_no_kernel_compiles_twice_across_the_commands():
+    # one neighbour-index dtype (int32), one array type per argument: a kernel two commands
+    # share is compiled once on a fresh installation, not once per command's types
+    report = _report()["report"]
+    union = {}
+    for found in report.values():
+        for kernel, sigs in found.items():
+            union.setdefault(kernel, set()).update(
+                re.sub(r"UniTuple\((\w+), \d+\)", r"UniTuple(\1)", s) for s in sigs)
+    many = {kernel: sorted(sigs) for kernel, sigs in union.items() if len(sigs) > 1}
+    assert not many, json.dumps(many, indent=1)
+
+
 def test_first_compile_callback_fires_on_a_cache_miss_only(tmp_path):
     code = r"""
 import numpy as np

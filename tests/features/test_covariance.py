@@ -76,8 +76,9 @@ def test_fused_knn_equals_kdtree_neighbourhoods_bit_for_bit(rng, k):
                                atol=0)
     ref = np.empty_like(raw)
     n = len(pts)
-    ck.covariance_rows(local, np.arange(n), np.arange(n + 1) * k, j.ravel(), np.zeros(3),
-                       False, ref)
+    # int32 neighbour indices, as every producer of lidarstat.neighbors gives them
+    ck.covariance_rows(local, np.arange(n), np.arange(n + 1) * k, j.ravel().astype(np.int32),
+                       np.zeros(3), False, ref)
     assert np.array_equal(raw, ref)
     # without sorting only the summation order changes
     _, table_u, _, raw_u = cov._knn_table(pts, k, block_size=700, sort=False)

@@ -122,13 +122,23 @@ def test_radix_order_equals_stable_argsort(rng, high):
     assert np.array_equal(skeys, keys[ref])
 
 
-def test_neighborhoods_keep_int32_indices():
-    """int32 indices stay int32 (half the memory of kept kNN rows); other types -> int64."""
+def test_neighborhoods_hold_one_index_dtype(rng):
+    """Every search gives int32 indices below 2**31 points, whatever type it was given, so
+    each kernel taking neighbour indices compiles once (half the memory of int64)."""
+    from lidarstat.neighbors._csr import index_dtype
+
     ptr = np.array([0, 2, 3])
-    nb32 = Neighborhoods(ptr, np.array([0, 1, 1], dtype=np.int32), np.zeros(3), 2)
-    assert nb32.indices.dtype == np.int32
-    nb16 = Neighborhoods(ptr, np.array([0, 1, 1], dtype=np.int16), np.zeros(3), 2)
-    assert nb16.indices.dtype == np.int64
+    for dt in (np.int16, np.int32, np.int64, np.uint32):
+        nb = Neighborhoods(ptr, np.array([0, 1, 1], dtype=dt), np.zeros(3), 2)
+        assert nb.indices.dtype == np.int32
+    assert index_dtype(2**31 - 1) == np.int32 and index_dtype(2**31) == np.int64
+    pts = rng.uniform(0, 3, (400, 3))
+    index = CellIndex(pts, 0.6)
+    assert index.query_cells(0, index.n_cells)[1].dtype == np.int32
+    assert index.query(pts[:5])[1].dtype == np.int32
+    for nb in (radius_neighbors(pts, 0.6), radius_neighbors(pts, 0.6, query=[3, 4]),
+               radius_neighbors(pts, 0.6, dim=2), knn_neighbors(pts, 8)):
+        assert nb.indices.dtype == np.int32
 
 
 def test_row_order_is_a_checked_permutation():

@@ -6,9 +6,9 @@ CLI load compiled code from ``__pycache__`` instead of recompiling at every star
 statistics rely on IEEE semantics (NaN propagation, no reassociation of the moment sums).
 
 A kernel called from another kernel is compiled for the argument types of the call
-(:func:`one_signature`): constants count as plain ``int64``/``bool``/``float64`` and a
-``prange`` index as ``int64``, so each helper is compiled once rather than once per
-constant and once per loop kind. Compilation is what a first run waits for.
+(:func:`one_signature`): constants count as plain ``int64``/``bool``/``float64`` and every
+integer scalar (a ``prange`` index, an index read from an int32 array) as ``int64``, so
+each helper is compiled once rather than once per constant, loop kind and integer width. Compilation is what a first run waits for.
 """
 
 from __future__ import annotations
@@ -51,21 +51,22 @@ def _call_type(ty):
     from numba.core import types
 
     ty = types.unliteral(ty)
-    return types.int64 if ty == types.uint64 else ty
+    return types.int64 if isinstance(ty, types.Integer) else ty
 
 
 def one_signature(dispatcher):
     """Compile `dispatcher`, when another kernel calls it, for plain argument types.
 
     Numba types a call from one kernel to another with the caller's types as they are: a
-    constant argument as ``Literal[int](0)`` (one compilation per distinct constant) and,
-    inside a ``prange`` loop, the loop index as ``uint64`` where the same loop before the
-    parallel rewrite typed it ``int64`` (every helper called in a parallel loop compiled
-    twice). Here a call types a constant as its plain type and an unsigned 64-bit scalar as
-    ``int64``; the caller converts the value (a no-op for a constant or an index). No kernel
-    of lidarstat takes an unsigned 64-bit scalar for its own sake: unsigned scalars in
-    kernels are ``prange`` indices, always below 2**63. Kernels that need a literal
-    (``numba.literally``) cannot use this. Returns `dispatcher`.
+    constant argument as ``Literal[int](0)`` (one compilation per distinct constant),
+    inside a ``prange`` loop the loop index as ``uint64`` where the same loop before the
+    parallel rewrite typed it ``int64``, and an index read from an int32 neighbour array as
+    ``int32`` where another caller passes an ``int64`` (each such helper compiled twice).
+    Here a call types a constant as its plain type and every integer scalar as ``int64``;
+    the caller converts the value (exact: no kernel of lidarstat takes an unsigned 64-bit
+    scalar for its own sake, unsigned scalars in kernels are ``prange`` indices, always
+    below 2**63, and no helper relies on the wrap-around of a narrower integer). Kernels
+    that need a literal (``numba.literally``) cannot use this. Returns `dispatcher`.
     """
     typed = dispatcher.get_call_template
 

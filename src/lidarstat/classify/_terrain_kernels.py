@@ -28,7 +28,7 @@ def cell_lowest(xy, z, ground, cell, nx, ny):  # pragma: no cover - compiled
     return low, low_g
 
 
-@njit_parallel
+@njit
 def grid_bilinear(xy, grid, cell, out):  # pragma: no cover - compiled
     """Bilinear interpolation of a grid of cell-centre values at every point (edges
     clamped), written to `out`."""

@@ -98,6 +98,9 @@ def _run_kernel(pts, query, indptr, idx, dist, *, bandwidth, frame, sensor, min_
     out = _allocate(m)
     has_sensor = sensor is not None
     sensor_arr = np.zeros(3) if sensor is None else np.asarray(sensor, dtype=np.float64)
+    # the neighbour-index dtype of lidarstat.neighbors (int32 below 2**31 points), also for
+    # indices built here (np.flatnonzero): one compiled variant of the kernel
+    idx = np.ascontiguousarray(idx, dtype=np.int32 if pts.shape[0] < 2**31 else np.int64)
     _k.fit_quadrics_block(
         pts, np.ascontiguousarray(query, dtype=np.int64), indptr, idx, dist,
         (-1.0 if bandwidth is None else float(bandwidth), FRAMES[Frame(frame).value], sensor_arr, has_sensor,

@@ -9,6 +9,21 @@ import numpy as np
 from ..errors import InvalidParameterError
 
 
+def index_dtype(n_points):
+    """The dtype of neighbour indices into a cloud of `n_points` points.
+
+    int32 below 2**31 points, else int64. Every producer of neighbour indices (the
+    searches, the fused drivers' buffers, :class:`Neighborhoods`) uses it, so a kernel
+    taking them is compiled for one index type, not for both.
+
+    Examples
+    --------
+    >>> index_dtype(1000), index_dtype(2**31)
+    (<class 'numpy.int32'>, <class 'numpy.int64'>)
+    """
+    return np.int32 if n_points < 2**31 else np.int64
+
+
 @dataclass(frozen=True)
 class Neighborhoods:
     """Neighbourhoods of a set of query points in compressed sparse row (CSR) form.
@@ -22,10 +37,10 @@ class Neighborhoods:
     ----------
     indptr : (M + 1,) ndarray of int64
         Row pointers, ``indptr[0] == 0``, non-decreasing.
-    indices : (nnz,) ndarray of int64 or int32
-        Neighbour indices into the searched cloud of `n_points` points: int64, or int32
-        when the producer gave int32 (the kept kNN neighbourhoods of
-        :func:`lidarstat.features.covariance_features` on fewer than 2**31 points).
+    indices : (nnz,) ndarray of int32 (int64 from 2**31 points)
+        Neighbour indices into the searched cloud of `n_points` points, of
+        :func:`index_dtype`: one dtype whatever the search, so that every kernel taking
+        neighbour indices is compiled once, and half the memory of int64.
     distances : (nnz,) ndarray of float64
         Distance of each neighbour from its query point.
     n_points : int
@@ -58,11 +73,7 @@ class Neighborhoods:
 
     def __post_init__(self):
         indptr = np.ascontiguousarray(self.indptr, dtype=np.int64)
-        indices = np.asarray(self.indices)
-        # int32 is kept as given (half the memory of large kNN neighbourhoods), any other
-        # type becomes int64
-        indices = np.ascontiguousarray(
-            indices, dtype=np.int32 if indices.dtype == np.int32 else np.int64)
+        indices = np.ascontiguousarray(self.indices, dtype=index_dtype(self.n_points))
         distances = np.ascontiguousarray(self.distances, dtype=np.float64)
         object.__setattr__(self, "indptr", indptr)
         object.__setattr__(self, "indices", indices)

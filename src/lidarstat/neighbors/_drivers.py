@@ -89,7 +89,7 @@ def make_drivers(fit_point, workspace, skip) -> Drivers:
             ws = workspace(params)
             ranges = np.empty((9, 2), dtype=np.int64)
             cap = 256
-            idx_buf = np.empty(cap, dtype=np.int64)
+            idx_buf = np.empty(cap, dtype=np.int32)
             dist_buf = np.empty(cap)
             buf = np.empty((cap, 4))
             for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
@@ -99,7 +99,7 @@ def make_drivers(fit_point, workspace, skip) -> Drivers:
                     need += ranges[t, 1] - ranges[t, 0]
                 if need > cap:
                     cap = max(need, 2 * cap)
-                    idx_buf = np.empty(cap, dtype=np.int64)
+                    idx_buf = np.empty(cap, dtype=np.int32)
                     dist_buf = np.empty(cap)
                     buf = np.empty((cap, 4))
                 for i in range(cell_start[c], cell_start[c + 1]):

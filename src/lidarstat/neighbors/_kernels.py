@@ -40,7 +40,7 @@ def count_radius(queries, pts, cell_keys, cell_start, cell, dims, radius, ndim):
     """Number of neighbours of every query point (parallel over queries)."""
     m = queries.shape[0]
     counts = np.empty(m, dtype=np.int64)
-    dummy_i = np.empty(0, dtype=np.int64)
+    dummy_i = np.empty(0, dtype=np.int32)
     dummy_d = np.empty(0, dtype=np.float64)
     for i in prange(m):
         counts[i] = _visit(queries[i], pts, cell_keys, cell_start, cell, dims, radius, ndim,
@@ -141,7 +141,7 @@ def count_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, ndim):
     base = cell_start[c0]
     counts = np.zeros(cell_start[c1] - base, dtype=np.int64)
     r2 = radius * radius
-    dummy_i = np.empty(0, dtype=np.int64)
+    dummy_i = np.empty(0, dtype=np.int32)
     dummy_d = np.empty(0, dtype=np.float64)
     for c in prange(c0, c1):
         ranges = np.empty((9, 2), dtype=np.int64)
@@ -207,7 +207,7 @@ def permute_rows(indptr, indices, distances, row_of, order):
     for r in range(m):
         s = row_of[r]
         new_ptr[r + 1] = new_ptr[r] + indptr[s + 1] - indptr[s]
-    new_idx = np.empty(new_ptr[m], dtype=np.int64)
+    new_idx = np.empty(new_ptr[m], dtype=indices.dtype)
     new_dist = np.empty(new_ptr[m], dtype=np.float64)
     for r in prange(m):
         s = row_of[r]

@@ -9,7 +9,7 @@ from .._shared._jit import kernel_array
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError, TooManyNeighborsError
 from . import _budget, _kernels
-from ._csr import Neighborhoods
+from ._csr import Neighborhoods, index_dtype
 
 #: Largest number of grid cells per axis before the cell size is enlarged.
 _MAX_CELLS_PER_AXIS = 1 << 20
@@ -132,7 +132,7 @@ class CellIndex:
         indptr = np.zeros(counts.size + 1, dtype=np.int64)
         np.cumsum(counts, out=indptr[1:])
         self._check_total(int(indptr[-1]), radius, counts.size)
-        idx = np.empty(indptr[-1], dtype=np.int64)
+        idx = np.empty(indptr[-1], dtype=index_dtype(self.sorted_points.shape[0]))
         dist = np.empty(indptr[-1], dtype=np.float64)
         _kernels.fill_cells(c0, c1, *args, indptr, idx, dist)
         return indptr, idx, dist
@@ -207,7 +207,7 @@ class CellIndex:
         indptr = np.zeros(q.shape[0] + 1, dtype=np.int64)
         np.cumsum(counts, out=indptr[1:])
         self._check_total(int(indptr[-1]), radius, q.shape[0])
-        idx = np.empty(indptr[-1], dtype=np.int64)
+        idx = np.empty(indptr[-1], dtype=index_dtype(self.sorted_points.shape[0]))
         dist = np.empty(indptr[-1], dtype=np.float64)
         _kernels.fill_radius(q, *args, indptr, idx, dist)
         return indptr, idx, dist
@@ -309,7 +309,7 @@ def knn_neighbors(points, k, *, query=None, workers=-1):
     q = points if qidx is None else points[qidx]
     dist, idx = tree.query(q - origin, k=k, workers=workers)
     dist = np.asarray(dist, dtype=np.float64).reshape(q.shape[0], k)
-    idx = np.asarray(idx, dtype=np.int64).reshape(q.shape[0], k)
+    idx = np.asarray(idx, dtype=index_dtype(points.shape[0])).reshape(q.shape[0], k)
     indptr = np.arange(q.shape[0] + 1, dtype=np.int64) * k
     return Neighborhoods(indptr, idx.ravel(), dist.ravel(), points.shape[0], kind="knn", k=k,
                          query=qidx)

@@ -31,7 +31,7 @@ def clean_plane_points(labels, clean, nbh):
     if nbh.kind != "knn" or nbh.k is None:
         return ref
     _ek.first_in_row(nbh.indptr, nbh.indices, nbh.query_indices(),
-                     np.ascontiguousarray(clean, dtype=bool), np.ascontiguousarray(labels), ref)
+                     np.ascontiguousarray(clean, dtype=bool), _ek._compact(labels), ref)
     return ref
 
 

@@ -128,9 +128,9 @@ def _compact(labels):
     entry at random: half the bytes keep more of them in cache, measured 25-35 % less
     CPU for 2M points, k = 50); the selections compare labels only, so they are equal."""
     labels = np.ascontiguousarray(labels)
-    if labels.dtype.kind in "iu" and labels.dtype.itemsize > 4 and labels.size \
-            and labels.min() >= -2**31 and labels.max() < 2**31:
-        return labels.astype(np.int32)
+    if labels.dtype.kind in "iu" and (not labels.size or (labels.min() >= -2**31
+                                                         and labels.max() < 2**31)):
+        return labels.astype(np.int32, copy=False)  # also empty or narrower: one variant
     return labels
 
 
