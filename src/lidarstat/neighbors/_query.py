@@ -88,11 +88,15 @@ class CellIndex:
             self.cell_start = starts
 
     def to_input_order(self, values):
-        """Per-point `values` (N,) in the sorted order of the index, in input order (one
-        parallel scatter through :attr:`order`)."""
+        """Per-point `values` (N,) in the sorted order of the index, in input order (a
+        scatter through :attr:`order`: parallel for float64, the bulk of a result's fields;
+        NumPy for the few integer fields, so the kernel has one signature)."""
         values = np.ascontiguousarray(values)
         out = np.empty_like(values)
-        _kernels.scatter_to(values, self.order, out)
+        if values.dtype == np.float64:
+            _kernels.scatter_to(values, self.order, out)
+        else:
+            out[self.order] = values
         return out
 
     @property
