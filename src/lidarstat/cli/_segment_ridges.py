@@ -36,12 +36,15 @@ def run(args, cloud):
     # barriers, are C0 discontinuities that jets reject at any scale; per-point radii
     # (wider beside the creases) widen the rejection bands and lose faces
     # (docs/methods/jets.md, validation)
+    # The crease label is left out: its points as barriers cost hip_roof two of its six
+    # roof planes (benchmarks/results_ridges.json, key scenes_with_creases)
     radius = args.radius
     if radius is None and args.k is None:
         radius = float(radius_ladder(cloud.xyz)[0])
     res = ridges(cloud.xyz, radius=radius, k=None if radius is not None else args.k,
                  sigma=args.sigma, alpha=args.alpha, weight=args.weight, sensor=args.sensor,
-                 noise=args.noise, ratio=args.ratio, min_length=args.min_length)
+                 noise=args.noise, ratio=args.ratio, min_length=args.min_length,
+                 creases=False)
     min_points = DEFAULT_MIN_POINTS if args.min_points is None else args.min_points
     return ridge_segments(cloud.xyz, res, grow_k=args.ridge_grow_k, width=args.band,
                           min_points=min_points, extend=args.extend)

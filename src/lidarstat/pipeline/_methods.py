@@ -45,7 +45,8 @@ SEGMENTATIONS = {
     "curvature": (("lidarstat.segment:segment_curvature", {}),),
     "covariance": (("lidarstat.classify:covariance", {"keep_neighbors": True}),
                    ("lidarstat.segment:segment_covariance", {})),
-    "ridges": (("lidarstat.segment:ridges", {}), ("lidarstat.segment:ridge_segments", {})),
+    "ridges": (("lidarstat.segment:ridges", {"creases": False}),
+               ("lidarstat.segment:ridge_segments", {})),
 }
 
 
