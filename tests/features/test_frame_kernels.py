@@ -53,3 +53,38 @@ def test_close_eigenvalues_go_to_jacobi(rng, lam):
     gap) are refused, so the Jacobi solver decides them as before."""
     ev, vec = np.empty(3), np.empty((3, 3))
     assert not eigh3_closed(_spd(rng, np.array(lam)), ev, vec)
+
+
+def test_spd_inverse6_matches_lapack(rng):
+    from lidarstat.features._quadric_kernels import _spd_inverse6
+
+    L, LI, inv = np.zeros((6, 6)), np.zeros((6, 6)), np.empty((6, 6))
+    for _ in range(100):
+        x = rng.normal(size=(int(rng.integers(7, 60)), 6)) * 10.0 ** rng.uniform(-2, 2, 6)
+        a = np.ascontiguousarray(x.T @ x)
+        assert _spd_inverse6(a, 1e-12, L, LI, inv)
+        want = np.linalg.inv(a)
+        cond = np.linalg.cond(a)
+        np.testing.assert_allclose(inv, want, rtol=0, atol=1e-13 * cond * np.abs(want).max())
+        np.testing.assert_array_equal(inv, inv.T)
+    singular = np.ones((6, 6))
+    assert not _spd_inverse6(singular, 1e-12, L, LI, inv)
+    assert not _spd_inverse6(np.zeros((6, 6)), 1e-12, L, LI, inv)
+
+
+def test_moment_sums_match_direct_sums(rng):
+    """The lane-blocked sums equal the plain sums of w^(p+1) U^i V^j and w h U^i V^j."""
+    from lidarstat.features._quadric_kernels import LANES, _MONO, _moment_sums
+
+    acc, mom, rhs = np.empty(54 * LANES), np.empty((3, 15)), np.empty(6)
+    for nk in (1, 7, 8, 9, 50, 301):
+        cols = np.ascontiguousarray(rng.uniform(-1, 1, (4, nk + 5)))
+        cols[3] = rng.uniform(0, 1, nk + 5)
+        _moment_sums(cols[0], cols[1], cols[2], cols[3], nk, acc, mom, rhs)
+        u, v, h, w = (c[:nk] for c in cols)
+        powers = [(i - j, j) for i in range(5) for j in range(i + 1)]  # 1 U V U2 UV V2 ...
+        mono = np.array([u ** a * v ** b for a, b in powers])
+        assert len(powers) == 15 and max(_MONO) == 14
+        for p in range(3):
+            np.testing.assert_allclose(mom[p], mono @ w ** (p + 1), rtol=1e-13, atol=1e-13 * nk)
+        np.testing.assert_allclose(rhs, mono[:6] @ (w * h), rtol=1e-13, atol=1e-13 * nk)
