@@ -10,7 +10,7 @@ gets the first cause that applies, in this order (lengths in metres):
 
 * ``ground``: the ground step took it (terrain step, raised patches);
 * ``below_object_height``: not ground, under ``min_object_height`` (0.5) above the surface;
-* ``wall``: a candidate whose 12 nearest candidates' plane is steep (normal within 72.5
+* ``wall``: a candidate whose 12 nearest candidates' plane is steep (normal within 17.5
   degrees of horizontal, ``|n_z| < 0.3``): walls and facades;
 * ``low_roof_patch``: under 2 m, on a roof patch (tested planes, enough points, share of
   non-last returns not rejected): a low roof or the low end of one, which the 2 m floor
