@@ -185,6 +185,17 @@ def recovery_rules(state, pred, truth, keep):
     return out
 
 
+def without_patches(fields, reject, building):
+    """The fields with the roof patches `reject` no longer roofs: their points' evidence
+    is 2 (roof cell) where `building` (the class decided again without them) holds them,
+    3 elsewhere, so that :func:`candidate_state` sees the roofs left."""
+    ev = np.asarray(fields["building_evidence"]).copy()
+    out = np.isin(np.asarray(fields["building_patch"]), reject) & (ev == 1)
+    ev[out] = np.where(building[out], 2, 3)
+    ev[(ev == 2) & ~building] = 3
+    return {**fields, "building_evidence": ev}
+
+
 def figure(xyz, cause, pred, truth, keep, out, title):
     """Plan view: found building points, false ones, and the missed ones by cause."""
     import matplotlib

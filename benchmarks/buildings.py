@@ -22,7 +22,8 @@ compares the false and true roof patches of every file (``building_evidence.py``
 bound of any rule that rejects roof patches) measure them jointly (``building_joint.py``).
 ``missed_by_cause`` breaks the missed building points down by cause, with the F1 each
 cause's perfect recovery would give, and ``recovery_rules`` the true and false points
-that rules on the largest causes would add (``building_recall.py``).
+that rules on the largest causes would add (``building_recall.py``), also once every
+false patch is rejected (``recovery_rules_after_patch_bound``).
 
 Usage::
 
@@ -172,14 +173,21 @@ def run(rel):
     # the bound of any patch rule: every roof patch mostly outside class 6 rejected (the
     # reference's own labels), the roof cells decided again
     false_ids = joint[joint[:, 2] < 0.5, 0].astype(np.int64) if joint.size else []
-    row["false_patches_rejected_by_reference"] = scores(
-        building_joint.redecide(*ctx[:4], false_ids)[keep], truth[keep])
+    oracle = building_joint.redecide(*ctx[:4], false_ids)
+    row["false_patches_rejected_by_reference"] = scores(oracle[keep], truth[keep])
     # where the missed building points are, by cause, and what rules on the largest
     # causes would add (building_recall.py)
     state = building_recall.candidate_state(cloud.xyz, fields, res.height, multi)
     row["missed_by_cause"], cause = building_recall.missed_causes(
         state, new, truth, keep, res.ground, res.height, b["sigma"])
     row["recovery_rules"] = building_recall.recovery_rules(state, new, truth, keep)
+    # the same rules once every false patch is rejected (the patch rules' bound above):
+    # do the low parts under the true roofs follow the reference then?
+    state = building_recall.candidate_state(
+        cloud.xyz, building_recall.without_patches(fields, false_ids, oracle), res.height,
+        multi)
+    row["recovery_rules_after_patch_bound"] = building_recall.recovery_rules(
+        state, oracle, truth, keep)
     del state
     return row, (cloud.xyz, truth, old, new, ref, patches, joint, ctx, cause, keep)
 
