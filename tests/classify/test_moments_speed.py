@@ -390,3 +390,17 @@ def test_raised_patch_copy_check_finds_every_copy(seed):
         xy[0], xy[1], z[1] = (-0.0, 5.0), (0.0, 5.0), z[0]
     ref = find_duplicates(np.c_[xy, z]).any
     assert _may_repeat(xy, z) == ref
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_cluster_bound_from_sorted_heights_equals_numpy_medians(seed):
+    # the median read from the sorted kept heights (odd and even counts, ties) is
+    # np.median's, so the bound is the same number
+    from lidarstat.classify._moments_analysis import _cluster_bound
+
+    g = np.random.default_rng(seed)
+    for n in (7, 8, 9, 10, 101, 1000):
+        v = np.round(g.normal(0, 0.05, n), 3 if seed % 2 else 6)
+        med = np.median(v)
+        ref = float(med + 3.0 * 1.4826 * np.median(np.abs(v - med))) if n >= 8 else -np.inf
+        assert _cluster_bound(np.sort(v), 3.0) == ref
