@@ -279,6 +279,9 @@ def test_low_outliers_equal_reference(seed):
     got = low_outliers(xy, z)
     assert np.array_equal(got, _low_outliers_reference(xy, z))
     assert got[low].mean() > 0.5
+    pts = np.c_[xy, z]  # the first two columns of a cloud's coordinates, read in place
+    assert np.array_equal(low_outliers(pts, pts[:, 2]), got)
+    assert np.array_equal(low_outliers(pts[:, :2], z), got)
 
 
 @pytest.mark.parametrize("seed", range(4))

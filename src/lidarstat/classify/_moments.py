@@ -260,7 +260,7 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     inten, nret, rnum = (None if a is None else a[canon] for a in (inten, nret, rnum))
 
     # 1. low noise, out of every analysis
-    noise = (low_outliers(pts[:, :2], pts[:, 2], min_depth=0.5 / uz) if low_noise
+    noise = (low_outliers(pts, pts[:, 2], min_depth=0.5 / uz) if low_noise
              else np.zeros(n, bool))
     pts_noise = pts[noise]  # for their heights under the final surface
     pts, inten, multi, has_returns = _without_low_noise(noise, pts, inten, nret, rnum, source,
