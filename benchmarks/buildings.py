@@ -20,13 +20,18 @@ score is also given without it (``tested_outside_omissions``). ``patch_evidence`
 compares the false and true roof patches of every file (``building_evidence.py``);
 ``joint_evidence``, ``joint_rule_search`` and ``false_patches_rejected_by_reference`` (the
 bound of any rule that rejects roof patches) measure them jointly (``building_joint.py``).
+``missed_by_cause`` breaks the missed building points down by cause, with the F1 each
+cause's perfect recovery would give, and ``recovery_rules`` the true and false points
+that rules on the largest causes would add (``building_recall.py``), also once every
+false patch is rejected (``recovery_rules_after_patch_bound``).
 
 Usage::
 
     python benchmarks/buildings.py --out benchmarks/results_buildings.json --figures
 
 ``--figures`` draws the files of ``FIGURES`` (cell rule against tested planes), the
-reference's omission and the patch evidence of ``EVIDENCE_FILES`` into ``docs/figures/``.
+reference's omission, the patch evidence of ``EVIDENCE_FILES`` and St-Barthelemy's missed
+building points by cause into ``docs/figures/``.
 """
 
 from __future__ import annotations
@@ -49,6 +54,7 @@ from lidarstat.io import linear_units, read  # noqa: E402
 DATA = HERE.parent.parent / "shared" / "data"
 import building_evidence  # noqa: E402
 import building_joint  # noqa: E402
+import building_recall  # noqa: E402
 from real_moments import PRODUCER_FILES as FILES  # noqa: E402 (the same files)
 LEFT_OUT = (7, 9, 18)
 FIGURE_FILE = "ahn3_amsterdam/ahn_2386_9702.laz"
@@ -167,9 +173,23 @@ def run(rel):
     # the bound of any patch rule: every roof patch mostly outside class 6 rejected (the
     # reference's own labels), the roof cells decided again
     false_ids = joint[joint[:, 2] < 0.5, 0].astype(np.int64) if joint.size else []
-    row["false_patches_rejected_by_reference"] = scores(
-        building_joint.redecide(*ctx[:4], false_ids)[keep], truth[keep])
-    return row, (cloud.xyz, truth, old, new, ref, patches, joint, ctx)
+    oracle = building_joint.redecide(*ctx[:4], false_ids)
+    row["false_patches_rejected_by_reference"] = scores(oracle[keep], truth[keep])
+    # where the missed building points are, by cause, and what rules on the largest
+    # causes would add (building_recall.py)
+    state = building_recall.candidate_state(cloud.xyz, fields, res.height, multi)
+    row["missed_by_cause"], cause = building_recall.missed_causes(
+        state, new, truth, keep, res.ground, res.height, b["sigma"])
+    row["recovery_rules"] = building_recall.recovery_rules(state, new, truth, keep)
+    # the same rules once every false patch is rejected (the patch rules' bound above):
+    # do the low parts under the true roofs follow the reference then?
+    state = building_recall.candidate_state(
+        cloud.xyz, building_recall.without_patches(fields, false_ids, oracle), res.height,
+        multi)
+    row["recovery_rules_after_patch_bound"] = building_recall.recovery_rules(
+        state, oracle, truth, keep)
+    del state
+    return row, (cloud.xyz, truth, old, new, ref, patches, joint, ctx, cause, keep)
 
 
 def evidence(xyz, ev, patch, multi, pred, truth, height, k=30):
@@ -304,6 +324,11 @@ def main():
         if args.figures and rel in FIGURES:
             png, title = FIGURES[rel]
             figure(data, HERE.parent / "docs" / "figures" / png, title)
+        if args.figures and rel == SB_FIGURE_FILE:
+            building_recall.figure(data[0], data[8], data[3], data[1] & data[9], data[9],
+                                   HERE.parent / "docs" / "figures"
+                                   / "moments_buildings_missed_stbarth.png",
+                                   "IGN St-Barthelemy")
         if args.figures and rel in REFERENCE_OMISSIONS:
             omission_figure(data, REFERENCE_OMISSIONS[rel][0],
                             HERE.parent / "docs" / "figures" / "moments_buildings_ign_omission.png")

@@ -215,6 +215,11 @@ def test_canonical_order_equals_lexsort(seed):
     x = np.round(g.uniform(0, 20, n) / step) * step
     if seed == 4:
         x[: n // 2] = 7.0  # one long run: the merge path
+    if seed == 1:  # negative values: the comparison sort instead of the radix sort of the bits
+        x -= 10.0
+    if seed == 5:  # -0.0 and 0.0 are one key (the bits of -0.0 are negative)
+        x[: n // 3] = 0.0
+        x[n // 3: n // 2] = -0.0
     y, z, w = (np.round(g.uniform(0, 3, n)) for _ in range(3))
     z[z == 0] = -0.0  # -0.0 and 0.0 are equal keys
     for inten in (w, None):
@@ -274,6 +279,9 @@ def test_low_outliers_equal_reference(seed):
     got = low_outliers(xy, z)
     assert np.array_equal(got, _low_outliers_reference(xy, z))
     assert got[low].mean() > 0.5
+    pts = np.c_[xy, z]  # the first two columns of a cloud's coordinates, read in place
+    assert np.array_equal(low_outliers(pts, pts[:, 2]), got)
+    assert np.array_equal(low_outliers(pts[:, :2], z), got)
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -315,14 +323,15 @@ def test_ground_surface_on_rows_equals_the_copied_ground(seed):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_in_place_row_kernels_equal_numpy_gathers(seed):
-    from lidarstat.classify._moments_kernels import compact_rows, permute_rows
+    from lidarstat.classify._moments import _permute_columns
+    from lidarstat.classify._moments_kernels import compact_rows
 
     g = np.random.default_rng(seed)
     n = int(g.integers(1, 3000))
     a = g.normal(size=(n, 3))
     order = g.permutation(n)
     b = a.copy()
-    permute_rows(b, order)
+    _permute_columns(b, order)
     assert np.array_equal(b, a[order])
     keep = g.uniform(size=n) < 0.7
     c = a.copy()
@@ -384,3 +393,17 @@ def test_raised_patch_copy_check_finds_every_copy(seed):
         xy[0], xy[1], z[1] = (-0.0, 5.0), (0.0, 5.0), z[0]
     ref = find_duplicates(np.c_[xy, z]).any
     assert _may_repeat(xy, z) == ref
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_cluster_bound_from_sorted_heights_equals_numpy_medians(seed):
+    # the median read from the sorted kept heights (odd and even counts, ties) is
+    # np.median's, so the bound is the same number
+    from lidarstat.classify._moments_analysis import _cluster_bound
+
+    g = np.random.default_rng(seed)
+    for n in (7, 8, 9, 10, 101, 1000):
+        v = np.round(g.normal(0, 0.05, n), 3 if seed % 2 else 6)
+        med = np.median(v)
+        ref = float(med + 3.0 * 1.4826 * np.median(np.abs(v - med))) if n >= 8 else -np.inf
+        assert _cluster_bound(np.sort(v), 3.0) == ref

@@ -120,7 +120,7 @@ def test_read_only_inputs_compile_no_second_variant():
     sigma = np.full(300, 0.01)
     for a in (pts, sigma):
         a.flags.writeable = False
-    kernels = [nk.grid_keys, nk.row_hash, _refine._seg_moments, _refine._residual_units,
+    kernels = [nk.grid_keys, nk.column_hash, _refine._seg_moments, _refine._residual_units,
                _scales._prefix_planes]
     before = [set(k.signatures) for k in kernels]  # other tests may have run them
     CellIndex(pts, 0.5)

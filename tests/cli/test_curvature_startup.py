@@ -60,3 +60,38 @@ def test_parsing_imports_no_numerics():
             "'pandas') if m in sys.modules]\n"
             "assert not bad, bad\n")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_a_module_command_parses_alone_and_the_same():
+    from lidarstat.cli._app import COMMAND_MODULES
+
+    full = build_parser()
+    argv = ["moments", "in.las", "out.las", "--no-report", "--window", "32", "-q"]
+    alone = build_parser(command_of(argv))
+    assert {k: v for k, v in vars(full.parse_args(argv)).items() if k != "func"} == \
+        {k: v for k, v in vars(alone.parse_args(argv)).items() if k != "func"}
+    for name in COMMAND_MODULES:
+        sub = next(a for a in build_parser(name)._actions if a.dest == "command")
+        assert set(sub.choices) == {name}
+
+
+def test_moments_run_does_not_import_the_other_methods(tmp_path):
+    import numpy as np
+
+    from lidarstat.io import PointCloud, write
+
+    g = np.random.default_rng(0)
+    xy = g.uniform(0, 40, (3000, 2))
+    write(tmp_path / "in.las", PointCloud(xyz=np.c_[xy, 0.05 * xy[:, 0] + g.normal(0, 0.02, 3000)],
+                                          attributes={"intensity": g.integers(50, 200, 3000)
+                                                      .astype(np.uint16)}))
+    code = (
+        "import sys\n"
+        "from lidarstat.cli._app import main\n"
+        f"assert main(['moments', {str(tmp_path / 'in.las')!r}, {str(tmp_path / 'out.las')!r},"
+        " '--no-report', '-q']) == 0\n"
+        "bad = [m for m in sys.modules if m.startswith(('lidarstat.segment', 'lidarstat.synth',"
+        " 'lidarstat.report', 'matplotlib'))]\n"
+        "assert not bad, bad\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+    assert (tmp_path / "out.las").exists()

@@ -10,6 +10,7 @@ from lidarstat.neighbors import (
     CellIndex,
     find_duplicates,
     knn_neighbors,
+    location_hash,
     max_pairs,
     radius_neighbors,
 )
@@ -37,6 +38,39 @@ def test_find_duplicates_edge_cases():
     assert d.n_unique == 2 and d.inverse.tolist() == [0, 0, 1]   # -0.0 == 0.0
     d = find_duplicates(np.random.default_rng(0).normal(size=(1000, 3)))
     assert not d.any and d.describe() == "1,000 points share 1,000 locations"
+
+
+def _hash_reference(pts):
+    """The location hash in NumPy: the bits of +0.0 for -0.0, three products, two mixes."""
+    b = (pts + 0.0).view(np.uint64)  # -0.0 + 0.0 is +0.0
+    with np.errstate(over="ignore"):
+        h = ((b[:, 0] * np.uint64(0x9E3779B97F4A7C15))
+             ^ (b[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F))
+             ^ (b[:, 2] * np.uint64(0x165667B19E3779F9)))
+        h ^= h >> np.uint64(29)
+        h *= np.uint64(0xBF58476D1CE4E5B9)
+        h ^= h >> np.uint64(32)
+    return h
+
+
+@pytest.mark.parametrize("block", [7, 1 << 18])
+def test_location_hash_of_columns_equals_the_row_hash(monkeypatch, block):
+    # one kernel for the rows of an (N, 3) array and for separate columns (an (N, 2) block
+    # and a z array), over blocks of rows that need not divide N
+    from lidarstat.neighbors import _duplicates
+
+    monkeypatch.setattr(_duplicates, "_HASH_BLOCK", block)
+    g = np.random.default_rng(3)
+    pts = np.round(g.uniform(-2, 2, (1000, 3)), 1)
+    pts[:5] = [[-0.0, 1.0, 0.0], [0.0, 1.0, -0.0], [0.0, -0.0, 0.0], [-0.0, 0.0, -0.0],
+               [0.0, 0.0, 0.0]]
+    ref = _hash_reference(pts)
+    xy, z = np.ascontiguousarray(pts[:, :2]), pts[:, 2].copy()
+    z.flags.writeable = False  # a read-only column hashes the same (copied per block)
+    assert np.array_equal(location_hash(pts[:, 0], pts[:, 1], pts[:, 2]), ref)
+    assert np.array_equal(location_hash(xy[:, 0], xy[:, 1], z), ref)
+    assert np.array_equal(_duplicates._row_hash(pts), ref.view(np.int64))
+    assert ref[0] == ref[1] and ref[2] == ref[3] == ref[4] and ref[0] != ref[2]
 
 
 def test_refuse_dominated_names_the_counts():

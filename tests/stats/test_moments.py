@@ -73,3 +73,23 @@ def test_dip_dequantizes_integer_intensities():
     g = np.random.default_rng(9)
     x = np.round(g.normal(100, 3, 5000))  # integers: heavy ties
     assert not dip_test(x).reject
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_dip_dequantisation_step_from_the_distinct_values(seed):
+    # the jitter's width is the smallest gap between distinct values, and no jitter is
+    # drawn without ties or with one distinct value: as np.unique gives them
+    import diptest
+
+    g = np.random.default_rng(seed)
+    x = [np.round(g.normal(100, 3, 3000)), g.normal(size=3000), np.full(50, 2.0),
+         np.round(g.uniform(0, 5, 400), 2) * 1e-3 + 4.5e6, np.r_[np.zeros(30), 1.0]][seed]
+    gen = np.random.default_rng(seed)
+    u = np.unique(x)
+    y = x
+    if u.size < x.size and u.size > 1:
+        q = float(np.min(np.diff(u)))
+        y = x + gen.uniform(-0.5 * q, 0.5 * q, size=x.size)
+    dip, p = diptest.diptest(y)
+    got = dip_test(x, rng=seed)
+    assert (float(got.statistic), float(got.pvalue)) == (dip, p)

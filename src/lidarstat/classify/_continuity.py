@@ -28,7 +28,7 @@ from .._shared._columns import column_max, column_min
 from ..neighbors import GRID_CELL_CHUNK as _CELL_CHUNK, grid_block_ranges as _block_ranges, grid_candidate_count as _count, grid_knn_point as _knn_point, grid_knn_scratch as _scratch  # noqa: E501
 from .._shared._jit import njit, njit_parallel
 from .._shared._kernels import uf_find as _find
-from ..neighbors import find_duplicates
+from ..neighbors import find_duplicates, location_hash
 from ._surface import cell_keys, cell_order
 
 __all__ = ["raised_patches"]
@@ -293,40 +293,9 @@ def _join_smooth(parent, zs, nbr, smooth, start):  # pragma: no cover - compiled
 def _may_repeat(xy, z) -> bool:
     """False when no two points share a location (every hash of their coordinates'
     bits distinct); True when two hashes are equal (a copy, or a collision)."""
-    bits = np.ascontiguousarray(xy).view(np.uint64)
-    h = _location_hash(bits[:, 0], bits[:, 1], np.ascontiguousarray(z).view(np.uint64))
+    h = location_hash(xy[:, 0], xy[:, 1], z)
     h.sort()
     return bool((h[1:] == h[:-1]).any())
-
-
-_NEG_ZERO = np.uint64(0x8000000000000000)  # the bits of -0.0
-
-
-@njit
-def _location_hash(bx, by, bz):  # pragma: no cover - compiled
-    """64-bit hash of the bits of every point's (x, y, z), -0.0 taken as 0.0: the hash
-    of :func:`lidarstat.neighbors.find_duplicates` from the columns (no (N, 3) copy)."""
-    c0 = np.uint64(0x9E3779B97F4A7C15)
-    c1 = np.uint64(0xC2B2AE3D27D4EB4F)
-    c2 = np.uint64(0x165667B19E3779F9)
-    c3 = np.uint64(0xBF58476D1CE4E5B9)
-    out = np.empty(bz.size, np.uint64)
-    for i in range(bz.size):
-        b0 = bx[i]
-        b1 = by[i]
-        b2 = bz[i]
-        if b0 == _NEG_ZERO:
-            b0 = np.uint64(0)
-        if b1 == _NEG_ZERO:
-            b1 = np.uint64(0)
-        if b2 == _NEG_ZERO:
-            b2 = np.uint64(0)
-        h = (b0 * c0) ^ (b1 * c1) ^ (b2 * c2)
-        h ^= h >> np.uint64(29)
-        h *= c3
-        h ^= h >> np.uint64(32)
-        out[i] = h
-    return out
 
 
 @njit

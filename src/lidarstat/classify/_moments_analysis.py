@@ -31,6 +31,14 @@ __all__ = ["analyse", "dip_tests", "paper_clusters", "progressive_cut"]
 def analyse(values, category, p: MomentsOptions, *, window, step, population, dips,
             record=True):
     """Sequential moments of one population and the cycle choice; (choice, MomentsStep)."""
+    ch, rec, _ = _analysis(values, category, p, window=window, step=step,
+                           population=population, dips=dips, record=record)
+    return ch, rec
+
+
+def _analysis(values, category, p: MomentsOptions, *, window, step, population, dips,
+              record=True):
+    """:func:`analyse`, and the values sorted: ``(choice, MomentsStep, sorted values)``."""
     sm = sequential_moments(values, min_points=max(2, min(4, values.size)))
     if p.method is MomentsMethod.SKEWNESS_BALANCING:
         ch = skewness_balance_cycle(sm)
@@ -44,7 +52,7 @@ def analyse(values, category, p: MomentsOptions, *, window, step, population, di
         rec = MomentsStep(window=window, step=step, population=population, category=category,
                           n=int(values.size), dip=dips, choice=ch, curves=thin_curves(sm),
                           density=de)
-    return ch, rec
+    return ch, rec, sm.sorted_values
 
 
 def dip_tests(cats: dict, p: MomentsOptions) -> dict:
@@ -67,16 +75,19 @@ def _quadrants(xy, size, origin):
 
 
 def _cluster_bound(kept, z):
-    """``median + z x 1.4826 MAD`` of the kept heights (-inf for fewer than 8 values).
+    """``median + z x 1.4826 MAD`` of the kept heights, sorted ascending (-inf for fewer
+    than 8 values).
 
     The sequential cut stops where what is left is symmetric; on ground that the surface
     follows only roughly (sparse or steep terrain) that stop lies inside the ground's own
     upper tail. The cut is never placed closer to the ground cluster's centre than `z`
-    robust standard deviations of that cluster.
+    robust standard deviations of that cluster. The median is read from the sorted
+    values (the mean of the middle one or two, as ``np.median`` takes it).
     """
-    if kept.size < 8:
+    n = kept.size
+    if n < 8:
         return -np.inf
-    med = np.median(kept)
+    med = np.mean(kept[(n - 1) // 2: n // 2 + 1])
     return float(med + z * 1.4826 * np.median(np.abs(kept - med)))
 
 
@@ -94,13 +105,16 @@ def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, 
     rec = None
     if idx.size >= 2 * p.min_points + 4:
         dips = dip_tests({"elevation": v}, p) if record else {}
-        ch, rec = analyse(v, "elevation", p, window=window_id, step=1,
-                          population="heights above the ground model", dips=dips,
-                          record=record)
+        ch, rec, vs = _analysis(v, "elevation", p, window=window_id, step=1,
+                                population="heights above the ground model", dips=dips,
+                                record=record)
         if ch.cycle is not None:
             thr = min(ch.threshold, parent_thr)
             if p.ground_spread > 0 and p.method is MomentsMethod.MOMENTS:
-                thr = max(thr, _cluster_bound(v[v <= thr], p.ground_spread))
+                # the heights <= thr: a prefix of the sorted heights
+                kept = vs[:int(np.searchsorted(vs, thr, side="right"))]
+                thr = max(thr, _cluster_bound(kept, p.ground_spread))
+        del vs
     info = {"window": window_id, "size": size, "n": int(idx.size),
             "x0": float(xy[idx, 0].min()) if idx.size else None,
             "y0": float(xy[idx, 1].min()) if idx.size else None,

@@ -13,8 +13,9 @@ from __future__ import annotations
 import numpy as np
 
 from .._shared._jit import njit
+from ..neighbors import radix_order
 
-__all__ = ["canonical_order", "compact_rows", "permute_rows"]
+__all__ = ["canonical_order", "compact_rows"]
 
 #: Runs of equal x up to this length are sorted by insertion, longer ones by merging.
 _INSERTION_RUN = 24
@@ -97,7 +98,13 @@ def _sort_ties(order, first, y, z, w):  # pragma: no cover - compiled
 
 def canonical_order(x, y, z, intensity=None) -> np.ndarray:
     """``np.lexsort((intensity, z, y, x))`` (intensity left out when None), computed as a
-    sort of x and a sort of each run of equal x by y, z, intensity and the index.
+    stable sort of x and a sort of each run of equal x by y, z, intensity and the index.
+
+    The sort of x is a radix sort of the bits of the values when none is negative (the
+    bits of non-negative doubles order as the numbers do), a comparison sort otherwise.
+    The other keys are gathered into that order once, so the runs are sorted on
+    contiguous memory; inside a run the stable sort left the points in input order, so
+    the position in it breaks the last ties as the index does.
 
     Examples
     --------
@@ -108,38 +115,29 @@ def canonical_order(x, y, z, intensity=None) -> np.ndarray:
     True
     """
     x = np.ascontiguousarray(x, dtype=np.float64)
-    order = np.argsort(x).astype(np.int64, copy=False)
-    y, z = (np.ascontiguousarray(a, dtype=np.float64) for a in (y, z))
+    order = _x_order(x)
+    first = np.take(x, order)
+    y, z = (np.take(np.asarray(a, dtype=np.float64), order) for a in (y, z))
     w = (np.empty(0) if intensity is None
-         else np.ascontiguousarray(intensity, dtype=np.float64))
-    _sort_ties(order, x, y, z, w)
+         else np.take(np.asarray(intensity, dtype=np.float64), order))
+    pos = np.arange(x.size, dtype=np.int64)
+    _sort_ties(pos, first, y, z, w)
+    del first, y, z, w
+    return np.take(order, pos)
+
+
+def _x_order(x):
+    """Stable ascending order of `x` (float64, no NaN)."""
+    bits = x.view(np.int64)
+    if x.size < 2:
+        return np.arange(x.size, dtype=np.int64)
+    lo = int(bits.min())
+    if lo < 0:  # a negative value or -0.0: the bits do not order as the numbers
+        return np.argsort(x, kind="stable").astype(np.int64, copy=False)
+    keys = bits - lo  # >= 0, in the order of the numbers; equal only for equal numbers
+    span = int(keys.max())
+    order, _ = radix_order(keys, max(span, 1).bit_length())
     return order
-
-
-@njit
-def permute_rows(a, order):  # pragma: no cover - compiled
-    """``a[i] = a[order[i]]`` for every row of `a`, in place (`order` a permutation):
-    the gather ``a[order]`` without a second array, one cycle of the permutation at a
-    time."""
-    n, k = a.shape
-    done = np.zeros(n, np.bool_)
-    tmp = np.empty(k, a.dtype)
-    for s in range(n):
-        if done[s]:
-            continue
-        for c in range(k):
-            tmp[c] = a[s, c]
-        j = s
-        while True:
-            done[j] = True
-            nxt = order[j]
-            if nxt == s:
-                for c in range(k):
-                    a[j, c] = tmp[c]
-                break
-            for c in range(k):
-                a[j, c] = a[nxt, c]
-            j = nxt
 
 
 @njit

@@ -89,7 +89,8 @@ def low_outliers(xy, z, *, points_per_cell: float = 4.0, k: float = 5.0,
     Parameters
     ----------
     xy : (N, 2) ndarray
-        Planimetric coordinates (any origin).
+        Planimetric coordinates (any origin); an (N, 3) array is read as its first two
+        columns (the coordinates of a cloud without a copy of them).
     z : (N,) ndarray
         Elevations.
     points_per_cell : float, optional
@@ -122,6 +123,8 @@ def low_outliers(xy, z, *, points_per_cell: float = 4.0, k: float = 5.0,
     out = np.zeros(n, bool)
     if n < 16:
         return out
+    cols = xy if xy.ndim == 2 and xy.flags.c_contiguous else np.ascontiguousarray(xy)
+    xy = xy[:, :2]
     lo = column_min(xy)
     span = np.maximum(column_max(xy) - lo, 1e-9)
     cell = float(np.sqrt(points_per_cell * span[0] * span[1] / n))
@@ -129,7 +132,7 @@ def low_outliers(xy, z, *, points_per_cell: float = 4.0, k: float = 5.0,
         return out
     # floor((v - lo) / cell) is monotone in v: the largest index is that of the maximum
     nx, ny = (int(np.floor((v - lo[j]) / cell)) + 1 for j, v in enumerate(column_max(xy)))
-    key = _cell_keys(np.ascontiguousarray(xy), float(lo[0]), float(lo[1]), cell, ny)
+    key = _cell_keys(cols, float(lo[0]), float(lo[1]), cell, ny)  # reads columns 0 and 1
     z = np.ascontiguousarray(z)
     for _ in range(iterations):
         z1, arg = _lowest_live(key, z, out, nx * ny)

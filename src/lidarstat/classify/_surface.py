@@ -385,11 +385,11 @@ class TinSurface:
     """
 
     def __init__(self, P, V, cell: float):
-        from scipy.spatial import Delaunay, QhullError, cKDTree
+        from scipy.spatial import Delaunay, QhullError
 
         self.P = np.ascontiguousarray(P, dtype=np.float64)
         self.V = np.ascontiguousarray(V, dtype=np.float64)
-        self._tree = cKDTree(self.P)
+        self._kdtree = None  # the vertices' k-d tree, built when a query needs it
         self._tri = None
         if len(self.P) >= 3:
             try:
@@ -407,6 +407,15 @@ class TinSurface:
                                              nx, ny)
                 self._tri = (float(lo[0]), float(lo[1]), g, nx, ny, indptr, tri, simp,
                              _transforms(self.P, simp))
+
+    @property
+    def _tree(self):
+        """k-d tree of the vertices (outside the hull only: built on first use)."""
+        if self._kdtree is None:
+            from scipy.spatial import cKDTree
+
+            self._kdtree = cKDTree(self.P)
+        return self._kdtree
 
     def __call__(self, q) -> np.ndarray:
         q = np.ascontiguousarray(q, dtype=np.float64)

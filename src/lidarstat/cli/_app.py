@@ -262,12 +262,13 @@ def command_of(argv) -> str | None:
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The ``lidarstat`` parser with every subcommand, or with `command` alone.
 
-    A run of one of :data:`CORE_COMMANDS` parses with that subcommand alone, so that it
-    does not import the packages the other commands need (their options' choices come from
-    them): ``lidarstat curvature`` starts without SciPy's statistics, the segmentations or
-    the classifications.
+    A run of one command parses with that subcommand alone, so that it does not import
+    the packages the other commands need (their options' choices come from them):
+    ``lidarstat curvature`` starts without SciPy's statistics, the segmentations or the
+    classifications, ``lidarstat moments`` without the segmentations and the synthetic
+    scenes.
     """
-    only = command if command in CORE_COMMANDS else None
+    only = command if command in CORE_COMMANDS + COMMAND_MODULES else None
 
     def want(name):
         return only is None or name == only
@@ -363,8 +364,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         s.add_argument("--seed", type=opt.seed, default=0)
         s.set_defaults(func=cmd_demo)
 
-    if only is None:
-        for name in COMMAND_MODULES:
+    for name in COMMAND_MODULES:
+        if want(name):
             import_module(f".{name}", __package__).register(sub)
     from ._catalogue import install
 

@@ -14,8 +14,9 @@ from ._common import (add_alpha, add_noise, add_run_outputs, add_seed, add_worke
 def _run(args):
     from ..classify import moments
     from ..io import linear_units, read, rewrite, write
-    from ..report import write_moments_report
 
+    if not args.no_report:  # imported before the work: a missing plotting stack fails first
+        from ..report import write_moments_report
     out = Path(args.output)
     folder = None
     if not args.no_report:

@@ -15,7 +15,7 @@ from ._budget import max_pairs
 from ._csr import Neighborhoods
 from ._drivers import Drivers, make_drivers
 from ._duplicates import (Duplicates, check_copies, copies_degenerate, find_duplicates,
-                          map_rows, refuse_dominated, run_on_unique)
+                          location_hash, map_rows, refuse_dominated, run_on_unique)
 from ._query import CellIndex, knn_neighbors, radius_neighbors
 from ._grid_knn import knn_cell_size
 from ._grid_kernels import _CELL_CHUNK as GRID_CELL_CHUNK
@@ -23,9 +23,11 @@ from ._grid_kernels import _block_ranges as grid_block_ranges
 from ._grid_kernels import _count as grid_candidate_count
 from ._grid_kernels import _knn_point as grid_knn_point
 from ._grid_kernels import _scratch as grid_knn_scratch
+from ._kernels import radix_order
 
 __all__ = ["Neighborhoods", "CellIndex", "radius_neighbors", "knn_neighbors",
-           "Duplicates", "find_duplicates", "check_copies", "copies_degenerate", "map_rows",
+           "Duplicates", "find_duplicates", "location_hash", "check_copies",
+           "copies_degenerate", "map_rows",
            "refuse_dominated", "run_on_unique", "max_pairs", "Drivers", "make_drivers",
            "knn_cell_size", "GRID_CELL_CHUNK", "grid_block_ranges", "grid_candidate_count",
-           "grid_knn_point", "grid_knn_scratch"]
+           "grid_knn_point", "grid_knn_scratch", "radix_order"]

@@ -128,12 +128,39 @@ def find_duplicates(points) -> Duplicates:
 
 
 def _row_hash(pts):
-    """A 64-bit hash (as int64) of each row's coordinate bits; -0.0 hashes as 0.0.
+    """A 64-bit hash (as int64) of each row's coordinate bits; -0.0 hashes as 0.0."""
+    pts = kernel_array(pts)
+    return location_hash(pts[:, 0], pts[:, 1], pts[:, 2]).view(np.int64)
 
-    One compiled pass over the rows (:func:`~._kernels.row_hash`): no temporaries of
-    the cloud's size besides the hashes.
+
+#: Rows hashed at a time: the strided columns are copied this many at a time.
+_HASH_BLOCK = 1 << 18
+
+
+def location_hash(x, y, z) -> np.ndarray:
+    """A 64-bit hash (uint64) of the bits of every location ``(x[i], y[i], z[i])``, -0.0
+    taken as 0.0: equal locations hash equally (the hash of :func:`find_duplicates`).
+
+    The three float64 columns may be views of other arrays (the columns of an (N, 3) or
+    (N, 2) array): one compiled pass (:func:`~._kernels.column_hash`) over blocks of
+    rows, each column handed to it contiguous and writable (one compiled variant), so no
+    copy of the cloud's size is made.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> h = location_hash(np.array([0.0, -0.0, 1.0]), np.zeros(3), np.zeros(3))
+    >>> bool(h[0] == h[1]), bool(h[0] == h[2])
+    (True, False)
     """
-    return _kernels.row_hash(kernel_array(pts)).view(np.int64)
+    cols = [np.asarray(c) for c in (x, y, z)]
+    n = cols[0].shape[0]
+    out = np.empty(n, np.uint64)
+    for a in range(0, n, _HASH_BLOCK):
+        b = min(a + _HASH_BLOCK, n)
+        bits = [kernel_array(c[a:b]).view(np.uint64) for c in cols]
+        _kernels.column_hash(*bits, out[a:b])
+    return out
 
 
 def refuse_dominated(dup: Duplicates, *, what: str, max_share: float = 0.5,

@@ -310,19 +310,18 @@ _NEG_ZERO = np.uint64(0x8000000000000000)
 
 
 @njit
-def row_hash(pts):
-    """64-bit hash of the bits of every row of the (N, 3) C-contiguous float64 `pts`, -0.0
-    taken as 0.0: ``b0 * C0 ^ b1 * C1 ^ b2 * C2`` (wrapping), then two mixing rounds."""
-    bits = pts.view(np.uint64)
-    out = np.empty(pts.shape[0], np.uint64)
+def column_hash(bx, by, bz, out):
+    """64-bit hash of the bits of every location ``(bx[i], by[i], bz[i])`` (the float64
+    coordinates viewed as uint64, three C-contiguous columns) into `out`, -0.0 taken as
+    0.0: ``b0 * C0 ^ b1 * C1 ^ b2 * C2`` (wrapping), then two mixing rounds."""
     c0 = np.uint64(0x9E3779B97F4A7C15)
     c1 = np.uint64(0xC2B2AE3D27D4EB4F)
     c2 = np.uint64(0x165667B19E3779F9)
     c3 = np.uint64(0xBF58476D1CE4E5B9)
-    for i in range(pts.shape[0]):
-        b0 = bits[i, 0]
-        b1 = bits[i, 1]
-        b2 = bits[i, 2]
+    for i in range(bz.size):
+        b0 = bx[i]
+        b1 = by[i]
+        b2 = bz[i]
         if b0 == _NEG_ZERO:
             b0 = np.uint64(0)
         if b1 == _NEG_ZERO:
@@ -334,7 +333,6 @@ def row_hash(pts):
         h *= c3
         h ^= h >> np.uint64(32)
         out[i] = h
-    return out
 
 
 @njit

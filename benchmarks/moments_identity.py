@@ -1,0 +1,129 @@
+#!/usr/bin/env python
+"""Field-by-field check of ``moments`` across two versions of the package.
+
+``dump`` runs :func:`lidarstat.classify.moments` on a seed sweep of the synthetic airborne
+cloud of ``bench_moments.py`` (quantised to the millimetre as a LAS file holds it) - with
+intensity and returns, without intensity, in a frame with negative coordinates, with a few
+low-noise echoes and with copies of points - and writes every per-point field, the
+building fields and each analysis step's dip tests and cut to one ``.npz``; ``compare``
+counts, per array, the values that differ (NaN equal to NaN) and writes the counts as
+JSON. A speed change that claims identical results must count zeros.
+
+Usage::
+
+    mkdir -p /tmp/old && git archive REV src | tar -x -C /tmp/old
+    PYTHONPATH=/tmp/old/src python benchmarks/moments_identity.py dump /tmp/mom_old.npz
+    PYTHONPATH=src python benchmarks/moments_identity.py dump /tmp/mom_new.npz
+    python benchmarks/moments_identity.py compare /tmp/mom_old.npz /tmp/mom_new.npz \\
+        --out benchmarks/results_moments_identity.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+
+
+def _clouds(n, seeds):
+    """(name, xyz, intensity, number_of_returns, return_number) of the sweep."""
+    sys.path.insert(0, str(HERE))
+    from bench_moments import make_cloud
+
+    for seed in range(seeds):
+        xyz, inten, nret, rnum, _ = make_cloud(n, seed=seed)
+        xyz = np.round(xyz, 3)  # millimetre coordinates, as read from a LAS file
+        inten = np.clip(np.round(inten), 0, 65535).astype(np.uint16)
+        yield f"als{seed}", xyz, inten, nret, rnum
+        if seed == 0:
+            yield "no_intensity", xyz, None, nret, rnum
+        if seed == 1:  # negative x: the canonical order's comparison sort
+            yield "negative", xyz - [500_400.0, 500_100.0, 0.0], inten, nret, rnum
+        if seed == 2:  # low noise and copies of points
+            g = np.random.default_rng(seed)
+            low = g.choice(n, 40, replace=False)
+            z = xyz.copy()
+            z[low, 2] -= g.uniform(2.0, 8.0, low.size)
+            copies = g.choice(n, n // 50, replace=False)
+            idx = np.r_[np.arange(n), copies]
+            yield "noise_copies", z[idx], inten[idx], nret[idx], rnum[idx]
+
+
+def dump(path, n=200_000, seeds=3):
+    from lidarstat.classify import moments
+
+    out = {}
+    for name, xyz, inten, nret, rnum in _clouds(n, seeds):
+        r = moments(xyz, inten, number_of_returns=nret, return_number=rnum)
+        for k, v in r.to_fields().items():
+            out[f"{name}/{k}"] = np.asarray(v)
+        for k, v in r.building_fields.items():
+            out[f"{name}/building:{k}"] = np.asarray(v)
+        dips = [(d["dip"], d["pvalue"]) for s in r.steps for d in s.dip.values()]
+        out[f"{name}/steps:dips"] = np.array(dips, float).reshape(-1, 2)
+        out[f"{name}/steps:cuts"] = np.array([s.choice.threshold for s in r.steps], float)
+        out[f"{name}/windows:thresholds"] = np.array(
+            [np.nan if w["threshold"] is None else w["threshold"] for w in r.windows], float)
+        print(f"{name}: {len(xyz):,} points", flush=True)
+    np.savez_compressed(path, **out)
+    print(f"wrote {len(out)} arrays to {path}")
+
+
+def compare(a_path, b_path, out=None, note=None):
+    a, b = np.load(a_path), np.load(b_path)
+    counts, bad = {}, 0
+    for k in sorted(set(a.files) | set(b.files)):
+        if k not in a.files or k not in b.files:
+            print(f"{k}: in one dump only")
+            counts[k] = "missing"
+            bad += 1
+            continue
+        x, y = a[k], b[k]
+        if x.dtype != y.dtype or x.shape != y.shape:
+            print(f"{k}: {x.dtype}{x.shape} against {y.dtype}{y.shape}")
+            counts[k] = "shape or type"
+            bad += 1
+            continue
+        same = (x == y) | (np.isnan(x) & np.isnan(y)) if x.dtype.kind == "f" else x == y
+        counts[k] = int(same.size - same.sum())
+        if counts[k]:
+            print(f"{k}: {counts[k]} of {x.size} differ")
+            bad += 1
+    print(f"{len(counts)} arrays compared, {bad} differ")
+    if out:
+        Path(out).write_text(json.dumps({
+            "what": "values that differ between two dumps of benchmarks/moments_identity.py "
+                    "(every per-point field, building field, dip test and cut of the "
+                    "moments classification on a seed sweep of synthetic airborne clouds)",
+            "a": str(a_path), "b": str(b_path), **({"code": note} if note else {}),
+            "arrays": len(counts),
+            "arrays_that_differ": bad, "differences": counts}, indent=1) + "\n")
+    return 0 if bad == 0 else 1
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    d = sub.add_parser("dump")
+    d.add_argument("out")
+    d.add_argument("--points", type=int, default=200_000)
+    d.add_argument("--seeds", type=int, default=3)
+    c = sub.add_parser("compare")
+    c.add_argument("a")
+    c.add_argument("b")
+    c.add_argument("--out", default=None, help="JSON of the counts")
+    c.add_argument("--note", default=None, help="what code each dump ran (stored in --out)")
+    args = ap.parse_args(argv)
+    if args.cmd == "dump":
+        dump(args.out, args.points, args.seeds)
+        return 0
+    return compare(args.a, args.b, args.out, args.note)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
