@@ -12,6 +12,8 @@ Usage::
     python benchmarks/bench_curvature.py --points 2000000 --repeats 3 --out results.json
     python benchmarks/bench_curvature.py --points 200000 --skip-peers   # quick
     python benchmarks/bench_curvature.py --whole --out benchmarks/results_curvature_speed.json
+    python benchmarks/bench_curvature.py --whole --out benchmarks/results_curvature_speed.json \
+        --key NAME --before OLD/src      # one more run beside the file's others
 
 ``--whole`` measures the commands as a user runs them, start to exit (interpreter start,
 imports, read, compute, write): ``lidarstat curvature IN.las OUT.las --radius R`` against
@@ -477,9 +479,15 @@ def main_whole(args):
             "the automatic scale, the command's default (no --radius): five rungs of 3 to "
             "12 point spacings, the points that do not stop early fitted at each"))
         _print_row("auto", res["rows"]["auto"])
-    Path(args.out).write_text(json.dumps(res, indent=1, default=str))
+    if args.key:  # one run among others in the same file
+        out = Path(args.out)
+        whole = json.loads(out.read_text()) if out.exists() else {}
+        whole[args.key] = res
+        out.write_text(json.dumps(whole, indent=1, default=str))
+    else:
+        Path(args.out).write_text(json.dumps(res, indent=1, default=str))
     print_whole(res)
-    print(f"wrote {args.out}")
+    print(f"wrote {args.out}" + (f" (key {args.key})" if args.key else ""))
 
 
 def _print_row(tgt, row):
@@ -674,6 +682,9 @@ def main(argv=None):
     ap.add_argument("--before", default=None, metavar="SRC",
                     help="with --whole: also profile the package found at SRC (a PYTHONPATH, "
                     "e.g. the src folder of an earlier checkout) in the same run")
+    ap.add_argument("--key", default=None,
+                    help="with --whole: store the run under this key of --out, keeping the "
+                    "file's other keys")
     ap.add_argument("--numba-cache", default=None, metavar="DIR",
                     help="with --whole: Numba cache folder (default: one in the work folder)")
     ap.add_argument("--input", default=None, help=argparse.SUPPRESS)

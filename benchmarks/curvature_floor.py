@@ -17,6 +17,24 @@ The difference between the last two is the price of the tested statistics; the f
 the neighbour search every method pays. Writes ``results_curvature_floor.json``::
 
     python benchmarks/curvature_floor.py --points 2000000
+
+``--stages`` instead times the kernel's own steps one after the other on one thread
+(``NUMBA_NUM_THREADS=1``), each stage adding one step to the previous (a serial loop of
+the benchmark over the cells of the middle of the cloud calling the library's functions):
+
+* ``search``: the grid scan of every candidate of the 27 cells (squared distances
+  stored, square roots of the neighbours);
+* ``offsets``: + the offsets and tricube weights of the neighbours into four columns;
+* ``frame``: + the PCA frame (weighted mean and covariance, eigenpairs, orientation);
+* ``moments``: + local coordinates and the 15 x 3 + 6 weighted moment sums;
+* ``fit``: the whole per-point fit of the command (``_fit_one``: the above, the 6 x 6
+  Cholesky inverse, the residual pass, the traces and the sandwich cofactor);
+* ``driver``: the command's own call (``_run_cells``: the parallel driver on one thread,
+  the per-block budget check, the outputs written to the block's arrays).
+
+Stored under ``stages`` (per neighbour count) in the same file::
+
+    NUMBA_NUM_THREADS=1 python benchmarks/curvature_floor.py --stages --neighbors 50 300
 """
 
 from __future__ import annotations
@@ -102,6 +120,150 @@ def _plain_kernels():
     return make_drivers(fit_point, workspace, skip)
 
 
+STAGES = ("search", "offsets", "frame", "moments", "fit", "driver")
+
+
+def _stage_kernel():
+    """A serial loop over cells running the first `stage` steps of the command's fit."""
+    from lidarstat._shared._jit import njit
+    from lidarstat.features import _frame_kernels as fk
+    from lidarstat.features import _quadric_kernels as qk
+    from lidarstat.neighbors import _kernels as nk
+
+    @njit
+    def run(stage, c0, c1, pts, cell_keys, cell_start, dims, radius):
+        ws = qk._workspace()
+        R, cov3, ev, evec, mom, rhs, part = ws[0], ws[1], ws[2], ws[3], ws[4], ws[12], ws[13]
+        ranges = np.empty((9, 2), dtype=np.int64)
+        cap = 1024
+        idx = np.empty(cap, dtype=np.int32)
+        dist = np.empty(cap)
+        buf = np.empty((cap, 4))
+        cols = buf.reshape((4, cap))
+        rows = cols.T
+        beta, cof, frm, st = (np.empty((1, 6)), np.empty((1, 6, 6)), np.empty((1, 3, 3)),
+                              np.empty((1, 4)))
+        sensor = np.zeros(3)
+        r2 = radius * radius
+        visits = 0
+        check = 0.0
+        for c in range(c0, c1):
+            nr = nk._cell_ranges(c, cell_keys, cell_start, dims, 3, ranges)
+            need = 0
+            for t in range(nr):
+                need += ranges[t, 1] - ranges[t, 0]
+            if need > cap:
+                cap = max(need, 2 * cap)
+                idx = np.empty(cap, dtype=np.int32)
+                dist = np.empty(cap)
+                buf = np.empty((cap, 4))
+                cols = buf.reshape((4, cap))
+                rows = cols.T
+            for i in range(cell_start[c], cell_start[c + 1]):
+                n = nk._scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, 3, idx,
+                             dist, 0, nk.STORE_ALL)
+                visits += n
+                if stage == 0:
+                    check += dist[0]
+                    continue
+                if stage == 4:
+                    qk._fit_one(i, pts, idx, dist, 0, n, radius, fk.FRAME_PCA, sensor, False,
+                                7, qk.COV_SANDWICH, ws, buf, 0, beta, cof, frm, st)
+                    check += beta[0, 0]
+                    continue
+                nkp = 0
+                for t in range(n):
+                    w = fk._tricube(dist[t], radius)
+                    if w <= 0.0:
+                        continue
+                    j = idx[t]
+                    cols[0, nkp] = pts[j, 0] - pts[i, 0]
+                    cols[1, nkp] = pts[j, 1] - pts[i, 1]
+                    cols[2, nkp] = pts[j, 2] - pts[i, 2]
+                    cols[3, nkp] = w
+                    nkp += 1
+                if stage == 1 or nkp < 6:
+                    check += cols[0, 0]
+                    continue
+                fk._local_frame(rows, nkp, pts[i, 0], pts[i, 1], pts[i, 2], fk.FRAME_PCA,
+                                sensor, False, R, cov3, ev, evec, True)
+                if stage == 2:
+                    check += R[0, 0]
+                    continue
+                fk.to_frame(rows, nkp, R, 1.0 / radius)
+                qk._moment_sums(cols[0], cols[1], cols[2], cols[3], nkp, part, mom, rhs)
+                check += mom[0, 0]
+        return visits, check
+
+    return run
+
+
+def stages(args):
+    """``--stages``: single-thread CPU per neighbour and per point of the kernel's steps."""
+    import numba
+
+    from lidarstat.features import _quadric as quadric
+    from lidarstat.neighbors import CellIndex
+
+    xyz, _ = make_cloud(args.points)
+    run = _stage_kernel()
+    out = {}
+    for target in args.neighbors:
+        radius = float(calibrate_radius(xyz, target)[0])
+        index = CellIndex(xyz, radius)
+        # the cells of the middle of the sorted order, about --stage-points points
+        mid = index.n_cells // 2
+        c1 = int(np.searchsorted(index.cell_start, index.cell_start[mid] + args.stage_points))
+        c1 = min(max(c1, mid + 1), index.n_cells)
+        npts = int(index.cell_start[c1] - index.cell_start[mid])
+        call = (mid, c1, index.sorted_points, index.cell_keys, index.cell_start, index.dims,
+                radius)
+        row = {}
+        buffers = quadric._allocate(npts)
+
+        def driver(c0, c1):
+            quadric._run_cells(index, c0, c1, bandwidth=radius, frame="pca", sensor=None,
+                               min_neighbors=7, covariance="sandwich", buffers=buffers)
+
+        for k in range(len(STAGES) - 1):
+            run(k, mid, mid + 1, *call[2:])  # load or compile
+        driver(mid, mid + 1)
+        cpu = {name: [] for name in STAGES}
+        visits = 0
+        for _ in range(args.repeats):  # alternating stages, minimum of the repeats
+            for k, name in enumerate(STAGES):
+                c = time.process_time()
+                if name == "driver":
+                    driver(mid, c1)
+                else:
+                    visits, _ = run(k, *call)
+                cpu[name].append(time.process_time() - c)
+        prev = 0.0
+        for name in STAGES:
+            t = min(cpu[name])
+            row[name] = dict(cpu_ns_per_neighbour=1e9 * t / visits,
+                             cpu_ns_per_point=1e9 * t / npts,
+                             step_ns_per_point=1e9 * (t - prev) / npts, all_cpu=cpu[name])
+            prev = t
+        out[str(target)] = dict(radius=radius, points=npts, neighbour_visits=int(visits),
+                                mean_neighbours=visits / npts, stages=row)
+        print(f"about {target} neighbours ({visits / npts:.0f} per point, {npts} points):")
+        for name, r in row.items():
+            print(f"  {name:8s} {r['cpu_ns_per_neighbour']:6.1f} ns per neighbour, "
+                  f"{r['cpu_ns_per_point']:7.0f} ns per point (step {r['step_ns_per_point']:6.0f})")
+    path = Path(args.out)
+    res = json.loads(path.read_text()) if path.exists() else {}
+    res["stages"] = dict(
+        date=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        machine_shared=bool(args.shared), threads=numba.config.NUMBA_NUM_THREADS,
+        cloud_points=int(xyz.shape[0]), repeats=args.repeats,
+        how="single thread (NUMBA_NUM_THREADS=1), process CPU time, minimum of the "
+            "repeats, stages run alternately; each stage adds one step to the previous; "
+            "see the module docstring of benchmarks/curvature_floor.py",
+        rows=out)
+    path.write_text(json.dumps(res, indent=1) + "\n")
+
+
 def _cpu():
     u = resource.getrusage(resource.RUSAGE_SELF)
     return u.ru_utime + u.ru_stime
@@ -122,12 +284,18 @@ def _timed(fn, repeats):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--points", type=int, default=2_000_000)
-    ap.add_argument("--neighbors", type=int, default=50)
+    ap.add_argument("--neighbors", type=int, nargs="+", default=[50])
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--stages", action="store_true",
+                    help="time the kernel's steps on one thread (stored under 'stages')")
+    ap.add_argument("--stage-points", type=int, default=200_000,
+                    help="with --stages: points of the middle of the cloud to time")
     ap.add_argument("--shared", action="store_true",
                     help="record that other work ran on the machine meanwhile")
     ap.add_argument("--out", default=str(HERE / "results_curvature_floor.json"))
     args = ap.parse_args(argv)
+    if args.stages:
+        return stages(args)
 
     import numba
 
@@ -136,7 +304,7 @@ def main(argv=None):
     from lidarstat.neighbors import _kernels as nk
 
     xyz, _ = make_cloud(args.points)
-    radius = float(calibrate_radius(xyz, args.neighbors)[0])
+    radius = float(calibrate_radius(xyz, args.neighbors[0])[0])
     index = CellIndex(xyz, radius)
     ncell = index.cell_keys.size
     pts = index.sorted_points
@@ -172,6 +340,9 @@ def main(argv=None):
         neighbour_visits=visits, repeats=args.repeats, rows=rows,
         how="one process, warm Numba cache, median of the repeats; the grid index is built "
             "once; see the module docstring of benchmarks/curvature_floor.py")
+    old = json.loads(Path(args.out).read_text()) if Path(args.out).exists() else {}
+    if "stages" in old:
+        res["stages"] = old["stages"]
     Path(args.out).write_text(json.dumps(res, indent=1) + "\n")
     for name, row in rows.items():
         print(f"{name:20s} {row['seconds']:6.2f} s  {row['cpu_seconds']:6.2f} s CPU  "

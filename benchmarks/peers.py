@@ -38,7 +38,14 @@ def _fmt(x, nd=1):
     return "" if x is None else f"{x:.{nd}f}"
 
 
+def _latest_run(d):
+    """The file's most recent run: its top level or a run kept under a key of its own."""
+    runs = [d] + [v for v in d.values() if isinstance(v, dict) and "rows" in v and "date" in v]
+    return max(runs, key=lambda r: r.get("date", ""))
+
+
 def curvature_rows(d):
+    d = _latest_run(d)
     out = []
     for key, label in (("50", "about 50 neighbours"), ("300", "about 300 neighbours")):
         r = d["rows"].get(key)

@@ -140,3 +140,17 @@ def on_first_compile(callback):
 
     with event.install_listener("numba:compile", _Once()):
         yield
+
+
+@contextlib.contextmanager
+def dynamic_schedule(chunk=1):
+    """Parallel kernels called in the block hand their ``prange`` iterations to the threads
+    `chunk` at a time, as each thread is free, instead of one equal share per thread: for
+    loops whose iterations cost unequal work (grid cells of unequal population), so that
+    no thread waits for the other at the end. Results do not change (each iteration writes
+    its own rows)."""
+    old = numba.set_parallel_chunksize(chunk)
+    try:
+        yield
+    finally:
+        numba.set_parallel_chunksize(old)

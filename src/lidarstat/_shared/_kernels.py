@@ -13,7 +13,7 @@ import numpy as np
 
 from ._jit import njit
 
-__all__ = ["add_outer3", "cholesky_lower", "eigh3", "lower_inverse", "mirror3", "uf_find"]
+__all__ = ["cholesky_lower", "eigh3", "lower_inverse", "mirror3", "uf_find"]
 
 
 @njit
@@ -70,18 +70,6 @@ def eigh3(a, evals, evecs):
                 evecs[k, j - 1] = evecs[k, j]
                 evecs[k, j] = tv
             j -= 1
-
-
-@njit
-def add_outer3(cov, w, d0, d1, d2):  # pragma: no cover - compiled
-    """Add ``w d d'`` to the upper triangle of the 3 x 3 `cov` (weighted covariance sums;
-    :func:`mirror3` fills the lower triangle once the sums are complete)."""
-    cov[0, 0] += w * d0 * d0
-    cov[0, 1] += w * d0 * d1
-    cov[0, 2] += w * d0 * d2
-    cov[1, 1] += w * d1 * d1
-    cov[1, 2] += w * d1 * d2
-    cov[2, 2] += w * d2 * d2
 
 
 @njit

@@ -22,7 +22,7 @@ from ._curvature_scale import climb_into, scale_ladder, walk_ladder
 from ._hk import hk_surface_types
 from ._noise import (estimate_sigma, estimate_sigma_index, fit_variance_and_spread,
                      resolve_noise)
-from ._quadric import FitStatus, _run_cells, check_fit_options
+from ._quadric import FitStatus, _allocate, _run_cells, check_fit_options
 
 logger = logging.getLogger(__name__)
 
@@ -116,11 +116,15 @@ def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neigh
     fields = None
     done = 0
     covariance = "paper" if test == Test.PAPER else "sandwich"
-    for c0, c1 in index.cell_blocks(block_size):
+    blocks = index.cell_blocks(block_size)
+    # one set of kernel outputs for every block: each block's fields are copied out of it
+    largest = max(int(index.cell_start[c1] - index.cell_start[c0]) for c0, c1 in blocks)
+    buffers = _allocate(largest)
+    for c0, c1 in blocks:
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
         out = _run_cells(index, c0, c1, bandwidth=radius, frame=frame, sensor=sensor_local,
                          min_neighbors=min_neighbors, covariance=covariance,
-                         active=active_sorted)
+                         active=active_sorted, buffers=buffers)
         sigma2, spread = fit_variance_and_spread(
             out["beta"], out["frames"], sigma, noise=noise, radius=radius,
             points=index.sorted_points[s0:s1], sensor=sensor_local)

@@ -113,6 +113,9 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
     """
     (cov, ev, evec, mono, mom, N, N2, N3, L, Ninv, rhs, beta, dsc, mtmp, mbasis, mws,
      jac, R) = ws
+    # buf as four columns of its size, row t the neighbour's (d0, d1, d2, w): the layout
+    # the frame kernels read (as the quadric kernel's)
+    rows = buf.reshape((4, buf.shape[0])).T
     m = n_coef(d)
     nmd = 2 * d
     nmom = (nmd + 1) * (nmd + 2) // 2
@@ -142,10 +145,10 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
         dx = pts[j, 0] - px0
         dy = pts[j, 1] - py0
         dz = pts[j, 2] - pz0
-        buf[p, 0] = dx
-        buf[p, 1] = dy
-        buf[p, 2] = dz
-        buf[p, 3] = w
+        rows[p, 0] = dx
+        rows[p, 1] = dy
+        rows[p, 2] = dz
+        rows[p, 3] = w
         sw += w
         p += 1
     if p < min_nb or p <= m:
@@ -154,13 +157,13 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
     uy = 0.0
     uz = 0.0
     for t in range(p):
-        ux += buf[t, 0]
-        uy += buf[t, 1]
-        uz += buf[t, 2]
+        ux += rows[t, 0]
+        uy += rows[t, 1]
+        uz += rows[t, 2]
     stats_out[7] = math.sqrt(ux * ux + uy * uy + uz * uz) / (p * b)
     # PCA frame (rows e, f, n of R) from the offsets and weights in buf
-    if not (_local_frame(buf, p, px0, py0, pz0, FRAME_PCA, sensor, has_sensor, R, cov, ev, evec)
-            and ev[1] > 0.0):
+    if not (_local_frame(rows, p, px0, py0, pz0, FRAME_PCA, sensor, has_sensor, R, cov, ev, evec,
+                         False) and ev[1] > 0.0):
         return SINGULAR, p
     # pass 2: local coordinates (U, V scaled by 1/b), moments of the monomials
     inv_b = 1.0 / b
@@ -171,11 +174,11 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
         mom[2, k] = 0.0
     for a in range(m):
         rhs[a] = 0.0
-    to_frame(buf, p, R, inv_b)
+    to_frame(rows, p, R, inv_b)
     for t in range(p):
-        w = buf[t, 3]
-        _monomials(buf[t, 0], buf[t, 1], nmd, mono)
-        wh = w * buf[t, 2]
+        w = rows[t, 3]
+        _monomials(rows[t, 0], rows[t, 1], nmd, mono)
+        wh = w * rows[t, 2]
         for a in range(m):
             rhs[a] += wh * mono[a]
         if weighted_stats:
@@ -226,12 +229,12 @@ def _jet_one(i, pts, idx, dist, s, e, bw, d, dm, weighted, sensor, has_sensor, m
     # pass 3: explicit weighted residual sum of squares
     q = 0.0
     for t in range(p):
-        _monomials(buf[t, 0], buf[t, 1], d, mono)
+        _monomials(rows[t, 0], rows[t, 1], d, mono)
         fit = 0.0
         for a in range(m):
             fit += beta[a] * mono[a] / COL_FACT[a]
-        r = buf[t, 2] - fit
-        q += buf[t, 3] * r * r
+        r = rows[t, 2] - fit
+        q += rows[t, 3] * r * r
     # traces and the cofactor (in equilibrated units: cof = D^-1 S D^-1)
     if weighted_stats:
         sw2 = mom[1, 0]

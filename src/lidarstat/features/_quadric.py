@@ -8,6 +8,7 @@ from enum import IntEnum
 import numpy as np
 
 from .._shared._choices import Frame
+from .._shared._jit import dynamic_schedule
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import Neighborhoods
@@ -117,24 +118,28 @@ def _mark_unfitted(out):
 
 
 def _run_cells(index, c0, c1, *, bandwidth, frame, sensor, min_neighbors, covariance,
-               active=None):
+               active=None, buffers=None):
     """Fused neighbour search + fit of the points of cells c0..c1-1 of a 3-D CellIndex.
 
     `active` (uint8 per sorted position, default all) restricts the fit to some points.
+    `buffers` (from :func:`_allocate`, at least as many rows as the block) receive the
+    outputs, which are then views of them, valid until the next call with the same
+    buffers: a caller that fits block after block reuses one set of pages.
     """
     if active is None:
         active = np.ones(index.n_points, dtype=np.uint8)
     index.bound_pairs(c0, c1)  # the fits' work is the pairs: refuse an impossible block
     m = int(index.cell_start[c1] - index.cell_start[c0])
-    out = _allocate(m)
+    out = _allocate(m) if buffers is None else {k: v[:m] for k, v in buffers.items()}
     has_sensor = sensor is not None
     sensor_arr = np.zeros(3) if sensor is None else np.asarray(sensor, dtype=np.float64)
-    _k.fit_quadrics_cells(
-        c0, c1, index.sorted_points, index.cell_keys, index.cell_start, index.dims,
-        float(index.radius), active,
-        (float(bandwidth), FRAMES[Frame(frame).value], sensor_arr, has_sensor, int(min_neighbors),
-         COVARIANCES[covariance]), _outs(out),
-    )
+    with dynamic_schedule():  # chunks of cells of unequal work
+        _k.fit_quadrics_cells(
+            c0, c1, index.sorted_points, index.cell_keys, index.cell_start, index.dims,
+            float(index.radius), active,
+            (float(bandwidth), FRAMES[Frame(frame).value], sensor_arr, has_sensor,
+             int(min_neighbors), COVARIANCES[covariance]), _outs(out),
+        )
     return _mark_unfitted(out)
 
 

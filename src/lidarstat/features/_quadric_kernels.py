@@ -22,7 +22,7 @@ import numpy as np
 
 from .._shared._jit import njit
 from ..neighbors import make_drivers
-from ._frame_kernels import _local_frame, _tricube, cholesky_inverse_n, to_frame
+from ._frame_kernels import _local_frame, _tricube, to_frame
 
 # status codes (mirrored by FitStatus in _results.py)
 OK = 0
@@ -49,18 +49,157 @@ _COEF = (1.0, 1.0, 1.0, 0.5, 1.0, 0.5,
          0.5, 0.5, 0.5, 0.25, 0.5, 0.25)
 
 
-@njit
-def _acc3(s0, s1, s2, w, w2, w3, mk):
-    """One monomial's three moment sums advanced by a neighbour of weight w:
-    ``(s0 + w mk, s1 + w^2 mk, s2 + w^3 mk)``."""
-    return s0 + w * mk, s1 + w2 * mk, s2 + w3 * mk
+#: Neighbours per lane block of the moment sums (:func:`_moment_sums`)
+LANES = 8
 
 
 @njit
-def _put(a, values):
-    """``a[:len(values)] = values`` from a tuple of scalar accumulators."""
-    for k in range(len(values)):
-        a[k] = values[k]
+def _lane_total(acc, k):
+    """Sum of the LANES partial sums of accumulator `k`, in a fixed order."""
+    a = k * LANES
+    return (((acc[a] + acc[a + 1]) + (acc[a + 2] + acc[a + 3]))
+            + ((acc[a + 4] + acc[a + 5]) + (acc[a + 6] + acc[a + 7])))
+
+
+@njit
+def _moment_sums(U, V, Hh, W, nk, acc, mom, rhs):
+    """The weighted moment sums of one neighbourhood: ``mom[p, k] = sum w^(p+1) m_k`` over
+    the 15 monomials ``m_k = U^i V^j`` (i + j <= 4, order of ``_MONO``) and
+    ``rhs[k] = sum w h m_k`` (k < 6).
+
+    Neighbour t goes to lane ``t % LANES``: each lane sums its neighbours in their order
+    and the lanes are added in a fixed order (:func:`_lane_total`), so the result does not
+    depend on the processor; the loop over the lanes of a block is elementwise, which the
+    compiler turns into vector instructions (it only reads the neighbours' columns: a
+    store to them in the same loop keeps it scalar). `acc` (at least ``54 * LANES``) is
+    scratch.
+    """
+    for a in range(54 * LANES):
+        acc[a] = 0.0
+    for t0 in range(0, nk, LANES):
+        nl = min(LANES, nk - t0)
+        for L in range(nl):
+            t = t0 + L
+            u = U[t]
+            v = V[t]
+            w = W[t]
+            uu = u * u
+            uv = u * v
+            vv = v * v
+            w2 = w * w
+            w3 = w2 * w
+            wh = w * Hh[t]
+            m6 = uu * u
+            m7 = uu * v
+            m8 = u * vv
+            m9 = vv * v
+            m10 = uu * uu
+            m11 = uu * uv
+            m12 = uu * vv
+            m13 = uv * vv
+            m14 = vv * vv
+            # rows 0-14: w m_k; 15-29: w^2 m_k; 30-44: w^3 m_k; 45-50: w h m_k
+            acc[0 * LANES + L] += w
+            acc[1 * LANES + L] += w * u
+            acc[2 * LANES + L] += w * v
+            acc[3 * LANES + L] += w * uu
+            acc[4 * LANES + L] += w * uv
+            acc[5 * LANES + L] += w * vv
+            acc[6 * LANES + L] += w * m6
+            acc[7 * LANES + L] += w * m7
+            acc[8 * LANES + L] += w * m8
+            acc[9 * LANES + L] += w * m9
+            acc[10 * LANES + L] += w * m10
+            acc[11 * LANES + L] += w * m11
+            acc[12 * LANES + L] += w * m12
+            acc[13 * LANES + L] += w * m13
+            acc[14 * LANES + L] += w * m14
+            acc[15 * LANES + L] += w2
+            acc[16 * LANES + L] += w2 * u
+            acc[17 * LANES + L] += w2 * v
+            acc[18 * LANES + L] += w2 * uu
+            acc[19 * LANES + L] += w2 * uv
+            acc[20 * LANES + L] += w2 * vv
+            acc[21 * LANES + L] += w2 * m6
+            acc[22 * LANES + L] += w2 * m7
+            acc[23 * LANES + L] += w2 * m8
+            acc[24 * LANES + L] += w2 * m9
+            acc[25 * LANES + L] += w2 * m10
+            acc[26 * LANES + L] += w2 * m11
+            acc[27 * LANES + L] += w2 * m12
+            acc[28 * LANES + L] += w2 * m13
+            acc[29 * LANES + L] += w2 * m14
+            acc[30 * LANES + L] += w3
+            acc[31 * LANES + L] += w3 * u
+            acc[32 * LANES + L] += w3 * v
+            acc[33 * LANES + L] += w3 * uu
+            acc[34 * LANES + L] += w3 * uv
+            acc[35 * LANES + L] += w3 * vv
+            acc[36 * LANES + L] += w3 * m6
+            acc[37 * LANES + L] += w3 * m7
+            acc[38 * LANES + L] += w3 * m8
+            acc[39 * LANES + L] += w3 * m9
+            acc[40 * LANES + L] += w3 * m10
+            acc[41 * LANES + L] += w3 * m11
+            acc[42 * LANES + L] += w3 * m12
+            acc[43 * LANES + L] += w3 * m13
+            acc[44 * LANES + L] += w3 * m14
+            acc[45 * LANES + L] += wh
+            acc[46 * LANES + L] += wh * u
+            acc[47 * LANES + L] += wh * v
+            acc[48 * LANES + L] += wh * uu
+            acc[49 * LANES + L] += wh * uv
+            acc[50 * LANES + L] += wh * vv
+    for p in range(3):
+        for k in range(15):
+            mom[p, k] = _lane_total(acc, 15 * p + k)
+    for k in range(6):
+        rhs[k] = _lane_total(acc, 45 + k)
+
+
+@njit
+def _spd_inverse6(a, rel_tol, L, LI, inv):
+    """Inverse of the SPD 6 x 6 `a` into `inv` via its Cholesky factor `L`, whose inverse
+    (lower) goes to `LI`: as :func:`cholesky_inverse_n` with m = 6, but dividing once per
+    pivot (its reciprocal is the diagonal of `LI`) and with loops of fixed length that the
+    compiler unrolls. False if a pivot is not above `rel_tol` times the largest diagonal.
+    """
+    scale = 0.0
+    for k in range(6):
+        if a[k, k] > scale:
+            scale = a[k, k]
+    if not scale > 0.0:
+        return False
+    tol = rel_tol * scale
+    for j in range(6):
+        sjj = a[j, j]
+        for k in range(j):
+            sjj -= L[j, k] * L[j, k]
+        if not sjj > tol:
+            return False
+        ljj = np.sqrt(sjj)
+        L[j, j] = ljj
+        dj = 1.0 / ljj
+        LI[j, j] = dj
+        for r in range(j + 1, 6):
+            acc = a[r, j]
+            for k in range(j):
+                acc -= L[r, k] * L[j, k]
+            L[r, j] = acc * dj
+    for j in range(6):  # forward substitution, column by column
+        for r in range(j + 1, 6):
+            acc = 0.0
+            for k in range(j, r):
+                acc -= L[r, k] * LI[k, j]
+            LI[r, j] = acc * LI[r, r]
+    for r in range(6):  # a^-1 = LI' LI
+        for c in range(r, 6):
+            acc = 0.0
+            for k in range(c, 6):
+                acc += LI[k, r] * LI[k, c]
+            inv[r, c] = acc
+            inv[c, r] = acc
+    return True
 
 
 @njit
@@ -68,19 +207,24 @@ def _workspace():
     """Per-thread scratch arrays of ``_fit_one`` (allocated once per chunk or cell)."""
     return (np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty((3, 3)),
             np.empty((3, 15)), np.empty((6, 6)), np.empty((6, 6)), np.empty((6, 6)),
-            np.zeros((6, 6)), np.zeros((6, 6)), np.empty((6, 6)), np.empty(6), np.empty(6))
+            np.zeros((6, 6)), np.zeros((6, 6)), np.empty((6, 6)), np.empty(6), np.empty(6),
+            np.empty(54 * LANES))
 
 
 @njit
 def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov_mode, ws, buf,
-             beta_out, cof_out, frame_out, stats_out):
-    """Fit point i; returns (status, p). stats_out = [Q, sum w, trB, trB2].
+             row, beta_out, cof_out, frame_out, stats_out):
+    """Fit point i into row `row` of the outputs; returns (status, p). stats_out[row] = [Q,
+    sum w, trB, trB2]. (Rows, not views of them: a view per point costs reference counting on
+    the arrays that every thread shares.)
 
-    `buf` (at least e - s rows, 4 columns) receives the offsets and weight of the
-    neighbours (pass 0), then their u, v, h (pass 1), so that the frame, moment and residual
-    passes read them contiguously.
+    `buf` (at least e - s rows, 4 columns) is scratch for the neighbours, used as four
+    columns of its size: their offsets and weights (pass 0), then their u, v, h (pass 1),
+    so that the frame, moment and residual passes read each coordinate contiguously.
     """
-    R, cov3, ev, evec, mom, N, N2, N3, L, LI, Ninv, tmp, rhs = ws
+    R, cov3, ev, evec, mom, N, N2, N3, L, LI, Ninv, tmp, rhs, part = ws
+    cols = buf.reshape((4, buf.shape[0]))  # columns d0 / u, d1 / v, d2 / h, w
+    rows = cols.T  # row t: the neighbour's (d0, d1, d2, w), as the frame kernels read them
     b = bw
     if b <= 0.0:  # kNN: the bandwidth is the farthest neighbour's distance (LOESS)
         for t in range(s, e):
@@ -100,66 +244,26 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
         if w <= 0.0:
             continue
         j = idx[t]
-        buf[nk, 0] = pts[j, 0] - px
-        buf[nk, 1] = pts[j, 1] - py
-        buf[nk, 2] = pts[j, 2] - pz
-        buf[nk, 3] = w
+        cols[0, nk] = pts[j, 0] - px
+        cols[1, nk] = pts[j, 1] - py
+        cols[2, nk] = pts[j, 2] - pz
+        cols[3, nk] = w
         nk += 1
     if p < min_nb or p < 6:
         return TOO_FEW, p
-    if not _local_frame(buf, nk, px, py, pz, frame, sensor, has_sensor, R, cov3, ev, evec):
+    # the fit, hence every result, is the same for any direction of e1 in the tangent plane
+    if not _local_frame(rows, nk, px, py, pz, frame, sensor, has_sensor, R, cov3, ev, evec,
+                        True):
         return SINGULAR, p
     for a in range(3):
         for c in range(3):
-            frame_out[a, c] = R[a, c]
+            frame_out[row, a, c] = R[a, c]
     # Pass 1: local coordinates (u, v, h) into buf, then the weighted moment sums of the 15
     # monomials U^i V^j (i + j <= 4) for w, w^2, w^3 (the entries of X'WX, X'W^2X, X'W^3X)
-    # and of w h U^i V^j (i + j <= 2) for X'Wh, in scalar accumulators (kept in registers):
-    # s{p}_{k} = sum w^(p+1) * monomial k, g{k} = sum w h * monomial k (k < 6)
+    # and of w h U^i V^j (i + j <= 2) for X'Wh
     inv_b = 1.0 / b
-    to_frame(buf, nk, R, inv_b)
-    s0_0 = s0_1 = s0_2 = s0_3 = s0_4 = s0_5 = s0_6 = s0_7 = s0_8 = s0_9 = s0_10 = s0_11 = s0_12 = s0_13 = s0_14 = 0.0
-    s1_0 = s1_1 = s1_2 = s1_3 = s1_4 = s1_5 = s1_6 = s1_7 = s1_8 = s1_9 = s1_10 = s1_11 = s1_12 = s1_13 = s1_14 = 0.0
-    s2_0 = s2_1 = s2_2 = s2_3 = s2_4 = s2_5 = s2_6 = s2_7 = s2_8 = s2_9 = s2_10 = s2_11 = s2_12 = s2_13 = s2_14 = 0.0
-    g0 = g1 = g2 = g3 = g4 = g5 = 0.0
-    for t in range(nk):
-        u = buf[t, 0]
-        v = buf[t, 1]
-        w = buf[t, 3]
-        uu = u * u
-        uv = u * v
-        vv = v * v
-        wh = w * buf[t, 2]
-        g0 += wh
-        g1 += wh * u
-        g2 += wh * v
-        g3 += wh * uu
-        g4 += wh * uv
-        g5 += wh * vv
-        w2 = w * w
-        w3 = w2 * w
-        s0_0, s1_0, s2_0 = _acc3(s0_0, s1_0, s2_0, w, w2, w3, 1.0)
-        s0_1, s1_1, s2_1 = _acc3(s0_1, s1_1, s2_1, w, w2, w3, u)
-        s0_2, s1_2, s2_2 = _acc3(s0_2, s1_2, s2_2, w, w2, w3, v)
-        s0_3, s1_3, s2_3 = _acc3(s0_3, s1_3, s2_3, w, w2, w3, uu)
-        s0_4, s1_4, s2_4 = _acc3(s0_4, s1_4, s2_4, w, w2, w3, uv)
-        s0_5, s1_5, s2_5 = _acc3(s0_5, s1_5, s2_5, w, w2, w3, vv)
-        s0_6, s1_6, s2_6 = _acc3(s0_6, s1_6, s2_6, w, w2, w3, uu * u)
-        s0_7, s1_7, s2_7 = _acc3(s0_7, s1_7, s2_7, w, w2, w3, uu * v)
-        s0_8, s1_8, s2_8 = _acc3(s0_8, s1_8, s2_8, w, w2, w3, u * vv)
-        s0_9, s1_9, s2_9 = _acc3(s0_9, s1_9, s2_9, w, w2, w3, vv * v)
-        s0_10, s1_10, s2_10 = _acc3(s0_10, s1_10, s2_10, w, w2, w3, uu * uu)
-        s0_11, s1_11, s2_11 = _acc3(s0_11, s1_11, s2_11, w, w2, w3, uu * uv)
-        s0_12, s1_12, s2_12 = _acc3(s0_12, s1_12, s2_12, w, w2, w3, uu * vv)
-        s0_13, s1_13, s2_13 = _acc3(s0_13, s1_13, s2_13, w, w2, w3, uv * vv)
-        s0_14, s1_14, s2_14 = _acc3(s0_14, s1_14, s2_14, w, w2, w3, vv * vv)
-    _put(mom[0], (s0_0, s0_1, s0_2, s0_3, s0_4, s0_5, s0_6, s0_7, s0_8, s0_9, s0_10, s0_11,
-                  s0_12, s0_13, s0_14))
-    _put(mom[1], (s1_0, s1_1, s1_2, s1_3, s1_4, s1_5, s1_6, s1_7, s1_8, s1_9, s1_10, s1_11,
-                  s1_12, s1_13, s1_14))
-    _put(mom[2], (s2_0, s2_1, s2_2, s2_3, s2_4, s2_5, s2_6, s2_7, s2_8, s2_9, s2_10, s2_11,
-                  s2_12, s2_13, s2_14))
-    _put(rhs, (g0, g1, g2, g3, g4, g5))
+    to_frame(rows, nk, R, inv_b)
+    _moment_sums(cols[0], cols[1], cols[2], cols[3], nk, part, mom, rhs)
     rhs[3] *= 0.5
     rhs[5] *= 0.5
     for a in range(6):
@@ -172,7 +276,7 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
             N[c, a] = N[a, c]
             N2[c, a] = N2[a, c]
             N3[c, a] = N3[a, c]
-    if not cholesky_inverse_n(N, 6, 1e-12, L, Ninv):
+    if not _spd_inverse6(N, 1e-12, L, LI, Ninv):
         return SINGULAR, p
     for a in range(6):
         acc = 0.0
@@ -188,15 +292,16 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
     b4 = tmp[4]
     b5 = 0.5 * tmp[5]
     for t in range(nk):  # the neighbours' local coordinates and weights from pass 1
-        u = buf[t, 0]
-        v = buf[t, 1]
-        h = buf[t, 2]
-        w = buf[t, 3]
+        u = cols[0, t]
+        v = cols[1, t]
+        h = cols[2, t]
+        w = cols[3, t]
         r = h - (b0 + u * (b1 + b3 * u + b4 * v) + v * (b2 + b5 * v))
         q += w * r * r
     sw = mom[0, 0]
     sw2 = mom[1, 0]
-    # traces: tr(Ninv N2), tr(Ninv N3); S = Ninv N2 Ninv and tr(S N2)
+    # traces: tr(Ninv N2), tr(Ninv N3) and, with M = N2 Ninv, tr(S N2) = tr(M M) for the
+    # sandwich S = Ninv N2 Ninv = Ninv M (symmetric: its upper triangle, mirrored)
     t2 = 0.0
     t3 = 0.0
     for a in range(6):
@@ -208,32 +313,34 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
             acc = 0.0
             for k in range(6):
                 acc += N2[a, k] * Ninv[k, c]
-            L[a, c] = acc  # L reused: N2 Ninv
+            L[a, c] = acc  # L reused: M = N2 Ninv
     trSN2 = 0.0
     for a in range(6):
         for c in range(6):
-            acc = 0.0
-            for k in range(6):
-                acc += Ninv[a, k] * L[k, c]
-            cof_out[a, c] = acc  # sandwich S
-    for a in range(6):
-        for c in range(6):
-            trSN2 += cof_out[a, c] * N2[c, a]
+            trSN2 += L[a, c] * L[c, a]
     if cov_mode == COV_PAPER:
         for a in range(6):
             for c in range(6):
-                cof_out[a, c] = Ninv[a, c]
+                cof_out[row, a, c] = Ninv[a, c]
+    else:
+        for a in range(6):
+            for c in range(a, 6):
+                acc = 0.0
+                for k in range(6):
+                    acc += Ninv[a, k] * L[k, c]
+                cof_out[row, a, c] = acc
+                cof_out[row, c, a] = acc
     # rescale to physical units
     for a in range(6):
         da = 1.0 if a == 0 else (inv_b if a < 3 else inv_b * inv_b)
-        beta_out[a] = tmp[a] * da
+        beta_out[row, a] = tmp[a] * da
         for c in range(6):
             dc = 1.0 if c == 0 else (inv_b if c < 3 else inv_b * inv_b)
-            cof_out[a, c] *= da * dc
-    stats_out[0] = q
-    stats_out[1] = sw
-    stats_out[2] = sw - t2
-    stats_out[3] = sw2 - 2.0 * t3 + trSN2
+            cof_out[row, a, c] *= da * dc
+    stats_out[row, 0] = q
+    stats_out[row, 1] = sw
+    stats_out[row, 2] = sw - t2
+    stats_out[row, 3] = sw2 - 2.0 * t3 + trSN2
     return OK, p
 
 
@@ -251,7 +358,7 @@ def _quadric_point(i, pts, idx, dist, s, e, r, params, ws, buf, outs):
     bw, frame, sensor, has_sensor, min_nb, cov_mode = params
     status, npts, beta, cof, frames, stats = outs
     st, p = _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov_mode,
-                     ws, buf, beta[r], cof[r], frames[r], stats[r])
+                     ws, buf, r, beta, cof, frames, stats)
     status[r] = st
     npts[r] = p
     if st != OK:

@@ -166,22 +166,30 @@ def fill_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, ndim, indptr, o
                   indptr[i - base], STORE)
 
 
-@njit
+@njit_parallel
 def cell_candidates(c0, c1, cell_keys, cell_start, dims, ndim):
     """Upper bound of the neighbour pairs of the points of cells c0..c1-1.
 
     Each point is paired with every point of the 3**ndim cells around its own (what the
-    search scans), so the sum is exact work and at least the number of pairs. O(cells).
+    search scans), so the sum is exact work and at least the number of pairs. O(cells),
+    parallel over chunks of cells (integer sums: the same total in any order).
     """
+    nchunks = (c1 - c0 + _COUNT_CHUNK - 1) // _COUNT_CHUNK
     total = 0
-    ranges = np.empty((9, 2), dtype=np.int64)
-    for c in range(c0, c1):
-        nr = _cell_ranges(c, cell_keys, cell_start, dims, ndim, ranges)
-        near = 0
-        for t in range(nr):
-            near += ranges[t, 1] - ranges[t, 0]
-        total += (cell_start[c + 1] - cell_start[c]) * near
+    for ch in prange(nchunks):
+        ranges = np.empty((9, 2), dtype=np.int64)
+        part = 0
+        for c in range(c0 + ch * _COUNT_CHUNK, min(c1, c0 + (ch + 1) * _COUNT_CHUNK)):
+            nr = _cell_ranges(c, cell_keys, cell_start, dims, ndim, ranges)
+            near = 0
+            for t in range(nr):
+                near += ranges[t, 1] - ranges[t, 0]
+            part += (cell_start[c + 1] - cell_start[c]) * near
+        total += part
     return total
+
+
+_COUNT_CHUNK = 1024  # cells per parallel task of cell_candidates
 
 
 @njit

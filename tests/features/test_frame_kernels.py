@@ -1,0 +1,90 @@
+"""The closed-form eigenpairs of the quadric's PCA frame against LAPACK and the Jacobi solver."""
+
+import numpy as np
+import pytest
+
+from lidarstat._shared._kernels import eigh3
+from lidarstat.features._frame_kernels import CLOSED_FORM_GAP, eigh3_closed
+
+
+def _spd(rng, lam):
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return np.ascontiguousarray((q * lam) @ q.T)
+
+
+@pytest.mark.parametrize("spectrum", [(0.0, 0.15, 0.25), (4e-4, 0.15, 0.2), (1e-6, 0.005, 0.02),
+                                      (0.1, 0.2, 0.3), (2e-3, 0.01, 0.5)])
+def test_closed_form_matches_lapack(rng, spectrum):
+    ev, vec = np.empty(3), np.empty((3, 3))
+    for _ in range(200):
+        lam = np.array(spectrum) * rng.uniform(0.9, 1.1, 3) * 10.0 ** rng.uniform(-3, 3)
+        lam.sort()
+        a = _spd(rng, lam)
+        kept = a.copy()
+        assert eigh3_closed(a, ev, vec)
+        np.testing.assert_array_equal(a, kept)  # the input is left alone
+        want_val, want_vec = np.linalg.eigh(a)
+        np.testing.assert_allclose(ev, want_val, rtol=0, atol=1e-12 * want_val[2])
+        for col in (0, 2):  # the normal and e1, up to sign
+            cos = abs(vec[:, col] @ want_vec[:, col])
+            assert 1.0 - cos < 1e-12
+        np.testing.assert_allclose(vec.T @ vec, np.eye(3), atol=1e-14)
+        np.testing.assert_allclose(np.cross(vec[:, 0], vec[:, 1]), vec[:, 2], atol=1e-14)
+
+
+def test_same_frame_as_jacobi(rng):
+    """Where it answers, the closed form gives Jacobi's normal and e1 (up to sign)."""
+    ev, vec, ev_j, vec_j = np.empty(3), np.empty((3, 3)), np.empty(3), np.empty((3, 3))
+    for _ in range(300):
+        lam = np.sort(rng.uniform(0, 1, 3))
+        a = _spd(rng, lam)
+        if not eigh3_closed(a, ev, vec):
+            continue
+        eigh3(a.copy(), ev_j, vec_j)
+        np.testing.assert_allclose(ev, ev_j, rtol=0, atol=1e-11 * lam[2])
+        for col in (0, 2):
+            assert 1.0 - abs(vec[:, col] @ vec_j[:, col]) < 1e-10
+
+
+@pytest.mark.parametrize("lam", [(1.0, 1.0, 1.0), (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.1, 0.5, 0.5),
+                                 (0.1, 0.1, 0.5), (0.0, 0.3, 0.3 * (1 + 0.5 * CLOSED_FORM_GAP))])
+def test_close_eigenvalues_go_to_jacobi(rng, lam):
+    """Collinear, isotropic and circular neighbourhoods (any two eigenvalues within the
+    gap) are refused, so the Jacobi solver decides them as before."""
+    ev, vec = np.empty(3), np.empty((3, 3))
+    assert not eigh3_closed(_spd(rng, np.array(lam)), ev, vec)
+
+
+def test_spd_inverse6_matches_lapack(rng):
+    from lidarstat.features._quadric_kernels import _spd_inverse6
+
+    L, LI, inv = np.zeros((6, 6)), np.zeros((6, 6)), np.empty((6, 6))
+    for _ in range(100):
+        x = rng.normal(size=(int(rng.integers(7, 60)), 6)) * 10.0 ** rng.uniform(-2, 2, 6)
+        a = np.ascontiguousarray(x.T @ x)
+        assert _spd_inverse6(a, 1e-12, L, LI, inv)
+        want = np.linalg.inv(a)
+        cond = np.linalg.cond(a)
+        np.testing.assert_allclose(inv, want, rtol=0, atol=1e-13 * cond * np.abs(want).max())
+        np.testing.assert_array_equal(inv, inv.T)
+    singular = np.ones((6, 6))
+    assert not _spd_inverse6(singular, 1e-12, L, LI, inv)
+    assert not _spd_inverse6(np.zeros((6, 6)), 1e-12, L, LI, inv)
+
+
+def test_moment_sums_match_direct_sums(rng):
+    """The lane-blocked sums equal the plain sums of w^(p+1) U^i V^j and w h U^i V^j."""
+    from lidarstat.features._quadric_kernels import LANES, _MONO, _moment_sums
+
+    acc, mom, rhs = np.empty(54 * LANES), np.empty((3, 15)), np.empty(6)
+    for nk in (1, 7, 8, 9, 50, 301):
+        cols = np.ascontiguousarray(rng.uniform(-1, 1, (4, nk + 5)))
+        cols[3] = rng.uniform(0, 1, nk + 5)
+        _moment_sums(cols[0], cols[1], cols[2], cols[3], nk, acc, mom, rhs)
+        u, v, h, w = (c[:nk] for c in cols)
+        powers = [(i - j, j) for i in range(5) for j in range(i + 1)]  # 1 U V U2 UV V2 ...
+        mono = np.array([u ** a * v ** b for a, b in powers])
+        assert len(powers) == 15 and max(_MONO) == 14
+        for p in range(3):
+            np.testing.assert_allclose(mom[p], mono @ w ** (p + 1), rtol=1e-13, atol=1e-13 * nk)
+        np.testing.assert_allclose(rhs, mono[:6] @ (w * h), rtol=1e-13, atol=1e-13 * nk)
