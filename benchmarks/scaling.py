@@ -114,10 +114,11 @@ def run(argv: list[str], env: dict, timeout: float, max_mib: float | None = None
             rss = _rss_mib(proc.pid)
             if rss > max_mib:
                 proc.kill()
-                os.wait4(proc.pid, 0)
+                _, _, usage = os.wait4(proc.pid, 0)
                 proc.stderr.close()
-                return {"seconds": None, "peak_mib": round(rss, 1),
-                        "status": f"stopped over {max_mib:.0f} MiB"}
+                return {"seconds": None, "cpu_seconds": round(usage.ru_utime + usage.ru_stime, 2),
+                        "stopped_after_seconds": round(time.perf_counter() - t0, 1),
+                        "peak_mib": round(rss, 1), "status": f"stopped over {max_mib:.0f} MiB"}
         time.sleep(0.05)
     wall = time.perf_counter() - t0
     err = proc.stderr.read().decode().strip()
