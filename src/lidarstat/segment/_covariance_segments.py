@@ -170,7 +170,7 @@ def one_plane_p(n_a, rss_a, n_b, rss_b, rss_u):
 
 
 def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=None,
-                   centroids=None, tolerance=1.5, merge_alpha=MERGE_ALPHA):
+                   centroids=None, tolerance=1.5, merge_alpha=MERGE_ALPHA, width=None):
     """Merge touching segments that are one surface (split by a window, a pipe in front, ...).
 
     Two segments that share neighbour pairs merge when their plane normals differ by less
@@ -183,13 +183,14 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
     (two parallel planes a recess apart are not one surface; pieces of one cylinder are
     merged by :func:`lidarstat.segment._cylinders.merge_cylinders`), and one plane for
     the union must not be rejected against a plane per part at `merge_alpha`
-    (:func:`one_plane_p`; None: not tested). Ids are renumbered by size.
+    (:func:`one_plane_p`; None: not tested). Segments touch through the first `width`
+    entries of each row of `nbh` (every entry when None). Ids are renumbered by size.
     """
     from ._grow import adjacency_of_pairs, relabel
 
     # the touching pairs of points once: both directions for the segment adjacency, the
     # ascending ones (0 < labels[si] < labels[di], in CSR order) for the local test below
-    src, dst = _ek.label_pairs(nbh, labels, different_only=True)
+    src, dst = _ek.label_pairs(nbh, labels, different_only=True, width=width)
     pairs, _ = adjacency_of_pairs(labels, src, dst)
     if not len(pairs):
         return labels
@@ -468,10 +469,11 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
     del models, moved  # per-point arrays: not kept beside the neighbourhoods
     if nbh.kind == "knn":
         del free, before, new
-    # the first grow_k neighbours of each row are copied for each step that reads them
-    # (12 grow_k bytes a point), not held between the steps
-    labels = merge_coplanar(pts, labels, truncate_rows(nbh, grow_k), max_angle=min_angle / 4,
-                            normals=normals, centroids=centroids)
+    # the merges take the pairs of the first grow_k neighbours of each kNN row straight
+    # from the kept rows (no copy of those rows: 12 grow_k bytes a point)
+    width = grow_k if nbh.kind == "knn" and nbh.k is not None and grow_k < nbh.k else None
+    labels = merge_coplanar(pts, labels, nbh, max_angle=min_angle / 4, normals=normals,
+                            centroids=centroids, width=width)
     from ._cylinders import merge_cylinders
 
     labels, cylinders = merge_cylinders(
@@ -481,8 +483,8 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
 
     csensor = nsensor
     cylinders = refine_cylinder_table(pts, labels, cylinders, seg_sigma, sensor=csensor)
-    labels, absorbed = absorb_into_cylinders(pts, labels, truncate_rows(nbh, grow_k),
-                                             cylinders, seg_sigma, sensor=csensor)
+    labels, absorbed = absorb_into_cylinders(pts, labels, nbh, cylinders, seg_sigma,
+                                             sensor=csensor, width=width)
     if absorbed:
         cylinders = refine_cylinder_table(
             pts, labels, segment_cylinders(pts, labels, normals, seg_sigma,
