@@ -18,7 +18,8 @@ single-file runs.
 A run that exceeds ``--timeout`` seconds, or whose resident memory passes ``--max-mib``,
 is stopped and recorded as such (``null`` time, the CPU seconds and memory reached, the
 limit in the table): a command whose cost grows faster than the others shows as a missing
-point, not as a stalled script or a machine out of memory. The figure plots CPU seconds
+point (a hollow triangle at the cap in the memory plot when the cap stopped it), not as a
+stalled script or a machine out of memory. The figure plots CPU seconds
 (user + system, every thread), which compare across machine loads where wall time does not.
 
 Usage::
@@ -114,10 +115,11 @@ def run(argv: list[str], env: dict, timeout: float, max_mib: float | None = None
             rss = _rss_mib(proc.pid)
             if rss > max_mib:
                 proc.kill()
-                os.wait4(proc.pid, 0)
+                _, _, usage = os.wait4(proc.pid, 0)
                 proc.stderr.close()
-                return {"seconds": None, "peak_mib": round(rss, 1),
-                        "status": f"stopped over {max_mib:.0f} MiB"}
+                return {"seconds": None, "cpu_seconds": round(usage.ru_utime + usage.ru_stime, 2),
+                        "stopped_after_seconds": round(time.perf_counter() - t0, 1),
+                        "peak_mib": round(rss, 1), "status": f"stopped over {max_mib:.0f} MiB"}
         time.sleep(0.05)
     wall = time.perf_counter() - t0
     err = proc.stderr.read().decode().strip()
@@ -205,6 +207,12 @@ def figure(results: dict, path: Path) -> None:
         n = [r["points"] for r in ok]
         line, = ax_t.plot(n, [r.get("cpu_seconds", np.nan) for r in ok], "o-", label=name)
         ax_m.plot(n, [r["peak_mib"] for r in ok], "o-", color=line.get_color(), label=name)
+        capped = [r for r in rows if r["status"].startswith("stopped over")]
+        if capped:  # stopped at the memory cap: the need lies above the marker (side by
+            # side, one command each, where several met the same cap)
+            shift = 1.06 ** (list(COMMANDS).index(name) - 3) if name in COMMANDS else 1.0
+            ax_m.plot([r["points"] * shift for r in capped], [r["peak_mib"] for r in capped],
+                      "^", mfc="none", ms=9, color=line.get_color())
     cat = results.get("catalogue")
     if cat:
         ax_t.plot([cat["points"]], [cat["seconds"]], "k*", ms=11,
@@ -220,6 +228,8 @@ def figure(results: dict, path: Path) -> None:
         ax.grid(True, which="both", alpha=0.3)
     ax_m.axhline(4096, color="r", lw=0.8, ls="--")
     ax_m.text(2.2e5, 4300, "4 GB", color="r", fontsize=8)
+    ax_m.plot([], [], "^", mfc="none", color="0.3", label="stopped at the memory cap")
+    ax_m.legend(fontsize=7, loc="lower right")
     ax_t.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)

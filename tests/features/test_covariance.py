@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from lidarstat.errors import InvalidParameterError, InvalidPointsError
-from lidarstat.features import covariance_features, eigen_features
+from lidarstat.features import covariance_features, covariance_frames, eigen_features
 from lidarstat.neighbors import Neighborhoods, radius_neighbors
 
 
@@ -142,6 +142,27 @@ def test_radius_path_equals_given_neighbourhoods(rng):
                  "Linearity", "NormalX"):
         np.testing.assert_allclose(a[name], b[name], rtol=1e-9, atol=1e-12, equal_nan=True)
     assert np.array_equal(a["neighbors"], b["neighbors"])
+
+
+@pytest.mark.parametrize("sensor", [None, [3.0, -20.0, 15.0]])
+@pytest.mark.parametrize("block_size", [262144, 37])
+def test_frames_equal_the_features_bit_for_bit(rng, sensor, block_size):
+    """Normals, centroids and normal-spread directions of :func:`covariance_frames` are
+    those of :func:`covariance_features` on the same rows, bit for bit, in one block or
+    many; kNN rows and radius rows (with rows of fewer than 3 points: NaN in both)."""
+    pts = _cloud(rng, 1500)
+    for nbh in (covariance_features(pts, k=25, keep_neighbors=True).neighborhoods,
+                radius_neighbors(pts, 0.25)):
+        ref = covariance_features(pts, neighborhoods=nbh, sensor=sensor)
+        normals, centroids, dirs = covariance_frames(pts, nbh, sensor=sensor,
+                                                     block_size=block_size)
+        np.testing.assert_array_equal(normals, ref.normals)
+        np.testing.assert_array_equal(centroids, ref.centroid)
+        np.testing.assert_array_equal(
+            dirs, np.c_[ref["PrincipalDirX"], ref["PrincipalDirY"], ref["PrincipalDirZ"]])
+    assert (ref["neighbors"] < 3).any() and np.isnan(normals[ref["neighbors"] < 3]).all()
+    with pytest.raises(InvalidParameterError, match="one row per point"):
+        covariance_frames(pts[:-1], nbh)
 
 
 def test_utm_offset_does_not_change_features(rng):

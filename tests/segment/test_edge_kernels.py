@@ -9,7 +9,7 @@ from scipy import special
 from lidarstat.neighbors import knn_neighbors, radius_neighbors
 from lidarstat.segment import _edge_kernels as ek
 from lidarstat.segment._covariance_lines import clean_plane_points
-from lidarstat.segment._covariance_segments import surface_prefix_edges
+from lidarstat.segment._covariance_segments import surface_prefix_edges, truncate_rows
 from lidarstat.segment._grow import adjacency
 from lidarstat.segment._scales import SCALES, planar_scales, prefix_edges
 
@@ -41,6 +41,21 @@ def test_prefix_and_label_selections(graph, rng):
     keep = (la > 0) & (lb > 0) & (la != lb)
     i, j = ek.label_pairs(nbh, labels, different_only=True)
     assert np.array_equal(i, src[keep]) and np.array_equal(j, dst[keep])
+    # the first `width` entries of each row only (none, some, all)
+    at = np.arange(nbh.nnz) - np.repeat(nbh.indptr[:-1], nbh.counts)
+    for width in (0, 7, 10**6):
+        near = keep & (at < width)
+        i, j = ek.label_pairs(nbh, labels, different_only=True, width=width)
+        assert np.array_equal(i, src[near]) and np.array_equal(j, dst[near])
+        asc = (la > 0) & (la < lb) & (at < width)
+        i, j = ek.label_pairs(nbh, labels, width=width)
+        assert np.array_equal(i, src[asc]) and np.array_equal(j, dst[asc])
+    if nbh.kind == "knn":  # the pairs of the truncated rows, without their copy
+        short = truncate_rows(nbh, 7)
+        for mode in (False, True):
+            got = ek.label_pairs(nbh, labels, different_only=mode, width=7)
+            ref = ek.label_pairs(short, labels, different_only=mode)
+            assert all(np.array_equal(g, r) for g, r in zip(got, ref))
     for wide in (labels.astype(np.int64), labels.astype(np.uint64)):  # gathered as int32
         i, j = ek.label_pairs(nbh, wide, different_only=True)
         assert np.array_equal(i, src[keep]) and np.array_equal(j, dst[keep])

@@ -5,8 +5,8 @@ the face they lie on, and no point crosses a crease."""
 import numpy as np
 import pytest
 
-from lidarstat.neighbors import knn_neighbors
-from lidarstat.segment._model_growth import UnitModels, grow_by_models
+from lidarstat.neighbors import knn_neighbors, radius_neighbors
+from lidarstat.segment._model_growth import UnitModels, free_pairs, grow_by_models
 
 SIGMA = 0.005
 
@@ -66,3 +66,29 @@ def test_no_model_no_growth():
     src, dst = knn.edges()
     out, joined = grow_by_models(pts, labels, np.r_[src, dst], np.r_[dst, src], models)
     assert not joined.any() and np.array_equal(out, labels)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("kind", ["knn", "radius", "query"])
+def test_free_pairs_are_the_growth_pairs_of_the_whole_graph(seed, kind):
+    """:func:`free_pairs` gives exactly what :func:`grow_by_models` keeps of the pairs of
+    both directions of the whole graph (same pairs, same order, int64), on kNN rows,
+    radius rows of varying length and rows of a subset of query points."""
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(0, 1, (600, 3))
+    if kind == "knn":
+        nbh = knn_neighbors(pts, 9)
+    elif kind == "radius":
+        nbh = radius_neighbors(pts, 0.15)
+    else:
+        nbh = radius_neighbors(pts, 0.15, query=rng.choice(600, 250, replace=False))
+    free = rng.uniform(size=600) < [0.02, 0.3, 0.9, 0.5][seed]
+    s, d = nbh.edges()
+    src, dst = np.r_[s, d], np.r_[d, s]
+    keep = free[src]
+    got_src, got_dst = free_pairs(nbh, free)
+    assert got_src.dtype == got_dst.dtype == np.int64
+    np.testing.assert_array_equal(got_src, src[keep])
+    np.testing.assert_array_equal(got_dst, dst[keep])
+    none_src, _ = free_pairs(nbh, np.zeros(600, dtype=bool))
+    assert none_src.size == 0

@@ -16,7 +16,8 @@ _WHERE = {
                      "noise_directions", "noise_factor", "resolve_noise", "sigma_from_fits"),
                     "._noise"),
     **dict.fromkeys(("point_spacing", "scale_ladder"), "._curvature_scale"),
-    **dict.fromkeys(("OPTIMAL_K_MAX", "OPTIMAL_K_MIN", "covariance_features"), "._covariance"),
+    **dict.fromkeys(("OPTIMAL_K_MAX", "OPTIMAL_K_MIN", "covariance_features",
+                     "covariance_frames"), "._covariance"),
     **dict.fromkeys(("COVARIANCE_FIELDS", "CovarianceResult", "EigenMode", "PointClass",
                      "eigen_features"), "._covariance_result"),
     **dict.fromkeys(("prefix_features", "tested_features", "tested_scale"),
@@ -38,7 +39,7 @@ _WHERE = {
 }
 _RENAMED = {"COVARIANCE_FIELDS": "FIELDS"}
 
-__all__ = ["COVARIANCE_FIELDS", "OPTIMAL_K_MIN", "OPTIMAL_K_MAX", "CovarianceResult", "covariance_features", "eigen_features",
+__all__ = ["COVARIANCE_FIELDS", "OPTIMAL_K_MIN", "OPTIMAL_K_MAX", "CovarianceResult", "covariance_features", "covariance_frames", "eigen_features",
            "prefix_features", "tested_features", "tested_scale",
            "BandwidthResult", "optimal_bandwidth", "FIELDS", "CurvatureResult", "FitStatus", "QuadricFit", "curvature",
            "curvature_jacobian", "curvature_tests", "curvatures", "estimate_sigma",

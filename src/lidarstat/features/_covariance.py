@@ -142,13 +142,7 @@ def covariance_features(points, *, k=None, radius=None, neighborhoods=None, sens
     block_size = check_scalar(block_size, "block_size", func=func, low=1, closed="left",
                               integer=True)
     if neighborhoods is not None:
-        if not isinstance(neighborhoods, Neighborhoods):
-            raise InvalidParameterError(f"{func}: `neighborhoods` must be a Neighborhoods instance")
-        if neighborhoods.n_points != n or len(neighborhoods) != n:
-            raise InvalidParameterError(
-                f"{func}: `neighborhoods` must have one row per point and index the {n} points "
-                f"(got {len(neighborhoods)} rows over {neighborhoods.n_points} points)"
-            )
+        _check_neighborhoods(neighborhoods, n, func)
         kind = "given"
     elif radius is not None:
         radius = check_scalar(radius, "radius", func=func, low=0.0)
@@ -249,6 +243,80 @@ def covariance_features(points, *, k=None, radius=None, neighborhoods=None, sens
             scan = scan_in
         add_sensor_fields(res, pts, sensor, scan)
     return res
+
+
+def covariance_frames(points, neighborhoods, *, sensor=None, block_size=262144):
+    """Normal, centroid and principal direction of the normals of every point's given
+    neighbourhood, without the other covariance features.
+
+    The same values, bit for bit, as ``normals``, ``centroid`` and ``PrincipalDirX/Y/Z``
+    of :func:`covariance_features` with these `neighborhoods` and `sensor`: the first
+    pass of the covariance kernel and the normal spread over the rows, without the
+    variance of the surface variation, the scan geometry and the eigen features, the
+    kernel's rows a block at a time (a segmentation that needs the planes of its rows
+    holds 72 bytes a point instead of the whole result's 250 and more).
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+    neighborhoods : Neighborhoods
+        One row per point, indexing the `N` points.
+    sensor : (3,) array_like, optional
+        Scanner position: normals point to it (else up).
+    block_size : int
+        Rows of the covariance kernel's output held at a time.
+
+    Returns
+    -------
+    normals, centroids, principal_dirs : (N, 3) ndarray of float64
+        Unit normals, neighbourhood centroids (file coordinates) and the direction of
+        largest variation of the neighbours' normals.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lidarstat.features import covariance_features, covariance_frames
+    >>> from lidarstat.neighbors import knn_neighbors
+    >>> rng = np.random.default_rng(0)
+    >>> pts = np.c_[rng.uniform(0, 10, (500, 2)), rng.normal(0, 0.01, 500)]
+    >>> nbh = knn_neighbors(pts, 12)
+    >>> normals, centroids, dirs = covariance_frames(pts, nbh)
+    >>> bool((normals == covariance_features(pts, neighborhoods=nbh).normals).all())
+    True
+    """
+    func = "covariance_frames"
+    pts = check_points(points)
+    n = pts.shape[0]
+    sensor = _check_sensor(sensor, func)
+    block_size = check_scalar(block_size, "block_size", func=func, low=1, closed="left",
+                              integer=True)
+    _check_neighborhoods(neighborhoods, n, func)
+    origin = pts.mean(axis=0)
+    local = pts - origin
+    sens = None if sensor is None else sensor - origin
+    indptr, indices = neighborhoods.indptr, neighborhoods.indices
+    normals = np.empty((n, 3))
+    centroids = np.empty((n, 3))
+    for r0 in range(0, n, block_size):  # the kernel's output rows a block at a time
+        r1 = min(n, r0 + block_size)
+        raw = _rows(local, np.arange(r0, r1), indptr[r0:r1 + 1], indices, sens)
+        normals[r0:r1] = raw[:, _ck.C_NX:_ck.C_NZ + 1]
+        centroids[r0:r1] = raw[:, _ck.C_CX:_ck.C_CZ + 1] + origin
+    del local
+    spread = np.empty((n, 4))
+    _ck.normal_spread_rows_offset(normals, 0, neighborhoods.indptr, neighborhoods.indices,
+                                  spread)
+    return normals, centroids, np.ascontiguousarray(spread[:, :3])
+
+
+def _check_neighborhoods(neighborhoods, n, func):
+    if not isinstance(neighborhoods, Neighborhoods):
+        raise InvalidParameterError(f"{func}: `neighborhoods` must be a Neighborhoods instance")
+    if neighborhoods.n_points != n or len(neighborhoods) != n:
+        raise InvalidParameterError(
+            f"{func}: `neighborhoods` must have one row per point and index the {n} points "
+            f"(got {len(neighborhoods)} rows over {neighborhoods.n_points} points)"
+        )
 
 
 def _rows(local, query, indptr, idx, sens):

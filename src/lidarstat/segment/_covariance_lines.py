@@ -185,8 +185,6 @@ def crease_lines(pts, labels, feats, classes, surface, boundary, cylinders, seg_
     cylinder's tangent plane on cylinder segments.
     """
     nbh = feats.neighborhoods
-    normals = feats.normals
-    centroids = feats.centroid
     rk = nbh.distances.reshape(len(nbh), -1)[:, -1] if nbh.kind == "knn" else \
         np.full(len(nbh), nbh.radius)
     # local planes from neighbourhoods the plane test accepted (a surface accepted by
@@ -195,7 +193,7 @@ def crease_lines(pts, labels, feats, classes, surface, boundary, cylinders, seg_
     ref = clean_plane_points(labels, planar, nbh)
     # a point with no such plane in its row (its own straddles the crease) takes no part
     use = labels * planar[ref]
-    n_loc, c_loc = normals[ref], centroids[ref]
+    n_loc, c_loc = feats.normals[ref], feats.centroid[ref]
     from ._intersect import (cylinder_tangent_planes, snap_between_cylinders,
                              snap_to_cylinder)
     from ._refine import PlaneModels

@@ -170,7 +170,7 @@ def one_plane_p(n_a, rss_a, n_b, rss_b, rss_u):
 
 
 def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=None,
-                   centroids=None, tolerance=1.5, merge_alpha=MERGE_ALPHA):
+                   centroids=None, tolerance=1.5, merge_alpha=MERGE_ALPHA, width=None):
     """Merge touching segments that are one surface (split by a window, a pipe in front, ...).
 
     Two segments that share neighbour pairs merge when their plane normals differ by less
@@ -183,13 +183,14 @@ def merge_coplanar(points, labels, nbh, *, max_angle=5.0, nsigma=3.0, normals=No
     (two parallel planes a recess apart are not one surface; pieces of one cylinder are
     merged by :func:`lidarstat.segment._cylinders.merge_cylinders`), and one plane for
     the union must not be rejected against a plane per part at `merge_alpha`
-    (:func:`one_plane_p`; None: not tested). Ids are renumbered by size.
+    (:func:`one_plane_p`; None: not tested). Segments touch through the first `width`
+    entries of each row of `nbh` (every entry when None). Ids are renumbered by size.
     """
     from ._grow import adjacency_of_pairs, relabel
 
     # the touching pairs of points once: both directions for the segment adjacency, the
     # ascending ones (0 < labels[si] < labels[di], in CSR order) for the local test below
-    src, dst = _ek.label_pairs(nbh, labels, different_only=True)
+    src, dst = _ek.label_pairs(nbh, labels, different_only=True, width=width)
     pairs, _ = adjacency_of_pairs(labels, src, dst)
     if not len(pairs):
         return labels
@@ -284,20 +285,21 @@ def _grow_cylinders(pts, labels, nbh, cylinders, normals, sigma, nsensor):
     points, and its segment grows over them by its cylinder. `normals` are the features'
     own (at each point's scale): on a strip a few rows wide the larger rows straddle its
     creases and tilt the cylinder's axis."""
-    from ._model_growth import UnitModels, grow_by_models
+    from ._model_growth import UnitModels, free_pairs, grow_by_models
     from ._refine import PlaneModels
 
-    src, dst = nbh.edges()
-    src, dst = np.r_[src, dst], np.r_[dst, src]
     dirs = None
     if nsensor is not None:
         dirs = pts - nsensor
         dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     models = UnitModels(pts, labels, np.asarray(cylinders["model"]) == 2, normals, sigma,
                         dirs=dirs, sensor=nsensor)
-    labels, _ = grow_by_models(pts, labels, src, dst, models)
+    # the pairs from the points each growth may give a unit (both directions): the
+    # whole graph's would be 32 bytes a neighbour entry
+    labels, _ = grow_by_models(pts, labels, *free_pairs(nbh, labels == 0), models)
     out = PlaneModels(pts, labels, sigma, nsensor).outliers()
-    lab, joined = grow_by_models(pts, np.where(out, 0, labels), src, dst, models)
+    start = np.where(out, 0, labels)
+    lab, joined = grow_by_models(pts, start, *free_pairs(nbh, start == 0), models)
     return np.where(out & ~joined, labels, lab).astype(np.int32)
 
 
@@ -368,7 +370,6 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
     # occlusion or a crease "boundary", and those must cut the rows like edges
     boundary = (pc == PointClass.BOUNDARY) & surface_tested(feats, classes)
     edge_like = (pc == PointClass.EDGE) | ((pc == PointClass.BOUNDARY) & ~boundary)
-    grow_nbh = truncate_rows(nbh, grow_k)
     sv = feats["SurfaceVariation"]
     order = np.argsort(np.where(np.isfinite(sv), sv, np.inf), kind="stable") \
         if seeds is SeedOrder.CURVATURE else None
@@ -395,33 +396,42 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
         labels = grow_regions(nbh, edge_ok, order=order, can_grow=surface | boundary | (kstar > 0),
                               mask=pc != PointClass.UNDETERMINED, merge=True,
                               min_points=min_points)
+        del kstar, pn
     else:
         # boundary points end a surface, they do not separate two: they may be joined (and
         # do not grow), only edge and undetermined points cut the rows (Fig. 4)
+        grow_nbh = truncate_rows(nbh, grow_k)  # radius rows: `nbh` itself
         edge_ok = surface_prefix_edges(grow_nbh, surface | boundary)
         labels = grow_regions(grow_nbh, edge_ok, order=order, can_grow=surface,
                               mask=surface | boundary, merge=True, min_points=min_points)
+    del edge_ok, order  # per-edge and per-point: not kept beside the steps below
     # at the automatic scale the segment-level steps take the planes of the kept rows of
     # k_max neighbours (the classes keep their own scale): a prefix that stopped at a
-    # crease straddles it with a few points, and its plane is no face's
-    geo = feats
+    # crease straddles it with a few points, and its plane is no face's (only their
+    # normals, centroids and normal-spread directions: the whole feature set of those rows
+    # would sit beside the classification's at the segmentation's peak)
     if feats.k is None and feats.radius is None and nbh.kind == "knn":
-        from ..features import covariance_features
+        from ..features import covariance_frames
 
-        geo = covariance_features(pts, neighborhoods=nbh, sensor=feats.sensor)
-    normals = geo.normals  # one (N, 3) stack for every step below (read only)
-    centroids = geo.centroid
-    # per-point axes (minimum-curvature directions) of the curved surface points only
+        normals, centroids, pdir_all = covariance_frames(pts, nbh, sensor=feats.sensor)
+    else:
+        normals, centroids = feats.normals, feats.centroid
+        pdir_all = None
+    # `normals`: one (N, 3) stack for every step below (read only); per-point axes
+    # (minimum-curvature directions) of the curved surface points only
     # (computed for those points: no (N, 3) temporaries at the segmentation's peak); at
     # the automatic scale from the kept rows of k_max neighbours: the axes of the smaller
     # neighbourhoods scatter, and the pieces of one pipe then fail to merge
     curved_pts = surface & ~(classes["plane_p"] >= classes.alpha)
     pt_axes = np.full((pts.shape[0], 3), np.nan)
     ci_ = np.flatnonzero(curved_pts)
-    pdir = np.stack([geo["PrincipalDirX"][ci_], geo["PrincipalDirY"][ci_],
-                     geo["PrincipalDirZ"][ci_]], axis=1)
+    if pdir_all is None:
+        pdir = np.stack([feats["PrincipalDirX"][ci_], feats["PrincipalDirY"][ci_],
+                         feats["PrincipalDirZ"][ci_]], axis=1)
+    else:
+        pdir = pdir_all[ci_]
     pt_axes[ci_] = np.cross(normals[ci_], pdir)
-    del pdir, ci_, geo, curved_pts
+    del pdir, pdir_all, ci_, curved_pts
     across = seg_sigma
     if nsensor is not None:
         ray = pts - nsensor
@@ -459,8 +469,11 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
     del models, moved  # per-point arrays: not kept beside the neighbourhoods
     if nbh.kind == "knn":
         del free, before, new
-    labels = merge_coplanar(pts, labels, grow_nbh, max_angle=min_angle / 4,
-                            normals=normals, centroids=centroids)
+    # the merges take the pairs of the first grow_k neighbours of each kNN row straight
+    # from the kept rows (no copy of those rows: 12 grow_k bytes a point)
+    width = grow_k if nbh.kind == "knn" and nbh.k is not None and grow_k < nbh.k else None
+    labels = merge_coplanar(pts, labels, nbh, max_angle=min_angle / 4, normals=normals,
+                            centroids=centroids, width=width)
     from ._cylinders import merge_cylinders
 
     labels, cylinders = merge_cylinders(
@@ -470,8 +483,8 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
 
     csensor = nsensor
     cylinders = refine_cylinder_table(pts, labels, cylinders, seg_sigma, sensor=csensor)
-    labels, absorbed = absorb_into_cylinders(pts, labels, grow_nbh, cylinders, seg_sigma,
-                                             sensor=csensor)
+    labels, absorbed = absorb_into_cylinders(pts, labels, nbh, cylinders, seg_sigma,
+                                             sensor=csensor, width=width)
     if absorbed:
         cylinders = refine_cylinder_table(
             pts, labels, segment_cylinders(pts, labels, normals, seg_sigma,
@@ -484,6 +497,7 @@ def segment_covariance(points, result, *, min_points=50, grow_k=20, seeds="curva
             pts, labels, segment_cylinders(pts, labels, normals, seg_sigma,
                                            sensor=csensor, point_axes=pt_axes),
             seg_sigma, sensor=csensor)
+    del normals, centroids, pt_axes  # the lines take the features' own planes
     lines_out = None
     if lines:
         lines_out = crease_lines(pts, labels, feats, classes, surface, boundary, cylinders,

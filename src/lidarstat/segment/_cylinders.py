@@ -343,7 +343,7 @@ def cylinder_units(points, idx, table, s, sigma, *, sensor=None):
 
 
 def absorb_into_cylinders(points, labels, nbh, table, sigma, *, sensor=None, nsigma=3.0,
-                          min_fraction=0.9):
+                          min_fraction=0.9, width=None):
     """Merge a segment into a touching, larger cylinder segment whose cylinder it lies on.
 
     A band of a tank next to the ground, grown through small planar prefixes and cut off
@@ -351,7 +351,8 @@ def absorb_into_cylinders(points, labels, nbh, table, sigma, *, sensor=None, nsi
     a poor cylinder: radius 0.23 m on the synthetic tank of radius 3 m) and is not merged
     by :func:`merge_cylinders` (radii differ). Here a segment whose points are at least
     `min_fraction` inliers (within `nsigma` noise units) of a touching larger cylinder
-    segment's fitted cylinder joins it.
+    segment's fitted cylinder joins it. Segments touch through the first `width`
+    entries of each row of `nbh` (every entry when None).
 
     Returns
     -------
@@ -359,12 +360,14 @@ def absorb_into_cylinders(points, labels, nbh, table, sigma, *, sensor=None, nsi
         Relabelled by size (unchanged when nothing is absorbed).
     changed : bool
     """
-    from ._grow import adjacency, relabel
+    from ._edge_kernels import label_pairs
+    from ._grow import adjacency_of_pairs, relabel
 
     model = np.asarray(table["model"])
     if not (model == 2).any():
         return labels, False
-    pairs, _ = adjacency(nbh, labels)
+    pairs, _ = adjacency_of_pairs(labels, *label_pairs(nbh, labels, different_only=True,
+                                                       width=width))
     if not len(pairs):
         return labels, False
     size = np.bincount(labels, minlength=model.size + 1)[1:]

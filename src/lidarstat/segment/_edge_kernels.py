@@ -73,9 +73,10 @@ def _pair_ok(mode, lp, lq):
 
 
 @njit
-def pair_edges(indptr, indices, rows, labels, candidates, mode, fill, offs, src, dst):
+def pair_edges(indptr, indices, rows, labels, candidates, mode, width, fill, offs, src, dst):
     """Edges (p, q) selected by `mode` (:func:`_pair_ok`; `candidates` only for
-    ``REINTEGRATION``).
+    ``REINTEGRATION``) among the first `width` entries of each row (every entry when
+    `width` < 0).
 
     Count-then-fill over chunks of `_ROWS` rows (see :func:`_two_pass`): returns the
     number of edges of every row; with `fill` writes them, in CSR order, to `src`, `dst`
@@ -94,7 +95,10 @@ def pair_edges(indptr, indices, rows, labels, candidates, mode, fill, offs, src,
             if not _row_ok(mode, lp, mode == REINTEGRATION and candidates[p]):
                 continue
             c = offs[r] if fill else 0
-            for e in range(indptr[r], indptr[r + 1]):
+            end = indptr[r + 1]
+            if width >= 0 and indptr[r] + width < end:
+                end = indptr[r] + width
+            for e in range(indptr[r], end):
                 q = indices[e]
                 if _pair_ok(mode, lp, labels[q]):
                     if fill:
@@ -138,7 +142,7 @@ def reintegration_pairs(nbh, candidates, labels):
     """``(src, dst)`` of the edges from an unlabelled `candidates` point to a labelled one."""
     return _two_pass(pair_edges, nbh.indptr, nbh.indices, nbh.query_indices(),
                      _compact(labels),
-                     np.ascontiguousarray(candidates, dtype=np.bool_), REINTEGRATION)
+                     np.ascontiguousarray(candidates, dtype=np.bool_), REINTEGRATION, -1)
 
 
 @njit
@@ -153,15 +157,19 @@ def first_in_row(indptr, indices, rows, clean, labels, ref):
                 break
 
 
-def label_pairs(nbh, labels, *, different_only=False):
+def label_pairs(nbh, labels, *, different_only=False, width=None):
     """``(src, dst)`` of the edges between two labelled points of different segments.
 
     Default: ``0 < labels[src] < labels[dst]`` (each touching pair of points once per CSR
     direction it appears in); `different_only`: ``labels[src] != labels[dst]``, both > 0.
+    `width`: only the first `width` entries of each row (the `width` nearest neighbours
+    of sorted kNN rows: the pairs of :func:`lidarstat.segment._covariance_segments.truncate_rows`
+    without its copy of the rows).
     """
     return _two_pass(pair_edges, nbh.indptr, nbh.indices, nbh.query_indices(),
                      _compact(labels), np.zeros(0, dtype=np.bool_),
-                     LABELS_DIFFERENT if different_only else LABELS_ASCENDING)
+                     LABELS_DIFFERENT if different_only else LABELS_ASCENDING,
+                     -1 if width is None else int(width))
 
 
 @njit_parallel

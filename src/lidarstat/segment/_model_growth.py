@@ -106,6 +106,33 @@ class UnitModels:
         return res
 
 
+def free_pairs(nbh, free):
+    """The neighbour pairs of both directions that start at a `free` point.
+
+    Equal, pair for pair and in the same order, to ``src[e], dst[e]`` with ``e =
+    free[src]`` of ``src, dst = r_[s, d], r_[d, s]`` for ``s, d = nbh.edges()`` (what
+    :func:`grow_by_models` keeps of every pair), without those four arrays of one entry
+    per pair and direction (32 bytes a CSR entry): the pairs of the free rows, then the
+    entries whose neighbour is free, reversed.
+
+    Returns
+    -------
+    src, dst : (E,) ndarray of int64
+    """
+    free = np.asarray(free, dtype=bool)
+    rows = nbh.query_indices()
+    fr = np.flatnonzero(free[rows])
+    cnt = nbh.indptr[fr + 1] - nbh.indptr[fr]
+    first = np.zeros(fr.size, dtype=np.int64)
+    np.cumsum(cnt[:-1], out=first[1:])
+    pos = np.repeat(nbh.indptr[fr] - first, cnt) + np.arange(int(cnt.sum()), dtype=np.int64)
+    back = np.flatnonzero(free[nbh.indices])
+    row_of = np.searchsorted(nbh.indptr, back, side="right") - 1
+    src = np.concatenate([np.repeat(rows[fr], cnt), nbh.indices[back]]).astype(np.int64)
+    dst = np.concatenate([nbh.indices[pos], rows[row_of]]).astype(np.int64)
+    return src, dst
+
+
 def grow_by_models(points, labels, src, dst, models, *, candidates=None, nsigma=NSIGMA):
     """Give unlabelled points, front by front, the touching unit whose model they fit.
 
