@@ -246,6 +246,50 @@ def test_jets_driver_radius_equals_csr_fit():
     assert set(res.to_fields()) == set(res.fields)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_fit_by_radius_equals_csr_fit(seed):
+    """The fused search (``fit_jets(points, radius=r, query=rows)``, no neighbour table)
+    fits the same neighbourhoods as ``radius_neighbors``, in the order of `query`
+    (repeats and any order): status and counts equal everywhere; every field within
+    1e-10 of its row's largest value where the radius lies inside the cap (condition
+    number about 15). At the rim (condition up to 1e5) the order of the sums moves the
+    degree-4 coefficients by about 1e-7 relative, which the comparison leaves out."""
+    g = np.random.default_rng(seed)
+    cap = make_sphere_cap(1.0 + g.uniform(0, 1), spacing=0.03, sigma=0.001, rng=seed)
+    n = len(cap.xyz)
+    rows = g.choice(n, size=n // 3, replace=False)
+    rows = np.r_[rows, rows[:7]]  # repeats are fitted once and copied
+    r = g.uniform(0.1, 0.2)
+    fused = fit_jets(cap.xyz, radius=r, query=rows)
+    csr = fit_jets(cap.xyz, radius_neighbors(cap.xyz, r, query=rows))
+    np.testing.assert_array_equal(fused.status, csr.status)
+    np.testing.assert_array_equal(fused.neighbors, csr.neighbors)
+    inner = (csr.status == 0) & (cap.edge_distance[rows] > r)
+    assert inner.mean() > 0.5
+    for name in ("jet", "monge", "frame", "monge_cofactor", "q", "sum_w", "bandwidth"):
+        a, b = getattr(fused, name)[inner], getattr(csr, name)[inner]
+        a, b = a.reshape(len(a), -1), b.reshape(len(b), -1)
+        scale = np.abs(b).max(axis=1, keepdims=True)
+        assert np.all(np.abs(a - b) <= 1e-10 * scale), name
+    whole = fit_jets(cap.xyz, radius=r)
+    np.testing.assert_array_equal(whole.status[rows], fused.status)
+
+
+def test_fit_by_radius_refusals():
+    pts = _grid(0.2, 0.05, lambda x, y: 0 * x)
+    nb = radius_neighbors(pts, 0.06)
+    with pytest.raises(InvalidParameterError, match="neighborhoods. or .radius"):
+        fit_jets(pts)
+    with pytest.raises(InvalidParameterError, match="already hold"):
+        fit_jets(pts, nb, radius=0.06)
+    with pytest.raises(InvalidParameterError, match="already hold"):
+        fit_jets(pts, nb, query=[0])
+    with pytest.raises(InvalidParameterError, match="bandwidth"):
+        fit_jets(pts, radius=0.06, bandwidth=0.1)
+    with pytest.raises(InvalidParameterError, match="query"):
+        fit_jets(pts, radius=0.06, query=[len(pts)])
+
+
 def test_jets_knn_and_estimated_sigma():
     cap = make_sphere_cap(1.0, spacing=0.03, sigma=0.002, rng=4)
     res = jets(cap.xyz, k=40, degree=3)

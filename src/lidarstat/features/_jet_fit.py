@@ -9,7 +9,7 @@ import numpy as np
 from .._shared._choices import Weight
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidParameterError
-from ..neighbors import Neighborhoods, knn_neighbors
+from ..neighbors import CellIndex, Neighborhoods, knn_neighbors
 from . import _jet_kernels as _jk
 from ._quadric import check_fit_options, check_neighborhoods, kernel_bandwidth
 
@@ -141,9 +141,9 @@ def _check_options(func, degree, monge_degree, weight, min_neighbors, sensor):
     return degree, monge_degree, min_neighbors, weight
 
 
-def fit_jets(points, neighborhoods: Neighborhoods, *, degree=4, monge_degree=None,
-             weight="tricube", bandwidth=None, sensor=None, min_neighbors=None,
-             standard_errors=True) -> JetFit:
+def fit_jets(points, neighborhoods: Neighborhoods | None = None, *, radius=None, query=None,
+             degree=4, monge_degree=None, weight="tricube", bandwidth=None, sensor=None,
+             min_neighbors=None, standard_errors=True) -> JetFit:
     """Fit a degree-`degree` jet and its Monge form at every query point.
 
     The four steps of Cazals and Pouget (2005): PCA frame of the neighbourhood, polynomial
@@ -154,9 +154,16 @@ def fit_jets(points, neighborhoods: Neighborhoods, *, degree=4, monge_degree=Non
     ----------
     points : (N, 3) array_like
         The cloud the neighbourhoods index into.
-    neighborhoods : Neighborhoods
+    neighborhoods : Neighborhoods, optional
         CSR neighbourhoods, e.g. from :func:`lidarstat.neighbors.radius_neighbors` or
-        :func:`~lidarstat.neighbors.knn_neighbors`.
+        :func:`~lidarstat.neighbors.knn_neighbors`. Give these or `radius`.
+    radius : float, optional
+        Fit the points within `radius` of each query point, searching and fitting a block
+        of grid cells at a time: no neighbour table is built, so the memory is that of
+        the result whatever the number of neighbours (the fits equal those over
+        ``radius_neighbors(points, radius, query=query)`` up to the order of the sums).
+    query : (M,) array_like of int, optional
+        With `radius`: the points to fit (default all), in this order.
     degree : int
         Jet degree d, 1 to 4 (15 coefficients at 4).
     monge_degree : int, optional
@@ -191,12 +198,23 @@ def fit_jets(points, neighborhoods: Neighborhoods, *, degree=4, monge_degree=Non
     >>> fit = fit_jets(pts, radius_neighbors(pts, 0.4), degree=4)
     >>> np.round(fit.monge[840], 6) + 0.0   # k1, k2, b0..b3, c0..c4 at the centre
     array([ 0.3, -0.1,  0. ,  0. ,  0. ,  0. ,  1. ,  0. ,  0. ,  0. ,  0. ])
+    >>> np.round(fit_jets(pts, radius=0.4, query=[840]).monge[0, :2], 6) + 0.0
+    array([ 0.3, -0.1])
     """
     func = "fit_jets"
     pts = check_points(points)
-    check_neighborhoods(func, pts, neighborhoods)
     degree, monge_degree, min_neighbors, weight = _check_options(
         func, degree, monge_degree, weight, min_neighbors, sensor)
+    if neighborhoods is None:
+        return _fit_radius(pts, radius, query, bandwidth, func,
+                           dict(degree=degree, monge_degree=monge_degree, weight=weight,
+                                sensor=sensor, min_neighbors=min_neighbors,
+                                standard_errors=standard_errors))
+    for name, value in (("radius", radius), ("query", query)):
+        if value is not None:
+            raise InvalidParameterError(f"{func}: `{name}` is for a search by radius; the "
+                                        "given `neighborhoods` already hold theirs")
+    check_neighborhoods(func, pts, neighborhoods)
     bandwidth = kernel_bandwidth(func, bandwidth, neighborhoods)
     origin = pts.mean(axis=0)
     local = pts - origin
@@ -209,6 +227,35 @@ def fit_jets(points, neighborhoods: Neighborhoods, *, degree=4, monge_degree=Non
     _jk.fit_jets_block(local, query, neighborhoods.indptr, neighborhoods.indices,
                        neighborhoods.distances, params, _outs(out))
     return _to_fit(out, degree, monge_degree, weight)
+
+
+def _fit_radius(pts, radius, query, bandwidth, func, kw, block_size=131072):
+    """:func:`fit_jets` by `radius` with the fused search, rows in `query` order."""
+    if radius is None:
+        raise InvalidParameterError(f"{func}: give `neighborhoods` or `radius`")
+    if bandwidth is not None:
+        raise InvalidParameterError(f"{func}: `bandwidth` is the `radius` of a search by "
+                                    "radius; give one of them")
+    radius = check_scalar(radius, "radius", func=func, low=0.0)
+    n = pts.shape[0]
+    if query is None:
+        rows = np.arange(n, dtype=np.int64)
+    else:
+        rows = np.asarray(query)
+        if rows.ndim != 1 or (rows.size and (not np.issubdtype(rows.dtype, np.integer)
+                                             or rows.min() < 0 or rows.max() >= n)):
+            raise InvalidParameterError(f"{func}: `query` must be a 1-d array of point "
+                                        f"indices in [0, {n})")
+    unique, inverse = np.unique(rows, return_inverse=True)
+    active = np.zeros(n, bool)
+    active[unique] = True
+    slot = np.zeros(n, np.int64)
+    slot[unique] = np.arange(unique.size)
+    out = _allocate(unique.size)
+    _fit_into(pts, radius, active, kw, block_size, out, slot)
+    if unique.size != rows.size or not np.array_equal(unique, rows):
+        out = {k: v[inverse] for k, v in out.items()}
+    return _to_fit(out, kw["degree"], kw["monge_degree"], kw["weight"])
 
 
 def _outs(out):
@@ -243,6 +290,31 @@ def _fit_cells(index, *, degree, monge_degree, weight, sensor, min_neighbors, st
     inverse = np.empty_like(index.order)
     inverse[index.order] = np.arange(n)
     return {k: np.take(v, inverse, axis=0) for k, v in out.items()}
+
+
+def _fit_into(points, radius, active, kw, block_size, dest, slot):
+    """The jets at `radius` of the points where `active` (bool, input order), written to
+    row ``slot[i]`` of every array of `dest` (:func:`._jet_fit._allocate`) for input
+    index i, a block of cells at a time: the fits of :func:`_fit_cells` without its
+    whole-cloud output arrays."""
+    index = CellIndex(points, radius)
+    sensor_arr, has_sensor = _sensor(kw["sensor"], index.origin)
+    params = (float(index.radius), kw["degree"], kw["monge_degree"],
+              kw["weight"] == "tricube", sensor_arr, has_sensor, int(kw["min_neighbors"]),
+              bool(kw["standard_errors"]))
+    act = np.ascontiguousarray(active[index.order], dtype=np.uint8)
+    for c0, c1 in index.cell_blocks(block_size):
+        s0, s1 = int(index.cell_start[c0]), int(index.cell_start[c1])
+        index.bound_pairs(c0, c1)  # the fits' work is the pairs: refuse an impossible block
+        sel = act[s0:s1] != 0
+        if not sel.any():
+            continue
+        part = _allocate(s1 - s0)
+        _jk.fit_jets_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
+                           index.dims, float(index.radius), act, params, _outs(part))
+        rows = slot[index.order[s0:s1][sel]]
+        for key, val in part.items():
+            dest[key][rows] = val[sel]
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ import numpy as np
 from ..neighbors import CellIndex, knn_neighbors
 from ..stats import normal_quantile, z_critical
 from . import _jet_kernels as _jk
-from ._jet_fit import MONGE_NAMES, _allocate, _fit_cells, _outs, _sensor, _to_fit
+from ._jet_fit import MONGE_NAMES, _allocate, _fit_cells, _fit_into, _outs, _sensor, _to_fit
 from ._jet_kernels import SKIPPED
 
 #: Expected neighbours of the smallest rung: three times the 16 a degree-4 jet needs.
@@ -140,31 +140,6 @@ def fit_rungs(points, radii, rung, kw, block_size=131072, progress=None):
         if progress is not None:
             progress(int(np.count_nonzero((rung >= 0) & (rung <= j))), n)
     return merged
-
-
-def _fit_into(points, radius, active, kw, block_size, dest, slot):
-    """The jets at `radius` of the points where `active` (bool, input order), written to
-    row ``slot[i]`` of every array of `dest` (:func:`._jet_fit._allocate`) for input
-    index i, a block of cells at a time: the fits of ``_jet_fit._fit_cells`` without its
-    whole-cloud output arrays."""
-    index = CellIndex(points, radius)
-    sensor_arr, has_sensor = _sensor(kw["sensor"], index.origin)
-    params = (float(index.radius), kw["degree"], kw["monge_degree"],
-              kw["weight"] == "tricube", sensor_arr, has_sensor, int(kw["min_neighbors"]),
-              bool(kw["standard_errors"]))
-    act = np.ascontiguousarray(active[index.order], dtype=np.uint8)
-    for c0, c1 in index.cell_blocks(block_size):
-        s0, s1 = int(index.cell_start[c0]), int(index.cell_start[c1])
-        index.bound_pairs(c0, c1)  # the fits' work is the pairs: refuse an impossible block
-        sel = act[s0:s1] != 0
-        if not sel.any():
-            continue
-        part = _allocate(s1 - s0)
-        _jk.fit_jets_cells(c0, c1, index.sorted_points, index.cell_keys, index.cell_start,
-                           index.dims, float(index.radius), act, params, _outs(part))
-        rows = slot[index.order[s0:s1][sel]]
-        for key, val in part.items():
-            dest[key][rows] = val[sel]
 
 
 def choose_rungs(points, radii, criterion, alpha, tests, kw, block_size=131072):

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..features import FitStatus, fit_jets, height_variance, jet_tests, point_spacing
-from ..neighbors import knn_neighbors, radius_neighbors
+from ..neighbors import knn_neighbors
 from . import _ridge_kernels as _rk
 from ._ridge_lines import join_lines, smooth_vertices
 
@@ -137,13 +137,22 @@ def crease_points(points, fields, *, alpha, n_eff, radius=0.0, spacing=None):
     band_reach = max(across_reach, float(radius))
     reach = max(band_reach, along_reach) / spacing
     k = min(max(CREASE_K, int(np.ceil(1.5 * np.pi * reach * reach))), n)
-    idx = np.zeros((n, k), np.int64)
-    dist = np.full((n, k), np.inf)
+    # the neighbourhoods of the points examined only (candidates and those they compare
+    # with), row pos[i] for point i: k is hundreds at a wide crease radius
+    pos = np.full(n, -1, np.int64)
+    hoods = {"idx": np.empty((0, k), np.int32), "dist": np.empty((0, k))}
 
     def query(at):
         nb = knn_neighbors(points, k, query=at)
-        idx[at] = nb.indices.reshape(-1, k)
-        dist[at] = nb.distances.reshape(-1, k)
+        pos[at] = hoods["idx"].shape[0] + np.arange(at.size)
+        hoods["idx"] = np.concatenate([hoods["idx"], nb.indices.reshape(-1, k)])
+        hoods["dist"] = np.concatenate([hoods["dist"], nb.distances.reshape(-1, k)])
+
+    def idx(at):
+        return hoods["idx"][pos[at]]
+
+    def dist(at):
+        return hoods["dist"][pos[at]]
 
     normals = np.full((n, 3), np.nan)
     across_dir = np.zeros((n, 3))
@@ -153,11 +162,11 @@ def crease_points(points, fields, *, alpha, n_eff, radius=0.0, spacing=None):
         """Across the crease at `at`, in the point's tangent plane: normal to the crease
         line, the least axis of the neighbours' normals within the band's reach (the
         normals turn about the crease line, so they span the plane normal to it)."""
-        ok = dist[at] <= band_reach
-        todo = np.setdiff1d(np.unique(idx[at][ok]), np.flatnonzero(np.isfinite(normals[:, 0])))
+        ok = dist(at) <= band_reach
+        todo = np.setdiff1d(np.unique(idx(at)[ok]), np.flatnonzero(np.isfinite(normals[:, 0])))
         if todo.size:
             normals[todo] = _pca_normals(points, todo)
-        nn = np.nan_to_num(normals[idx[at]]) * ok[..., None]
+        nn = np.nan_to_num(normals[idx(at)]) * ok[..., None]
         m = np.einsum("nki,nkj->nij", nn, nn)
         axis = np.linalg.eigh(m)[1][:, :, 0]
         axis_dir[at] = axis
@@ -168,8 +177,8 @@ def crease_points(points, fields, *, alpha, n_eff, radius=0.0, spacing=None):
         """Per neighbour: the sine of its offset's angle to the crease line, signed by
         the side (the sign of the offset along the across direction): the surface bends
         at the crease, so the offsets to the other side leave the tangent plane."""
-        off = points[idx[at]] - points[at][:, None, :]
-        d = dist[at]
+        off = points[idx(at)] - points[at][:, None, :]
+        d = dist(at)
         with np.errstate(invalid="ignore", divide="ignore"):
             c = np.einsum("nkj,nj->nk", off, axis_dir[at]) / d
             side = np.where(np.einsum("nkj,nj->nk", off, across_dir[at]) >= 0, 1.0, -1.0)
@@ -180,7 +189,7 @@ def crease_points(points, fields, *, alpha, n_eff, radius=0.0, spacing=None):
     fold_across(rows)
     cos, d = cosines(rows)
     # the score at every point a candidate compares with
-    near = np.unique(idx[rows][(np.abs(cos) >= COS_ACROSS) & (d <= across_reach)])
+    near = np.unique(idx(rows)[(np.abs(cos) >= COS_ACROSS) & (d <= across_reach)])
     more = np.setdiff1d(near, rows)
     query(more)
     fold_across(more)
@@ -188,19 +197,19 @@ def crease_points(points, fields, *, alpha, n_eff, radius=0.0, spacing=None):
     cos_n, d_n = cosines(need)
     along = ((np.abs(cos_n) <= COS_ALONG) & (d_n <= along_reach)) | (d_n == 0)
     # the depth of every point an average along the crease takes in
-    extra = np.setdiff1d(np.unique(idx[need][along]), need)
+    extra = np.setdiff1d(np.unique(idx(need)[along]), need)
     query(extra)
     fold_across(extra)
     scored = np.union1d(need, extra)
     cos_s, d_s = cosines(scored)
-    cone = (np.abs(cos_s) >= COS_ACROSS) & (d_s > 0) & (d_s <= band_reach) & strong[idx[scored]]
+    cone = (np.abs(cos_s) >= COS_ACROSS) & (d_s > 0) & (d_s <= band_reach) & strong[idx(scored)]
     depth = np.zeros(n)
     depth[scored] = np.minimum((cone & (cos_s > 0)).sum(axis=1),
                                (cone & (cos_s < 0)).sum(axis=1))
     smooth = np.zeros(n)
-    smooth[need] = (depth[idx[need]] * along).sum(axis=1) / np.maximum(along.sum(axis=1), 1)
+    smooth[need] = (depth[idx(need)] * along).sum(axis=1) / np.maximum(along.sum(axis=1), 1)
     across = (np.abs(cos) >= COS_ACROSS) & (d > 0) & (d <= across_reach)
-    higher = ((1.0 - TOLERANCE) * smooth[idx[rows]] > smooth[rows][:, None]) & across
+    higher = ((1.0 - TOLERANCE) * smooth[idx(rows)] > smooth[rows][:, None]) & across
     both = (across & (cos > 0)).any(axis=1) & (across & (cos < 0)).any(axis=1)
     mask[rows[~higher.any(axis=1) & both & (smooth[rows] > 0)]] = True
     return mask
@@ -223,8 +232,7 @@ def _pca_normals(points, at):
 def variance_factor(points, query, radius, *, sigma, noise, sensor, weight, alpha):
     """Jets of degree 4 at `radius` for the `query` rows: their fields (``jet_tests``) and
     the variance factor in units of the noise, ``sigma0_sq / var(height)``."""
-    fit = fit_jets(points, radius_neighbors(points, radius, query=query), degree=4,
-                   weight=weight, sensor=sensor)
+    fit = fit_jets(points, radius=radius, query=query, degree=4, weight=weight, sensor=sensor)
     var = height_variance(fit.frame, sigma, noise=noise, points=points[query], sensor=sensor)
     fields = jet_tests(fit, var, alpha)
     with np.errstate(invalid="ignore", divide="ignore"):
