@@ -232,7 +232,9 @@ def _pca_normals(points, at):
 def variance_factor(points, query, radius, *, sigma, noise, sensor, weight, alpha):
     """Jets of degree 4 at `radius` for the `query` rows: their fields (``jet_tests``) and
     the variance factor in units of the noise, ``sigma0_sq / var(height)``."""
-    fit = fit_jets(points, radius=radius, query=query, degree=4, weight=weight, sensor=sensor)
+    # the crease pass reads the test, the principal curvatures and their directions
+    fit = fit_jets(points, radius=radius, query=query, degree=4, monge_degree=2,
+                   weight=weight, sensor=sensor, standard_errors=False)
     var = height_variance(fit.frame, sigma, noise=noise, points=points[query], sensor=sensor)
     fields = jet_tests(fit, var, alpha)
     with np.errstate(invalid="ignore", divide="ignore"):
