@@ -23,7 +23,12 @@ bound of any rule that rejects roof patches) measure them jointly (``building_jo
 ``missed_by_cause`` breaks the missed building points down by cause, with the F1 each
 cause's perfect recovery would give, and ``recovery_rules`` the true and false points
 that rules on the largest causes would add (``building_recall.py``), also once every
-false patch is rejected (``recovery_rules_after_patch_bound``).
+false patch is rejected (``recovery_rules_after_patch_bound``). ``echo_strip_evidence``
+measures the roof patches' echoes, the returns under them and the overlap of flight
+strips, ``echo_strip_rule_search`` every rule on them (``building_echoes.py``);
+``mixed_false_patches`` the false patches that hold much of class 6, and
+``false_patches_rejected_except_mixed`` the patch rules' bound without them (with the
+recovery rules after it).
 
 Usage::
 
@@ -52,6 +57,7 @@ from lidarstat.classify import _moments_objects, filter_errors, moments  # noqa:
 from lidarstat.io import linear_units, read  # noqa: E402
 
 DATA = HERE.parent.parent / "shared" / "data"
+import building_echoes  # noqa: E402
 import building_evidence  # noqa: E402
 import building_joint  # noqa: E402
 import building_recall  # noqa: E402
@@ -188,8 +194,28 @@ def run(rel):
         multi)
     row["recovery_rules_after_patch_bound"] = building_recall.recovery_rules(
         state, oracle, truth, keep)
+    # echoes, returns under the patches, flight strips (building_echoes.py)
+    evk = np.where(keep, ev, 0)
+    patch = np.asarray(fields["building_patch"])
+    echo, missing = building_echoes.patch_features(cloud.xyz, evk, patch, a, res.height,
+                                                   b["sigma"], truth)
+    row["echo_strip_evidence"] = building_echoes.summarise(echo, missing)
+    effects = building_echoes.marginal_effects(cloud.xyz, evk, patch, multi, truth, keep,
+                                               echo[:, 0].astype(np.int64))
+    row["mixed_false_patches"] = building_echoes.mixed_patches(cloud.xyz, evk, patch, ref,
+                                                               a, echo)
+    mixed = [int(p) for p in row["mixed_false_patches"]]
+    rest = np.setdiff1d(false_ids, mixed)
+    partial = building_joint.redecide(*ctx[:4], rest)
+    row["false_patches_rejected_except_mixed"] = scores(partial[keep], truth[keep])
+    state = building_recall.candidate_state(
+        cloud.xyz, building_recall.without_patches(fields, rest, partial), res.height,
+        multi)
+    row["recovery_rules_after_patch_bound_except_mixed"] = building_recall.recovery_rules(
+        state, partial, truth, keep)
     del state
-    return row, (cloud.xyz, truth, old, new, ref, patches, joint, ctx, cause, keep)
+    return row, (cloud.xyz, truth, old, new, ref, patches, joint, ctx, cause, keep, echo,
+                 effects, mixed, evk, patch)
 
 
 def evidence(xyz, ev, patch, multi, pred, truth, height, k=30):
@@ -314,6 +340,7 @@ def main():
     tables = {}
     joint = {}
     contexts = {}
+    echoes, effects = {}, {}
     for rel in FILES:
         if not (DATA / rel).is_file():
             print(f"skipped (not found): {DATA / rel}")
@@ -336,10 +363,17 @@ def main():
             tables[EVIDENCE_FILES[rel]] = data[5]
         joint[rel] = data[6]
         contexts[rel] = data[7]
+        echoes[rel], effects[rel] = data[10], data[11]
+        if args.figures and rel == SB_FIGURE_FILE and data[12]:
+            building_echoes.section_figure(data[0], data[13], data[14], data[4], data[12],
+                                           HERE.parent / "docs" / "figures"
+                                           / "moments_buildings_mixed_patches.png",
+                                           "IGN St-Barthelemy, false roof patches that hold "
+                                           "class 6")
     if args.figures and tables:
         building_evidence.figure(tables, HERE.parent / "docs" / "figures"
                                  / "moments_buildings_patch_evidence.png")
-    search = []
+    search = echo_search = []
     if SB_FIGURE_FILE in joint:
         counts = {r["file"]: (r["counts"]["tp"], r["counts"]["fp"], r["counts"]["fn"])
                   for r in rows}
@@ -351,6 +385,14 @@ def main():
                                             building_joint.rejected(joint[rel], rule["terms"]))
                 rule["redecided"][rel] = scores(b[keep], truth[keep])
         print("two-feature rules, best on St-Barthelemy:", json.dumps(search[:3]))
+        echo_search = building_echoes.rule_search(echoes, effects, counts, SB_FIGURE_FILE)
+        for rule in echo_search:  # the estimate checked: the roof cells decided again
+            rule["redecided"] = {}
+            for rel, (xyz, ev, patch, multi, truth, keep) in contexts.items():
+                b = building_joint.redecide(xyz, ev, patch, multi, building_echoes.rejected(
+                    echoes[rel], rule["terms"]))
+                rule["redecided"][rel] = scores(b[keep], truth[keep])
+        print("echo and strip rules, best on St-Barthelemy:", json.dumps(echo_search[:3]))
     if args.figures and joint:
         building_joint.figure({EVIDENCE_FILES[r]: joint[r] for r in EVIDENCE_FILES
                                if r in joint},
@@ -369,6 +411,7 @@ def main():
         print(f"mean F1: tested {mean['tested']}, cell rule {mean['cells']}")
     if args.out:
         Path(args.out).write_text(json.dumps({"files": rows, "joint_rule_search": search,
+                                              "echo_strip_rule_search": echo_search,
                                               "machine": "shared, 2 cores",
                                               "machine_shared": True}, indent=2))
 
