@@ -162,6 +162,17 @@ def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neigh
     return _as_fields(floats[:-1], flags[:-1], index.to_input_order(neighbors))
 
 
+def _on_unique(dup, pts, again):
+    """:func:`curvature` (arguments `again`) of the unique cloud, each location's result
+    to its points."""
+    res = run_on_unique(dup, lambda: curvature(pts[dup.first], **again), what="curvature")
+    fields = dict(res.fields)
+    fields["status"] = copies_degenerate(
+        dup, fields["status"], too_few=FitStatus.TOO_FEW_NEIGHBORS,
+        degenerate=FitStatus.DEGENERATE, min_neighbors=again["min_neighbors"])
+    return replace(res, fields={k: dup.broadcast(v) for k, v in fields.items()})
+
+
 def curvature(points, *, radius=None, sigma=None, alpha=0.05, test="calibrated", frame="pca",
               sensor=None, noise=None, min_neighbors=7, minimal_detectable=False, power=0.9,
               scales=None, block_size=131072, progress=None) -> CurvatureResult:
@@ -259,21 +270,23 @@ def curvature(points, *, radius=None, sigma=None, alpha=0.05, test="calibrated",
                       sensor=sensor)
     block_size = check_scalar(block_size, "block_size", func=func, low=1, closed="left",
                               integer=True)
-    dup = find_duplicates(pts)
-    if dup.any:  # every location once, its result to every point at it (_duplicates)
-        res = run_on_unique(dup, lambda: curvature(
-            pts[dup.first], radius=radius, sigma=sigma, alpha=alpha, test=test, frame=frame,
-            sensor=sensor, noise=noise, min_neighbors=min_neighbors,
-            minimal_detectable=minimal_detectable, power=power, scales=scales,
-            block_size=block_size, progress=progress), what=func)
-        fields = dict(res.fields)
-        fields["status"] = copies_degenerate(
-            dup, fields["status"], too_few=FitStatus.TOO_FEW_NEIGHBORS,
-            degenerate=FitStatus.DEGENERATE, min_neighbors=min_neighbors)
-        return replace(res, fields={k: dup.broadcast(v) for k, v in fields.items()})
+    again = dict(radius=radius, sigma=sigma, alpha=alpha, test=test, frame=frame,
+                 sensor=sensor, noise=noise, min_neighbors=min_neighbors,
+                 minimal_detectable=minimal_detectable, power=power, scales=scales,
+                 block_size=block_size, progress=progress)  # the call, for the unique cloud
+    index = None
+    if not automatic:
+        # the index proves distinct locations cell by cell; only a possible copy sends the
+        # cloud to the exact check (the automatic ladder measures the unique cloud first)
+        index = CellIndex(pts, radii[0])
+    if index is None or index.may_have_copies():
+        dup = find_duplicates(pts)
+        if dup.any:  # every location once, its result to every point at it (_duplicates)
+            del index
+            return _on_unique(dup, pts, again)
     if automatic:
         radii = scales if scales is not None else scale_ladder(pts)
-    index = CellIndex(pts, radii[0])
+        index = CellIndex(pts, radii[0])
     estimated = sigma is None
     if estimated:
         # at the middle rung of the automatic ladder: the 3-D sphere censors the largest

@@ -101,6 +101,16 @@ class CellIndex:
             out[self.order] = values
         return out
 
+    def may_have_copies(self) -> bool:
+        """False when no two indexed points share a location.
+
+        Equal points fall in one cell, so the cells are compared pairwise, in parallel
+        (a cell of more than a few hundred points counts as a possible copy): a proof of
+        distinct locations at a small part of the cost of :func:`find_duplicates`, which
+        a True sends the caller to.
+        """
+        return bool(_kernels.cells_may_share(self.sorted_points, self.cell_start))
+
     @property
     def n_cells(self) -> int:
         """Number of occupied cells."""
