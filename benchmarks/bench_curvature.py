@@ -280,6 +280,7 @@ PROFILE_PIECES = (
     ("lidarstat.io", "write", "write"),
     ("lidarstat.io", "rewrite", "write"),
     ("lidarstat.features._curvature", "find_duplicates", "duplicates"),
+    ("lidarstat.neighbors._query", "CellIndex.may_have_copies", "duplicates"),
     ("lidarstat.features._curvature", "CellIndex", "index"),
     ("lidarstat.features._curvature", "estimate_sigma_index", "sigma"),
     ("lidarstat.features._curvature", "_run_cells", "search_fit"),

@@ -48,6 +48,9 @@ def test_to_input_order_inverts_the_sort(rng):
                    rng.integers(-9, 9, 5000).astype(np.int32)):
         back = index.to_input_order(values[index.order])
         assert back.dtype == values.dtype and np.array_equal(back, values)
+        into = np.empty_like(values)
+        assert index.to_input_order(values[index.order], out=into) is into
+        assert np.array_equal(into, values)
 
 
 def test_knn_sorted_and_includes_self(rng):
@@ -150,3 +153,24 @@ def test_row_order_is_a_checked_permutation():
     for bad in ([0, 0, 1], [0, 1], [0, 1, 3]):
         with pytest.raises(InvalidParameterError, match="row_order"):
             Neighborhoods(ptr, np.array([1, 2, 0]), np.zeros(3), 3, row_order=bad)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_may_have_copies_proves_distinct_locations(seed):
+    from lidarstat.neighbors import CellIndex, find_duplicates
+
+    rng = np.random.default_rng(seed)
+    pts = np.round(rng.random((4000, 3)) * [8, 8, 1], 2) + [5e5, 5e6, 100]
+    pts = np.unique(pts, axis=0)
+    # neighbours one unit in the last place apart stay distinct
+    pts[1] = pts[0]
+    pts[1, 2] = np.nextafter(pts[0, 2], np.inf)
+    index = CellIndex(pts, 0.5)
+    assert not find_duplicates(pts).any and not index.may_have_copies()
+    # one copy anywhere is seen, whatever the order of the points
+    k = int(rng.integers(pts.shape[0]))
+    dup = np.vstack([pts, pts[k]])[rng.permutation(pts.shape[0] + 1)]
+    assert CellIndex(dup, 0.5).may_have_copies()
+    # a cell too large to compare pairwise counts as a possible copy
+    crowded = np.vstack([pts, rng.random((300, 3)) * 0.01 + pts[0]])
+    assert CellIndex(crowded, 0.5).may_have_copies()

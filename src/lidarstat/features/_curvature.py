@@ -14,14 +14,12 @@ from ..errors import InvalidParameterError
 from ..neighbors import CellIndex, copies_degenerate, find_duplicates, run_on_unique
 
 __all__ = ["curvature", "curvature_tests", "estimate_sigma"]
-from ..stats import chi2_test, z_critical
+from ..stats import z_critical
 from . import _curvature_kernels as _ck
 from . import _quadric_kernels as _k
 from ._curvature_result import CurvatureResult
 from ._curvature_scale import climb_into, scale_ladder, walk_ladder
-from ._hk import hk_surface_types
-from ._noise import (estimate_sigma, estimate_sigma_index, fit_variance_and_spread,
-                     resolve_noise)
+from ._noise import estimate_sigma, estimate_sigma_index, resolve_noise
 from ._quadric import FitStatus, _allocate, _run_cells, check_fit_options
 
 logger = logging.getLogger(__name__)
@@ -52,52 +50,63 @@ def curvature_tests(out, *, sigma2, alpha, test, minimal_detectable=False, sprea
     dict of per-point arrays named as in ``FIELDS``.
     """
     m = out["status"].size
-    sigma2 = kernel_array(np.broadcast_to(np.asarray(sigma2, dtype=np.float64), (m,)))
-    st = np.empty((m, _ck.NCOL))
+    given = [kernel_array(np.broadcast_to(np.asarray(v, dtype=np.float64), (m,)))
+             for v in (sigma2, 1.0 if spread is None else spread)]
+    out = {k: kernel_array(out[k], dtype) for k, dtype in (
+        ("status", np.uint8), ("npts", np.int32), ("beta", np.float64), ("cof", np.float64),
+        ("stats", np.float64), ("frames", np.float64))}  # the pipeline's array types
+    floats, flags, neighbors = _field_arrays(m, minimal_detectable)
+    _block_fields(out, _ck.NOISE_GIVEN, *given, None, None,
+                  _params(np.nan, np.nan, alpha, minimal_detectable), test,
+                  np.arange(m, dtype=np.int64), floats, flags, neighbors)
+    return _as_fields(floats, flags, neighbors)  # z0 relative: the caller adds the height
+
+
+#: ``Noise`` value -> the noise model of ``_curvature_kernels.curvature_fields``.
+_NOISE_CODES = {"z": _ck.NOISE_Z, "range": _ck.NOISE_RANGE, "normal": _ck.NOISE_NORMAL}
+_NO_POINTS = np.zeros((0, 3))
+_NO_VALUES = np.zeros(0)
+
+
+def _params(sigma, radius, alpha, minimal_detectable, origin_z=0.0):
+    zc = z_critical(alpha / 2) if minimal_detectable else np.nan  # eq. 19
+    return (float(sigma), float(radius), float(alpha), float(zc), float(origin_z))
+
+
+def _field_arrays(n, minimal_detectable, spare=False):
+    """The float64 rows, uint8 rows and neighbour counts of `n` points' fields (with
+    `spare`, one more row ahead of each matrix's)."""
+    nf = _ck.NFLOAT + (2 if minimal_detectable else 0) + spare
+    return (np.empty((nf, n)), np.empty((_ck.NBYTE + spare, n), dtype=np.uint8),
+            np.empty(n, dtype=np.int32))
+
+
+def _as_fields(floats, flags, neighbors):
+    """The fields (views of the rows) in the order of ``FIELDS``."""
+    f, b = floats, flags
+    res = {"neighbors": neighbors, "z0": f[_ck.F_Z0], "sigma0_sq": f[_ck.F_S0],
+           "chi2_pass": b[_ck.B_CHI2PASS], "K": f[_ck.F_K], "H": f[_ck.F_H],
+           "kmin": f[_ck.F_KMIN], "kmax": f[_ck.F_KMAX], "K_sig": b[_ck.B_KSIG],
+           "H_sig": b[_ck.B_HSIG], "surface_type": b[_ck.B_TYPE], "status": b[_ck.B_STATUS],
+           "dz0": f[_ck.F_DZ0], "chi2_p": f[_ck.F_CHI2P], "planar_p": f[_ck.F_PLANP],
+           "K_p": f[_ck.F_KP], "H_p": f[_ck.F_HP], "NormalX": f[_ck.F_NX],
+           "NormalY": f[_ck.F_NY], "NormalZ": f[_ck.F_NZ]}
+    if floats.shape[0] > _ck.NFLOAT:
+        res["K_min"] = f[_ck.F_KMIN_DET]
+        res["H_min"] = f[_ck.F_HMIN_DET]
+    return res
+
+
+def _block_fields(out, noise, sigma2, spread, points, sensor, params, test, dest, floats,
+                  flags, neighbors):
+    """One call of the fields kernel on a block of fits (:func:`_ck.curvature_fields`)."""
     test = Test.parse(test, "test", func="curvature_tests")
     mode = _ck.TEST_PAPER if test == Test.PAPER else _ck.TEST_CALIBRATED
-    _ck.curvature_statistics(out["status"], out["npts"], out["beta"], out["cof"], out["stats"],
-                             out["frames"], sigma2, mode, st)
-    col = {name: st[:, getattr(_ck, "C_" + name)] for name in
-           ("K", "H", "KMIN", "KMAX", "SDK", "SDH", "CHI2", "CHI2DF", "S0", "PLANP", "KP",
-            "HP")}
-    K, H = col["K"], col["H"]
-    fitted = out["status"] == _k.OK
-    # v'Wv against its (Satterthwaite) chi-square; the kernel writes the statistic per point
-    rho = 1.0 if spread is None else np.asarray(spread, dtype=np.float64)
-    chi2_p = chi2_test(col["CHI2"] / rho,
-                       np.where(col["CHI2DF"] > 0, col["CHI2DF"] / rho, np.nan),
-                       alpha=alpha).pvalue
-    planar_p, K_p, H_p = col["PLANP"], col["KP"], col["HP"]
-    half = alpha / 2
-    chi2_pass = fitted & np.isfinite(chi2_p) & ~(chi2_p < alpha)
-    planar = ~(planar_p < alpha)
-    K_sig = K_p < half
-    H_sig = H_p < half
-    status = out["status"].copy()
-    status[fitted & ~chi2_pass] = FitStatus.MODEL_REJECTED
-    surface_type = hk_surface_types(K, H, tested=chi2_pass, planar=planar, K_sig=K_sig,
-                                    H_sig=H_sig)
-    frames, beta = out["frames"], out["beta"]
-    res = {
-        "neighbors": out["npts"],
-        "z0": beta[:, 0] * frames[:, 2, 2],  # z offset of the fitted point; caller adds z
-        "sigma0_sq": col["S0"],
-        "chi2_pass": chi2_pass.astype(np.uint8),
-        "K": K, "H": H, "kmin": col["KMIN"], "kmax": col["KMAX"],
-        "K_sig": (chi2_pass & K_sig).astype(np.uint8),
-        "H_sig": (chi2_pass & H_sig).astype(np.uint8),
-        "surface_type": surface_type,
-        "status": status,
-        "dz0": beta[:, 0],
-        "chi2_p": chi2_p, "planar_p": planar_p, "K_p": K_p, "H_p": H_p,
-        "NormalX": st[:, _ck.C_NX], "NormalY": st[:, _ck.C_NY], "NormalZ": st[:, _ck.C_NZ],
-    }
-    if minimal_detectable:
-        zc = z_critical(alpha / 2)  # two-sided at alpha/2 (Bonferroni), eq. 19
-        res["K_min"] = zc * col["SDK"]
-        res["H_min"] = zc * col["SDH"]
-    return res
+    _ck.curvature_fields(out["status"], out["npts"], out["beta"], out["cof"], out["stats"],
+                         out["frames"], _NO_POINTS if points is None else points,
+                         np.zeros(3) if sensor is None else sensor, noise, sigma2, spread,
+                         params, mode, dest, floats, flags, neighbors)
+
 
 def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neighbors,
                    minimal_detectable, block_size, progress=None, active=None, into=None):
@@ -107,47 +116,61 @@ def _single_radius(index, *, sigma, noise, alpha, test, frame, sensor, min_neigh
     other rows are NaN / unclassified. With `into`, each block's fields go to
     `into(rows, block_fields)` (`rows`: the block's input positions) and nothing is kept
     or returned: a rung of a ladder writes into the chosen fields without a second set of
-    fields for the whole cloud.
+    fields for the whole cloud. Otherwise each block's fields are written by the fields
+    kernel straight into their input positions.
     """
     radius = index.radius
     active_sorted = None if active is None else active[index.order].astype(np.uint8)
     sensor_local = None if sensor is None else np.asarray(sensor, float) - index.origin
     n = index.n_points
-    fields = None
     done = 0
     covariance = "paper" if test == Test.PAPER else "sandwich"
     blocks = index.cell_blocks(block_size)
     # one set of kernel outputs for every block: each block's fields are copied out of it
     largest = max(int(index.cell_start[c1] - index.cell_start[c0]) for c0, c1 in blocks)
     buffers = _allocate(largest)
+    params = _params(sigma, radius, alpha, minimal_detectable, index.origin[2])
+    code = _NOISE_CODES[str(noise)]
+    if into is None:  # the fields in sorted order, a spare row ahead of each matrix
+        floats, flags, neighbors = _field_arrays(n, minimal_detectable, spare=True)
+        arrays = (floats[1:], flags[1:], neighbors)
+        positions = np.arange(n, dtype=np.int64)
     for c0, c1 in blocks:
         s0, s1 = index.cell_start[c0], index.cell_start[c1]
         out = _run_cells(index, c0, c1, bandwidth=radius, frame=frame, sensor=sensor_local,
                          min_neighbors=min_neighbors, covariance=covariance,
                          active=active_sorted, buffers=buffers)
-        sigma2, spread = fit_variance_and_spread(
-            out["beta"], out["frames"], sigma, noise=noise, radius=radius,
-            points=index.sorted_points[s0:s1], sensor=sensor_local)
-        res = curvature_tests(out, sigma2=sigma2, alpha=alpha, test=test,
-                              minimal_detectable=minimal_detectable, spread=spread)
-        res["z0"] = res["z0"] + index.sorted_points[s0:s1, 2] + index.origin[2]
-        if into is not None:
-            into(index.order[s0:s1], res)  # the block's input positions
-            done += s1 - s0
-            if progress is not None:
-                progress(done, n)
-            continue
-        if fields is None:
-            fields = {k: np.empty(n, dtype=v.dtype) for k, v in res.items()}
-        for k, v in res.items():  # sorted order: contiguous slices
-            fields[k][s0:s1] = v
+        if into is None:
+            _block_fields(out, code, _NO_VALUES, _NO_VALUES, index.sorted_points[s0:s1],
+                          sensor_local, params, test, positions[s0:s1], *arrays)
+        else:
+            block = _field_arrays(s1 - s0, minimal_detectable)  # the block's own rows
+            _block_fields(out, code, _NO_VALUES, _NO_VALUES, index.sorted_points[s0:s1],
+                          sensor_local, params, test, np.arange(s1 - s0, dtype=np.int64),
+                          *block)
+            into(index.order[s0:s1], _as_fields(*block))
         done += s1 - s0
         if progress is not None:
             progress(done, n)
-    if fields is not None:
-        for k in list(fields):  # one permutation per field, each replaced as it is done
-            fields[k] = index.to_input_order(fields[k])
-    return fields
+    if into is not None:
+        return None
+    # to input order, one field at a time: row k + 1 scattered into row k (one stream of
+    # writes into one field's pages at a time, no second set of fields)
+    for rows in (floats, flags):
+        for k in range(rows.shape[0] - 1):
+            index.to_input_order(rows[k + 1], out=rows[k])
+    return _as_fields(floats[:-1], flags[:-1], index.to_input_order(neighbors))
+
+
+def _on_unique(dup, pts, again):
+    """:func:`curvature` (arguments `again`) of the unique cloud, each location's result
+    to its points."""
+    res = run_on_unique(dup, lambda: curvature(pts[dup.first], **again), what="curvature")
+    fields = dict(res.fields)
+    fields["status"] = copies_degenerate(
+        dup, fields["status"], too_few=FitStatus.TOO_FEW_NEIGHBORS,
+        degenerate=FitStatus.DEGENERATE, min_neighbors=again["min_neighbors"])
+    return replace(res, fields={k: dup.broadcast(v) for k, v in fields.items()})
 
 
 def curvature(points, *, radius=None, sigma=None, alpha=0.05, test="calibrated", frame="pca",
@@ -247,21 +270,23 @@ def curvature(points, *, radius=None, sigma=None, alpha=0.05, test="calibrated",
                       sensor=sensor)
     block_size = check_scalar(block_size, "block_size", func=func, low=1, closed="left",
                               integer=True)
-    dup = find_duplicates(pts)
-    if dup.any:  # every location once, its result to every point at it (_duplicates)
-        res = run_on_unique(dup, lambda: curvature(
-            pts[dup.first], radius=radius, sigma=sigma, alpha=alpha, test=test, frame=frame,
-            sensor=sensor, noise=noise, min_neighbors=min_neighbors,
-            minimal_detectable=minimal_detectable, power=power, scales=scales,
-            block_size=block_size, progress=progress), what=func)
-        fields = dict(res.fields)
-        fields["status"] = copies_degenerate(
-            dup, fields["status"], too_few=FitStatus.TOO_FEW_NEIGHBORS,
-            degenerate=FitStatus.DEGENERATE, min_neighbors=min_neighbors)
-        return replace(res, fields={k: dup.broadcast(v) for k, v in fields.items()})
+    again = dict(radius=radius, sigma=sigma, alpha=alpha, test=test, frame=frame,
+                 sensor=sensor, noise=noise, min_neighbors=min_neighbors,
+                 minimal_detectable=minimal_detectable, power=power, scales=scales,
+                 block_size=block_size, progress=progress)  # the call, for the unique cloud
+    index = None
+    if not automatic:
+        # the index proves distinct locations cell by cell; only a possible copy sends the
+        # cloud to the exact check (the automatic ladder measures the unique cloud first)
+        index = CellIndex(pts, radii[0])
+    if index is None or index.may_have_copies():
+        dup = find_duplicates(pts)
+        if dup.any:  # every location once, its result to every point at it (_duplicates)
+            del index
+            return _on_unique(dup, pts, again)
     if automatic:
         radii = scales if scales is not None else scale_ladder(pts)
-    index = CellIndex(pts, radii[0])
+        index = CellIndex(pts, radii[0])
     estimated = sigma is None
     if estimated:
         # at the middle rung of the automatic ladder: the 3-D sphere censors the largest

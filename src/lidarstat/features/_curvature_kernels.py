@@ -1,8 +1,11 @@
-"""Numba kernel of the per-point curvature statistics (K, H, their variances, test statistics).
+"""Numba kernel of the per-point curvature fields: noise model, statistics, tests, types.
 
 Mirrors the vectorised reference formulas in ``_curvature_formulas.py`` (tested equal) so
 the 2 x 5 Jacobian products, the 3 x 3 Wald solve and the 2 x 2 pseudo-inverse of the
-paper's F test run without per-point temporaries. p-values are left to SciPy's ufuncs.
+paper's F test run without per-point temporaries; the height variance of each fit
+(``_noise.fit_variance_and_spread``), the Satterthwaite chi-square's tail, the decisions
+and the HK type (``_hk.hk_surface_types``) follow in the same loop, and every field is
+written straight into its output row (a block's points to their input positions).
 """
 
 from __future__ import annotations
@@ -13,6 +16,11 @@ import numpy as np
 from numba import prange
 
 from .._shared._jit import njit, njit_parallel
+from ..stats import chi2_sf_scalar
+from ._noise import FACTOR_FLOOR as _FACTOR_FLOOR
+from ._noise import TRICUBE2_M2 as _TRICUBE2_M2
+from ._noise import TRICUBE2_M4 as _TRICUBE2_M4
+from ._noise import TRICUBE_M2 as _TRICUBE_M2
 
 TEST_PAPER = 0
 TEST_CALIBRATED = 1
@@ -24,7 +32,21 @@ NCOL = 19
 
 _SQRT2 = math.sqrt(2.0)
 _SQRT_2_OVER_PI = math.sqrt(2.0 / math.pi)
-_CHUNK = 256  # points per parallel task of curvature_statistics
+_CHUNK = 256  # points per parallel task of curvature_fields
+
+# noise models of curvature_fields: the direction of sigma (``_noise``), or the height
+# variance and the spread given per point
+NOISE_Z = 0
+NOISE_RANGE = 1
+NOISE_NORMAL = 2
+NOISE_GIVEN = 3
+
+# rows of the float64 and uint8 output matrices of curvature_fields
+(F_Z0, F_S0, F_K, F_H, F_KMIN, F_KMAX, F_DZ0, F_CHI2P, F_PLANP, F_KP, F_HP, F_NX, F_NY,
+ F_NZ, F_KMIN_DET, F_HMIN_DET) = range(16)
+NFLOAT = 14  # without the minimal detectable curvatures
+(B_CHI2PASS, B_KSIG, B_HSIG, B_TYPE, B_STATUS) = range(5)
+NBYTE = 5
 
 
 @njit
@@ -62,21 +84,147 @@ def _quad(J, cof, s2, i, r1, r2):
 
 
 @njit_parallel
-def curvature_statistics(status, npts, beta, cof, stats, frames, sigma2, mode, out):
-    """Fill `out` (M, NCOL) with curvature, standard deviations and test statistics."""
+def curvature_fields(status, npts, beta, cof, stats, frames, points, sensor, noise,
+                     sigma2_given, spread_given, params, mode, dest, floats, flags, neighbors):
+    """The curvature fields of a block of fits, point ``i`` into column ``dest[i]``.
+
+    `params` is ``(sigma, radius, alpha, z_critical(alpha / 2), origin_z)``. `noise`
+    (``NOISE_*``) gives each fit's height variance ``sigma^2 f`` and spread ``rho``
+    (``_noise.fit_variance_and_spread``; `points`, the block's local coordinates, and
+    `sensor` for the range; ``NOISE_GIVEN`` reads them from `sigma2_given`,
+    `spread_given`). With `points` (not empty) z0 is the fitted height in file
+    coordinates, else relative to the point. `floats` (at least NFLOAT rows) and `flags`
+    (NBYTE rows) are the fields' rows (``F_*``, ``B_*``), `neighbors` the counts.
+    """
     m = status.size
     nchunks = (m + _CHUNK - 1) // _CHUNK
     for ch in prange(nchunks):
-        J = np.empty((4, 5))  # Jacobian rows of K, H, kmin, kmax (one per chunk of points)
+        J = np.empty((4, 5))
+        row = np.empty(NCOL)
         for i in range(ch * _CHUNK, min(m, (ch + 1) * _CHUNK)):
-            _statistics_one(i, status, npts, beta, cof, stats, frames, sigma2, mode, J, out)
+            if noise == NOISE_GIVEN:
+                s2i = sigma2_given[i]
+                rho = spread_given[i]
+            else:
+                s2i, rho = _height_variance(i, beta, frames, points, sensor, noise, params)
+            _statistics_one(i, status, npts, beta, cof, stats, frames, s2i, mode, J, row)
+            _write_fields(i, status, npts, beta, frames, points, row, rho, params, dest[i],
+                          floats, flags, neighbors)
 
 
 @njit
-def _statistics_one(i, status, npts, beta, cof, stats, frames, sigma2, mode, J, out):
-    """Row i of :func:`curvature_statistics`; `J` (4, 5) is scratch."""
+def _height_variance(i, beta, frames, points, sensor, noise, params):
+    """``(sigma^2 f, rho)`` of fit i: ``_noise._factor_from_terms`` and
+    ``_noise._spread_from_terms`` of its ``_noise._factor_terms``."""
+    sigma = params[0]
+    m2 = _TRICUBE_M2 * (params[1] * params[1])
+    a1 = beta[i, 1]
+    a2 = beta[i, 2]
+    a3 = beta[i, 3]
+    a4 = beta[i, 4]
+    a5 = beta[i, 5]
+    rho = 1.0
+    if noise == NOISE_NORMAL:
+        f = 1.0 + (a1 * a1 + a2 * a2) + m2 * (a3 * a3 + 2.0 * a4 * a4 + a5 * a5)
+    else:
+        d0 = 0.0
+        d1 = 0.0
+        d2 = 1.0
+        if noise == NOISE_RANGE:
+            d0 = points[i, 0] - sensor[0]
+            d1 = points[i, 1] - sensor[1]
+            d2 = points[i, 2] - sensor[2]
+            nrm = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if nrm > 0:
+                d0 /= nrm
+                d1 /= nrm
+                d2 /= nrm
+        t0 = frames[i, 0, 0] * d0 + frames[i, 0, 1] * d1 + frames[i, 0, 2] * d2
+        t1 = frames[i, 1, 0] * d0 + frames[i, 1, 1] * d1 + frames[i, 1, 2] * d2
+        te = frames[i, 2, 0] * d0 + frames[i, 2, 1] * d1 + frames[i, 2, 2] * d2
+        a = te - (a1 * t0 + a2 * t1)
+        gd0 = a3 * t0 + a4 * t1
+        gd1 = a4 * t0 + a5 * t1
+        g2 = gd0 * gd0 + gd1 * gd1
+        f = a * a + m2 * g2
+        b2 = params[1] * params[1]
+        aa = a * a
+        mean = aa + _TRICUBE_M2 * b2 * g2
+        fourth = (aa * aa + 6.0 * aa * g2 * _TRICUBE2_M2 * b2
+                  + g2 * g2 * _TRICUBE2_M4 * b2 * b2)
+        rho = fourth / (mean * mean) if mean != 0.0 else np.nan
+        if not np.isfinite(rho):
+            rho = 1.0
+        rho = max(rho, 1.0)
+    if not np.isfinite(f):
+        f = 1.0
+    return sigma * sigma * max(f, _FACTOR_FLOOR), rho
+
+
+@njit
+def _write_fields(i, status, npts, beta, frames, points, row, rho, params, j, floats, flags,
+                  neighbors):
+    """Fit i's fields from its statistics `row` into column j (``curvature_tests``)."""
+    alpha = params[2]
+    fitted = status[i] == 0
+    # v'Wv against its Satterthwaite chi-square, scale and degrees of freedom by the spread
+    df = row[C_CHI2DF] / rho if row[C_CHI2DF] > 0 else np.nan
+    chi2_p = chi2_sf_scalar(row[C_CHI2] / rho, df)
+    chi2_pass = fitted and chi2_p == chi2_p and not chi2_p < alpha
+    planar = not row[C_PLANP] < alpha
+    K_sig = row[C_KP] < 0.5 * alpha
+    H_sig = row[C_HP] < 0.5 * alpha
+    K = row[C_K]
+    H = row[C_H]
+    kind = 0  # hk_surface_types
+    if chi2_pass:
+        if planar or not (K_sig or H_sig):
+            kind = 1
+        elif not K_sig:
+            kind = 2 if H < 0 else (3 if H > 0 else 0)
+        elif K > 0:
+            kind = 4 if H < 0 else 5
+        elif K < 0:
+            if not H_sig:
+                kind = 8
+            elif H < 0:
+                kind = 6
+            elif H > 0:
+                kind = 7
+    z0 = beta[i, 0] * frames[i, 2, 2]
+    if points.shape[0] > 0:
+        z0 = (z0 + points[i, 2]) + params[4]
+    neighbors[j] = npts[i]
+    floats[F_Z0, j] = z0
+    floats[F_S0, j] = row[C_S0]
+    floats[F_K, j] = K
+    floats[F_H, j] = H
+    floats[F_KMIN, j] = row[C_KMIN]
+    floats[F_KMAX, j] = row[C_KMAX]
+    floats[F_DZ0, j] = beta[i, 0]
+    floats[F_CHI2P, j] = chi2_p
+    floats[F_PLANP, j] = row[C_PLANP]
+    floats[F_KP, j] = row[C_KP]
+    floats[F_HP, j] = row[C_HP]
+    floats[F_NX, j] = row[C_NX]
+    floats[F_NY, j] = row[C_NY]
+    floats[F_NZ, j] = row[C_NZ]
+    if floats.shape[0] > NFLOAT:  # eq. 19, two-sided at alpha/2 (Bonferroni)
+        floats[F_KMIN_DET, j] = params[3] * row[C_SDK]
+        floats[F_HMIN_DET, j] = params[3] * row[C_SDH]
+    flags[B_CHI2PASS, j] = chi2_pass
+    flags[B_KSIG, j] = chi2_pass and K_sig
+    flags[B_HSIG, j] = chi2_pass and H_sig
+    flags[B_TYPE, j] = kind
+    flags[B_STATUS, j] = 3 if fitted and not chi2_pass else status[i]
+
+
+@njit
+def _statistics_one(i, status, npts, beta, cof, stats, frames, s2i, mode, J, row):
+    """Point i of :func:`curvature_statistics` into `row` (NCOL,), at height variance
+    `s2i`; `J` (4, 5) is scratch."""
     for c in range(NCOL):
-        out[i, c] = np.nan
+        row[c] = np.nan
     if status[i] != 0:
         return
     a1 = beta[i, 1]
@@ -95,10 +243,10 @@ def _statistics_one(i, status, npts, beta, cof, stats, frames, sigma2, mode, J, 
     K = det / g2
     H = num / g15
     disc = np.sqrt(max(H * H - K, 0.0))
-    out[i, C_K] = K
-    out[i, C_H] = H
-    out[i, C_KMIN] = H - disc
-    out[i, C_KMAX] = H + disc
+    row[C_K] = K
+    row[C_H] = H
+    row[C_KMIN] = H - disc
+    row[C_KMAX] = H + disc
     J[0, 0] = -4.0 * a1 * det / g3
     J[0, 1] = -4.0 * a2 * det / g3
     J[0, 2] = a5 / g2
@@ -118,8 +266,8 @@ def _statistics_one(i, status, npts, beta, cof, stats, frames, sigma2, mode, J, 
     if mode == TEST_PAPER:
         s0 = q / (p - 6.0)
         s2 = s0
-        out[i, C_CHI2] = q / sigma2[i]
-        out[i, C_CHI2DF] = p - 6.0
+        row[C_CHI2] = q / s2i
+        row[C_CHI2DF] = p - 6.0
         # eq. 17: w' Q^-1 w / r with a 2x2 pseudo-inverse, r its rank
         qkk = _quad(J, cof, 1.0, i, 0, 0)
         qkh = _quad(J, cof, 1.0, i, 0, 1)
@@ -148,16 +296,16 @@ def _statistics_one(i, status, npts, beta, cof, stats, frames, sigma2, mode, J, 
                 stat += proj * proj / lam
                 rank += 1
         if rank > 0 and s0 > 0:
-            out[i, C_PLAN] = stat / (rank * s0)
-            out[i, C_PLANDF] = rank
+            row[C_PLAN] = stat / (rank * s0)
+            row[C_PLANDF] = rank
     else:
         trb = stats[i, 2]
         trb2 = stats[i, 3]
         s0 = q / trb
-        s2 = sigma2[i]
+        s2 = s2i
         c = trb2 / trb
-        out[i, C_CHI2] = q / (c * s2)
-        out[i, C_CHI2DF] = trb * trb / trb2
+        row[C_CHI2] = q / (c * s2)
+        row[C_CHI2DF] = trb * trb / trb2
         # Wald test of a3 = a4 = a5 = 0 with covariance s2 * cof[3:, 3:]
         m00 = cof[i, 3, 3]
         m01 = cof[i, 3, 4]
@@ -175,33 +323,33 @@ def _statistics_one(i, status, npts, beta, cof, stats, frames, sigma2, mode, J, 
             c22 = m00 * m11 - m01 * m01
             w = (a3 * a3 * c00 + a4 * a4 * c11 + a5 * a5 * c22
                  + 2.0 * (a3 * a4 * c01 + a3 * a5 * c02 + a4 * a5 * c12))
-            out[i, C_PLAN] = w / (dt * s2)
-            out[i, C_PLANDF] = 3.0
-    out[i, C_S0] = s0
-    out[i, C_SDK] = np.sqrt(max(_quad(J, cof, s2, i, 0, 0), 0.0))
-    out[i, C_SDH] = np.sqrt(max(_quad(J, cof, s2, i, 1, 1), 0.0))
+            row[C_PLAN] = w / (dt * s2)
+            row[C_PLANDF] = 3.0
+    row[C_S0] = s0
+    row[C_SDK] = np.sqrt(max(_quad(J, cof, s2, i, 0, 0), 0.0))
+    row[C_SDH] = np.sqrt(max(_quad(J, cof, s2, i, 1, 1), 0.0))
     if disc > 0:
-        out[i, C_SDKMIN] = np.sqrt(max(_quad(J, cof, s2, i, 2, 2), 0.0))
-        out[i, C_SDKMAX] = np.sqrt(max(_quad(J, cof, s2, i, 3, 3), 0.0))
+        row[C_SDKMIN] = np.sqrt(max(_quad(J, cof, s2, i, 2, 2), 0.0))
+        row[C_SDKMAX] = np.sqrt(max(_quad(J, cof, s2, i, 3, 3), 0.0))
     # p-values with closed forms (the Satterthwaite chi-square is left to SciPy)
-    out[i, C_PLANP] = chi2_sf_small_df(out[i, C_PLAN] * (out[i, C_PLANDF] if mode == TEST_PAPER
-                                                         else 1.0), out[i, C_PLANDF])
-    out[i, C_HP] = normal_two_sided(H, out[i, C_SDH])
+    row[C_PLANP] = chi2_sf_small_df(row[C_PLAN] * (row[C_PLANDF] if mode == TEST_PAPER
+                                                   else 1.0), row[C_PLANDF])
+    row[C_HP] = normal_two_sided(H, row[C_SDH])
     if mode == TEST_PAPER:
-        out[i, C_KP] = normal_two_sided(K, out[i, C_SDK])
+        row[C_KP] = normal_two_sided(K, row[C_SDK])
     else:
         # K = kmin kmax differs from 0 iff both principal curvatures do
         # (intersection-union test: each at alpha/2 gives a level-alpha/2 test of K = 0)
-        p_min = normal_two_sided(H - disc, out[i, C_SDKMIN])
-        p_max = normal_two_sided(H + disc, out[i, C_SDKMAX])
+        p_min = normal_two_sided(H - disc, row[C_SDKMIN])
+        p_max = normal_two_sided(H + disc, row[C_SDKMAX])
         if p_min != p_min:  # undefined (umbilic): the other decides, as np.fmax
-            out[i, C_KP] = p_max
+            row[C_KP] = p_max
         elif p_max != p_max:
-            out[i, C_KP] = p_min
+            row[C_KP] = p_min
         else:
-            out[i, C_KP] = max(p_min, p_max)
+            row[C_KP] = max(p_min, p_max)
     nx = -a1
     ny = -a2
     nn = np.sqrt(a1 * a1 + a2 * a2 + 1.0)
     for k in range(3):
-        out[i, C_NX + k] = (frames[i, 0, k] * nx + frames[i, 1, k] * ny + frames[i, 2, k]) / nn
+        row[C_NX + k] = (frames[i, 0, k] * nx + frames[i, 1, k] * ny + frames[i, 2, k]) / nn

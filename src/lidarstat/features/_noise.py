@@ -22,7 +22,7 @@ import numpy as np
 
 from .._shared._choices import Noise
 from ..errors import InsufficientNeighborsError, InvalidParameterError
-from ..stats import chi2_quantile
+from ..stats import chi2_isf_many
 
 __all__ = [
     "FACTOR_FLOOR",
@@ -319,7 +319,9 @@ def sigma_from_fits(q, trace_b, trace_b2, factor):
     if strong.sum() >= max(10, 0.05 * ok.sum()):
         ok = strong
     nu = tb[ok] ** 2 / tb2[ok]
-    s2 = q[ok] / (tb[ok] * f[ok] * (chi2_quantile(0.5, nu) / nu))
+    median = np.empty_like(nu)
+    chi2_isf_many(0.5, nu, median)  # the chi2(nu) medians, in a kernel: no SciPy import
+    s2 = q[ok] / (tb[ok] * f[ok] * (median / nu))
     return float(np.sqrt(np.median(s2)))
 
 

@@ -309,6 +309,38 @@ def radix_order(keys, nbits):
 _NEG_ZERO = np.uint64(0x8000000000000000)
 
 
+#: Largest cell whose points :func:`cells_may_share` compares pairwise.
+PAIRWISE_CELL = 256
+
+
+@njit_parallel
+def cells_may_share(pts, cell_start):
+    """Cells (of a :class:`CellIndex`, sorted local coordinates `pts`) in which two points
+    may share a location: pairs of equal coordinates, or more than `PAIRWISE_CELL` points
+    (not compared). 0 proves the cloud has no copies: equal locations fall in one cell
+    and stay equal once the index's origin is subtracted."""
+    found = 0
+    for c in prange(cell_start.size - 1):
+        s = cell_start[c]
+        e = cell_start[c + 1]
+        hit = 0
+        if e - s > PAIRWISE_CELL:
+            hit = 1
+        else:
+            for i in range(s, e - 1):
+                x = pts[i, 0]
+                y = pts[i, 1]
+                z = pts[i, 2]
+                for j in range(i + 1, e):
+                    if pts[j, 0] == x and pts[j, 1] == y and pts[j, 2] == z:
+                        hit = 1
+                        break
+                if hit:
+                    break
+        found += hit
+    return found
+
+
 @njit
 def column_hash(bx, by, bz, out):
     """64-bit hash of the bits of every location ``(bx[i], by[i], bz[i])`` (the float64

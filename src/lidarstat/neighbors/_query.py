@@ -87,17 +87,29 @@ class CellIndex:
             self.cell_keys = np.ascontiguousarray(skeys[starts[:-1]])
             self.cell_start = starts
 
-    def to_input_order(self, values):
+    def to_input_order(self, values, out=None):
         """Per-point `values` (N,) in the sorted order of the index, in input order (a
         scatter through :attr:`order`: parallel for float64, the bulk of a result's fields;
-        NumPy for the few integer fields, so the kernel has one signature)."""
+        NumPy for the few integer fields, so the kernel has one signature). `out` (N,) of
+        the same dtype, not overlapping `values`, receives them if given."""
         values = np.ascontiguousarray(values)
-        out = np.empty_like(values)
+        if out is None:
+            out = np.empty_like(values)
         if values.dtype == np.float64:
             _kernels.scatter_to(values, self.order, out)
         else:
             out[self.order] = values
         return out
+
+    def may_have_copies(self) -> bool:
+        """False when no two indexed points share a location.
+
+        Equal points fall in one cell, so the cells are compared pairwise, in parallel
+        (a cell of more than a few hundred points counts as a possible copy): a proof of
+        distinct locations at a small part of the cost of :func:`find_duplicates`, which
+        a True sends the caller to.
+        """
+        return bool(_kernels.cells_may_share(self.sorted_points, self.cell_start))
 
     @property
     def n_cells(self) -> int:

@@ -5,14 +5,27 @@ These are the functions ``scipy.stats.norm`` and ``scipy.stats.chi2`` evaluate (
 distributions' domains (NaN for a degree of freedom that is not positive or a probability
 outside [0, 1], the tail probability 1 below the support), without importing
 ``scipy.stats``: the commands that only need these start in a fraction of the time.
+``scipy.special`` itself is imported at the first call, so a command whose tests run in
+kernels (``lidarstat curvature`` at a fixed radius) does not load it.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy import special as _sc
 
 __all__ = ["chi2_isf", "chi2_ppf", "chi2_sf", "norm_isf", "norm_ppf", "norm_sf"]
+
+
+class _Special:
+    """``scipy.special``, imported at the first attribute read."""
+
+    def __getattr__(self, name):
+        from scipy import special
+
+        return getattr(special, name)
+
+
+_sc = _Special()
 
 
 def _out(v):
