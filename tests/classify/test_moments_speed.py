@@ -381,7 +381,7 @@ def test_noise_fence_equals_the_sorted_key_reference(seed):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_raised_patch_copy_check_finds_every_copy(seed):
-    from lidarstat.classify._continuity import _may_repeat
+    from lidarstat.classify._continuity import _cell_copies, _Grid2D
     from lidarstat.neighbors import find_duplicates
 
     g = np.random.default_rng(seed)
@@ -392,7 +392,10 @@ def test_raised_patch_copy_check_finds_every_copy(seed):
     if seed == 2:  # -0.0 and 0.0 are one location
         xy[0], xy[1], z[1] = (-0.0, 5.0), (0.0, 5.0), z[0]
     ref = find_duplicates(np.c_[xy, z]).any
-    assert _may_repeat(xy, z) == ref
+    rank = g.permutation(n)  # any order of the points inside a cell
+    for cell in (0.7, 3.0):
+        grid = _Grid2D(xy, cell, xy.min(axis=0), rank)
+        assert _cell_copies(xy, z[grid.pos], grid.pos, grid.cell_start) == ref
 
 
 @pytest.mark.parametrize("seed", range(4))
