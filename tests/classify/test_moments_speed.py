@@ -410,3 +410,25 @@ def test_cluster_bound_from_sorted_heights_equals_numpy_medians(seed):
         med = np.median(v)
         ref = float(med + 3.0 * 1.4826 * np.median(np.abs(v - med))) if n >= 8 else -np.inf
         assert _cluster_bound(np.sort(v), 3.0) == ref
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_without_evidence_every_field_cut_and_deciding_test_is_the_same(seed):
+    # evidence=False (the CLI without a report) leaves out the densities and the dip
+    # test of each window's heights before its cut, which the report alone reads
+    xyz, inten, nret, rnum, _ = _scene(np.random.default_rng(seed), 16000)
+    kw = dict(number_of_returns=nret, return_number=rnum, window=50.0, min_window=12.5)
+    a = moments(xyz, inten, **kw)
+    b = moments(xyz, inten, evidence=False, **kw)
+    for name, v in a.to_fields().items():
+        assert np.array_equal(v, b.to_fields()[name], equal_nan=True), name
+    assert a.windows == b.windows and a.params == b.params
+    assert [s.choice.threshold for s in a.steps] == [s.choice.threshold for s in b.steps]
+    assert all(s.density is not None for s in a.steps)
+    # the road step's density decides its cut (the antimode): kept
+    assert all((s.density is None) != (s.window == -1) for s in b.steps)
+    window_dips = [s.dip for s in a.steps if s.population.startswith("heights")]
+    assert window_dips and all(window_dips)
+    assert not any(s.dip for s in b.steps if s.population.startswith("heights"))
+    assert ([s.dip for s in a.steps if not s.population.startswith("heights")]
+            == [s.dip for s in b.steps if not s.population.startswith("heights")])
