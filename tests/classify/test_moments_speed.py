@@ -432,3 +432,44 @@ def test_without_evidence_every_field_cut_and_deciding_test_is_the_same(seed):
     assert not any(s.dip for s in b.steps if s.population.startswith("heights"))
     assert ([s.dip for s in a.steps if not s.population.startswith("heights")]
             == [s.dip for s in b.steps if not s.population.startswith("heights")])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_block_spread_equals_numpy_medians_of_each_block(seed):
+    # np.median and the median of the absolute deviations of each block: odd and even
+    # counts, ties, borders, blocks widened to several cells' radius where the cells
+    # are sparse
+    from lidarstat.classify._terrain_kernels import block_spread
+
+    g = np.random.default_rng(seed)
+    nx, ny, min_points, max_radius = 23, 17, 40, 4
+    n = 3000
+    ij = np.c_[g.integers(0, nx, n), g.integers(0, ny, n)]
+    dense = ij[:, 0] < nx // 2  # about 15 values a cell on one side, sparse on the other
+    keep = dense | (g.uniform(size=n) < 0.15)
+    ij = ij[keep]
+    v = np.round(g.standard_t(3, ij.shape[0]), 2 if seed % 2 else 6)
+    key = ij[:, 0] * ny + ij[:, 1]
+    order = np.argsort(key, kind="stable")
+    values = v[order]
+    offsets = np.r_[0, np.cumsum(np.bincount(key, minlength=nx * ny))]
+    cells = np.arange(nx * ny)
+    centre, spread = np.full(nx * ny, -1.0), np.full(nx * ny, -1.0)
+    block_spread(offsets, values, nx, ny, cells, min_points, max_radius, centre, spread)
+    grid = [[v[key == a * ny + b] for b in range(ny)] for a in range(nx)]
+    widened = 0
+    for c in cells:
+        i, j = divmod(int(c), ny)
+        for w in range(1, max_radius + 1):
+            blk = np.concatenate([grid[a][b] for a in range(max(0, i - w), min(nx, i + w + 1))
+                                  for b in range(max(0, j - w), min(ny, j + w + 1))])
+            if blk.size >= min_points:
+                break
+        widened += w > 1
+        if blk.size < 3:
+            assert np.isnan(centre[c]) and np.isnan(spread[c])
+            continue
+        m = np.median(blk)
+        assert centre[c] == m
+        assert spread[c] == 1.4826 * np.median(np.abs(blk - m))
+    assert widened > 50
