@@ -25,11 +25,19 @@ classification of the file pays, each timed alone in one process on a warm Numba
   root window, one sort of the heights and the one-pass updates of the central sums
   (``stats._moments._sequential_stats``); ``moments`` runs five such passes (and the
   splits, cut searches and dip tests around them);
-* ``csf_filter``: CSF's own filtering (cloth 1 m, slope smoothing) of the coordinates.
+* ``csf_filter``: CSF's own filtering (cloth 1 m, slope smoothing) of the coordinates;
+* the hardware's unit costs at N values: ``one_sort`` (``np.sort`` of N float64 in
+  random order), ``one_pass`` (one compiled pass over N float64 values: the sum and the
+  sum of squares), ``one_gather`` (``np.take`` of N float64 by a random permutation: one
+  reordering of a column).
 
-Writes ``results_moments_floor.json``::
+Writes ``results_moments_floor.json`` (``--label``: the run under ``runs``, the file's
+other contents kept; ``--parts`` a subset)::
 
     python benchmarks/moments_floor.py --points 2000000 --out benchmarks/results_moments_floor.json
+    python benchmarks/moments_floor.py --points 10000000 --label hardware_10m \
+        --parts one_sort one_pass one_gather sort_x knn8_grid moment_updates \
+        --out benchmarks/results_moments_floor.json
 """
 
 from __future__ import annotations
@@ -125,12 +133,31 @@ def moment_updates(xy, h, window=64.0):
         _sequential_stats(xs, y, c, 1.0, m, mean, std, sk, ku, thr)
 
 
+def one_pass(x):
+    """One compiled pass over `x`: its sum and sum of squares."""
+    from numba import njit
+
+    @njit(cache=False)
+    def _pass(v):  # pragma: no cover - compiled
+        s = 0.0
+        q = 0.0
+        for i in range(v.size):
+            s += v[i]
+            q += v[i] * v[i]
+        return s, q
+
+    _pass(x[:10])
+    return lambda: _pass(x)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", type=int, default=2_000_000)
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--work", default=None, help="folder of the clouds (default: a temp dir)")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--label", default=None, help="store the run under runs[LABEL]")
+    ap.add_argument("--parts", nargs="+", default=None, help="only these parts")
     args = ap.parse_args(argv)
     import warnings
 
@@ -150,24 +177,30 @@ def main(argv=None):
     n, r = args.points, args.repeats
     rows = {}
 
+    def want(*names):
+        return args.parts is None or any(p in args.parts for p in names)
+
     # start-up, fresh processes
-    rows["start_python"] = process_cpu("pass", r)
-    rows["start_numpy_laspy"] = process_cpu("import numpy, laspy", r)
-    rows["start_csf"] = process_cpu("import numpy, laspy, CSF", r)
-    rows["start_lidarstat"] = process_cpu(
-        "import lidarstat.cli, lidarstat.classify, lidarstat.io, lidarstat.report", r)
+    for name, code in (("start_python", "pass"), ("start_numpy_laspy", "import numpy, laspy"),
+                       ("start_csf", "import numpy, laspy, CSF"),
+                       ("start_lidarstat", "import lidarstat.cli, lidarstat.classify, "
+                                           "lidarstat.io, lidarstat.report")):
+        if want(name):
+            rows[name] = process_cpu(code, r)
     # the whole command on 20,000 points: start-up, loading every compiled kernel from
     # the cache on its first call, and a negligible amount of work
-    rows["moments_20k_points"] = process_cpu(
-        "from lidarstat.cli import main; main(['moments', %r, %r, '--no-report', '-q'])"
-        % (str(small), str(folder / "floor_small_out.las")), r)
+    if want("moments_20k_points"):
+        rows["moments_20k_points"] = process_cpu(
+            "from lidarstat.cli import main; main(['moments', %r, %r, '--no-report', '-q'])"
+            % (str(small), str(folder / "floor_small_out.las")), r)
 
     # read and write
     def laspy_read():
         las = laspy.read(inp)
         return las, np.c_[las.x, las.y, las.z]
 
-    rows["read_laspy"] = timed(laspy_read, r)
+    if want("read_laspy"):
+        rows["read_laspy"] = timed(laspy_read, r)
     las, xyz = laspy_read()
     out = folder / "floor_out.las"
 
@@ -175,52 +208,80 @@ def main(argv=None):
         las.classification = np.full(n, 2, np.uint8)
         las.write(out)
 
-    rows["write_laspy"] = timed(laspy_write, r)
+    if want("write_laspy"):
+        rows["write_laspy"] = timed(laspy_write, r)
     del las
-    rows["read_lidarstat"] = timed(lambda: read(inp), r)
-    cloud = read(inp)
-    fields = {"classification": np.full(n, 2, np.uint8),
-              "cluster_id": np.arange(n, dtype=np.int32)}
-    for name, (dtype, _) in BUILDING_FIELDS.items():
-        fields[name] = np.zeros(n, dtype)
-    rows["write_lidarstat"] = timed(lambda: rewrite(inp, out, lambda s, c: {
-        k: v[s:s + len(c)] for k, v in fields.items()}, decode=False), r)
+    if want("read_lidarstat"):
+        rows["read_lidarstat"] = timed(lambda: read(inp), r)
+    if want("write_lidarstat"):
+        fields = {"classification": np.full(n, 2, np.uint8),
+                  "cluster_id": np.arange(n, dtype=np.int32)}
+        for name, (dtype, _) in BUILDING_FIELDS.items():
+            fields[name] = np.zeros(n, dtype)
+        rows["write_lidarstat"] = timed(lambda: rewrite(inp, out, lambda s, c: {
+            k: v[s:s + len(c)] for k, v in fields.items()}, decode=False), r)
+        del fields
+
+    # the hardware's unit costs: one sort, one pass, one gather of N values
+    x, y, z = (np.ascontiguousarray(xyz[:, j]) for j in range(3))
+    shuffled = np.random.default_rng(0).permutation(x)
+    if want("one_sort"):
+        rows["one_sort"] = timed(lambda: np.sort(shuffled), r)
+    if want("one_pass"):
+        rows["one_pass"] = timed(one_pass(x), r)
+    if want("one_gather"):
+        perm = np.random.default_rng(1).permutation(n)
+        rows["one_gather"] = timed(lambda: np.take(x, perm), r)
+        del perm
+    del shuffled
 
     # one sort, the canonical order
-    x, y, z = (np.ascontiguousarray(xyz[:, j]) for j in range(3))
-    inten = cloud["intensity"]
-    canonical_order(x[:100], y[:100], z[:100], inten[:100])  # load the kernel
-    rows["sort_x"] = timed(lambda: np.argsort(x), r)
-    rows["canonical_order"] = timed(lambda: canonical_order(x, y, z, inten), r)
+    if want("sort_x"):
+        rows["sort_x"] = timed(lambda: np.argsort(x), r)
+    if want("canonical_order"):
+        inten = read(inp, fields=["intensity"])["intensity"]
+        canonical_order(x[:100], y[:100], z[:100], inten[:100])  # load the kernel
+        rows["canonical_order"] = timed(lambda: canonical_order(x, y, z, inten), r)
 
     # the 8-NN graph
     xy = np.ascontiguousarray(xyz[:, :2] - xyz[:, :2].min(axis=0))
     knn8_grid(xy[:5000], z[:5000])
     raised_patches(xy[:5000], z[:5000])
-    rows["knn8_grid"] = timed(lambda: knn8_grid(xy, z), r)
-    rows["knn8_ckdtree"] = timed(lambda: knn8_ckdtree(xy), r)
-    rows["raised_patches"] = timed(lambda: raised_patches(xy, z), r)
+    if want("knn8_grid"):
+        rows["knn8_grid"] = timed(lambda: knn8_grid(xy, z), r)
+    if want("knn8_ckdtree"):
+        rows["knn8_ckdtree"] = timed(lambda: knn8_ckdtree(xy), r)
+    if want("raised_patches"):
+        rows["raised_patches"] = timed(lambda: raised_patches(xy, z), r)
 
     # the moments' one-pass updates (heights above a plane of the terrain trend)
-    h = z - np.polyval(np.polyfit(x - x.min(), z, 1), x - x.min())
-    moment_updates(xy[:5000], h[:5000])
-    rows["moment_updates"] = timed(lambda: moment_updates(xy, h), r)
+    if want("moment_updates"):
+        h = z - np.polyval(np.polyfit(x - x.min(), z, 1), x - x.min())
+        moment_updates(xy[:5000], h[:5000])
+        rows["moment_updates"] = timed(lambda: moment_updates(xy, h), r)
 
     # the peer's filtering itself
-    rows["csf_filter"] = timed(lambda: csf_ground(xyz, 1.0), r)
+    if want("csf_filter"):
+        rows["csf_filter"] = timed(lambda: csf_ground(xyz, 1.0), r)
 
     for name, v in rows.items():
         print(f"  {name:18s} {v['cpu_s']:8.2f} s CPU  {v['wall_s']:8.2f} s wall", flush=True)
     if args.out:
-        Path(args.out).write_text(json.dumps({
-            "what": "CPU (user + system, all threads) and wall seconds of the irreducible "
-                    "parts of classifying the synthetic airborne LAS file of "
-                    "bench_moments.py, each alone in one process on a warm Numba cache "
-                    "(start: fresh processes by GNU time); median of the repeats",
-            "points": n, "repeats": r, "machine_shared": True, "cpus": os.cpu_count(),
-            "load_average": os.getloadavg(), "python": platform.python_version(),
-            "numpy": np.__version__, "laspy": laspy.__version__, "parts": rows},
-            indent=1) + "\n")
+        run = {"points": n, "repeats": r, "machine_shared": True, "cpus": os.cpu_count(),
+               "load_average": os.getloadavg(), "python": platform.python_version(),
+               "numpy": np.__version__, "laspy": laspy.__version__, "parts": rows}
+        what = ("CPU (user + system, all threads) and wall seconds of the irreducible "
+                "parts of classifying the synthetic airborne LAS file of "
+                "bench_moments.py, each alone in one process on a warm Numba cache "
+                "(start: fresh processes by GNU time); median of the repeats")
+        out_path = Path(args.out)
+        if args.label:
+            doc = json.loads(out_path.read_text()) if out_path.exists() else {"what": what}
+            doc.setdefault("runs", {})[args.label] = run
+        else:
+            old = json.loads(out_path.read_text()) if out_path.exists() else {}
+            doc = {"what": what, **run, **({"runs": old["runs"]} if "runs" in old else {})}
+        out_path.write_text(json.dumps(doc, indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -381,7 +381,7 @@ def test_noise_fence_equals_the_sorted_key_reference(seed):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_raised_patch_copy_check_finds_every_copy(seed):
-    from lidarstat.classify._continuity import _may_repeat
+    from lidarstat.classify._continuity import _cell_copies, _Grid2D
     from lidarstat.neighbors import find_duplicates
 
     g = np.random.default_rng(seed)
@@ -392,7 +392,10 @@ def test_raised_patch_copy_check_finds_every_copy(seed):
     if seed == 2:  # -0.0 and 0.0 are one location
         xy[0], xy[1], z[1] = (-0.0, 5.0), (0.0, 5.0), z[0]
     ref = find_duplicates(np.c_[xy, z]).any
-    assert _may_repeat(xy, z) == ref
+    rank = g.permutation(n)  # any order of the points inside a cell
+    for cell in (0.7, 3.0):
+        grid = _Grid2D(xy, cell, xy.min(axis=0), rank)
+        assert _cell_copies(xy, z[grid.pos], grid.pos, grid.cell_start) == ref
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -407,3 +410,66 @@ def test_cluster_bound_from_sorted_heights_equals_numpy_medians(seed):
         med = np.median(v)
         ref = float(med + 3.0 * 1.4826 * np.median(np.abs(v - med))) if n >= 8 else -np.inf
         assert _cluster_bound(np.sort(v), 3.0) == ref
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_without_evidence_every_field_cut_and_deciding_test_is_the_same(seed):
+    # evidence=False (the CLI without a report) leaves out the densities and the dip
+    # test of each window's heights before its cut, which the report alone reads
+    xyz, inten, nret, rnum, _ = _scene(np.random.default_rng(seed), 16000)
+    kw = dict(number_of_returns=nret, return_number=rnum, window=50.0, min_window=12.5)
+    a = moments(xyz, inten, **kw)
+    b = moments(xyz, inten, evidence=False, **kw)
+    for name, v in a.to_fields().items():
+        assert np.array_equal(v, b.to_fields()[name], equal_nan=True), name
+    assert a.windows == b.windows and a.params == b.params
+    assert [s.choice.threshold for s in a.steps] == [s.choice.threshold for s in b.steps]
+    assert all(s.density is not None for s in a.steps)
+    # the road step's density decides its cut (the antimode): kept
+    assert all((s.density is None) != (s.window == -1) for s in b.steps)
+    window_dips = [s.dip for s in a.steps if s.population.startswith("heights")]
+    assert window_dips and all(window_dips)
+    assert not any(s.dip for s in b.steps if s.population.startswith("heights"))
+    assert ([s.dip for s in a.steps if not s.population.startswith("heights")]
+            == [s.dip for s in b.steps if not s.population.startswith("heights")])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_block_spread_equals_numpy_medians_of_each_block(seed):
+    # np.median and the median of the absolute deviations of each block: odd and even
+    # counts, ties, borders, blocks widened to several cells' radius where the cells
+    # are sparse
+    from lidarstat.classify._terrain_kernels import block_spread
+
+    g = np.random.default_rng(seed)
+    nx, ny, min_points, max_radius = 23, 17, 40, 4
+    n = 3000
+    ij = np.c_[g.integers(0, nx, n), g.integers(0, ny, n)]
+    dense = ij[:, 0] < nx // 2  # about 15 values a cell on one side, sparse on the other
+    keep = dense | (g.uniform(size=n) < 0.15)
+    ij = ij[keep]
+    v = np.round(g.standard_t(3, ij.shape[0]), 2 if seed % 2 else 6)
+    key = ij[:, 0] * ny + ij[:, 1]
+    order = np.argsort(key, kind="stable")
+    values = v[order]
+    offsets = np.r_[0, np.cumsum(np.bincount(key, minlength=nx * ny))]
+    cells = np.arange(nx * ny)
+    centre, spread = np.full(nx * ny, -1.0), np.full(nx * ny, -1.0)
+    block_spread(offsets, values, nx, ny, cells, min_points, max_radius, centre, spread)
+    grid = [[v[key == a * ny + b] for b in range(ny)] for a in range(nx)]
+    widened = 0
+    for c in cells:
+        i, j = divmod(int(c), ny)
+        for w in range(1, max_radius + 1):
+            blk = np.concatenate([grid[a][b] for a in range(max(0, i - w), min(nx, i + w + 1))
+                                  for b in range(max(0, j - w), min(ny, j + w + 1))])
+            if blk.size >= min_points:
+                break
+        widened += w > 1
+        if blk.size < 3:
+            assert np.isnan(centre[c]) and np.isnan(spread[c])
+            continue
+        m = np.median(blk)
+        assert centre[c] == m
+        assert spread[c] == 1.4826 * np.median(np.abs(blk - m))
+    assert widened > 50

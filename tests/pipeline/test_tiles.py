@@ -71,3 +71,29 @@ def test_progress_and_bad_results(rng):
         tile_grid(xyz, 1.0, 2.0)
     with pytest.raises(InvalidParameterError, match="scheduler"):
         map_tiles(lambda p: {}, xyz, size=1.0, halo=0.1, scheduler="mpi")
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_views_give_the_copies_result_and_keep_the_inputs(seed):
+    # a cloud sorted tile by tile: every tile of the no-halo grid is a block of rows,
+    # handed to func as a read-only view; a halo grid's tiles are not blocks (copies)
+    g = np.random.default_rng(seed)
+    xyz = g.uniform(0, 40, (3000, 3))
+    order = np.concatenate([t.points for t in tile_grid(xyz, 10.0)])
+    xyz = xyz[order]
+    w = g.normal(size=len(xyz))
+    before = xyz.copy(), w.copy()
+
+    def f(p, a):
+        return {"s": p[:, 2] * a["w"] + p[:, 0], "n": np.full(len(p), p.flags.writeable)}
+
+    for halo in (0.0, 2.0):
+        tiles = tile_grid(xyz, 10.0, halo)
+        ref = map_tiles(f, xyz, tiles=tiles, attributes={"w": w})
+        got = map_tiles(f, xyz, tiles=tiles, attributes={"w": w}, views=True)
+        assert np.array_equal(ref["s"], got["s"])
+        assert ref["n"].all() and got["n"].any() != (halo == 0)
+    with pytest.raises(ValueError, match="read-only"):
+        map_tiles(lambda p: p.__setitem__((slice(None), 2), 0.0) or {"z": p[:, 2]}, xyz,
+                  tiles=tile_grid(xyz, 10.0), views=True)
+    assert np.array_equal(xyz, before[0]) and np.array_equal(w, before[1])

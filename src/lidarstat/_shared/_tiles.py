@@ -190,10 +190,26 @@ def _fields_of(result, n, key):
     return out
 
 
+def _block(points):
+    """The slice of a tile's points when they are a block of consecutive rows, else None.
+
+    A tile's points are increasing and distinct, so they are consecutive exactly when the
+    last is ``size - 1`` past the first."""
+    m = points.size
+    if m and int(points[-1]) - int(points[0]) == m - 1:
+        return slice(int(points[0]), int(points[0]) + m)
+    return None
+
+
+def _read_only(view):
+    view.flags.writeable = False
+    return view
+
+
 def map_tiles(func: Callable, xyz, *, size: float | None = None, halo: float = 0.0,
               scheduler: str = "sync", workers: int | None = None, progress=None,
               tiles: list | None = None, attributes: dict | None = None,
-              collect: Callable | None = None) -> dict[str, np.ndarray]:
+              collect: Callable | None = None, views: bool = False) -> dict[str, np.ndarray]:
     """Run ``func(xyz_of_tile)`` on every tile and assemble the core points' results.
 
     Parameters
@@ -226,6 +242,10 @@ def map_tiles(func: Callable, xyz, *, size: float | None = None, halo: float = 0
     collect : callable, optional
         ``collect(tile, result)``, called in the calling thread for every tile in tile
         order, to gather what a result holds beyond its per-point fields (reports).
+    views : bool, default False
+        Hand `func` read-only views of `xyz` and `attributes` for a tile whose points
+        are consecutive rows (a cloud sorted tile by tile) instead of copies; `func` must
+        then not write into its inputs.
 
     Returns
     -------
@@ -266,19 +286,27 @@ def map_tiles(func: Callable, xyz, *, size: float | None = None, halo: float = 0
         if collect is not None:
             collect(tile, result)
         fields = _fields_of(result, tile.points.size, tile.key)
-        rows = tile.points[tile.core]
+        block = _block(tile.points)
+        whole = block is not None and bool(tile.core.all())
+        rows = block if whole else tile.points[tile.core]
         for name, arr in fields.items():
             if name not in out:
                 out[name] = np.zeros((len(xyz),) + arr.shape[1:], dtype=arr.dtype)
-            out[name][rows] = arr[tile.core]
-        done += rows.size
+            out[name][rows] = arr if whole else arr[tile.core]
+        done += tile.points.size if whole else rows.size
         if progress is not None:
             progress(done, len(xyz))
 
     def args(tile):
+        rows = _block(tile.points) if views else None
+        if rows is None:
+            if attributes is None:
+                return (xyz[tile.points],)
+            return xyz[tile.points], {name: a[tile.points] for name, a in attributes.items()}
         if attributes is None:
-            return (xyz[tile.points],)
-        return xyz[tile.points], {name: a[tile.points] for name, a in attributes.items()}
+            return (_read_only(xyz[rows]),)
+        return _read_only(xyz[rows]), {name: _read_only(a[rows])
+                                       for name, a in attributes.items()}
 
     def one(tile):
         return func(*args(tile))

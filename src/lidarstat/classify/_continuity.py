@@ -28,7 +28,7 @@ from .._shared._columns import column_max, column_min
 from ..neighbors import GRID_CELL_CHUNK as _CELL_CHUNK, grid_block_ranges as _block_ranges, grid_candidate_count as _count, grid_knn_point as _knn_point, grid_knn_scratch as _scratch  # noqa: E501
 from .._shared._jit import njit, njit_parallel
 from .._shared._kernels import uf_find as _find
-from ..neighbors import find_duplicates, location_hash
+from ..neighbors import find_duplicates
 from ._surface import cell_keys, cell_order
 
 __all__ = ["raised_patches"]
@@ -93,21 +93,6 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     """
     xy = np.asarray(xy, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
-    # the copies are grouped (an (N, 3) copy and three index arrays) only when the
-    # hashes of the locations say there may be some
-    dup = find_duplicates(np.c_[xy, z]) if z.size and _may_repeat(xy, z) else None
-    if dup is not None and dup.any:
-        # copies of a point are joined to it (distance 0, same elevation) and share its
-        # patch: the graph is built on the distinct points, whose kNN search does not
-        # scan every copy of a location for each copy (neighbors/_duplicates.py)
-        sub_rank = None
-        if rank is not None:
-            sub_rank = np.argsort(np.argsort(np.asarray(rank)[dup.first], kind="stable"))
-        return dup.broadcast(raised_patches(
-            xy[dup.first], z[dup.first], k=k, step=step, slope=slope,
-            above_fraction=above_fraction, min_points=min_points, chunk=chunk,
-            rank=sub_rank))
-    del dup  # every point distinct: its three identity arrays are not needed
     n = z.size
     if n < 2 * min_points:
         return np.zeros(n, bool)
@@ -121,6 +106,24 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     cell = max(cell, float(span.max()) / 2**20)  # at most 2^20 cells a side (CellIndex)
     grid = _Grid2D(xy, cell, lo, rank)
     zs = z[grid.pos]
+    # copies of a location share a cell: the copies are grouped (an (N, 3) copy and
+    # three index arrays) only when two points of a cell are equal
+    dup = None
+    if _cell_copies(xy, zs, grid.pos, grid.cell_start):
+        dup = find_duplicates(np.c_[xy, z])
+    if dup is not None and dup.any:
+        del grid, zs
+        # copies of a point are joined to it (distance 0, same elevation) and share its
+        # patch: the graph is built on the distinct points, whose kNN search does not
+        # scan every copy of a location for each copy (neighbors/_duplicates.py)
+        sub_rank = None
+        if rank is not None:
+            sub_rank = np.argsort(np.argsort(np.asarray(rank)[dup.first], kind="stable"))
+        return dup.broadcast(raised_patches(
+            xy[dup.first], z[dup.first], k=k, step=step, slope=slope,
+            above_fraction=above_fraction, min_points=min_points, chunk=chunk,
+            rank=sub_rank))
+    del dup  # every point distinct: its three identity arrays are not needed
     parent = np.arange(n, dtype=np.int64)
     ci, cj, cup = [], [], []
     for c0, c1 in grid.blocks(chunk):
@@ -290,12 +293,17 @@ def _join_smooth(parent, zs, nbr, smooth, start):  # pragma: no cover - compiled
     return ci, cj, up
 
 
-def _may_repeat(xy, z) -> bool:
-    """False when no two points share a location (every hash of their coordinates'
-    bits distinct); True when two hashes are equal (a copy, or a collision)."""
-    h = location_hash(xy[:, 0], xy[:, 1], z)
-    h.sort()
-    return bool((h[1:] == h[:-1]).any())
+@njit
+def _cell_copies(xy, zs, pos, cell_start):  # pragma: no cover - compiled
+    """Whether two points of one grid cell have equal coordinates (`zs` the elevations in
+    the grid's order, `pos` their rows in `xy`): copies of a location share its cell."""
+    for c in range(cell_start.size - 1):
+        for i in range(cell_start[c], cell_start[c + 1]):
+            for j in range(i + 1, cell_start[c + 1]):
+                if (zs[i] == zs[j] and xy[pos[i], 0] == xy[pos[j], 0]
+                        and xy[pos[i], 1] == xy[pos[j], 1]):
+                    return True
+    return False
 
 
 @njit

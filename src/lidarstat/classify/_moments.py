@@ -62,7 +62,7 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
             road_threshold: float | None = None,
             terrain: bool = True, building_alpha: float = 0.01,
             sigma: float | None = None,
-            overwrite_xyz: bool = False) -> MomentsClassification:
+            overwrite_xyz: bool = False, evidence: bool = True) -> MomentsClassification:
     """Classify points as ground, road, building, vegetation or unclassified without training.
 
     Parameters
@@ -166,6 +166,11 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         array) for its own work arrays: `xyz` holds no coordinates afterwards. A caller
         that does not need the coordinates again (a file read only to classify it)
         saves a copy of them, 24 bytes a point, for the whole run.
+    evidence : bool
+        Keep in `steps` what only the report reads: the density estimate of every
+        analysed population (``steps[i].density``) and the dip test of every window's
+        heights before its cut. False leaves them out (None, an empty ``dip``) and
+        changes no class, cut or test that decides one.
 
     Returns
     -------
@@ -274,7 +279,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
                        bandwidth=bandwidth, method=method, elevation_rule=elevation_rule,
                        window=window / ux, min_window=min_window / ux,
                        ground_spread=float(ground_spread), seed=seed,
-                       building_alpha=building_alpha, sigma=sigma)
+                       building_alpha=building_alpha, sigma=sigma,
+                       evidence=bool(evidence))
     # the windows and rasters lie on multiples of the window side in the file's own
     # coordinates, so that the tiles of a catalogue share the whole area's windows
     origin = column_min(pts)

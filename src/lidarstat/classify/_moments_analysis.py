@@ -48,7 +48,8 @@ def _analysis(values, category, p: MomentsOptions, *, window, step, population, 
                           elevation_rule=p.elevation_rule)
     rec = None
     if record:
-        de = density_estimate(values, bandwidth=p.bandwidth, gridsize=256)
+        de = (density_estimate(values, bandwidth=p.bandwidth, gridsize=256) if p.evidence
+              else None)
         rec = MomentsStep(window=window, step=step, population=population, category=category,
                           n=int(values.size), dip=dips, choice=ch, curves=thin_curves(sm),
                           density=de)
@@ -104,7 +105,7 @@ def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, 
     thr = parent_thr
     rec = None
     if idx.size >= 2 * p.min_points + 4:
-        dips = dip_tests({"elevation": v}, p) if record else {}
+        dips = dip_tests({"elevation": v}, p) if record and p.evidence else {}
         ch, rec, vs = _analysis(v, "elevation", p, window=window_id, step=1,
                                 population="heights above the ground model", dips=dips,
                                 record=record)

@@ -59,6 +59,9 @@ class MomentsOptions:
         Level of the building tests (local plane, residual, patch share).
     sigma : float or None
         Noise std of the building tests in metres (None: estimated from the ground).
+    evidence : bool
+        Whether the recorded analyses carry what only the report reads: the density
+        estimate of every analysed population and the dip test of every window's heights.
     """
 
     alpha: float
@@ -75,6 +78,7 @@ class MomentsOptions:
     max_steps: int = 6
     building_alpha: float = 0.01
     sigma: float | None = None
+    evidence: bool = True
 
     @property
     def min_window_points(self) -> int:

@@ -148,7 +148,7 @@ def window_pass(xyh, roots, p: MomentsOptions, inten, scheduler, workers, *, fin
     attrs = {} if inten is None else {"intensity": inten}
     fields = map_tiles(lambda pts, a: _classify_window(pts, a, p, final, final), xyh,
                        tiles=roots, attributes=attrs, scheduler=scheduler, workers=workers,
-                       collect=keep)
+                       collect=keep, views=True)
     steps, infos = [], []
     for i, o in enumerate(outs):
         o.fields = None  # assembled in `fields`; keep only the ids and records

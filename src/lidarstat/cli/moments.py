@@ -54,7 +54,8 @@ def _run(args):
         building_alpha=args.building_alpha, sigma=args.sigma,
         # the streamed write copies the input's records: the coordinates read here are
         # needed again only by a terrain model, so the classification may reuse them
-        overwrite_xyz=stream and not args.dtm)
+        overwrite_xyz=stream and not args.dtm,
+        evidence=not args.no_report)  # the densities and window dips: the report's alone
     elapsed = time.perf_counter() - t0
     fields = res.to_fields()
     if stream:
