@@ -28,7 +28,7 @@ from .._shared._columns import column_max, column_min
 from ..neighbors import GRID_CELL_CHUNK as _CELL_CHUNK, grid_block_ranges as _block_ranges, grid_candidate_count as _count, grid_knn_point as _knn_point, grid_knn_scratch as _scratch  # noqa: E501
 from .._shared._jit import njit, njit_parallel
 from .._shared._kernels import uf_find as _find
-from ..neighbors import find_duplicates
+from ..neighbors import find_duplicates, grid_cells_may_share
 from ._surface import cell_keys, cell_order
 
 __all__ = ["raised_patches"]
@@ -107,9 +107,9 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     grid = _Grid2D(xy, cell, lo, rank)
     zs = z[grid.pos]
     # copies of a location share a cell: the copies are grouped (an (N, 3) copy and
-    # three index arrays) only when two points of a cell are equal
+    # three index arrays) only when two points of a cell may be equal
     dup = None
-    if _cell_copies(xy, zs, grid.pos, grid.cell_start):
+    if grid.may_have_copies(zs):
         dup = find_duplicates(np.c_[xy, z])
     if dup is not None and dup.any:
         del grid, zs
@@ -190,6 +190,16 @@ class _Grid2D:
         self.points = np.zeros((self.pos.size, 3))
         self.points[:, 0] = xy[self.pos, 0] - lo[0]
         self.points[:, 1] = xy[self.pos, 1] - lo[1]
+
+    def may_have_copies(self, zs):
+        """False when no two points share a location (`zs` the elevations in the grid's
+        order), as :meth:`CellIndex.may_have_copies
+        <lidarstat.neighbors.CellIndex.may_have_copies>`: the sorted points carry their
+        elevations for the comparison, then z = 0 again for the 2-D kNN."""
+        self.points[:, 2] = zs
+        maybe = grid_cells_may_share(self.points, self.cell_start)
+        self.points[:, 2] = 0.0
+        return bool(maybe)
 
     def blocks(self, max_points):
         """Consecutive cell ranges of about `max_points` points (CellIndex.cell_blocks)."""
@@ -291,19 +301,6 @@ def _join_smooth(parent, zs, nbr, smooth, start):  # pragma: no cover - compiled
                 up[t] = zs[j] < zs[start + r]
                 t += 1
     return ci, cj, up
-
-
-@njit
-def _cell_copies(xy, zs, pos, cell_start):  # pragma: no cover - compiled
-    """Whether two points of one grid cell have equal coordinates (`zs` the elevations in
-    the grid's order, `pos` their rows in `xy`): copies of a location share its cell."""
-    for c in range(cell_start.size - 1):
-        for i in range(cell_start[c], cell_start[c + 1]):
-            for j in range(i + 1, cell_start[c + 1]):
-                if (zs[i] == zs[j] and xy[pos[i], 0] == xy[pos[j], 0]
-                        and xy[pos[i], 1] == xy[pos[j], 1]):
-                    return True
-    return False
 
 
 @njit

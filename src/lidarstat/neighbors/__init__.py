@@ -23,6 +23,7 @@ from ._grid_kernels import _block_ranges as grid_block_ranges
 from ._grid_kernels import _count as grid_candidate_count
 from ._grid_kernels import _knn_point as grid_knn_point
 from ._grid_kernels import _scratch as grid_knn_scratch
+from ._kernels import cells_may_share as grid_cells_may_share
 from ._kernels import radix_order
 
 __all__ = ["Neighborhoods", "CellIndex", "radius_neighbors", "knn_neighbors",
@@ -30,4 +31,4 @@ __all__ = ["Neighborhoods", "CellIndex", "radius_neighbors", "knn_neighbors",
            "copies_degenerate", "map_rows",
            "refuse_dominated", "run_on_unique", "max_pairs", "Drivers", "make_drivers",
            "knn_cell_size", "GRID_CELL_CHUNK", "grid_block_ranges", "grid_candidate_count",
-           "grid_knn_point", "grid_knn_scratch", "radix_order"]
+           "grid_knn_point", "grid_knn_scratch", "grid_cells_may_share", "radix_order"]
