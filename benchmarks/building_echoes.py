@@ -300,11 +300,9 @@ def rule_search(tables, effects, counts, target, keep_best=5):
 
 def rejected(a, terms):
     """Patch labels a rule's `terms` (``[feature, sign, threshold]`` each) rejects."""
-    rej = np.ones(len(a), bool)
-    with np.errstate(invalid="ignore"):
-        for f, sign, t in terms:
-            rej &= sign * a[:, 2 + FEATURES.index(f)] > sign * t
-    return a[rej, 0].astype(np.int64)
+    from building_joint import rejected as joint_rejected
+
+    return joint_rejected(a, terms, features=FEATURES, first=2)
 
 
 def mixed_patches(xyz, ev, patch, ref, attributes, a, min_true=0.25, min_points=300):

@@ -165,12 +165,13 @@ def pair_search(tables, counts, target, keep=10, max_loss=0.3):
             for _, fa, sa, ta, fb, sb, tb, gains in found[:keep]]
 
 
-def rejected(a, terms):
-    """Patch labels a rule's `terms` (``[feature, sign, threshold]`` each) rejects."""
+def rejected(a, terms, features=FEATURES, first=3):
+    """Patch labels a rule's `terms` (``[feature, sign, threshold]`` each) rejects; the
+    columns of `a` from `first` on hold `features`, column 0 the patch label."""
     rej = np.ones(len(a), bool)
     with np.errstate(invalid="ignore"):
         for f, sign, t in terms:
-            rej &= sign * a[:, 3 + FEATURES.index(f)] > sign * t
+            rej &= sign * a[:, first + features.index(f)] > sign * t
     return a[rej, 0].astype(np.int64)
 
 
