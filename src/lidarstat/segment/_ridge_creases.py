@@ -308,15 +308,16 @@ def find_creases(local, nb, step, radii, *, sigma, noise, sensor, weight, alpha,
             break
         fields, f_j = variance_factor(local, rows, float(r), **kw)
         full, f_full = _scatter(fields, f_j, rows, n)
+        if j == 0:
+            fitted = np.isin(fields["status"], (FitStatus.OK, FitStatus.MODEL_REJECTED))
+            med = float(np.median(fields["neighbors"][fitted])) if fitted.any() else 1.0
+            n_eff = max(1.0, n / max(1.0, med))
+        del fields, f_j  # the fits' arrays: the scattered fields are all that is read
         if j:
             cand, factor = found[-1][0], found[-1][1]
             found[-1][4][cand] = misfit_growth(factor[cand], f_full[cand])
         if j == len(radii) - 1:
             break
-        if j == 0:
-            fitted = np.isin(fields["status"], (FitStatus.OK, FitStatus.MODEL_REJECTED))
-            med = float(np.median(fields["neighbors"][fitted])) if fitted.any() else 1.0
-            n_eff = max(1.0, n / max(1.0, med))
         cand = crease_points(local, full, alpha=alpha, n_eff=n_eff / 2.0 ** j, radius=r,
                              spacing=spacing)
         found.append((cand, f_full, full["chi2_p"],
