@@ -66,6 +66,16 @@ COMMANDS = {
     "segment-curvature": ["segment", "{i}", "{o}", "--method", "curvature"],
     "segment-sar": ["segment", "{i}", "{o}", "--method", "sar"],
 }
+#: Out-of-core runs of one file (``--tile``: tiles of 250 m, about 625,000 points of the
+#: town, each with its method's buffer): memory that does not grow with the file.
+TILE = "250"
+COMMANDS.update({
+    f"ridges --tile {TILE}": [*COMMANDS["ridges"], "--tile", TILE],
+    f"segment-covariance --tile {TILE}": [*COMMANDS["segment-covariance"], "--tile", TILE],
+    f"segment-curvature --tile {TILE}": [*COMMANDS["segment-curvature"], "--tile", TILE],
+    f"segment-sar --tile {TILE}": [*COMMANDS["segment-sar"], "--tile", TILE],
+    f"covariance --tile {TILE}": [*COMMANDS["covariance"], "--tile", TILE],
+})
 
 
 def write_cloud(path: Path, n: int, seed: int = 20261126) -> None:
