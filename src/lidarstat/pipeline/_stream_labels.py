@@ -10,11 +10,15 @@ thing when they hold the same shared points.
 The rule, for labels ``a`` of tile T and ``b`` of tile U: ``n(a, b)`` points of the
 overlap of T and U are labelled ``a`` by T and ``b`` by U, ``s(a, U)`` points of that
 overlap are labelled ``a`` by T (whatever U says), ``s(b, T)`` likewise. ``a`` and ``b``
-are joined when ``n(a, b)`` is at least half of the smaller of ``s(a, U)`` and
-``s(b, T)``: most of the overlap of one of them is the other. A surface crossing a tile
-border is labelled in both tiles' runs on the points of the overlap (the halo is as wide
-as the method's reach), so its two labels are joined; two surfaces meeting at a border
-share only their boundary points, and stay apart. Joined labels are connected
+are joined when ``n(a, b)`` is at least half of ``s(a, U)`` and at least half of
+``s(b, T)``: most of the overlap of each is the other. A surface crossing a tile border
+is labelled in both tiles' runs on the points of the overlap (the halo is as wide as the
+method's reach), so its two labels are joined; two surfaces meeting at a border share
+only their boundary points, and stay apart, as does a sliver of a surface that just
+enters the overlap and that the other tile gives to its neighbour (the rule asks a
+majority on both sides, so a join never rests on a few points). Where two tiles cut one
+surface differently (one label in T, two in U, each with less than half of T's), the
+surface keeps one id per tile, cut at the border as in a catalogue of tile files. Joined labels are connected
 components over the file (``scipy.sparse.csgraph``), numbered 1.. in the order of their
 first node, counting only those with a core point.
 """
@@ -123,6 +127,6 @@ def _components(links: np.ndarray, n: int) -> np.ndarray:
     def s(node, other):
         return scounts[np.searchsorted(skeys, node * ntile + other)]
 
-    keep = 2 * n_ab >= np.minimum(s(a, tile_of[b]), s(b, tile_of[a]))
+    keep = 2 * n_ab >= np.maximum(s(a, tile_of[b]), s(b, tile_of[a]))
     graph = coo_matrix((np.ones(int(keep.sum())), (a[keep], b[keep])), shape=(n, n))
     return connected_components(graph, directed=False)[1]
