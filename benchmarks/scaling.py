@@ -66,9 +66,9 @@ COMMANDS = {
     "segment-curvature": ["segment", "{i}", "{o}", "--method", "curvature"],
     "segment-sar": ["segment", "{i}", "{o}", "--method", "sar"],
 }
-#: Out-of-core runs of one file (``--tile``: tiles of 250 m, about 625,000 points of the
+#: Out-of-core runs of one file (``--tile``: tiles of 200 m, about 400,000 points of the
 #: town, each with its method's buffer): memory that does not grow with the file.
-TILE = "250"
+TILE = "200"
 COMMANDS.update({
     f"ridges --tile {TILE}": [*COMMANDS["ridges"], "--tile", TILE],
     f"segment-covariance --tile {TILE}": [*COMMANDS["segment-covariance"], "--tile", TILE],

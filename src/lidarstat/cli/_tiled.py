@@ -208,11 +208,13 @@ def run_tiled(args, command: str, out: Path, *, lines: Path | None = None,
             f"--tile: invalid value '{args.tile:g}': must be larger than the buffer "
             f"{buffer:.4g} of {command} (its reach), the halo of every tile")
     extra = decide(args, sample)
+    n_points = sample.n_points
+    del sample  # its tiles are not kept while the file's tiles run
     side: dict = {}
     func, labels, collect = tile_of(args, extra, side)
     maps: dict = {}
     if not args.quiet:
-        print(f"  {sample.n_points} points in tiles of {args.tile:g}, buffer {buffer:.4g}")
+        print(f"  {n_points} points in tiles of {args.tile:g}, buffer {buffer:.4g}")
     # The summary streams fields back from the output: it appears at once.
     with output_group(defer=False):
         process_file(func, args.input, out, size=args.tile, halo=buffer,
@@ -220,7 +222,7 @@ def run_tiled(args, command: str, out: Path, *, lines: Path | None = None,
                      points_per_chunk=args.chunk_points, progress=progress(args.quiet),
                      with_tile=True, labels=labels, collect=collect, finish=maps.update)
     facts = {"tile": args.tile, "buffer": buffer, "seconds": time.perf_counter() - t0,
-             "points": sample.n_points, **{k: v for k, v in extra.items()
+             "points": n_points, **{k: v for k, v in extra.items()
                                             if k in ("sigma", "radius")}}
     if "scales" in extra and extra["scales"] is not None:
         facts["scales"] = list(extra["scales"])

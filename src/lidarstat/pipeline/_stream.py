@@ -296,7 +296,7 @@ def _run_tiles(func, src, dst, grid, n, buckets, results, *, scheduler, workers,
             if scheduler == "sync":
                 out = [compute(k) for k in part]
             elif scheduler == "threads":
-                out = list(pool.map(compute, part))
+                out = pool.map(compute, part)  # each put as soon as it is done
             else:
                 import dask
 
