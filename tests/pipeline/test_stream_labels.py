@@ -82,7 +82,7 @@ def test_joined_labels_are_the_strips_whatever_the_tiling(strips, tmp_path, seed
 def test_touching_labels_are_not_joined(strips, tmp_path):
     """Two tiles that disagree on a wide band of border points (a tenth of a strip) still
     keep the strips apart: a join needs most of the overlap, not a few points."""
-    path, xyz = strips
+    path, _ = strips
     out = tmp_path / "out.laz"
     process_file(_labeller(0.2, 11), path, out, size=3.0, halo=0.5, with_tile=True,
                  labels={"seg": True})

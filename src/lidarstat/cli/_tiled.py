@@ -222,8 +222,8 @@ def run_tiled(args, command: str, out: Path, *, lines: Path | None = None,
                      points_per_chunk=args.chunk_points, progress=progress(args.quiet),
                      with_tile=True, labels=labels, collect=collect, finish=maps.update)
     facts = {"tile": args.tile, "buffer": buffer, "seconds": time.perf_counter() - t0,
-             "points": n_points, **{k: v for k, v in extra.items()
-                                            if k in ("sigma", "radius")}}
+             "points": n_points,
+             **{k: v for k, v in extra.items() if k in ("sigma", "radius")}}
     if "scales" in extra and extra["scales"] is not None:
         facts["scales"] = list(extra["scales"])
     label = next(iter(labels), None)
@@ -236,15 +236,14 @@ def run_tiled(args, command: str, out: Path, *, lines: Path | None = None,
 
         rows = _segment_table(side["tables"], maps["segment_id"])
         Segmentation(labels=rows["segment_id"], table=rows).write_table(table)
-        facts["n_segments"] = int(len(rows["segment_id"]))
+        facts["n_segments"] = len(rows["segment_id"])
         facts["points_in_segments"] = int(maps["segment_id"].core_points[1:].sum())
     return facts
 
 
 def _crs(path):
-    from ..io import file_extent
-
     from ..errors import PointCloudReadError
+    from ..io import file_extent
 
     try:
         return file_extent(path).crs

@@ -75,10 +75,10 @@ def sample_file(src, size: float, *, count: int = 9, points_per_chunk: int = 1_0
     parts: dict[int, list] = {int(k): [] for k in picks}
     for chunk in iter_chunks(src, points_per_chunk):
         _, key, _ = grid.memberships(chunk.xyz[:, :2])
-        for k in parts:
+        for k, part in parts.items():
             sel = key == k
             if sel.any():
-                parts[k].append(chunk.xyz[sel])
+                part.append(chunk.xyz[sel])
     files, xyz = [], []
     for k in sorted(parts):
         col, row = grid.key_of(k)
