@@ -77,6 +77,7 @@ def test_ridges_tiled_equals_untiled(tmp_path, capsys, tile, shift):
     ("covariance", 17.0, (5.3, 2.9), ["--radius", "1.5"]),
     ("covariance", 29.0, (8.1, 0.4), ["--k", "20"]),
     ("sar", 19.0, (1.1, 6.6), ["--radius", "1.5"]),
+    ("curvature", 21.0, (2.2, 4.5), ["--radius", "1.5"]),
 ])
 def test_segment_tiled_keeps_one_id_across_tile_borders(tmp_path, capsys, method, tile,
                                                         shift, options):
