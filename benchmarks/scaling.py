@@ -66,6 +66,16 @@ COMMANDS = {
     "segment-curvature": ["segment", "{i}", "{o}", "--method", "curvature"],
     "segment-sar": ["segment", "{i}", "{o}", "--method", "sar"],
 }
+#: Out-of-core runs of one file (``--tile``: tiles of 200 m, about 400,000 points of the
+#: town, each with its method's buffer): memory that does not grow with the file.
+TILE = "200"
+COMMANDS.update({
+    f"ridges --tile {TILE}": [*COMMANDS["ridges"], "--tile", TILE],
+    f"segment-covariance --tile {TILE}": [*COMMANDS["segment-covariance"], "--tile", TILE],
+    f"segment-curvature --tile {TILE}": [*COMMANDS["segment-curvature"], "--tile", TILE],
+    f"segment-sar --tile {TILE}": [*COMMANDS["segment-sar"], "--tile", TILE],
+    f"covariance --tile {TILE}": [*COMMANDS["covariance"], "--tile", TILE],
+})
 
 
 def write_cloud(path: Path, n: int, seed: int = 20261126) -> None:
@@ -199,20 +209,24 @@ def figure(results: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(10, 4.2))
+    fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(10, 4.8))
+    colours: dict[str, str] = {}  # a tiled run (dashed) in its command's colour
     for name, rows in results["commands"].items():
+        base = name.split(" --tile")[0]
+        colour = colours.setdefault(base, f"C{len(colours) % 10}")
+        style = "o--" if base != name else "o-"
         ok = [r for r in rows if r["seconds"]]
-        if not ok:
-            continue
         n = [r["points"] for r in ok]
-        line, = ax_t.plot(n, [r.get("cpu_seconds", np.nan) for r in ok], "o-", label=name)
-        ax_m.plot(n, [r["peak_mib"] for r in ok], "o-", color=line.get_color(), label=name)
+        ax_t.plot(n, [r.get("cpu_seconds", np.nan) for r in ok], style, color=colour,
+                  mfc="white" if base != name else colour, label=name)
+        ax_m.plot(n, [r["peak_mib"] for r in ok], style, color=colour,
+                  mfc="white" if base != name else colour, label=name)
         capped = [r for r in rows if r["status"].startswith("stopped over")]
         if capped:  # stopped at the memory cap: the need lies above the marker (side by
             # side, one command each, where several met the same cap)
-            shift = 1.06 ** (list(COMMANDS).index(name) - 3) if name in COMMANDS else 1.0
+            shift = 1.06 ** (list(COMMANDS).index(name) % 7 - 3) if name in COMMANDS else 1.0
             ax_m.plot([r["points"] * shift for r in capped], [r["peak_mib"] for r in capped],
-                      "^", mfc="none", ms=9, color=line.get_color())
+                      "^", mfc="none", ms=9, color=colour)
     cat = results.get("catalogue")
     if cat:
         ax_t.plot([cat["points"]], [cat["seconds"]], "k*", ms=11,
@@ -229,8 +243,8 @@ def figure(results: dict, path: Path) -> None:
     ax_m.axhline(4096, color="r", lw=0.8, ls="--")
     ax_m.text(2.2e5, 4300, "4 GB", color="r", fontsize=8)
     ax_m.plot([], [], "^", mfc="none", color="0.3", label="stopped at the memory cap")
-    ax_m.legend(fontsize=7, loc="lower right")
-    ax_t.legend(fontsize=7, loc="upper left")
+    ax_m.legend(fontsize=6, loc="lower right", ncol=2)
+    ax_t.legend(fontsize=6, loc="upper left", ncol=2)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)

@@ -76,12 +76,11 @@ def _curvature_prepare(args, cat):
     if args.sigma is not None:
         return extra
     from ..features import estimate_sigma
-    from ..io import read
 
     first = max(range(len(cat)), key=lambda i: cat.files[i].n_points)
     radii = sorted(_curvature_scales(args, cat))
     est_radius = radii[len(radii) // 2] if args.radius is None else radii[0]
-    sigma = estimate_sigma(read(cat.files[first].path).xyz, est_radius, noise=args.noise,
+    sigma = estimate_sigma(cat.tile_xyz(first), est_radius, noise=args.noise,
                            frame=args.frame, sensor=args.sensor)
     if not args.quiet:
         print(f"  sigma {sigma:.4g} estimated on {cat.files[first].path.name}, used for "
@@ -224,6 +223,9 @@ def _dispatch(run_one, command):
         _refuse(args, CATALOGUE_OPTIONS, "only with a catalogue of tiles (IN a folder, a "
                 "glob or several files)")
         folder = getattr(args, "report", None) if command in REPORTS else None
+        if folder is not None and getattr(args, "tile", None) is not None:
+            _refuse(args, ("report",), "not with --tile (the report reads the whole output "
+                    "back into memory)")
         if folder is not None:
             from .._shared._outputs import Output
             from ._app import check_plan

@@ -43,7 +43,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["AREA_SAMPLE_TILES", "COVARIANCE", "RIDGES", "TILE_OPTIONS", "area_ladder",
-           "curvature_ladder", "jet_ladder", "knn_reach", "sample_tiles"]
+           "covariance_decide", "curvature_ladder", "jet_ladder", "knn_reach",
+           "ridges_decide", "sample_tiles"]
 
 #: The options each command's tile function passes on (destinations). Any other option
 #: given with a catalogue is refused rather than ignored, so an option added to a command
@@ -88,9 +89,8 @@ def area_ladder(cat, ladder_of) -> tuple[float, ...]:
     own, and a point's result would depend on the tile it lies in. Given this ladder,
     every tile runs the whole area's automatic scale.
     """
-    from ..io import read
 
-    ladders = [np.asarray(ladder_of(read(cat.files[i].path).xyz), dtype=np.float64)
+    ladders = [np.asarray(ladder_of(cat.tile_xyz(i)), dtype=np.float64)
                for i in sample_tiles(cat)]
     return tuple(float(r) for r in np.median(np.vstack(ladders), axis=0))
 
@@ -126,9 +126,8 @@ def knn_reach(cat, k: int) -> float:
     times :data:`KNN_MARGIN`: a conservative reach of k-nearest-neighbour methods."""
     from scipy.spatial import cKDTree
 
-    from ..io import read
 
-    xyz = read(cat.files[_largest(cat)].path).xyz
+    xyz = cat.tile_xyz(_largest(cat))
     k = min(int(k), len(xyz))
     d = cKDTree(xyz).query(xyz, k=k, workers=-1)[0]
     return KNN_MARGIN * float(np.max(d[:, -1] if d.ndim > 1 else d))
@@ -190,16 +189,19 @@ def _covariance_buffer(args, cat):
 
 
 def _covariance_prepare(args, cat):
+    return {"outputs": _outputs(args, cat), **covariance_decide(args, cat)}
+
+
+def covariance_decide(args, cat):
     """One noise sigma for the area (estimated on the largest tile when not given)."""
-    extra = {"outputs": _outputs(args, cat)}
+    extra = {}
     if args.sigma is not None:
         return extra
     from ..classify import covariance
-    from ..io import read
     from .covariance import classification_options
 
     i = _largest(cat)
-    res = covariance(read(cat.files[i].path).xyz, k=args.k, radius=args.radius,
+    res = covariance(cat.tile_xyz(i), k=args.k, radius=args.radius,
                      sensor=args.sensor, noise=args.noise, alpha=args.alpha,
                      eigen_mode=args.eigen_mode,
                      **classification_options(args, args.sensor))
@@ -248,20 +250,23 @@ def _ridges_buffer(args, cat):
 
 
 def _ridges_prepare(args, cat):
+    return {"outputs": _outputs(args, cat), "offsets": _offsets(cat),
+            **ridges_decide(args, cat)}
+
+
+def ridges_decide(args, cat):
     """One noise sigma for the area (the jets' estimate on the largest tile) and, at the
     automatic scale, one ladder of radii."""
-    extra = {"outputs": _outputs(args, cat), "offsets": _offsets(cat),
-             "scales": _ridges_ladder(args, cat)}
+    extra = {"scales": _ridges_ladder(args, cat)}
     if extra["scales"] is not None:
         _say(args, f"automatic scale: radii {_ladder_text(extra['scales'])} decided on "
              f"{len(sample_tiles(cat))} tiles, used for every tile")
     if args.sigma is not None:
         return extra
     from ..features import jets
-    from ..io import read
 
     i = _largest(cat)
-    res = jets(read(cat.files[i].path).xyz, radius=args.radius, k=args.k, alpha=args.alpha,
+    res = jets(cat.tile_xyz(i), radius=args.radius, k=args.k, alpha=args.alpha,
                degree=4, weight=args.weight, sensor=args.sensor, noise=args.noise,
                standard_errors=False, scales=extra["scales"])
     extra["sigma"] = _scalar_sigma(res.sigma, "ridges")

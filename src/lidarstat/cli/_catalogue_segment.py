@@ -33,7 +33,7 @@ from ._catalogue_methods import (
     sample_tiles,
 )
 
-__all__ = ["SEGMENT", "SEGMENT_REACHES", "segment_scale"]
+__all__ = ["SEGMENT", "SEGMENT_REACHES", "segment_decide", "segment_runner", "segment_scale"]
 
 #: Buffer of a segmentation, in neighbourhood reaches.
 SEGMENT_REACHES = 4.0
@@ -58,9 +58,8 @@ def segment_scale(args, cat) -> dict:
     if args.method == "sar":
         def select():
             from ..features import select_plane_bandwidth
-            from ..io import read
 
-            b = [select_plane_bandwidth(read(cat.files[i].path).xyz,
+            b = [select_plane_bandwidth(cat.tile_xyz(i),
                                         criterion=args.criterion, rng=0).bandwidth
                  for i in sample_tiles(cat)]
             return {"radius": float(np.median(b))}
@@ -72,10 +71,9 @@ def segment_scale(args, cat) -> dict:
             out = {"scales": scales}
             if args.sigma is None:
                 from ..features import estimate_sigma
-                from ..io import read
 
                 out["sigma"] = _scalar_sigma(estimate_sigma(
-                    read(cat.files[_largest(cat)].path).xyz, scales[len(scales) // 2],
+                    cat.tile_xyz(_largest(cat)), scales[len(scales) // 2],
                     noise=args.noise, frame=args.frame, sensor=args.sensor), "segment")
             return out
 
@@ -109,23 +107,31 @@ def _segment_buffer(args, cat):
 
 
 def _segment_prepare(args, cat):
+    return {"outputs": _outputs(args, cat), "offsets": _offsets(cat),
+            "area": segment_decide(args, cat)}
+
+
+def segment_decide(args, cat) -> dict:
+    """:func:`segment_scale`, printed (options for every tile's run)."""
     area = segment_scale(args, cat)
     words = {"radius": lambda v: f"radius {v:.4g}", "sigma": lambda v: f"sigma {v:.4g}",
              "scales": lambda v: f"radii {_ladder_text(v)}"}
     if area:
         _say(args, "automatic scale: " + ", ".join(words[k](v) for k, v in area.items())
              + " decided for the area, used for every tile")
-    return {"outputs": _outputs(args, cat), "offsets": _offsets(cat), "area": area}
+    return area
 
 
-def _segment_fields(args, extra):
+def segment_runner(args, area):
+    """``run(xyz) -> Segmentation``: the method of ``--method`` with the area's decisions
+    (:func:`segment_scale`) as if given on the command line."""
     from importlib import import_module
 
     from ..io import PointCloud
     from .segment import SEGMENT_METHODS
 
     method = import_module(SEGMENT_METHODS[args.method])
-    area = dict(extra.get("area", {}))
+    area = dict(area)
     scales, run_args = area.pop("scales", None), args
     if area:  # the area's radius (and sigma) as if given on the command line
         from argparse import Namespace
@@ -140,6 +146,12 @@ def _segment_fields(args, extra):
         curv = curvature(xyz, sigma=run_args.sigma, alpha=args.alpha, frame=args.frame,
                          noise=args.noise, sensor=args.sensor, scales=scales)
         return method.run(run_args, PointCloud(xyz), curv=curv)
+
+    return run
+
+
+def _segment_fields(args, extra):
+    run = segment_runner(args, extra.get("area", {}))
 
     def fields(tile):
         seg = run(tile.xyz)

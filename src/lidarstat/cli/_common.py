@@ -126,12 +126,14 @@ def add_workers(parser, schedulers=("threads", "sync", "dask"), help_what="tiles
                         help=f"threads for the {help_what} (default: one per core)")
 
 
-def add_tiling(parser):
-    """Out-of-core processing: ``--tile``, ``--scheduler``, ``--workers``, ``--chunk-points``."""
+def add_tiling(parser, halo: str = "the neighbourhood"):
+    """Out-of-core processing: ``--tile``, ``--scheduler``, ``--workers``, ``--chunk-points``.
+
+    `halo` says how wide each tile's halo is (``--help``)."""
     g = parser.add_argument_group("large files (tiles with halos; memory independent of size)")
     g.add_argument("--tile", type=opt.positive_float, default=None, metavar="SIZE",
-                   help="process square tiles of this side, each with a halo of the "
-                   "neighbourhood; LAS/LAZ are streamed in chunks")
+                   help=f"process square tiles of this side, each with a halo of {halo} "
+                   "(larger than the halo); LAS/LAZ are streamed in chunks")
     add_workers(g)
     g.add_argument("--chunk-points", type=opt.int_at_least(1), default=1_000_000,
                    help="points per streamed chunk")

@@ -6,7 +6,7 @@ import time
 
 from . import _options as opt
 from ._app import Output, check_plan, progress, resolve_sensor, write_summary_json
-from ._common import add_alpha, add_neighbourhood, add_noise, add_run_outputs
+from ._common import add_alpha, add_neighbourhood, add_noise, add_run_outputs, add_tiling
 
 
 def add_classification_arguments(s):
@@ -78,6 +78,8 @@ def cmd_covariance(args):
 
     out, _ = check_plan([args.input], Output("output", args.output),
                         Output("--summary-json", args.summary_json, "json"))
+    if args.tile is not None:
+        return _covariance_tiled(args, out)
     cloud = read(args.input)
     t0 = time.perf_counter()
     sensor = resolve_sensor(args.sensor, args.input, args.quiet)
@@ -94,6 +96,25 @@ def cmd_covariance(args):
         meta = {"input": str(args.input), "output": str(out), "seconds": elapsed,
                 **res.params, "point_class": res.classes.counts()}
         write_summary_json(args.summary_json, meta)
+    return 0
+
+
+def _covariance_tiled(args, out):
+    """``--tile``: the file in tiles with a halo of twice the reach (point_class counts
+    streamed back from the output)."""
+    from ._tiled import count_field, run_tiled
+
+    args.sensor = resolve_sensor(args.sensor, args.input, args.quiet)
+    facts = run_tiled(args, "covariance", out)
+    counts = count_field(out, "point_class", args.chunk_points)
+    names = ("undetermined", "surface", "edge", "boundary")
+    classes = {n: int(counts[i]) if i < counts.size else 0 for i, n in enumerate(names)}
+    if not args.quiet:
+        print(f"{args.input} -> {out}  ({facts['seconds']:.2f} s)")
+        print("  " + ", ".join(f"{n} {c}" for n, c in classes.items()))
+    if args.summary_json:
+        write_summary_json(args.summary_json, {"input": str(args.input), "output": str(out),
+                                               **facts, "point_class": classes})
     return 0
 
 
@@ -117,4 +138,5 @@ def register(sub):
                    "or normalised eigenvalues")
     add_classification_arguments(s)
     add_run_outputs(s)
+    add_tiling(s, "twice the neighbourhood's reach")
     s.set_defaults(func=cmd_covariance)

@@ -8,7 +8,7 @@ from pathlib import Path
 from .._shared._choices import Weight
 from . import _options as opt
 from ._app import Output, check_plan, progress, resolve_sensor, write_summary_json
-from ._common import add_alpha, add_neighbourhood, add_noise, add_run_outputs
+from ._common import add_alpha, add_neighbourhood, add_noise, add_run_outputs, add_tiling
 
 #: Fewest neighbours of a degree-4 jet: its 15 coefficients and one degree of freedom.
 JET_NEIGHBORS = 16
@@ -28,6 +28,8 @@ def cmd_ridges(args):
     check_plan([args.input], Output("output", out),
                Output("--lines", lines_path, "lines", default=not args.lines),
                Output("--summary-json", args.summary_json, "json"))
+    if args.tile is not None:
+        return _ridges_tiled(args, out, lines_path)
     cloud = read(args.input)
     args.sensor = resolve_sensor(args.sensor, args.input, args.quiet)
     t0 = time.perf_counter()
@@ -50,6 +52,27 @@ def cmd_ridges(args):
                 "scale": res.params.get("scale", "fixed"),
                 "params": res.params}
         write_summary_json(args.summary_json, meta)
+    return 0
+
+
+def _ridges_tiled(args, out, lines_path):
+    """``--tile``: the file in tiles with a halo of three jet radii (ridge counts streamed
+    back from the output)."""
+    from ._tiled import count_field, run_tiled
+
+    args.sensor = resolve_sensor(args.sensor, args.input, args.quiet)
+    facts = run_tiled(args, "ridges", out, lines=lines_path)
+    counts = count_field(out, "ridge", args.chunk_points)
+    crest, ravine = (int(counts[i]) if i < counts.size else 0 for i in (1, 2))
+    if not args.quiet:
+        print(f"{args.input} -> {out}  ({facts['seconds']:.2f} s)")
+        print(f"  crest points {crest}, ravine points {ravine}, lines "
+              f"{facts.get('n_lines', 0)}")
+        print(f"  lines: {lines_path}")
+    if args.summary_json:
+        write_summary_json(args.summary_json, {
+            "input": str(args.input), "output": str(out), "lines": str(lines_path),
+            **facts, "crest_points": crest, "ravine_points": ravine})
     return 0
 
 
@@ -84,4 +107,5 @@ def register(sub):
                    help="ridge lines (.geojson, .csv, .las/.laz; default OUT stem + "
                    ".ridges.geojson)")
     add_run_outputs(s)
+    add_tiling(s, "three jet radii")
     s.set_defaults(func=cmd_ridges)

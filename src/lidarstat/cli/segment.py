@@ -44,6 +44,8 @@ def cmd_segment(args):
                Output("--lines", lines, "lines", default=not args.lines),
                Output("--summary-json", args.summary_json, "json"),
                Output("--diagnostics", diagnostics, "folder"))
+    if args.tile is not None:
+        return _segment_tiled(args, out, table, lines)
     cloud = read(args.input)
     args.sensor = resolve_sensor(args.sensor, args.input, args.quiet)
     method = import_module(SEGMENT_METHODS[args.method])
@@ -68,6 +70,26 @@ def cmd_segment(args):
                 "method": args.method, "seconds": elapsed, "n_segments": seg.n_segments,
                 "params": seg.params}
         write_summary_json(args.summary_json, meta)
+    return 0
+
+
+def _segment_tiled(args, out, table, lines):
+    """``--tile``: the file in tiles with a halo of four neighbourhood reaches, segments
+    joined across the tiles."""
+    from ._tiled import run_tiled
+
+    args.sensor = resolve_sensor(args.sensor, args.input, args.quiet)
+    facts = run_tiled(args, "segment", out, lines=lines, table=table)
+    wrote_lines = "n_lines" in facts
+    if not args.quiet:
+        print(f"{args.input} -> {out}  ({facts['seconds']:.2f} s)")
+        print(f"{args.method}: {facts['n_segments']} segments, "
+              f"{facts['points_in_segments']} points in segments")
+        print(f"  table: {table}" + (f"\n  lines: {lines}" if wrote_lines else ""))
+    if args.summary_json:
+        write_summary_json(args.summary_json, {
+            "input": str(args.input), "output": str(out), "table": str(table),
+            "lines": str(lines) if wrote_lines else None, "method": args.method, **facts})
     return 0
 
 
@@ -110,7 +132,7 @@ def _refuse_unusable(owners):
 
 def register(sub):
     """Add the ``segment`` subcommand and every registered method's options."""
-    from ._common import add_noise, add_run_outputs, deprecated_alias
+    from ._common import add_noise, add_run_outputs, add_tiling, deprecated_alias
 
     s = sub.add_parser(
         "segment", help="group points into surface segments (--method ...)",
@@ -145,6 +167,7 @@ def register(sub):
                    help="lines between segments (.geojson, .csv, .las/.laz; "
                    "default OUT stem + .lines.geojson)")
     add_run_outputs(s)
+    add_tiling(s, "four neighbourhood reaches; segments joined across tiles")
     owners = {}
     for name in sorted(SEGMENT_METHODS):
         group = s.add_argument_group(f"--method {name}")

@@ -6,6 +6,8 @@ from ._catalogue import DEFAULT_TEMPLATE, BufferedTile, Catalogue, write_tiles
 from ._catalogue_run import TileRun, process_catalogue
 from ._methods import METHODS, SEGMENTATIONS, method_function, segmentation
 from ._stream import process_file
+from ._stream_labels import LabelMap
+from ._stream_sample import FileSample, sample_file
 from ._terrain import GROUND_CODES_DTM, terrain_model
 
 __all__ = [
@@ -15,6 +17,8 @@ __all__ = [
                          "SEGMENTATIONS",
                          "BufferedTile",
                          "Catalogue",
+                         "FileSample",
+                         "LabelMap",
                          "Tile",
                          "TileGrid",
                          "TileRun",
@@ -22,6 +26,7 @@ __all__ = [
                          "method_function",
                          "process_catalogue",
                          "process_file",
+                         "sample_file",
                          "segmentation",
                          "terrain_model",
                          "tile_grid",

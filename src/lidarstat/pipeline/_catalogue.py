@@ -237,6 +237,10 @@ class Catalogue:
                 "files": [{"path": str(f.path), "points": f.n_points,
                            "bounds": list(f.bounds2d), "copc": f.copc} for f in self.files]}
 
+    def tile_xyz(self, i: int) -> np.ndarray:
+        """The (M, 3) points of tile `i` (read whole)."""
+        return read(self.files[i].path).xyz
+
     def window(self, i: int, buffer: float) -> tuple[float, float, float, float]:
         """Tile `i`'s extent grown by `buffer` on every side."""
         f = self.files[i]

@@ -32,10 +32,11 @@ from pathlib import Path
 import numpy as np
 
 from .._shared._atomic import unnamed_file
-from .._shared._tiles import TileGrid, _fields_of
+from .._shared._tiles import Tile, TileGrid, _fields_of
 from .._shared.validation import check_option, check_scalar
 from ..errors import InvalidPointsError
 from ..io import iter_chunks, rewrite
+from ._stream_labels import LINK, Labels
 
 _REC = np.dtype([("i", "<i8"), ("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("core", "u1")])
 
@@ -120,7 +121,9 @@ def _bucket(src, grid, scratch, points_per_chunk):
 
 def process_file(func: Callable, src, dst, *, size: float, halo: float,
                  scheduler: str = "sync", workers: int | None = None,
-                 points_per_chunk: int = 1_000_000, workdir=None, progress=None) -> Path:
+                 points_per_chunk: int = 1_000_000, workdir=None, progress=None,
+                 with_tile: bool = False, labels: dict | None = None,
+                 collect: Callable | None = None, finish: Callable | None = None) -> Path:
     """Run a per-point method on a file tile by tile and write its results beside the input's.
 
     Parameters
@@ -128,7 +131,8 @@ def process_file(func: Callable, src, dst, *, size: float, halo: float,
     func : callable
         ``func(points) -> dict`` of per-point arrays (or an object with ``to_fields()``)
         for the (M, 3) points of one tile with its halo. Fix any whole-cloud estimate
-        (noise level, thresholds) beforehand.
+        (noise level, thresholds) beforehand. It may return ``(fields, info)``: `info`
+        goes to `collect`.
     src, dst : path-like
         Input (never modified) and output point-cloud files. LAS/LAZ to LAS/LAZ streams;
         other formats are read and written whole (the tiles still bound the method's
@@ -149,6 +153,23 @@ def process_file(func: Callable, src, dst, *, size: float, halo: float,
         default `dst`'s folder. Nothing named is created there.
     progress : callable, optional
         ``progress(done_points, total_points)``.
+    with_tile : bool
+        Call ``func(points, tile)``, `tile` a :class:`Tile` (its key, core square, point
+        numbers and core flags; `points` in the file's order).
+    labels : dict of str to bool, optional
+        Label fields of `func`'s result (integers, 0 = none, numbered from 1 per tile):
+        written with ids unique over the file; a field mapped to True is also *joined*
+        across tiles, two tiles' labels becoming one id where they hold the same points
+        of the tiles' overlap (see ``lidarstat.pipeline._stream_labels``; a surface
+        crossing a tile border keeps one id).
+    collect : callable, optional
+        ``collect(tile, info, bases)`` in the calling thread for every tile, in order:
+        `info` as `func` returned it, `bases` the number added to the tile's labels of
+        each field of `labels` (its *nodes*).
+    finish : callable, optional
+        ``finish(maps)`` once every tile has run, before the output is written: `maps`
+        maps each field of `labels` to a :class:`LabelMap` (node -> id written, core
+        points per node), for outputs beside the points (tables, lines).
 
     Returns
     -------
@@ -171,33 +192,82 @@ def process_file(func: Callable, src, dst, *, size: float, halo: float,
     results = _Scratch(parent)
     try:
         _run_tiles(func, src, dst, grid, n, buckets, results, scheduler=scheduler,
-                   workers=workers, points_per_chunk=points_per_chunk, progress=progress)
+                   workers=workers, points_per_chunk=points_per_chunk, progress=progress,
+                   with_tile=with_tile, labels=labels or {}, collect=collect,
+                   finish=finish)
     finally:
         buckets.close()
         results.close()
     return dst
 
 
+def _shared_rows(xyz, core, bounds, halo):
+    """Rows of a tile that another tile also holds: its halo, and its core points within
+    `halo` of its border (a little wider: an extra row pairs with nothing)."""
+    x0, y0, x1, y1 = bounds
+    h = halo * (1 + 1e-9) + 1e-9 * (x1 - x0)
+    x, y = xyz[:, 0], xyz[:, 1]
+    near = (x - x0 < h) | (x1 - x < h) | (y - y0 < h) | (y1 - y < h)
+    return ~core | near
+
+
 def _run_tiles(func, src, dst, grid, n, buckets, results, *, scheduler, workers,
-               points_per_chunk, progress):
+               points_per_chunk, progress, with_tile=False, labels=None, collect=None,
+               finish=None):
     """Steps 2-4 of :func:`process_file`, with its scratch files `buckets` and `results`."""
     keys = _bucket(src, grid, buckets, points_per_chunk)
     # name -> (number, dtype, trailing shape) of every result field, first come
     registry: dict[str, tuple] = {}
+    state = {name: Labels(name, bool(join)) for name, join in (labels or {}).items()}
+    written: dict[str, np.dtype] = {}  # dtype of each label field (stored as nodes)
     done = 0
+    tiles_run = 0
 
     def compute(key):
         rec = buckets.read(key, _REC)
         core = rec["core"].astype(bool)
         if not core.any():
-            return rec["i"][:0], {}
+            return None
         xyz = np.c_[rec["x"], rec["y"], rec["z"]]
-        fields = _fields_of(func(xyz), len(rec), grid.key_of(key))
-        return rec["i"][core], {name: arr[core] for name, arr in fields.items()}
+        tile = Tile(grid.key_of(key), grid.bounds(key), rec["i"], core)
+        out = func(xyz, tile) if with_tile else func(xyz)
+        info = None
+        if isinstance(out, tuple):
+            out, info = out
+        fields = _fields_of(out, len(rec), grid.key_of(key))
+        shared = _shared_rows(xyz, core, tile.bounds, grid.halo) if state else None
+        links = {}
+        for name in state:
+            if name not in fields:
+                raise InvalidPointsError(f"tile {tile.key}: no label field {name!r}")
+            lab = fields[name].astype(np.int64)
+            links[name] = (lab.max(initial=0), rec["i"][shared], lab[shared], core[shared])
+        return tile, {name: arr[core] for name, arr in fields.items()}, info, links
 
-    def put(rows, fields):
-        """Append the results of `rows` to the runs of their chunk and field."""
-        nonlocal done
+    def put(result):
+        """Append the results of a tile's core rows to the runs of their chunk and field."""
+        nonlocal done, tiles_run
+        if result is None:
+            return
+        tile, fields, info, links = result
+        rows = tile.points[tile.core]
+        bases = {}
+        for name, (top, i, lab, core) in links.items():
+            lab_state = state[name]
+            written.setdefault(name, fields[name].dtype)
+            base, nodes = lab_state.nodes(fields[name], top)
+            bases[name] = base
+            lab_state.count_core(nodes)
+            fields[name] = nodes
+            if lab_state.join:
+                rec = np.empty(i.size, LINK)
+                rec["i"], rec["node"], rec["tile"] = i, np.where(lab > 0, lab + base, 0), \
+                    tiles_run
+                rec["core"] = core
+                results.append(("links", name), rec)
+        tiles_run += 1
+        if collect is not None:
+            collect(tile, info, bases)
         chunk = rows // points_per_chunk
         order = np.argsort(chunk, kind="stable")
         chunk = chunk[order]
@@ -226,16 +296,21 @@ def _run_tiles(func, src, dst, grid, n, buckets, results, *, scheduler, workers,
             if scheduler == "sync":
                 out = [compute(k) for k in part]
             elif scheduler == "threads":
-                out = list(pool.map(compute, part))
+                out = pool.map(compute, part)  # each put as soon as it is done
             else:
                 import dask
 
                 out = dask.compute(*[dask.delayed(compute)(k) for k in part])
-            for rows, fields in out:
-                put(rows, fields)
+            for result in out:
+                put(result)
     finally:
         if pool is not None:
             pool.shutdown(cancel_futures=True)
+
+    maps = {name: lab.finish(results.read(("links", name), LINK) if lab.join else None)
+            for name, lab in state.items()}
+    if finish is not None:
+        finish(maps)
 
     def fields_of(start, chunk):
         """The results of points ``start .. start + len(chunk)`` (zeros where none)."""
@@ -249,7 +324,7 @@ def _run_tiles(func, src, dst, grid, n, buckets, results, *, scheduler, workers,
                 rec = results.read((c, j), rec_type)
                 inside = (rec["row"] >= start) & (rec["row"] < start + m)
                 arr[rec["row"][inside] - start] = rec["v"][inside]
-            out[name] = arr
+            out[name] = maps[name](arr).astype(written[name]) if name in maps else arr
         return out
 
     rewrite(src, dst, fields_of, points_per_chunk=points_per_chunk)
