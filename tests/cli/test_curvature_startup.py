@@ -6,6 +6,16 @@ import sys
 from lidarstat.cli._app import CORE_COMMANDS, build_parser, command_of
 
 
+def _run_without(statements, prefixes=(), modules=()):
+    """Run `statements` in a fresh interpreter; fail if it imported a module starting with
+    one of `prefixes` or one of `modules`."""
+    code = ("import sys\n" + statements
+            + f"bad = [m for m in sys.modules if m.startswith({tuple(prefixes)!r})]\n"
+            + f"bad += [m for m in {tuple(modules)!r} if m in sys.modules]\n"
+            + "assert not bad, bad\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
 def test_command_of_skips_the_global_options():
     assert command_of(["-v", "curvature", "a.las", "b.las"]) == "curvature"
     assert command_of(["--version"]) is None
@@ -36,32 +46,24 @@ def test_curvature_run_does_not_import_scipy_stats_or_other_methods(tmp_path):
     x, y = [a.ravel() for a in np.meshgrid(g, g)]
     rng = np.random.default_rng(0)
     write(tmp_path / "in.las", PointCloud(xyz=np.c_[x, y, 0.1 * x * x + rng.normal(0, 0.01, x.size)]))
-    code = (
-        "import sys\n"
+    _run_without(
         "from lidarstat.cli._app import main\n"
         f"assert main(['curvature', {str(tmp_path / 'in.las')!r}, {str(tmp_path / 'out.las')!r},"
-        " '--radius', '0.6', '-q']) == 0\n"
-        "bad = [m for m in sys.modules if m.startswith(('scipy.stats', 'scipy.spatial', 'scipy.special',"
-        " 'lidarstat.segment', 'lidarstat.classify', 'lidarstat.pipeline', 'lidarstat.report',"
-        " 'matplotlib', 'dask', 'pandas', 'rasterio'))]\n"
+        " '--radius', '0.6', '-q']) == 0\n",
+        prefixes=("scipy.stats", "scipy.spatial", "scipy.special", "lidarstat.segment",
+                  "lidarstat.classify", "lidarstat.pipeline", "lidarstat.report", "matplotlib",
+                  "dask", "pandas", "rasterio"),
         # the other local models of lidarstat.features and the rasters of lidarstat.io
-        "bad += [m for m in ('lidarstat.features._jets', 'lidarstat.features._covariance',"
-        " 'lidarstat.features._cylinder', 'lidarstat.features._plane_regression',"
-        " 'lidarstat.io._raster', 'lidarstat.io._extent') if m in sys.modules]\n"
-        "assert not bad, bad\n")
-    subprocess.run([sys.executable, "-c", code], check=True)
+        modules=("lidarstat.features._jets", "lidarstat.features._covariance",
+                 "lidarstat.features._cylinder", "lidarstat.features._plane_regression",
+                 "lidarstat.io._raster", "lidarstat.io._extent"))
     assert (tmp_path / "out.las").exists()
 
 
 def test_parsing_imports_no_numerics():
     """``lidarstat curvature --help`` and a refused option parse without the numerical packages."""
-    code = ("import sys\n"
-            "from lidarstat.cli._app import build_parser\n"
-            "build_parser('curvature')\n"
-            "bad = [m for m in ('numba', 'scipy', 'laspy', 'pyproj', 'matplotlib', 'dask', "
-            "'pandas') if m in sys.modules]\n"
-            "assert not bad, bad\n")
-    subprocess.run([sys.executable, "-c", code], check=True)
+    _run_without("from lidarstat.cli._app import build_parser\nbuild_parser('curvature')\n",
+                 modules=("numba", "scipy", "laspy", "pyproj", "matplotlib", "dask", "pandas"))
 
 
 def test_a_module_command_parses_alone_and_the_same():
@@ -87,13 +89,9 @@ def test_moments_run_does_not_import_the_other_methods(tmp_path):
     write(tmp_path / "in.las", PointCloud(xyz=np.c_[xy, 0.05 * xy[:, 0] + g.normal(0, 0.02, 3000)],
                                           attributes={"intensity": g.integers(50, 200, 3000)
                                                       .astype(np.uint16)}))
-    code = (
-        "import sys\n"
+    _run_without(
         "from lidarstat.cli._app import main\n"
         f"assert main(['moments', {str(tmp_path / 'in.las')!r}, {str(tmp_path / 'out.las')!r},"
-        " '--no-report', '-q']) == 0\n"
-        "bad = [m for m in sys.modules if m.startswith(('lidarstat.segment', 'lidarstat.synth',"
-        " 'lidarstat.report', 'matplotlib'))]\n"
-        "assert not bad, bad\n")
-    subprocess.run([sys.executable, "-c", code], check=True)
+        " '--no-report', '-q']) == 0\n",
+        prefixes=("lidarstat.segment", "lidarstat.synth", "lidarstat.report", "matplotlib"))
     assert (tmp_path / "out.las").exists()
