@@ -17,8 +17,9 @@ Roof-cell points removed:
   probability ``ALPHA`` (a Poisson half-disc: ``d > sqrt(-ln ALPHA / (lambda pi / 2))``,
   ``lambda`` the roof points within 1 m of that roof point per square metre);
 * ``cell_above_roof_plane_beside``: its own 1 m cell holds no roof point and it lies above
-  the local plane of its nearest roof point (12 nearest roof points) by more than the
-  normal test's limit ``z_{1-ALPHA/2} sigma sqrt(1 + 1/k)``: foliage rising beside a roof;
+  the local plane of its nearest roof point in plan (that point's 12 nearest roof points)
+  by more than the normal test's limit ``z_{1-ALPHA/2} sigma sqrt(1 + 1/k)``: foliage
+  rising beside a roof;
 * ``cell_ground_seen``: returns more than 1 m under it within 0.5 m (plan) significantly
   more frequent (binomial, upper tail) than under the file's roof-patch points: a roof
   hides the ground, a crown does not.
