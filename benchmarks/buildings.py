@@ -28,7 +28,11 @@ measures the roof patches' echoes, the returns under them and the overlap of fli
 strips, ``echo_strip_rule_search`` every rule on them (``building_echoes.py``);
 ``mixed_false_patches`` the false patches that hold much of class 6, and
 ``false_patches_rejected_except_mixed`` the patch rules' bound without them (with the
-recovery rules after it).
+recovery rules after it). ``point_rules`` scores per-point tests on the roof-cell points,
+the roofs with no accepted plane and the walls; on St-Barthelemy ``no_plane_components``
+describes the missed roofs with no accepted plane and ``learned_point_bound`` what a
+classifier trained on the reference's own labels reaches on that per-point evidence
+(``building_points.py``).
 
 Usage::
 
@@ -60,6 +64,7 @@ DATA = HERE.parent.parent / "shared" / "data"
 import building_echoes  # noqa: E402
 import building_evidence  # noqa: E402
 import building_joint  # noqa: E402
+import building_points  # noqa: E402
 import building_recall  # noqa: E402
 from real_moments import PRODUCER_FILES as FILES  # noqa: E402 (the same files)
 LEFT_OUT = (7, 9, 18)
@@ -187,6 +192,17 @@ def run(rel):
     row["missed_by_cause"], cause = building_recall.missed_causes(
         state, new, truth, keep, res.ground, res.height, b["sigma"])
     row["recovery_rules"] = building_recall.recovery_rules(state, new, truth, keep)
+    # per-point rules on what is left (building_points.py): roof-cell points beside roofs,
+    # roofs with no accepted plane, walls; on St-Barthelemy what bounds any such rule
+    extra = building_points.point_evidence(state, cloud.xyz, b["sigma"])
+    row["point_rules"] = building_points.point_rules(state, ev, new, truth, keep, b["sigma"],
+                                                     extra)
+    if rel == SB_FIGURE_FILE:
+        row["no_plane_components"] = building_points.no_plane_components(
+            cloud.xyz, cause, ref, multi, np.asarray(a["point_source_id"]))
+        row["learned_point_bound"] = building_points.learned_bound(
+            state, extra, fields, a.get("intensity"), new, truth, keep, b["sigma"])
+    del extra
     # the same rules once every false patch is rejected (the patch rules' bound above):
     # do the low parts under the true roofs follow the reference then?
     state = building_recall.candidate_state(
