@@ -269,3 +269,26 @@ def test_refine_borders_moves_a_misassigned_row(rng):
     # noise) that happened to lie beyond 3 sigma of A's plane
     other = np.flatnonzero(moved & ~np.isin(np.arange(len(p)), row))
     assert other.size <= 5 and (np.abs(p[other, 0]) < 0.004).all()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_strip_links_are_the_pairs_within_the_larger_radius(seed):
+    """Each point is searched with its own radius (in blocks of near radii), never with
+    the largest: the pairs are exactly those within the larger of the two radii, each
+    once, with exact copies, radius-0 points and one isolated point of a huge radius."""
+    from lidarstat.segment._refine import _link_pairs
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(200, 1500))
+    p = rng.random((n, 3)) * [10.0, 10.0, 1.0]
+    p[rng.integers(0, n, 15)] = p[rng.integers(0, n, 15)]  # exact copies
+    r = rng.gamma(2.0, 0.15, n)
+    r[rng.random(n) < 0.05] = 0.0
+    r[0] = 4.0  # an isolated point's reach: the old global radius
+    a, b = _link_pairs(p, r, block=int(rng.integers(1, 400)))
+    got = np.stack([a, b], axis=1)
+    assert (a < b).all() and len(np.unique(got, axis=0)) == len(got)
+    d = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=2)
+    i, j = np.nonzero(np.triu(d <= np.maximum(r[:, None], r[None, :]), k=1))
+    want = np.stack([i, j], axis=1)
+    assert np.array_equal(got[np.lexsort(got.T[::-1])], want)

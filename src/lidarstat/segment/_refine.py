@@ -337,19 +337,13 @@ def _link_groups(points, free, nbh, reach):
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
 
     idx = np.flatnonzero(free)
     k = np.diff(nbh.indptr)
     last = nbh.distances[np.maximum(nbh.indptr[1:] - 1, 0)]
     rk = np.where(k > 0, last, 0.0)[idx] if len(nbh) == free.size else np.zeros(idx.size)
-    tree = cKDTree(points[idx])
-    pairs = tree.query_pairs(reach * float(rk.max()) if idx.size else 0.0,
-                             output_type="ndarray")
-    if pairs.size:
-        d = np.linalg.norm(points[idx[pairs[:, 0]]] - points[idx[pairs[:, 1]]], axis=1)
-        pairs = pairs[d <= reach * np.maximum(rk[pairs[:, 0]], rk[pairs[:, 1]])]
-    g = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])),
+    a, b = _link_pairs(points[idx], reach * rk)
+    g = coo_matrix((np.ones(a.size, dtype=np.int8), (a, b)),
                    shape=(idx.size, idx.size)).tocsr()
     _, c = connected_components(g, directed=False)
     out = np.zeros(free.size, dtype=np.int64)
@@ -357,6 +351,44 @@ def _link_groups(points, free, nbh, reach):
     pos = np.full(free.size, -1, dtype=np.int64)
     pos[idx] = np.arange(idx.size)
     return out, (g, pos)
+
+
+def _link_pairs(p, r, block=16384, ratio=1.25):
+    """The pairs ``i < j`` of `p` with ``|p_i - p_j| <= max(r_i, r_j)``, each once.
+
+    Every point is searched with its own radius, never with the largest: on airborne data
+    a few isolated points reach metres, and one search at their radius over every point
+    holds hundreds of millions of pairs. Points are searched in blocks of nearly equal
+    radii (within `ratio`, at most `block` points) against all points; a block's pairs are
+    cut to the query's own radius at once, so only the graph's own pairs are ever held.
+    A pair is kept from the query of its smaller index when within that point's radius,
+    else from the other's (points of radius 0 are not searched: their pairs come from the
+    other point's search).
+    """
+    from scipy.spatial import cKDTree
+
+    m = p.shape[0]
+    if m < 2:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    tree = cKDTree(p)
+    order = np.argsort(r, kind="stable")
+    rs = r[order]
+    a_parts, b_parts = [], []
+    start = int(np.searchsorted(rs, 0.0, side="right"))  # radius 0 links through others
+    while start < m:
+        stop = int(np.searchsorted(rs, rs[start] * ratio, side="right"))
+        stop = min(max(stop, start + 1), start + block)
+        q = order[start:stop]
+        sdm = cKDTree(p[q]).sparse_distance_matrix(tree, float(rs[stop - 1]),
+                                                   output_type="ndarray")
+        qi, j, d = q[sdm["i"]], sdm["j"].astype(np.int64), sdm["v"]
+        other = (r[j] > 0) & (d <= r[j])  # the pair the query of j keeps
+        keep = (d <= r[qi]) & (qi != j) & ((j > qi) | ~other)
+        qi, j = qi[keep], j[keep]
+        a_parts.append(np.minimum(qi, j))
+        b_parts.append(np.maximum(qi, j))
+        start = stop
+    return np.concatenate(a_parts), np.concatenate(b_parts)
 
 
 def _pieces(link, members, min_points):
