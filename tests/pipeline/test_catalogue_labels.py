@@ -98,7 +98,7 @@ def test_catalogue_join_equals_the_tiled_file(tmp_path, seed):
     y = key[:, 1] / 1000 - Y0 - phase
     clear = (np.abs(y - STRIP * np.round(y / STRIP)) > 0.05) & (cat > 0)
     truth = np.floor(y / STRIP).astype(np.int64)
-    whole = range(0, int((10.0 - phase) // STRIP))  # the strips of full width
+    whole = range(int((10.0 - phase) // STRIP))  # the strips of full width
     ids = [np.unique(cat[clear & (truth == s)]) for s in whole]
     assert all(len(i) == 1 for i in ids), ids  # each strip one id over the area
     assert len({int(i[0]) for i in ids}) == len(ids) >= 4

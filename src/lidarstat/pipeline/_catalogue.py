@@ -9,8 +9,9 @@ one output per input. The buffer is removed on output, so a method whose answer 
 only on points within the buffer distance gives every point the result it gets on the
 whole area.
 
-Outputs appear atomically, one per tile as it completes; a rerun skips the tiles whose
-output exists (``resume=True``), so a stopped run goes on where it stopped. Tiles run one
+Outputs appear atomically, one per tile as it completes (with label fields joined
+across the tiles, when every tile has run: ``_catalogue_join``); a rerun skips the tiles
+whose output exists (``resume=True``), so a stopped run goes on where it stopped. Tiles run one
 after the other, in threads, or as Dask tasks on the local machine or on a
 ``distributed`` cluster (``address``); each task reads and writes its own tile, so memory
 holds the tiles in progress, not the area, and nothing large travels between workers.

@@ -97,9 +97,9 @@ def put_pending(cat, i: int, out: Path, outdir: Path, tile, fields: dict, info: 
     target.parent.mkdir(exist_ok=True)
     with output_group(defer=False):  # the output first: a record means a complete run
         write(target, tile.core, fields=core_fields)
-    with output_group(defer=False), atomic_path(_record(out, outdir)) as tmp:
-        with open(tmp, "wb") as fh:
-            pickle.dump(record, fh, protocol=pickle.HIGHEST_PROTOCOL)
+    with (output_group(defer=False), atomic_path(_record(out, outdir)) as tmp,
+          open(tmp, "wb") as fh):
+        pickle.dump(record, fh, protocol=pickle.HIGHEST_PROTOCOL)
 
 
 def _load(path: Path) -> dict | None:
