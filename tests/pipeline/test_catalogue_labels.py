@@ -246,3 +246,29 @@ def test_resume_of_a_complete_run_and_of_a_partial_folder(tmp_path):
     runs = process_catalogue(*args, buffer=0.5, labels={"seg": True}, resume=False)
     assert {r.status for r in runs} == {"done"} and outputs[0].exists()
     np.testing.assert_array_equal(read(outputs[1]).attributes["seg"], before)
+
+
+def test_copc_tiles_are_joined_as_their_las_tiles(tmp_path):
+    """A COPC tile's buffer points are numbered by their place in the file (streamed, the
+    octree does not number them): the join is the LAS tiles' join."""
+    pytest.importorskip("copclib", reason="copclib (writes the COPC test files) is missing")
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from _copc import write_copc
+
+    _, xyz = _cloud(tmp_path, seed=8, n=4000)
+    lo = _cut(xyz, tmp_path / "tiles", 4.0)
+    (tmp_path / "copc").mkdir()
+    for p in sorted((tmp_path / "tiles").glob("*.laz")):
+        c = read(p)
+        write_copc(tmp_path / "copc" / p.name, c.xyz, np.zeros(len(c.xyz), np.uint16),
+                   scale=c.las_header.scales.tolist())
+    _, in_catalogue = _tile_functions(9, 0.05, 0.4, lo, 4.0)
+    for name in ("tiles", "copc"):
+        process_catalogue(in_catalogue, tmp_path / name, tmp_path / f"out_{name}",
+                          buffer=0.6, labels={"seg": True}, scheduler="sync")
+    (ka, a), (kb, b) = _by_point(tmp_path / "out_tiles"), _by_point(tmp_path / "out_copc")
+    np.testing.assert_array_equal(ka, kb)
+    assert _same_partition(a, b) and len(np.unique(a[a > 0])) >= 5
