@@ -7,8 +7,9 @@ Two measurements, each a ``lidarstat`` process as a user runs it:
   ``moments`` on the whole file: the share of points with the same class, and with the
   same ground (2, 11) / object decision. ``curvature`` likewise, whose answer is local
   (its share must be 1 with the default buffer, the radius). ``segment --method
-  covariance`` on the tiles (default buffer) against the whole file: purity and
-  completeness of the segments (the cuts at tile borders lower the completeness).
+  covariance`` on the tiles (default buffer, segments joined across the tiles) against
+  the whole file: purity and completeness of the segments.
+* ``--segments``: that segment measurement alone (merged into ``agreement``).
 * ``--reach``: how far the refits of the ground surface carry the edge of a buffer: one
   tile's classes against the whole file's for ``--iterations`` 0, 1 and 4.
 * ``--points N``: a synthetic airborne catalogue of N points in tiles of
@@ -19,6 +20,7 @@ Two measurements, each a ``lidarstat`` process as a user runs it:
 Usage::
 
     python benchmarks/catalogue.py --agreement --out benchmarks/results_catalogue.json
+    python benchmarks/catalogue.py --segments --out benchmarks/results_catalogue.json
     python benchmarks/catalogue.py --reach --out benchmarks/results_catalogue.json
     python benchmarks/catalogue.py --points 50000000 --out benchmarks/results_catalogue.json
 
@@ -130,8 +132,8 @@ def _best_overlap(a, b):
 
 def segment_agreement(tmp: Path) -> dict:
     """``segment --method covariance`` on the tiles against the whole file: purity (a
-    tile's segment lies in one whole-file segment) and completeness (a whole-file
-    segment lies in one tile segment; the cuts at tile borders lower it)."""
+    catalogue segment lies in one whole-file segment) and completeness (a whole-file
+    segment lies in one catalogue segment: the join across the tiles)."""
     opts = ["--method", "covariance", "--radius", "1.5", "--sigma", "0.03"]
     secs, mem = lidarstat("segment", DELFT, tmp / "whole_s.laz", *opts, "-q")
     wx, wc = _classes([tmp / "whole_s.laz"], "segment_id")
@@ -142,8 +144,43 @@ def segment_agreement(tmp: Path) -> dict:
     rows["segment tiles, default buffer"] = {
         "seconds": secs, "peak_mib": mem, "purity": _best_overlap(tc, wc),
         "completeness": _best_overlap(wc, tc),
-        "same_in_a_segment": float(((tc > 0) == (wc > 0)).mean())}
+        "same_in_a_segment": float(((tc > 0) == (wc > 0)).mean()),
+        "segments": int(np.unique(tc[tc > 0]).size),
+        "whole_file_segments": int(np.unique(wc[wc > 0]).size),
+        "machine_shared": True}
+    _unjoined(tmp / "tiles", tmp / "seg_cut", opts)
+    tx, tc = _classes(sorted((tmp / "seg_cut").glob("*.laz")), "segment_id")
+    assert np.array_equal(tx, wx)
+    rows["segment tiles, default buffer, not joined"] = {
+        "purity": _best_overlap(tc, wc), "completeness": _best_overlap(wc, tc),
+        "same_in_a_segment": float(((tc > 0) == (wc > 0)).mean()),
+        "segments": int(np.unique(tc[tc > 0]).size)}
     return rows
+
+
+def _unjoined(tiles: Path, out: Path, opts: list) -> None:
+    """The catalogue run of ``segment`` (in this process) with its segments left as the
+    tiles' runs found them: ids unique over the area, not joined across the tiles, so
+    the difference from the joined run is the join's."""
+    from lidarstat.cli import _catalogue_segment as seg
+    from lidarstat.cli._app import build_parser
+    from lidarstat.pipeline import Catalogue, process_catalogue
+
+    args = build_parser("segment").parse_args(["segment", str(tiles), str(out), *opts, "-q"])
+    args.input = str(tiles)
+    cat = Catalogue(tiles)
+    fields, join = seg._segment_fields(args, seg._segment_prepare(args, cat))
+    process_catalogue(fields, cat, out, buffer=seg._segment_buffer(args, cat),
+                      labels={"segment_id": False}, collect=join["collect"],
+                      finish=join["finish"])
+
+
+def segments_only(tmp: Path) -> dict:
+    """:func:`segment_agreement` on the tiles of :func:`agreement`."""
+    if not DELFT.is_file():
+        raise SystemExit(f"real data not found: {DELFT}")
+    write_tiles(read(DELFT), tmp / "tiles", size=80.0)
+    return segment_agreement(tmp)
 
 
 def iteration_reach(tile=(1061, 5595), size=80.0, buffer=128.0) -> dict:
@@ -211,6 +248,8 @@ def scale(tmp: Path, n: int, tile_points: int) -> dict:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--agreement", action="store_true")
+    ap.add_argument("--segments", action="store_true",
+                    help="the segment agreement alone, merged into 'agreement'")
     ap.add_argument("--reach", action="store_true",
                     help="the ground refits' reach on one tile (iterations 0, 1, 4)")
     ap.add_argument("--points", type=int, default=None)
@@ -224,6 +263,10 @@ def main(argv=None):
         if args.agreement:
             results["agreement"] = agreement(tmp / "agreement")
             print(json.dumps(results["agreement"], indent=1))
+        if args.segments:
+            seg = segments_only(tmp / "segments")
+            print(json.dumps(seg, indent=1))
+            results["agreement_segments"] = seg
         if args.reach:
             results["agreement_iterations"] = iteration_reach()
             print(json.dumps(results["agreement_iterations"], indent=1))
@@ -234,6 +277,9 @@ def main(argv=None):
     if args.out:
         path = Path(args.out)
         old = json.loads(path.read_text()) if path.exists() else {}
+        if "agreement_segments" in results:  # rows of the agreement runs
+            old.setdefault("agreement", {"runs": {}})["runs"].update(
+                results.pop("agreement_segments"))
         old.update(results)
         path.write_text(json.dumps(old, indent=1) + "\n")
 

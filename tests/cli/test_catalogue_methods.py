@@ -1,6 +1,6 @@
 """Every command on a catalogue: covariance and ridges give the whole-file answer with
-their reach as buffer (field by field), segment cuts segments at tile borders with ids
-unique over the area (its difference from the whole-file run measured), and info
+their reach as buffer (field by field), segment joins its segments across the tiles
+(its difference from the whole-file run measured), and info
 summarises a catalogue and writes its tile index."""
 
 import json
@@ -104,27 +104,33 @@ def _agreement(a, b):
     return sum(best.values()) / len(a)
 
 
-def test_segment_ids_are_unique_over_the_area(tmp_path, capsys):
+def test_segment_ids_are_joined_over_the_area(tmp_path, capsys):
+    """Segments crossing tile borders keep one id; every tile's table lists the segments
+    of its points under those ids, with their points over the area."""
     _tiles(tmp_path, seed=5)
     _run(["segment", tmp_path / "whole.laz", tmp_path / "w.laz", "--method", "covariance",
           "--radius", "1.5", "--sigma", "0.05", "-q"], capsys)
     out = _run(["segment", tmp_path / "tiles", tmp_path / "out", "--method", "covariance",
                 "--radius", "1.5", "--sigma", "0.05"], capsys)
     assert "9 tiles processed" in out
-    ids_per_tile = [set(np.unique(read(p)["segment_id"]).tolist()) - {0}
-                    for p in sorted((tmp_path / "out").glob("*.laz"))]
-    assert all(ids for ids in ids_per_tile)
-    assert sum(map(len, ids_per_tile)) == len(set().union(*ids_per_tile))  # unique
+    _, ids = _gather(tmp_path / "out", ["segment_id"])
+    ids = ids["segment_id"].astype(np.int64)
+    found, counts = np.unique(ids[ids > 0], return_counts=True)
+    assert found.tolist() == list(range(1, found.size + 1))  # numbered 1.. over the area
     for p in sorted((tmp_path / "out").glob("*.laz")):  # each tile's table: its segments
         table = (tmp_path / "out" / (p.stem + ".segments.csv")).read_text().splitlines()
-        listed = {int(r.split(",")[0]) for r in table[1:]}
-        assert listed == set(np.unique(read(p)["segment_id"]).tolist()) - {0}
+        head = table[0].split(",")
+        rows = {int(r.split(",")[0]): int(r.split(",")[head.index("n_points")])
+                for r in table[1:]}
+        assert set(rows) == set(np.unique(read(p)["segment_id"]).tolist()) - {0}
+        assert all(rows[k] == counts[k - 1] for k in rows)
     xyz, whole = _whole_fields(tmp_path / "w.laz")
     (_, a), (_, b) = (_by_xyz(_gather(tmp_path / "out", ["segment_id"])),
                       _by_xyz((xyz, {"segment_id": whole["segment_id"]})))
-    # a tile's segments never mix two whole-file segments (the buffer): only the cuts
-    # at the tile borders separate them
+    # the buffer: a tile's segments never mix two whole-file segments; the join: a
+    # whole-file segment is one segment of the catalogue
     assert _agreement(a["segment_id"], b["segment_id"]) > 0.98
+    assert _agreement(b["segment_id"], a["segment_id"]) > 0.98
 
 
 def test_segment_table_option_is_refused_with_a_catalogue(tmp_path, capsys):

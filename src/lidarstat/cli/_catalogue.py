@@ -169,14 +169,18 @@ def _run_catalogue(args, command):
     if not args.quiet:
         print(f"{len(cat)} tiles, {cat.n_points} points, buffer {buffer:g} -> {out}/")
     t0 = time.perf_counter()
-    runs = process_catalogue(fields_of(args, extra), cat, out, buffer=buffer,
+    tile_func, join = fields_of(args, extra), {}
+    if isinstance(tile_func, tuple):  # labels joined across the tiles (segment)
+        tile_func, join = tile_func
+    runs = process_catalogue(tile_func, cat, out, buffer=buffer,
                              template=args.template, resume=not args.overwrite,
                              scheduler=args.scheduler, workers=args.workers,
-                             address=args.address, progress=_progress(args.quiet))
+                             address=args.address, progress=_progress(args.quiet), **join)
     if not args.quiet:
         for r in runs:
             what = ("skipped: output exists" if r.status == "skipped" else
-                    f"{r.n_points} points + {r.n_buffer} buffer, {r.seconds:.1f} s")
+                    "resumed: its run kept from a stopped run" if r.status == "resumed"
+                    else f"{r.n_points} points + {r.n_buffer} buffer, {r.seconds:.1f} s")
             print(f"  {r.input.name} -> {r.output.name}  ({what})")
         done = sum(r.status == "done" for r in runs)
         print(f"{done} tiles processed, {len(runs) - done} skipped  "

@@ -31,9 +31,9 @@ Reaches (the buffer that makes the result independent of the tiling):
   bandwidth, the curvature ladder (and noise), the ridges' radius. Each tile is
   segmented with a buffer (default: the method's neighbourhood reach times 4, so that
   the segments near a tile's border grow over the neighbours' points as on the whole
-  area) and its points keep the segments of that run; a surface
-  crossing a tile border is cut there into one segment per tile. Segment ids are unique
-  over the area: a tile's ids are offset by the points of the tiles before it.
+  area), and the segments of neighbouring tiles are joined where they hold the same
+  points of the tiles' overlap (``_catalogue_segment``): a surface crossing tile
+  borders keeps one id over the area.
 """
 
 from __future__ import annotations
@@ -275,15 +275,24 @@ def ridges_decide(args, cat):
     return extra
 
 
-def _lines_in_tile(lines, extent):
-    """The lines whose middle vertex lies in the tile (each line written by one tile)."""
+def _lines_in_tile(lines, extent, extents=None, index=None):
+    """The lines whose middle vertex lies in the tile (each line written by one tile).
+
+    With `extents` (every tile's ``(xmin, ymin, xmax, ymax)``) and the tile's `index`:
+    the lines whose middle vertex is nearest to this tile's extent (ties to the first
+    tile), so that a line in the gap between two tiles' point bounds is kept once too.
+    """
     if lines is None or not len(lines):
         return lines
-    keep = []
-    for v in lines.vertices:
-        x, y = v[len(v) // 2, :2]
-        keep.append(extent.xmin <= x <= extent.xmax and extent.ymin <= y <= extent.ymax)
-    keep = np.asarray(keep, bool)
+    mid = np.array([v[len(v) // 2, :2] for v in lines.vertices]).reshape(-1, 2)
+    if extents is None:
+        keep = ((mid[:, 0] >= extent.xmin) & (mid[:, 0] <= extent.xmax)
+                & (mid[:, 1] >= extent.ymin) & (mid[:, 1] <= extent.ymax))
+    else:
+        box = np.asarray(extents, float).reshape(-1, 1, 4)
+        dx = np.maximum(np.maximum(box[..., 0] - mid[:, 0], mid[:, 0] - box[..., 2]), 0)
+        dy = np.maximum(np.maximum(box[..., 1] - mid[:, 1], mid[:, 1] - box[..., 3]), 0)
+        keep = np.argmin(np.hypot(dx, dy), axis=0) == index
     return type(lines)([v for v, k in zip(lines.vertices, keep) if k],
                        {n: np.asarray(a)[keep] for n, a in lines.attributes.items()})
 

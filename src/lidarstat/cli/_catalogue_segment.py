@@ -5,10 +5,11 @@ Segmentations couple points further than any buffer. A scale the method chooses 
 data is chosen once for the area (:func:`segment_scale`): the SAR bandwidth, the
 curvature ladder (and noise), the ridges' radius. Each tile is segmented with a buffer
 (default: the method's neighbourhood reach times :data:`SEGMENT_REACHES`, so that the
-segments near a tile's border grow over the neighbours' points as on the whole area) and
-its points keep the segments of that run; a surface crossing a tile border is cut there
-into one segment per tile. Segment ids are unique over the area: a tile's ids are offset
-by the points of the tiles before it.
+segments near a tile's border grow over the neighbours' points as on the whole area);
+the segments of neighbouring tiles are then joined where they hold the same points of
+the tiles' overlap (:func:`lidarstat.pipeline.process_catalogue` with ``labels``, the
+rule of ``--tile`` on one file), so a surface crossing tile borders keeps one id over
+the area. Ids are numbered 1.. over the area.
 """
 
 from __future__ import annotations
@@ -22,7 +23,6 @@ from ._catalogue_methods import (
     _ladder_text,
     _largest,
     _lines_in_tile,
-    _offsets,
     _outputs,
     _say,
     _scalar_sigma,
@@ -107,8 +107,8 @@ def _segment_buffer(args, cat):
 
 
 def _segment_prepare(args, cat):
-    return {"outputs": _outputs(args, cat), "offsets": _offsets(cat),
-            "area": segment_decide(args, cat)}
+    return {"outputs": _outputs(args, cat), "area": segment_decide(args, cat),
+            "crs": cat.crs, "extents": [f.bounds2d for f in cat.files]}
 
 
 def segment_decide(args, cat) -> dict:
@@ -151,35 +151,63 @@ def segment_runner(args, area):
 
 
 def _segment_fields(args, extra):
+    """The tile function and the join of ``segment`` on a catalogue: ``(fields,
+    {"labels", "collect", "finish"})`` for :func:`lidarstat.pipeline.process_catalogue`.
+
+    Each tile's run keeps its segment table and its lines whose middle vertex lies in
+    the tile; after the join every tile's table lists the segments of its points under
+    their final ids, each row that of the segment's largest piece (the tile's run
+    holding most of its points; the same row in every tile the segment crosses) with
+    ``n_points`` its points over the area, and its lines (those whose middle vertex is
+    nearest to the tile) name the final ids.
+    """
+    from ._tiled import _Lines, _segment_table
+
     run = segment_runner(args, extra.get("area", {}))
+    files = list(extra["outputs"])
+    tables: list = []  # per tile, in catalogue order: its table with nodes as ids
+    lines: list = []
 
     def fields(tile):
         seg = run(tile.xyz)
         f = seg.to_fields()
-        n = tile.n_core
-        labels = np.asarray(f["segment_id"]).astype(np.int64)
-        core = labels[:n]
-        # the tile's segments, numbered 1.. in order of first appearance among its points
-        present, first = np.unique(core[core > 0], return_index=True)
-        present = present[np.argsort(first)]
-        renumber = np.zeros(int(labels.max()) + 1 if labels.size else 1, np.int64)
-        offset = extra["offsets"][tile.extent.path]
-        renumber[present] = offset + np.arange(1, present.size + 1)
-        f["segment_id"] = renumber[labels].astype(np.uint32)
-        out = Path(extra["outputs"][tile.extent.path])
-        stem = out.name.split(".")[0]
-        table = {k: np.asarray(v) for k, v in seg.table.items()}
-        ids = np.asarray(table["segment_id"]).astype(np.int64)
-        keep = np.isin(ids, present)
-        table = {k: v[keep] if v.shape[:1] == ids.shape else v for k, v in table.items()}
-        table["segment_id"] = renumber[ids[keep]].astype(np.int64)
-        _write_table(out.with_name(stem + ".segments.csv"), table)
-        if seg.lines is not None:
-            _lines_in_tile(seg.lines, tile.extent).write(
-                out.with_name(stem + ".lines.geojson"), crs=tile.core.crs)
-        return f, {"segments": int(present.size)}
+        f["segment_id"] = np.asarray(f["segment_id"]).astype(np.uint32)
+        table = {k: np.asarray(v) for k, v in seg.table.items() if np.ndim(v) == 1}
+        core = f["segment_id"][:tile.n_core]
+        index = files.index(tile.extent.path)
+        return f, {"segments": int(np.unique(core[core > 0]).size), "table": table,
+                   "lines": _lines_in_tile(seg.lines, tile.extent, extra["extents"], index)}
 
-    return fields
+    def collect(index, info, bases):
+        table = dict(info["table"])
+        ids = table["segment_id"].astype(np.int64)
+        table["segment_id"] = np.where(ids > 0, ids + bases["segment_id"], 0)
+        tables.append(table)
+        part = _Lines("segment_id", ("segment_a", "segment_b"))
+        if info["lines"] is not None:
+            part.add(info["lines"], bases)
+        lines.append(part)
+
+    def finish(maps):
+        label_map = maps["segment_id"]
+        rows = _segment_table(tables, label_map)
+        where = np.zeros(int(rows["segment_id"].max(initial=0)) + 1, np.int64)
+        where[rows["segment_id"]] = np.arange(rows["segment_id"].size)
+        for path, table, part in zip(files, tables, lines):
+            out = Path(extra["outputs"][path])
+            stem = out.name.split(".")[0]
+            nodes = table["segment_id"].astype(np.int64)
+            mine = np.unique(label_map(nodes[label_map.core_points[nodes] > 0]))
+            mine = mine[mine > 0]
+            _write_table(out.with_name(stem + ".segments.csv"),
+                         {k: v[where[mine]] for k, v in rows.items()})
+            if part.present:
+                part.polylines(label_map).write(out.with_name(stem + ".lines.geojson"),
+                                                crs=extra.get("crs"))
+        tables.clear()
+        lines.clear()
+
+    return fields, {"labels": {"segment_id": True}, "collect": collect, "finish": finish}
 
 
 def _write_table(path, table):

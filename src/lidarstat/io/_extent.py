@@ -106,7 +106,7 @@ def _in_window(xyz, window) -> np.ndarray:
 
 
 def read_window(path: str | os.PathLike, window, *, points_per_chunk: int = 1_000_000,
-                copc: bool | None = None) -> PointCloud:
+                copc: bool | None = None, index: bool = False):
     """The points of a file inside the planimetric box ``(xmin, ymin, xmax, ymax)``.
 
     A COPC file is queried through its octree (:class:`laspy.CopcReader`), reading only the
@@ -122,27 +122,36 @@ def read_window(path: str | os.PathLike, window, *, points_per_chunk: int = 1_00
         Chunk size of the streamed read (LAS/LAZ).
     copc : bool, optional
         Whether the file is COPC (read from the header when None).
+    index : bool
+        Also return each point's place in the file (0-based, int64). A COPC file is
+        then streamed as the LAZ file it is (the octree does not number the points).
 
     Returns
     -------
     PointCloud
-        Possibly empty.
+        Possibly empty; with `index`, ``(cloud, places)``.
     """
     path = Path(path)
     if copc is None:
         copc = file_extent(path).copc
-    if copc:
+    if copc and not index:
         return _copc_window(path, window)
-    xyz, attrs, header = [], {}, None
+    xyz, attrs, header, places, start = [], {}, None, [], 0
     for chunk in iter_chunks(path, points_per_chunk):
         keep = _in_window(chunk.xyz, window)
         header = chunk.las_header
         xyz.append(chunk.xyz[keep])
+        places.append(start + np.flatnonzero(keep))
+        start += len(chunk.xyz)
         for name, values in chunk.attributes.items():
             attrs.setdefault(name, []).append(np.asarray(values)[keep])
     xyz_all = np.concatenate(xyz) if xyz else np.empty((0, 3))
-    return PointCloud(xyz_all, {k: np.concatenate(v) for k, v in attrs.items()},
-                      source_path=path, source_format=_format_of(path), las_header=header)
+    cloud = PointCloud(xyz_all, {k: np.concatenate(v) for k, v in attrs.items()},
+                       source_path=path, source_format=_format_of(path), las_header=header)
+    if not index:
+        return cloud
+    return cloud, (np.concatenate(places).astype(np.int64) if places
+                   else np.empty(0, np.int64))
 
 
 def _copc_window(path: Path, window) -> PointCloud:

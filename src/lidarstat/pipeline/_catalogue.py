@@ -9,8 +9,9 @@ one output per input. The buffer is removed on output, so a method whose answer 
 only on points within the buffer distance gives every point the result it gets on the
 whole area.
 
-Outputs appear atomically, one per tile as it completes; a rerun skips the tiles whose
-output exists (``resume=True``), so a stopped run goes on where it stopped. Tiles run one
+Outputs appear atomically, one per tile as it completes (with label fields joined
+across the tiles, when every tile has run: ``_catalogue_join``); a rerun skips the tiles
+whose output exists (``resume=True``), so a stopped run goes on where it stopped. Tiles run one
 after the other, in threads, or as Dask tasks on the local machine or on a
 ``distributed`` cluster (``address``); each task reads and writes its own tile, so memory
 holds the tiles in progress, not the area, and nothing large travels between workers.
@@ -92,11 +93,15 @@ class BufferedTile:
         Points of the neighbouring tiles within the buffer distance of the tile's extent.
     extent : FileExtent, optional
         The tile's file: its path and header bounds.
+    buffer_ids : (M,) ndarray of int64, optional
+        Each buffer point's number over the catalogue (the points of the files before
+        its file plus its place in its file), when read with ``ids=True``.
     """
 
     core: PointCloud
     buffer: PointCloud
     extent: FileExtent | None = None
+    buffer_ids: np.ndarray | None = None
 
     @property
     def n_core(self) -> int:
@@ -251,21 +256,34 @@ class Catalogue:
         w = self.window(i, buffer)
         return [j for j, f in enumerate(self.files) if j != i and f.intersects(w)]
 
-    def read_tile(self, i: int, buffer: float, *, points_per_chunk: int = 1_000_000
-                  ) -> BufferedTile:
-        """Tile `i` whole, and the points of its neighbours within `buffer` of its extent."""
+    def read_tile(self, i: int, buffer: float, *, points_per_chunk: int = 1_000_000,
+                  ids: bool = False) -> BufferedTile:
+        """Tile `i` whole, and the points of its neighbours within `buffer` of its extent;
+        with `ids`, the buffer points' numbers over the catalogue
+        (:attr:`BufferedTile.buffer_ids`)."""
         core = read(self.files[i].path)
-        parts = [read_window(self.files[j].path, self.window(i, buffer),
-                             points_per_chunk=points_per_chunk, copc=self.files[j].copc)
-                 for j in self.neighbours(i, buffer)] if buffer > 0 else []
-        parts = [p for p in parts if len(p.xyz)]
+        offsets = self.point_offsets() if ids else None
+        parts, numbers = [], []
+        for j in (self.neighbours(i, buffer) if buffer > 0 else []):
+            got = read_window(self.files[j].path, self.window(i, buffer),
+                              points_per_chunk=points_per_chunk, copc=self.files[j].copc,
+                              index=ids)
+            if ids:
+                got, places = got
+                numbers.append(places + offsets[j])
+            parts.append(got)
+        keep = [k for k, p in enumerate(parts) if len(p.xyz)]
+        parts = [parts[k] for k in keep]
+        buffer_ids = (np.concatenate([numbers[k] for k in keep]) if keep else
+                      np.empty(0, np.int64)) if ids else None
         if not parts:
-            return BufferedTile(core, PointCloud(np.empty((0, 3))), self.files[i])
+            return BufferedTile(core, PointCloud(np.empty((0, 3))), self.files[i],
+                                buffer_ids)
         names = set.intersection(*(set(p.attributes) for p in parts))
         xyz = np.concatenate([p.xyz for p in parts])
         attrs = {n: np.concatenate([np.asarray(p.attributes[n]) for p in parts])
                  for n in names}
-        return BufferedTile(core, PointCloud(xyz, attrs), self.files[i])
+        return BufferedTile(core, PointCloud(xyz, attrs), self.files[i], buffer_ids)
 
     def outputs(self, outdir, template: str = DEFAULT_TEMPLATE) -> list[Path]:
         """The output path of every tile; refused before any work when two tiles get one

@@ -1,6 +1,7 @@
 """Running a method over a :class:`Catalogue`: every tile with its buffer, one after the
 other, in threads or as Dask tasks (local or a ``distributed`` cluster), each output
-written atomically as its tile completes (see ``_catalogue``)."""
+written atomically as its tile completes (see ``_catalogue``), or, with label fields
+joined across the tiles, when every tile has run (see ``_catalogue_join``)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from .._shared._atomic import output_group
 from .._shared.validation import check_option, check_scalar
 from ..errors import InvalidParameterError
 from ..io import write
+from . import _catalogue_join as _join
 from ._catalogue import DEFAULT_TEMPLATE, BufferedTile, Catalogue
 
 __all__ = ["TileRun", "process_catalogue"]
@@ -23,7 +25,8 @@ __all__ = ["TileRun", "process_catalogue"]
 
 @dataclass
 class TileRun:
-    """What happened to one tile: ``status`` is ``"done"`` or ``"skipped"`` (resumed)."""
+    """What happened to one tile: ``status`` is ``"done"``, ``"skipped"`` (its output
+    exists) or ``"resumed"`` (joined labels: its run kept from a stopped run)."""
 
     index: int
     input: Path
@@ -59,18 +62,20 @@ def _release_memory() -> None:
 _TRIM = None
 
 
-def _run_one(func, cat: Catalogue, i: int, out: Path, buffer: float, points_per_chunk: int
-             ) -> TileRun:
+def _run_one(func, cat: Catalogue, i: int, out: Path, buffer: float, points_per_chunk: int,
+             join: tuple | None = None) -> TileRun:
     try:
-        return _run_tile(func, cat, i, out, buffer, points_per_chunk)
+        return _run_tile(func, cat, i, out, buffer, points_per_chunk, join)
     finally:  # the tile's arrays are gone: their pages go back to the system
         _release_memory()
 
 
-def _run_tile(func, cat: Catalogue, i: int, out: Path, buffer: float, points_per_chunk: int
-              ) -> TileRun:
+def _run_tile(func, cat: Catalogue, i: int, out: Path, buffer: float, points_per_chunk: int,
+              join: tuple | None = None) -> TileRun:
+    """Run tile `i`; write its output, or with `join` ``(labels, outdir)`` its pending
+    run (``_catalogue_join``)."""
     t0 = time.perf_counter()
-    tile = cat.read_tile(i, buffer, points_per_chunk=points_per_chunk)
+    tile = cat.read_tile(i, buffer, points_per_chunk=points_per_chunk, ids=join is not None)
     with output_group(defer=False):  # what the method writes of a tile appears at once
         fields = func(tile)
     info = {}
@@ -85,17 +90,31 @@ def _run_tile(func, cat: Catalogue, i: int, out: Path, buffer: float, points_per
                                         f"with {values.shape[0]} values for "
                                         f"{len(tile.xyz)} points")
         core_fields[name] = values[:n]
+    if join is not None:
+        labels, outdir = join
+        fields = {name: np.asarray(values) for name, values in fields.items()}
+        _join.put_pending(cat, i, out, outdir, tile, fields, dict(info), labels, buffer)
+        return TileRun(i, cat.files[i].path, out, "done", n, len(tile.buffer.xyz),
+                       time.perf_counter() - t0, _scalars(info))
     with output_group(defer=False):  # each tile appears when complete (resume)
         write(out, tile.core, fields=core_fields)
     return TileRun(i, cat.files[i].path, out, "done", n, len(tile.buffer.xyz),
                    time.perf_counter() - t0, dict(info))
 
 
+def _scalars(info) -> dict:
+    """The entries of a tile's `info` that are numbers or words (its summary)."""
+    return {k: v for k, v in dict(info).items() if isinstance(v, (int, float, str, bool))
+            or (isinstance(v, np.generic) and v.ndim == 0)}
+
+
 def process_catalogue(func: Callable[[BufferedTile], dict], catalogue, outdir, *,
                       buffer: float, template: str = DEFAULT_TEMPLATE, resume: bool = True,
                       scheduler: str = "threads", workers: int | None = None,
                       address: str | None = None, points_per_chunk: int = 1_000_000,
-                      progress: Callable | None = None) -> list[TileRun]:
+                      progress: Callable | None = None, labels: dict | None = None,
+                      collect: Callable | None = None, finish: Callable | None = None
+                      ) -> list[TileRun]:
     """Run `func` on every tile of a catalogue with a buffer; one output per tile.
 
     Parameters
@@ -126,11 +145,29 @@ def process_catalogue(func: Callable[[BufferedTile], dict], catalogue, outdir, *
         Chunk size of the streamed buffer reads.
     progress : callable, optional
         ``progress(done, total)`` after each tile.
+    labels : dict of str to bool, optional
+        Label fields of `func`'s result (integers, 0 = none): written with ids unique
+        over the area; a field mapped to True is also *joined* across the tiles, two
+        tiles' labels becoming one id where they hold the same points of the tiles'
+        overlap (a tile's buffer points are core points of its neighbours), by the rule
+        of :func:`process_file` (``lidarstat.pipeline._stream_labels``). The outputs
+        then appear only when every tile has run and the labels are joined
+        (``lidarstat.pipeline._catalogue_join``: the tiles' runs wait in
+        ``OUTDIR/.lidarstat-pending``, which a resumed run goes on from).
+    collect : callable, optional
+        With `labels`: ``collect(index, info, bases)`` for every tile in catalogue
+        order after the join, `info` as `func` returned it, `bases` the number added to
+        the tile's labels of each field: its *nodes*.
+    finish : callable, optional
+        With `labels`: ``finish(maps)`` once, before the outputs are written, `maps`
+        mapping each field of `labels` to a :class:`LabelMap` (node -> id written).
 
     Returns
     -------
     list of TileRun
-        In catalogue order.
+        In catalogue order; with `labels`, a tile whose run was kept from a stopped run
+        has status ``"resumed"``, and :attr:`TileRun.summary` holds the scalar entries
+        of `info`.
     """
     cat = catalogue if isinstance(catalogue, Catalogue) else Catalogue(catalogue)
     buffer = check_scalar(buffer, "buffer", func="process_catalogue", low=0, closed="left")
@@ -140,52 +177,67 @@ def process_catalogue(func: Callable[[BufferedTile], dict], catalogue, outdir, *
     paths = cat.outputs(outdir, template)
     Path(outdir).mkdir(parents=True, exist_ok=True)
     runs: list[TileRun | None] = [None] * len(cat)
-    todo = []
-    for i, p in enumerate(paths):
-        if resume and p.exists():
-            runs[i] = TileRun(i, cat.files[i].path, p, "skipped", cat.files[i].n_points)
-        else:
-            todo.append(i)
+    join = None
+    if labels:
+        join = (dict(labels), Path(outdir))
+        todo, resumed, needed = _join.plan(cat, paths, Path(outdir), buffer, resume)
+        for i in range(len(cat)):
+            if not needed or i in resumed:
+                runs[i] = TileRun(i, cat.files[i].path, paths[i],
+                                  "resumed" if needed else "skipped", cat.files[i].n_points)
+    else:
+        todo = []
+        for i, p in enumerate(paths):
+            if resume and p.exists():
+                runs[i] = TileRun(i, cat.files[i].path, p, "skipped", cat.files[i].n_points)
+            else:
+                todo.append(i)
     done = len(cat) - len(todo)
     if progress is not None:
         progress(done, len(cat))
     for run in _execute(func, cat, paths, todo, buffer, points_per_chunk, scheduler, workers,
-                        address):
+                        address, join):
         runs[run.index] = run
         done += 1
         if progress is not None:
             progress(done, len(cat))
+    if join is not None and needed:
+        _join.join_outputs(cat, paths, Path(outdir), join[0], resume=resume,
+                           collect=collect, finish=finish,
+                           points_per_chunk=points_per_chunk)
     return [r for r in runs if r is not None]
 
 
 def _execute(func, cat, paths, todo: Iterable[int], buffer, points_per_chunk, scheduler,
-             workers, address):
+             workers, address, join=None):
     todo = list(todo)
     if scheduler == "sync" or not todo:
         for i in todo:
-            yield _run_one(func, cat, i, paths[i], buffer, points_per_chunk)
+            yield _run_one(func, cat, i, paths[i], buffer, points_per_chunk, join)
         return
     if scheduler == "threads":
         from concurrent.futures import ThreadPoolExecutor, as_completed
 
         with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
-            futures = [pool.submit(_run_one, func, cat, i, paths[i], buffer, points_per_chunk)
-                       for i in todo]
+            futures = [pool.submit(_run_one, func, cat, i, paths[i], buffer, points_per_chunk,
+                                   join) for i in todo]
             for fut in as_completed(futures):
                 yield fut.result()
         return
-    yield from _execute_dask(func, cat, paths, todo, buffer, points_per_chunk, workers, address)
+    yield from _execute_dask(func, cat, paths, todo, buffer, points_per_chunk, workers, address,
+                             join)
 
 
-def _execute_dask(func, cat, paths, todo, buffer, points_per_chunk, workers, address):
+def _execute_dask(func, cat, paths, todo, buffer, points_per_chunk, workers, address,
+                  join=None):
     try:
         import dask
     except ImportError:  # pragma: no cover - dask is an optional dependency
         raise InvalidParameterError("scheduler 'dask' needs dask: pip install "
                                     "'lidarstat[dask]'") from None
     if address is None:
-        tasks = [dask.delayed(_run_one)(func, cat, i, paths[i], buffer, points_per_chunk)
-                 for i in todo]
+        tasks = [dask.delayed(_run_one)(func, cat, i, paths[i], buffer, points_per_chunk,
+                                        join) for i in todo]
         yield from dask.compute(*tasks, scheduler="threads", num_workers=workers)
         return
     try:
@@ -195,6 +247,6 @@ def _execute_dask(func, cat, paths, todo, buffer, points_per_chunk, workers, add
                                     "'lidarstat[dask]'") from None
     with Client(address) as client:
         futures = [client.submit(_run_one, func, cat, i, paths[i], buffer, points_per_chunk,
-                                 pure=False) for i in todo]
+                                 join, pure=False) for i in todo]
         for fut in as_completed(futures):
             yield fut.result()

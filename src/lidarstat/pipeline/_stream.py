@@ -255,10 +255,11 @@ def _run_tiles(func, src, dst, grid, n, buckets, results, *, scheduler, workers,
         for name, (top, i, lab, core) in links.items():
             lab_state = state[name]
             written.setdefault(name, fields[name].dtype)
-            base, nodes = lab_state.nodes(fields[name], top)
+            local = fields[name].astype(np.int64)
+            base = lab_state.add_tile(top, np.bincount(np.maximum(local, 0),
+                                                       minlength=int(top) + 1))
             bases[name] = base
-            lab_state.count_core(nodes)
-            fields[name] = nodes
+            fields[name] = np.where(local > 0, local + base, 0)
             if lab_state.join:
                 rec = np.empty(i.size, LINK)
                 rec["i"], rec["node"], rec["tile"] = i, np.where(lab > 0, lab + base, 0), \

@@ -1,11 +1,15 @@
-"""Label fields of a streamed, tiled run: ids unique over the file, joined across tiles.
+"""Label fields of a tiled run: ids unique over the area, joined across tiles.
 
 A label field (``segment_id``, ``ridge_line``; 0 = none) numbers what a method found in
-one tile from 1. :func:`lidarstat.pipeline.process_file` gives every tile's labels a
-*node* number unique over the file (the tile's base plus its label) and, for a field
-that is *joined*, records the labels of the points that two tiles share (a point of one
-tile's halo is a core point of another): two labels of neighbouring tiles name one
-thing when they hold the same shared points.
+one tile from 1. The tiled runs give every tile's labels a *node* number unique over the
+area (the tile's base plus its label) and, for a field that is *joined*, record the
+labels of the points that two tiles share (a point of one tile's halo or buffer is a
+core point of another): two labels of neighbouring tiles name one thing when they hold
+the same shared points. One file in square tiles
+(:func:`lidarstat.pipeline.process_file`) and a catalogue of tile files
+(:func:`lidarstat.pipeline.process_catalogue`, a point named by its file and its place
+in the file) use the same records (:data:`LINK`), the same nodes (:class:`Labels`) and
+the same rule.
 
 The rule, for labels ``a`` of tile T and ``b`` of tile U: ``n(a, b)`` points of the
 overlap of T and U are labelled ``a`` by T and ``b`` by U, ``s(a, U)`` points of that
@@ -18,9 +22,12 @@ only their boundary points, and stay apart, as does a sliver of a surface that j
 enters the overlap and that the other tile gives to its neighbour (the rule asks a
 majority on both sides, so a join never rests on a few points). Where two tiles cut one
 surface differently (one label in T, two in U, each with less than half of T's), the
-surface keeps one id per tile, cut at the border as in a catalogue of tile files. Joined labels are connected
-components over the file (``scipy.sparse.csgraph``), numbered 1.. in the order of their
+surface keeps one id per tile, cut at the border. Joined labels are connected
+components over the area (``scipy.sparse.csgraph``), numbered 1.. in the order of their
 first node, counting only those with a core point.
+
+Memory: the records of the shared points (25 bytes each), and per node two integers;
+nothing per point of a tile's interior.
 """
 
 from __future__ import annotations
@@ -29,7 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: A shared point's label in one tile: point number, node, tile (run order), core flag.
+#: A shared point's label in one tile: point number (unique over the area), node, tile
+#: (the run's tile number), core flag.
 LINK = np.dtype([("i", "<i8"), ("node", "<i8"), ("tile", "<i8"), ("core", "u1")])
 
 
@@ -62,22 +70,19 @@ class Labels:
         self.next = 0  # nodes used so far (node 0 = none)
         self.counts = np.zeros(1, np.int64)
 
-    def nodes(self, local: np.ndarray, top: int) -> tuple[int, np.ndarray]:
-        """Node numbers of one tile's labels `local` (its largest label `top` over core
-        and halo); return the tile's base and the nodes."""
+    def add_tile(self, top: int, core_counts) -> int:
+        """Nodes for one tile's labels ``1..top``; `core_counts` ``(top + 1,)`` its core
+        points per label (label 0 ignored). Returns the tile's base: node = base + label."""
         base = self.next
-        self.next += max(int(top), 0)
-        local = np.asarray(local, dtype=np.int64)
-        return base, np.where(local > 0, local + base, 0)
-
-    def count_core(self, nodes: np.ndarray) -> None:
-        """Add the core points of `nodes` (a tile's core rows) to the node counts."""
+        top = max(int(top), 0)
+        self.next += top
         if self.counts.size < self.next + 1:
             grown = np.zeros(max(self.next + 1, 2 * self.counts.size), np.int64)
             grown[:self.counts.size] = self.counts
             self.counts = grown
-        self.counts[:self.next + 1] += np.bincount(nodes, minlength=self.next + 1)[
-            :self.next + 1]
+        counts = np.asarray(core_counts, dtype=np.int64)[1:top + 1]
+        self.counts[base + 1:base + 1 + counts.size] += counts
+        return base
 
     def finish(self, links: np.ndarray | None) -> LabelMap:
         """The final ids: nodes joined over the shared points `links` (LINK records)."""
