@@ -24,8 +24,10 @@ the benchmark over the cells of the middle of the cloud calling the library's fu
 
 * ``search``: the grid scan of every candidate of the 27 cells (squared distances
   stored, square roots of the neighbours);
-* ``offsets``: + the offsets and tricube weights of the neighbours into four columns;
-* ``frame``: + the PCA frame (weighted mean and covariance, eigenpairs, orientation);
+* ``offsets``: + the offsets and tricube weights of the neighbours into four columns,
+  with the weighted sums of the offsets and their products (the frame's covariance);
+* ``frame``: + the PCA frame (covariance about the weighted mean, eigenpairs,
+  orientation);
 * ``moments``: + local coordinates and the 15 x 3 + 6 weighted moment sums;
 * ``fit``: the whole per-point fit of the command (``_fit_one``: the above, the 6 x 6
   Cholesky inverse, the residual pass, the traces and the sandwich cofactor);
@@ -35,6 +37,13 @@ the benchmark over the cells of the middle of the cloud calling the library's fu
 Stored under ``stages`` (per neighbour count) in the same file::
 
     NUMBA_NUM_THREADS=1 python benchmarks/curvature_floor.py --stages --neighbors 50 300
+
+``--against SRC`` compares two versions of the package: the ``driver`` stage alone (the
+command's search and fit of the same cells, one thread), in child processes that
+alternate between the package found at SRC (a PYTHONPATH, e.g. main's ``src``) and this
+one, each with its own Numba cache; stored under ``driver_against``::
+
+    python benchmarks/curvature_floor.py --against /tmp/main/src --neighbors 50 300
 """
 
 from __future__ import annotations
@@ -172,21 +181,51 @@ def _stage_kernel():
                     check += beta[0, 0]
                     continue
                 nkp = 0
+                inv_b = 1.0 / radius
+                sw = s0 = s1 = s2 = 0.0
+                c00 = c01 = c02 = c11 = c12 = c22 = 0.0
                 for t in range(n):
-                    w = fk._tricube(dist[t], radius)
-                    if w <= 0.0:
+                    g = dist[t] * inv_b
+                    g = 1.0 - g * g * g
+                    w = g * g * g
+                    if not dist[t] < radius or w <= 0.0:
                         continue
                     j = idx[t]
-                    cols[0, nkp] = pts[j, 0] - pts[i, 0]
-                    cols[1, nkp] = pts[j, 1] - pts[i, 1]
-                    cols[2, nkp] = pts[j, 2] - pts[i, 2]
+                    d0 = pts[j, 0] - pts[i, 0]
+                    d1 = pts[j, 1] - pts[i, 1]
+                    d2 = pts[j, 2] - pts[i, 2]
+                    cols[0, nkp] = d0
+                    cols[1, nkp] = d1
+                    cols[2, nkp] = d2
                     cols[3, nkp] = w
                     nkp += 1
+                    sw += w
+                    s0 += w * d0
+                    s1 += w * d1
+                    s2 += w * d2
+                    c00 += w * d0 * d0
+                    c01 += w * d0 * d1
+                    c02 += w * d0 * d2
+                    c11 += w * d1 * d1
+                    c12 += w * d1 * d2
+                    c22 += w * d2 * d2
                 if stage == 1 or nkp < 6:
-                    check += cols[0, 0]
+                    check += cols[0, 0] + c00 + c01 + c02 + c11 + c12 + c22 + s0 + s1 + s2
                     continue
-                fk._local_frame(rows, nkp, pts[i, 0], pts[i, 1], pts[i, 2], fk.FRAME_PCA,
-                                sensor, False, R, cov3, ev, evec, True)
+                m0 = s0 / sw
+                m1 = s1 / sw
+                m2 = s2 / sw
+                cov3[0, 0] = c00 - m0 * s0
+                cov3[0, 1] = c01 - m0 * s1
+                cov3[0, 2] = c02 - m0 * s2
+                cov3[1, 1] = c11 - m1 * s1
+                cov3[1, 2] = c12 - m1 * s2
+                cov3[2, 2] = c22 - m2 * s2
+                cov3[1, 0] = cov3[0, 1]
+                cov3[2, 0] = cov3[0, 2]
+                cov3[2, 1] = cov3[1, 2]
+                fk.frame_from_covariance(cov3, pts[i, 0], pts[i, 1], pts[i, 2], fk.FRAME_PCA,
+                                         sensor, False, R, ev, evec, True)
                 if stage == 2:
                     check += R[0, 0]
                     continue
@@ -264,6 +303,80 @@ def stages(args):
     path.write_text(json.dumps(res, indent=1) + "\n")
 
 
+def _driver_child(args):
+    """``--child-driver``: CPU ns a point of the command's search and fit (the ``driver``
+    stage) on one thread, minimum of --repeats, printed as JSON."""
+    from lidarstat.features import _quadric as quadric
+    from lidarstat.neighbors import CellIndex
+
+    xyz, _ = make_cloud(args.points)
+    radius = float(calibrate_radius(xyz, args.neighbors[0])[0])
+    index = CellIndex(xyz, radius)
+    mid = index.n_cells // 2
+    c1 = int(np.searchsorted(index.cell_start, index.cell_start[mid] + args.stage_points))
+    c1 = min(max(c1, mid + 1), index.n_cells)
+    npts = int(index.cell_start[c1] - index.cell_start[mid])
+    buffers = quadric._allocate(npts)
+
+    def driver(c0, c1):
+        quadric._run_cells(index, c0, c1, bandwidth=radius, frame="pca", sensor=None,
+                           min_neighbors=7, covariance="sandwich", buffers=buffers)
+
+    driver(mid, mid + 1)  # load or compile
+    cpu = []
+    for _ in range(args.repeats):
+        c = time.process_time()
+        driver(mid, c1)
+        cpu.append(time.process_time() - c)
+    print(json.dumps(dict(radius=radius, points=npts, cpu_ns_per_point=1e9 * min(cpu) / npts)))
+
+
+def against(args):
+    """``--against SRC``: the driver stage of SRC's package and of this one, alternating."""
+    import subprocess
+    import tempfile
+
+    here = str(Path(__file__).resolve().parents[1] / "src")
+    versions = {"against": args.against, "this": here}
+    tmp = Path(tempfile.mkdtemp(prefix="curvature_floor_"))
+    out = {}
+    for target in args.neighbors:
+        runs = {name: [] for name in versions}
+        for k in range(args.rounds + 1):  # round 0 fills each version's cache
+            for name, src in versions.items():
+                env = dict(os.environ, PYTHONPATH=src, NUMBA_NUM_THREADS="1",
+                           NUMBA_CACHE_DIR=str(tmp / name))
+                r = subprocess.run(
+                    [sys.executable, __file__, "--child-driver", "--points", str(args.points),
+                     "--neighbors", str(target), "--repeats", str(args.repeats),
+                     "--stage-points", str(args.stage_points)],
+                    env=env, capture_output=True, text=True, check=True)
+                if k:
+                    runs[name].append(json.loads(r.stdout.strip().splitlines()[-1]))
+        row = {name: dict(cpu_ns_per_point=float(np.median([r["cpu_ns_per_point"] for r in rs])),
+                          all_cpu_ns_per_point=[r["cpu_ns_per_point"] for r in rs])
+               for name, rs in runs.items()}
+        row["radius"] = runs["this"][0]["radius"]
+        row["points"] = runs["this"][0]["points"]
+        row["ratio"] = row["this"]["cpu_ns_per_point"] / row["against"]["cpu_ns_per_point"]
+        out[str(target)] = row
+        print(f"about {target} neighbours: {row['against']['cpu_ns_per_point']:.0f} ns a "
+              f"point ({args.against}), {row['this']['cpu_ns_per_point']:.0f} (this), "
+              f"ratio {row['ratio']:.3f}")
+    path = Path(args.out)
+    res = json.loads(path.read_text()) if path.exists() else {}
+    res["driver_against"] = dict(
+        date=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        machine_shared=bool(args.shared), against=args.against, rounds=args.rounds,
+        repeats=args.repeats, cloud_points=args.points,
+        how="the driver stage (quadric._run_cells on the cells of the middle of the cloud, "
+            "one thread, process CPU, minimum of the repeats) in child processes "
+            "alternating between the two packages, median of the rounds; see the module "
+            "docstring of benchmarks/curvature_floor.py",
+        rows=out)
+    path.write_text(json.dumps(res, indent=1) + "\n")
+
+
 def _cpu():
     u = resource.getrusage(resource.RUSAGE_SELF)
     return u.ru_utime + u.ru_stime
@@ -293,7 +406,15 @@ def main(argv=None):
     ap.add_argument("--shared", action="store_true",
                     help="record that other work ran on the machine meanwhile")
     ap.add_argument("--out", default=str(HERE / "results_curvature_floor.json"))
+    ap.add_argument("--against", default=None, metavar="SRC",
+                    help="compare the driver stage with the package at SRC, alternating")
+    ap.add_argument("--rounds", type=int, default=3, help="with --against: rounds [3]")
+    ap.add_argument("--child-driver", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.child_driver:
+        return _driver_child(args)
+    if args.against:
+        return against(args)
     if args.stages:
         return stages(args)
 

@@ -23,11 +23,15 @@ Usage::
         python benchmarks/curvature_identity.py dump /tmp/curv_old.npz
     PYTHONPATH=src python benchmarks/curvature_identity.py dump /tmp/curv_new.npz
     python benchmarks/curvature_identity.py compare /tmp/curv_old.npz /tmp/curv_new.npz
+
+``compare --store FILE KEY`` also writes the figures under ``KEY`` of the results file
+(entry ``all``, or ``above_N`` with ``--above N``).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -73,10 +77,12 @@ def dump(path, seeds=3, permute=False):
     print(f"wrote {len(out)} arrays to {path}")
 
 
-def compare(a_path, b_path, above=None):
+def compare(a_path, b_path, above=None, store=None):
     a, b = np.load(a_path), np.load(b_path)
     if above is not None:
-        return _compare_above(a, b, above)
+        rc, worst, bad = _compare_above(a, b, above)
+        _store(store, f"above_{above}", worst, bad)
+        return rc
     if set(a.files) != set(b.files):
         print("different arrays:", sorted(set(a.files) ^ set(b.files)))
         return 1
@@ -105,6 +111,7 @@ def compare(a_path, b_path, above=None):
     for f, v in sorted(worst.items()):
         print(f"  {f:<12s} {v:.1e}")
     print(f"integer fields or NaN patterns that differ: {bad}")
+    _store(store, "all", worst, bad)
     return 0 if bad == 0 else 1
 
 
@@ -130,7 +137,24 @@ def _compare_above(a, b, above):
     for f, v in sorted(worst.items()):
         print(f"  {f:<12s} {v:.1e}")
     print(f"integer values or NaN patterns that differ: {bad}")
-    return 0 if bad == 0 else 1
+    return (0 if bad == 0 else 1), worst, bad
+
+
+def _store(store, name, worst, bad):
+    """Write one comparison to ``store = (results file, key)``: under ``key`` of the JSON
+    file, entry `name` (``all`` or ``above_N``), keeping the file's other keys."""
+    if store is None:
+        return
+    path, key = Path(store[0]), store[1]
+    res = json.loads(path.read_text()) if path.exists() else {}
+    entry = res.setdefault(key, {})
+    entry["how"] = ("python benchmarks/curvature_identity.py dump (main, then this version), "
+                    "compare [--above N]: largest |difference| / max(1, |value|) per field "
+                    "over the seed sweep; integer fields and NaN patterns that differ")
+    entry[name] = {
+        "largest_difference": {f: float(f"{v:.1e}") for f, v in sorted(worst.items())},
+        "integer_or_nan_differences": int(bad)}
+    path.write_text(json.dumps(res, indent=1) + "\n")
 
 
 def main(argv=None):
@@ -146,11 +170,13 @@ def main(argv=None):
     c.add_argument("b")
     c.add_argument("--above", type=int, default=None, metavar="N",
                    help="only the points with more than N neighbours")
+    c.add_argument("--store", nargs=2, default=None, metavar=("FILE", "KEY"),
+                   help="also write the figures under KEY of the results file FILE")
     args = ap.parse_args(argv)
     if args.cmd == "dump":
         dump(args.out, args.seeds, args.permute)
         return 0
-    return compare(args.a, args.b, args.above)
+    return compare(args.a, args.b, args.above, args.store)
 
 
 if __name__ == "__main__":

@@ -79,6 +79,17 @@ def _local_frame(buf, nk, px, py, pz, frame, sensor, has_sensor, R, cov, evals, 
     cov[1, 2] = c12
     cov[2, 2] = c22
     mirror3(cov)
+    return frame_from_covariance(cov, px, py, pz, frame, sensor, has_sensor, R, evals, evecs,
+                                 closed_form)
+
+
+@njit
+def frame_from_covariance(cov, px, py, pz, frame, sensor, has_sensor, R, evals, evecs,
+                          closed_form):
+    """R (rows e1, e2, n) of the `auto` or `pca` frame of the point at (px, py, pz) from
+    the weighted covariance `cov` (3 x 3, symmetric, both triangles) of its neighbours:
+    the second half of :func:`_local_frame`, for kernels that form the covariance in
+    their own pass over the neighbours. Returns False if the frame is degenerate."""
     if not (closed_form and eigh3_closed(cov, evals, evecs)):
         _eigh3(cov, evals, evecs)
     if evals[1] <= 0.0:

@@ -21,8 +21,10 @@ from __future__ import annotations
 import numpy as np
 
 from .._shared._jit import njit
+from .._shared._kernels import mirror3
 from ..neighbors import make_drivers
-from ._frame_kernels import _local_frame, _tricube, to_frame
+from ._frame_kernels import FRAME_Z, frame_from_covariance, to_frame
+from ._frame_kernels import _tricube  # noqa: F401 (the plane kernels import it from here)
 
 # status codes (mirrored by FitStatus in _results.py)
 OK = 0
@@ -219,49 +221,92 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
     the arrays that every thread shares.)
 
     `buf` (at least e - s rows, 4 columns) is scratch for the neighbours, used as four
-    columns of its size: their offsets and weights (pass 0), then their u, v, h (pass 1),
-    so that the frame, moment and residual passes read each coordinate contiguously.
+    columns of its size: their offsets and weights (pass 0, which also sums what the
+    frame's covariance needs), then their u, v, h (pass 1), so that the moment and
+    residual passes read each coordinate contiguously.
     """
     R, cov3, ev, evec, mom, N, N2, N3, L, LI, Ninv, tmp, rhs, part = ws
     cols = buf.reshape((4, buf.shape[0]))  # columns d0 / u, d1 / v, d2 / h, w
-    rows = cols.T  # row t: the neighbour's (d0, d1, d2, w), as the frame kernels read them
+    rows = cols.T  # row t: the neighbour's (u, v, h, w), as to_frame reads them
     b = bw
     if b <= 0.0:  # kNN: the bandwidth is the farthest neighbour's distance (LOESS)
         for t in range(s, e):
             if dist[t] > b:
                 b = dist[t]
     # Pass 0: the offsets d_j = x_j - x_i and weights of the neighbours with positive
-    # weight, once, into `buf` (read contiguously by the frame and the moment passes)
+    # weight, once, into `buf` (read contiguously by the moment passes), and the weighted
+    # sums of the offsets and of their products that give the frame's covariance
     px = pts[i, 0]
     py = pts[i, 1]
     pz = pts[i, 2]
+    inv_b = 1.0 / b
     p = 0
     nk = 0
+    sw = s0 = s1 = s2 = 0.0
+    c00 = c01 = c02 = c11 = c12 = c22 = 0.0
     for t in range(s, e):
-        if dist[t] < b:
-            p += 1
-        w = _tricube(dist[t], b)
+        d = dist[t]
+        if not d < b:
+            continue
+        p += 1
+        g = d * inv_b  # the tricube weight, by a product (no division)
+        g = 1.0 - g * g * g
+        w = g * g * g
         if w <= 0.0:
             continue
         j = idx[t]
-        cols[0, nk] = pts[j, 0] - px
-        cols[1, nk] = pts[j, 1] - py
-        cols[2, nk] = pts[j, 2] - pz
+        d0 = pts[j, 0] - px
+        d1 = pts[j, 1] - py
+        d2 = pts[j, 2] - pz
+        cols[0, nk] = d0
+        cols[1, nk] = d1
+        cols[2, nk] = d2
         cols[3, nk] = w
         nk += 1
+        w0 = w * d0
+        w1 = w * d1
+        sw += w
+        s0 += w0
+        s1 += w1
+        s2 += w * d2
+        c00 += w0 * d0
+        c01 += w0 * d1
+        c02 += w0 * d2
+        c11 += w1 * d1
+        c12 += w1 * d2
+        c22 += w * d2 * d2
     if p < min_nb or p < 6:
         return TOO_FEW, p
     # the fit, hence every result, is the same for any direction of e1 in the tangent plane
-    if not _local_frame(rows, nk, px, py, pz, frame, sensor, has_sensor, R, cov3, ev, evec,
-                        True):
-        return SINGULAR, p
+    if frame == FRAME_Z:
+        for a in range(3):
+            for c in range(3):
+                R[a, c] = 1.0 if a == c else 0.0
+    else:
+        # weighted covariance about the weighted mean, from the sums about the point:
+        # sum w (d - m)(d - m)' = sum w d d' - m (sum w d)'; the offsets are within b of
+        # the point, so the subtraction loses no more than the sums' own rounding
+        if not sw > 0.0:
+            return SINGULAR, p
+        m0 = s0 / sw
+        m1 = s1 / sw
+        m2 = s2 / sw
+        cov3[0, 0] = c00 - m0 * s0
+        cov3[0, 1] = c01 - m0 * s1
+        cov3[0, 2] = c02 - m0 * s2
+        cov3[1, 1] = c11 - m1 * s1
+        cov3[1, 2] = c12 - m1 * s2
+        cov3[2, 2] = c22 - m2 * s2
+        mirror3(cov3)
+        if not frame_from_covariance(cov3, px, py, pz, frame, sensor, has_sensor, R, ev, evec,
+                                     True):
+            return SINGULAR, p
     for a in range(3):
         for c in range(3):
             frame_out[row, a, c] = R[a, c]
     # Pass 1: local coordinates (u, v, h) into buf, then the weighted moment sums of the 15
     # monomials U^i V^j (i + j <= 4) for w, w^2, w^3 (the entries of X'WX, X'W^2X, X'W^3X)
     # and of w h U^i V^j (i + j <= 2) for X'Wh
-    inv_b = 1.0 / b
     to_frame(rows, nk, R, inv_b)
     _moment_sums(cols[0], cols[1], cols[2], cols[3], nk, part, mom, rhs)
     rhs[3] *= 0.5
