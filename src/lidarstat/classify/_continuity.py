@@ -181,20 +181,21 @@ class _Grid2D:
     def __init__(self, xy, cell, lo, rank=None):
         key = cell_keys(xy, cell, lo)
         ny = int(np.floor((xy[:, 1].max() - lo[1]) / cell)) + 1
-        if rank is None:
-            by_rank = None
-        else:  # visit the points in rank order so that ties follow it
-            by_rank = np.empty(key.size, np.int64)
-            by_rank[rank] = np.arange(key.size)
-            key = key[by_rank]
+        # the counting sort in the caller's order (memory visited in its order), then
+        # each cell's few points put in rank order
         order, self.cell_start = cell_order(key)
         self.cell_keys = key[order[self.cell_start[:-1]]]
         del key
         # positions as int32 below 2^31 points: half the memory of the two index arrays
         index = np.int32 if order.size < 2**31 - 1 else np.int64
-        self.pos = (order if by_rank is None else by_rank[order]).astype(index)
-        del by_rank
-        self.order = order.astype(index)
+        if rank is None:
+            self.pos = order.astype(index)
+            self.order = self.pos
+        else:
+            rank = np.asarray(rank, dtype=np.int64)
+            _rank_order_in_cells(order, self.cell_start, rank)
+            self.pos = order.astype(index)
+            self.order = rank[order].astype(index)
         del order
         self.dims = np.array([self.cell_keys[-1] // ny + 1, ny, 1], np.int64)
         self.points = np.zeros((self.pos.size, 3))
@@ -221,6 +222,28 @@ class _Grid2D:
             out.append((c, nxt))
             c = nxt
         return out
+
+
+@njit
+def _rank_order_in_cells(order, starts, rank):  # pragma: no cover - compiled
+    """Sort the points of every cell (``order[starts[c]:starts[c + 1]]``) by `rank`, in
+    place: insertion sort for the few points of most cells, else a sort of the cell."""
+    for c in range(starts.size - 1):
+        a0, a1 = starts[c], starts[c + 1]
+        if a1 - a0 > 64:
+            seg = order[a0:a1].copy()
+            o = np.argsort(rank[seg])
+            for t in range(a1 - a0):
+                order[a0 + t] = seg[o[t]]
+            continue
+        for a in range(a0 + 1, a1):
+            x = order[a]
+            r = rank[x]
+            b = a - 1
+            while b >= a0 and rank[order[b]] > r:
+                order[b + 1] = order[b]
+                b -= 1
+            order[b + 1] = x
 
 
 @njit_parallel
