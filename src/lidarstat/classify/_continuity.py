@@ -26,7 +26,10 @@ from numba import prange
 
 from .._shared._columns import column_max, column_min
 from ..neighbors import GRID_CELL_CHUNK as _CELL_CHUNK, grid_candidate_count as _count, grid_knn_point as _knn_point, grid_knn_scratch as _scratch  # noqa: E501
-from ..neighbors import grid_block_2d as _block_2d, grid_guaranteed as _guaranteed, grid_select_2d as _select_2d, grid_walk_block_2d as _walk_block_2d  # noqa: E501
+from ..neighbors import grid_block_2d as _block_2d
+from ..neighbors import grid_guaranteed as _guaranteed
+from ..neighbors import grid_select_2d as _select_2d
+from ..neighbors import grid_walk_block_2d as _walk_block_2d
 from .._shared._jit import njit, njit_parallel
 from .._shared._kernels import uf_find as _find
 from ..neighbors import find_duplicates, grid_cells_may_share

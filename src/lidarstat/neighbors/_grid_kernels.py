@@ -292,9 +292,7 @@ def walk_block_2d(ix0, iy0, cell_keys, cell_start, dims, ptr, ranges):
             a = np.searchsorted(cell_keys, lo)
         while a < ncell and cell_keys[a] < lo:
             a += 1
-        b = ptr[2 * u + 1]
-        if b < a:
-            b = a
+        b = max(ptr[2 * u + 1], a)
         while b < ncell and cell_keys[b] <= hi:
             b += 1
         ptr[2 * u] = a
