@@ -4,9 +4,10 @@ Per point, the candidates are the points of the (2R+1)^3 cells of a :class:`Cell
 around its cell (:func:`_block_ranges`), binned by distance and selected
 (:func:`_knn_point`), with R grown until the k-th candidate is closer than the faces of
 the block, so the result is exact. Exported from :mod:`lidarstat.neighbors` as
-``grid_knn_point``, ``grid_block_ranges``, ``grid_candidate_count``, ``grid_knn_scratch``
-and ``GRID_CELL_CHUNK`` (with the planimetric block ``grid_walk_block_2d``, its copy ``grid_block_2d``, its selection
-``grid_select_2d`` and ``grid_guaranteed``), for the drivers that fuse the search with a per-point model
+``grid_knn_point``, ``grid_block_ranges``, ``grid_candidate_count``, ``grid_knn_scratch``,
+``grid_guaranteed`` and ``GRID_CELL_CHUNK`` (and, in plan, ``grid_walk_block_2d``,
+``grid_block_2d`` and ``grid_select_2d``: a cell's 3 x 3 block copied once, then each of
+its points' nearest), for the drivers that fuse the search with a per-point model
 while the neighbours are in cache: the covariance features (3-D,
 :func:`lidarstat.features._covariance_kernels.knn_cells`) and the planimetric patch
 graph of the moments classification (2-D, :mod:`lidarstat.classify._continuity`).
