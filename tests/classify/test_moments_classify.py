@@ -267,6 +267,42 @@ def test_raised_patches_grid_knn_union_find_equals_scipy_components(rng, layout)
     assert np.array_equal(got, ref)
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_patch_graph_is_the_exact_knn_ties_to_the_lower_position(seed):
+    """Every point's neighbours in the patch graph are its k + 1 nearest in plan, ordered
+    by (distance, sorted position), without itself (else without the farthest), and the
+    smooth flags follow: against brute force on a lattice (equal distances everywhere),
+    a sparse field beside it (blocks widened) and locations held by 12 points each."""
+    from lidarstat.classify._continuity import _knn_smooth, _patch_grid
+
+    g = np.random.default_rng(seed)
+    lattice = np.round(g.uniform(0, 12, (1800, 2)) / 0.25) * 0.25
+    sparse = g.uniform(0, 300, (150, 2)) + [20, 0]
+    stacks = np.repeat(g.uniform(0, 12, (25, 2)), 12, axis=0)
+    xy = np.r_[lattice, sparse, stacks]
+    n, k, step, slope = len(xy), 8, 0.3, 1.0
+    z = 0.05 * xy[:, 0] + g.normal(0, 0.2, n)
+    grid, cell = _patch_grid(xy, k, g.permutation(n))
+    zs = z[grid.pos]
+    nbr = np.empty((n, k), np.int32)
+    smooth = np.empty((n, k), np.bool_)
+    _knn_smooth(0, grid.cell_keys.size, grid.points, zs, grid.cell_keys, grid.cell_start,
+                grid.dims, cell, k, cell, step, slope, nbr, smooth)
+    p = grid.points[:, :2]
+    d2 = (p[None, :, 0] - p[:, None, 0]) ** 2 + (p[None, :, 1] - p[:, None, 1]) ** 2
+    pos = np.arange(n)
+    ties = 0
+    for i in range(n):
+        near = np.lexsort((pos, d2[i]))[:k + 1]
+        want = near[near != i] if (near == i).any() else near[:k]
+        o = np.argsort(nbr[i])
+        assert np.array_equal(nbr[i][o], np.sort(want))
+        flags = np.abs(zs[nbr[i]] - zs[i]) <= step + slope * np.sqrt(d2[i, nbr[i]])
+        assert np.array_equal(smooth[i], flags)
+        ties += d2[i, near[-1]] == np.sort(d2[i])[k + 1]  # the (k+1)-th distance is shared
+    assert ties > 0.2 * n  # the tie rule decided many rows
+
+
 def test_raised_patches_of_a_reordered_cloud_with_ranks(rng):
     """A reordered cloud with its input indices as `rank` gives the raised points of the
     cloud in input order (positions on a half-metre lattice: equal distances everywhere)."""

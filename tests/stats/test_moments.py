@@ -93,3 +93,23 @@ def test_dip_dequantisation_step_from_the_distinct_values(seed):
     dip, p = diptest.diptest(y)
     got = dip_test(x, rng=seed)
     assert (float(got.statistic), float(got.pvalue)) == (dip, p)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_sorted_values_given_change_nothing(seed):
+    # a caller's np.sort(values) replaces the sorts of the dip test and the sequential
+    # moments: bit-identical results with ties (spread), without, one value, and a sample
+    # drawn from more than max_points values (the given sort cannot serve it)
+    g = np.random.default_rng(seed)
+    x = [np.round(g.normal(100, 3, 3000)), g.normal(size=3000), np.full(50, 2.0),
+         np.round(g.uniform(0, 5, 400), 2) * 1e-3 + 4.5e6,
+         np.r_[g.normal(0, 1, 15000), g.normal(4, 1, 10000)]][seed]
+    xs = np.sort(x)
+    for kw in ({}, {"dequantize": False}):
+        a, b = dip_test(x, rng=seed, **kw), dip_test(x, rng=seed, sorted_values=xs, **kw)
+        assert (float(a.statistic), float(a.pvalue)) == (float(b.statistic), float(b.pvalue))
+    a, b = sequential_moments(x), sequential_moments(x, sorted_values=xs)
+    for name in ("mean", "std", "skewness", "kurtosis", "threshold", "sorted_values"):
+        assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), name
+    with pytest.raises(ValueError, match="sorted_values"):
+        sequential_moments(x, sorted_values=xs[:-1])

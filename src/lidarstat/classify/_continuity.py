@@ -25,7 +25,11 @@ import numpy as np
 from numba import prange
 
 from .._shared._columns import column_max, column_min
-from ..neighbors import GRID_CELL_CHUNK as _CELL_CHUNK, grid_block_ranges as _block_ranges, grid_candidate_count as _count, grid_knn_point as _knn_point, grid_knn_scratch as _scratch  # noqa: E501
+from ..neighbors import GRID_CELL_CHUNK as _CELL_CHUNK, grid_candidate_count as _count, grid_knn_point as _knn_point, grid_knn_scratch as _scratch  # noqa: E501
+from ..neighbors import grid_block_2d as _block_2d
+from ..neighbors import grid_guaranteed as _guaranteed
+from ..neighbors import grid_select_2d as _select_2d
+from ..neighbors import grid_walk_block_2d as _walk_block_2d
 from .._shared._jit import njit, njit_parallel
 from .._shared._kernels import uf_find as _find
 from ..neighbors import find_duplicates, grid_cells_may_share
@@ -70,10 +74,13 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
 
     Notes
     -----
-    The k nearest neighbours come from the exact grid search of the covariance features
-    (:func:`lidarstat.features._covariance_kernels.knn_cells`' distance binning over a
-    uniform 2-D grid, sorted by the O(N) counting sort of the ground surface), in
-    parallel over cells, and the points are processed in the grid's order, so the
+    The k nearest neighbours come from an exact search on a uniform 2-D grid of about
+    k + 1 points a cell (sorted by the O(N) counting sort of the ground surface): each
+    cell's 3 x 3 block is copied once and every point of the cell keeps a sorted list of
+    its nearest candidates; a point whose k-th distance the block does not guarantee is
+    searched by the covariance features' kNN (:func:`lidarstat.neighbors.grid_knn_point`,
+    widening the block). Ties go to the lower position in the grid (rank order inside a
+    cell). In parallel over cells; the points are processed in the grid's order, so the
     union-find touches memory locally.
     The patches and the raised points equal those of a k-d tree query followed by
     ``scipy.sparse.csgraph.connected_components`` (tested) up to the choice among
@@ -97,14 +104,7 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     if n < 2 * min_points:
         return np.zeros(n, bool)
     k = min(k, n - 1)
-    lo = column_min(xy)
-    span = np.maximum(column_max(xy) - lo, 1e-12)
-    # about k + 1 points per cell: the 3 x 3 block holds the k nearest of most points
-    cell = float(np.sqrt((k + 1) * span[0] * span[1] / n))
-    # a cloud that is a line in plan has no area: about k + 1 points per cell along it
-    cell = max(cell, (k + 1) * float(span.max()) / n)
-    cell = max(cell, float(span.max()) / 2**20)  # at most 2^20 cells a side (CellIndex)
-    grid = _Grid2D(xy, cell, lo, rank)
+    grid, cell = _patch_grid(xy, k, rank)
     zs = z[grid.pos]
     # copies of a location share a cell: the copies are grouped (an (N, 3) copy and
     # three index arrays) only when two points of a cell may be equal
@@ -157,6 +157,19 @@ def raised_patches(xy, z, *, k: int = 8, step: float = 0.3, slope: float = 1.0,
     return out
 
 
+def _patch_grid(xy, k, rank):
+    """The grid of the patch graph's kNN search and its cell (about k + 1 points a cell)."""
+    n = xy.shape[0]
+    lo = column_min(xy)
+    span = np.maximum(column_max(xy) - lo, 1e-12)
+    # about k + 1 points per cell: the 3 x 3 block holds the k nearest of most points
+    cell = float(np.sqrt((k + 1) * span[0] * span[1] / n))
+    # a cloud that is a line in plan has no area: about k + 1 points per cell along it
+    cell = max(cell, (k + 1) * float(span.max()) / n)
+    cell = max(cell, float(span.max()) / 2**20)  # at most 2^20 cells a side (CellIndex)
+    return _Grid2D(xy, cell, lo, rank), cell
+
+
 class _Grid2D:
     """The points sorted by ``cell x cell`` squares, laid out for the covariance kNN kernel.
 
@@ -171,20 +184,21 @@ class _Grid2D:
     def __init__(self, xy, cell, lo, rank=None):
         key = cell_keys(xy, cell, lo)
         ny = int(np.floor((xy[:, 1].max() - lo[1]) / cell)) + 1
-        if rank is None:
-            by_rank = None
-        else:  # visit the points in rank order so that ties follow it
-            by_rank = np.empty(key.size, np.int64)
-            by_rank[rank] = np.arange(key.size)
-            key = key[by_rank]
+        # the counting sort in the caller's order (memory visited in its order), then
+        # each cell's few points put in rank order
         order, self.cell_start = cell_order(key)
         self.cell_keys = key[order[self.cell_start[:-1]]]
         del key
         # positions as int32 below 2^31 points: half the memory of the two index arrays
         index = np.int32 if order.size < 2**31 - 1 else np.int64
-        self.pos = (order if by_rank is None else by_rank[order]).astype(index)
-        del by_rank
-        self.order = order.astype(index)
+        if rank is None:
+            self.pos = order.astype(index)
+            self.order = self.pos
+        else:
+            rank = np.asarray(rank, dtype=np.int64)
+            _rank_order_in_cells(order, self.cell_start, rank)
+            self.pos = order.astype(index)
+            self.order = rank[order].astype(index)
         del order
         self.dims = np.array([self.cell_keys[-1] // ny + 1, ny, 1], np.int64)
         self.points = np.zeros((self.pos.size, 3))
@@ -213,6 +227,28 @@ class _Grid2D:
         return out
 
 
+@njit
+def _rank_order_in_cells(order, starts, rank):  # pragma: no cover - compiled
+    """Sort the points of every cell (``order[starts[c]:starts[c + 1]]``) by `rank`, in
+    place: insertion sort for the few points of most cells, else a sort of the cell."""
+    for c in range(starts.size - 1):
+        a0, a1 = starts[c], starts[c + 1]
+        if a1 - a0 > 64:
+            seg = order[a0:a1].copy()
+            o = np.argsort(rank[seg])
+            for t in range(a1 - a0):
+                order[a0 + t] = seg[o[t]]
+            continue
+        for a in range(a0 + 1, a1):
+            x = order[a]
+            r = rank[x]
+            b = a - 1
+            while b >= a0 and rank[order[b]] > r:
+                order[b + 1] = order[b]
+                b -= 1
+            order[b + 1] = x
+
+
 @njit_parallel
 def _knn_smooth(c0, c1, pts, zs, cell_keys, cell_start, dims, cell, k, tau0, step, slope,
                 nbr, smooth):  # pragma: no cover - compiled
@@ -222,9 +258,14 @@ def _knn_smooth(c0, c1, pts, zs, cell_keys, cell_start, dims, cell, k, tau0, ste
     elevations in the same order. Row r of `nbr` (sorted positions) is sorted position
     ``cell_start[c0] + r`` (the k nearest, not sorted by distance: the union-find and
     the step counts do not depend on the order); ``smooth[r, t]`` says
-    ``|zs[j] - zs[i]| <= step + slope * d``. The search is :func:`knn_cells`' (3 x 3
-    cells, widened until the k-th distance is guaranteed) with ``k + 1`` candidates so
-    that the point itself can be left out.
+    ``|zs[j] - zs[i]| <= step + slope * d``. The ``k + 1`` nearest (so that the point
+    itself can be left out) are those of :func:`knn_cells`' search: the 3 x 3 cells
+    around a cell (three column ranges whose bounds are walked from the previous cell's,
+    ``grid_walk_block_2d``) are copied once into a contiguous block (``grid_block_2d``) and each
+    of its points keeps a sorted list of its ``k + 1`` nearest candidates
+    (``grid_select_2d``, ties to the lower sorted position as in ``grid_knn_point``);
+    where that k-th distance is not guaranteed by the block (sparse cells), the point
+    is searched by ``grid_knn_point``, widening the block. Both give the same neighbours.
     """
     base = cell_start[c0]
     ncell = c1 - c0
@@ -233,36 +274,62 @@ def _knn_smooth(c0, c1, pts, zs, cell_keys, cell_start, dims, cell, k, tau0, ste
     for ch in prange(nchunks):
         cap = 1024
         bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
-        ranges = np.empty((9, 2), dtype=np.int64)
+        bcap = 1024
+        bx = np.empty(bcap)
+        by = np.empty(bcap)
+        bj = np.empty(bcap, dtype=np.int64)
+        bd2 = np.empty(bcap)
+        bc = np.empty(bcap, dtype=np.int64)
+        sel_d = np.empty(kk)
+        sel_i = np.empty(kk, dtype=np.int64)
+        ranges = np.empty((3, 2), dtype=np.int64)
+        ptr = np.full(6, -1, dtype=np.int64)
         for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
             key = cell_keys[c]
             ix0 = key // dims[1]
             iy0 = key % dims[1]
-            nr = _block_ranges(ix0, iy0, 0, 1, cell_keys, cell_start, dims, ranges)
+            nr = _walk_block_2d(ix0, iy0, cell_keys, cell_start, dims, ptr, ranges)
             need = _count(ranges, nr)
             if need > cap:
                 cap = max(need, 2 * cap)
                 bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
+            if need > bcap:
+                bcap = max(need, 2 * bcap)
+                bx = np.empty(bcap)
+                by = np.empty(bcap)
+                bj = np.empty(bcap, dtype=np.int64)
+                bd2 = np.empty(bcap)
+                bc = np.empty(bcap, dtype=np.int64)
+            mb = _block_2d(pts, ranges, nr, bx, by, bj)
             tau2 = tau0 * tau0
             for i in range(cell_start[c], cell_start[c + 1]):
-                need = 1
-                while need:
-                    kth, m, need = _knn_point(pts[i, 0], pts[i, 1], 0.0, ix0, iy0, 0, pts,
-                                              cell_keys, cell_start, dims, cell, kk, False,
-                                              tau2, ranges, nr, bd, bi, td, ti, tb, sd, si,
-                                              cnt)
-                    if need:
-                        cap = max(need, 2 * cap)
-                        bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
+                px = pts[i, 0]
+                py = pts[i, 1]
+                s = _select_2d(px, py, bx, by, bj, mb, kk, tau2, bd2, bc, sel_d, sel_i)
+                if s == kk and sel_d[kk - 1] <= _guaranteed(px, py, 0.0, ix0, iy0, 0, 1,
+                                                            cell, dims) ** 2:
+                    kth = sel_d[kk - 1]
+                    qd, qi, m = sel_d, sel_i, kk
+                else:
+                    need = 1
+                    while need:
+                        kth, m, need = _knn_point(px, py, 0.0, ix0, iy0, 0, pts, cell_keys,
+                                                  cell_start, dims, cell, kk, False, tau2,
+                                                  ranges, nr, bd, bi, td, ti, tb, sd, si,
+                                                  cnt)
+                        if need:
+                            cap = max(need, 2 * cap)
+                            bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
+                    qd, qi = td, ti
                 tau2 = kth * 1.3225  # (1.15 r_k)^2 for the next point of the cell
                 r = i - base
                 t = 0
                 for q in range(min(m, kk)):
-                    j = ti[q]
+                    j = qi[q]
                     if j == i or t == k:
                         continue
                     nbr[r, t] = j
-                    smooth[r, t] = abs(zs[j] - zs[i]) <= step + slope * np.sqrt(td[q])
+                    smooth[r, t] = abs(zs[j] - zs[i]) <= step + slope * np.sqrt(qd[q])
                     t += 1
 
 

@@ -27,19 +27,26 @@ from ._surface import cell_keys
 
 __all__ = ["analyse", "dip_tests", "paper_clusters", "progressive_cut"]
 
+#: Values a dip test takes as they are (``dip_test``'s ``max_points``): a larger sample is
+#: subsampled, and the sample sorted by the test.
+_DIP_MAX_POINTS = 20000
+
 
 def analyse(values, category, p: MomentsOptions, *, window, step, population, dips,
-            record=True):
-    """Sequential moments of one population and the cycle choice; (choice, MomentsStep)."""
+            record=True, sorted_values=None):
+    """Sequential moments of one population and the cycle choice; (choice, MomentsStep).
+    `sorted_values`: ``np.sort(values)`` when the caller has it."""
     ch, rec, _ = _analysis(values, category, p, window=window, step=step,
-                           population=population, dips=dips, record=record)
+                           population=population, dips=dips, record=record,
+                           sorted_values=sorted_values)
     return ch, rec
 
 
 def _analysis(values, category, p: MomentsOptions, *, window, step, population, dips,
-              record=True):
+              record=True, sorted_values=None):
     """:func:`analyse`, and the values sorted: ``(choice, MomentsStep, sorted values)``."""
-    sm = sequential_moments(values, min_points=max(2, min(4, values.size)))
+    sm = sequential_moments(values, min_points=max(2, min(4, values.size)),
+                            sorted_values=sorted_values)
     if p.method is MomentsMethod.SKEWNESS_BALANCING:
         ch = skewness_balance_cycle(sm)
     else:
@@ -56,11 +63,13 @@ def _analysis(values, category, p: MomentsOptions, *, window, step, population, 
     return ch, rec, sm.sorted_values
 
 
-def dip_tests(cats: dict, p: MomentsOptions) -> dict:
-    """Dip test of every category: statistic, p-value and decision at level ``alpha``."""
+def dip_tests(cats: dict, p: MomentsOptions, sorted_cats=None) -> dict:
+    """Dip test of every category: statistic, p-value and decision at level ``alpha``.
+    `sorted_cats`: the categories' values sorted, where the caller has them."""
     out = {}
     for name, v in cats.items():
-        t = dip_test(v, alpha=p.alpha, rng=p.seed)
+        t = dip_test(v, alpha=p.alpha, rng=p.seed,
+                     sorted_values=None if sorted_cats is None else sorted_cats.get(name))
         out[name] = {"dip": float(t.statistic), "pvalue": float(t.pvalue),
                      "multimodal": bool(t.reject)}
     return out
@@ -104,18 +113,20 @@ def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, 
     v = h[idx]
     thr = parent_thr
     rec = None
+    vs = None  # v sorted: for the analysis and the dip tests
     if idx.size >= 2 * p.min_points + 4:
-        dips = dip_tests({"elevation": v}, p) if record and p.evidence else {}
+        vs = np.sort(v)
+        dips = (dip_tests({"elevation": v}, p, {"elevation": vs}) if record and p.evidence
+                else {})
         ch, rec, vs = _analysis(v, "elevation", p, window=window_id, step=1,
                                 population="heights above the ground model", dips=dips,
-                                record=record)
+                                record=record, sorted_values=vs)
         if ch.cycle is not None:
             thr = min(ch.threshold, parent_thr)
             if p.ground_spread > 0 and p.method is MomentsMethod.MOMENTS:
                 # the heights <= thr: a prefix of the sorted heights
                 kept = vs[:int(np.searchsorted(vs, thr, side="right"))]
                 thr = max(thr, _cluster_bound(kept, p.ground_spread))
-        del vs
     info = {"window": window_id, "size": size, "n": int(idx.size),
             "x0": float(xy[idx, 0].min()) if idx.size else None,
             "y0": float(xy[idx, 1].min()) if idx.size else None,
@@ -123,7 +134,9 @@ def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, 
     kept = v <= thr
     if (size / 2 >= p.min_window and idx.size >= 4 * p.min_window_points
             and kept.sum() >= 8):
-        d = dip_test(v[kept], alpha=p.alpha, rng=p.seed)
+        # the heights <= thr sorted: a prefix of the sorted heights
+        d = dip_test(v[kept], alpha=p.alpha, rng=p.seed,
+                     sorted_values=None if vs is None else vs[:int(kept.sum())])
         info["ground_dip_pvalue"] = float(d.pvalue)
         if d.reject:
             info["split"] = True
@@ -151,14 +164,19 @@ def paper_clusters(cats: dict, p: MomentsOptions, window, steps: list, first_clu
     step = 1
     while todo.size >= 2 * p.min_points and step <= p.max_steps:
         sub = {k: v[todo] for k, v in cats.items()}
-        dips = dip_tests(sub, p)
+        # sorted once for the dip tests and the analysis (a dip test of more values
+        # draws a sample and sorts that: the analysis sorts its own then)
+        ssub = {k: np.sort(v) for k, v in sub.items() if v.size <= _DIP_MAX_POINTS}
+        dips = dip_tests(sub, p, ssub)
         multi = {k: d for k, d in dips.items() if d["multimodal"]}
         if not multi and step > 1:
             break
         pool = multi or dips
         cat = min(pool, key=lambda k: (pool[k]["pvalue"], -pool[k]["dip"]))
         ch, rec = analyse(sub[cat], cat, p, window=window, step=step,
-                          population="window" if step == 1 else "unclassified", dips=dips)
+                          population="window" if step == 1 else "unclassified", dips=dips,
+                          sorted_values=ssub.get(cat))
+        del ssub
         steps.append(rec)
         if ch.cycle is None:
             break
@@ -171,10 +189,12 @@ def paper_clusters(cats: dict, p: MomentsOptions, window, steps: list, first_clu
         if comp and cluster.size >= 2 * p.min_points:
             c2 = comp[0]
             v2 = cats[c2][cluster]
-            d2 = dip_tests({c2: v2}, p)
+            vs2 = np.sort(v2) if v2.size <= _DIP_MAX_POINTS else None
+            d2 = dip_tests({c2: v2}, p, {c2: vs2})
             if d2[c2]["multimodal"]:
                 ch2, rec2 = analyse(v2, c2, p, window=window, step=step,
-                                    population=f"cluster {next_id}", dips=d2)
+                                    population=f"cluster {next_id}", dips=d2,
+                                    sorted_values=vs2)
                 steps.append(rec2)
                 if ch2.cycle is not None:
                     lo2 = v2 <= ch2.threshold

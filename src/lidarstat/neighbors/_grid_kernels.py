@@ -4,8 +4,10 @@ Per point, the candidates are the points of the (2R+1)^3 cells of a :class:`Cell
 around its cell (:func:`_block_ranges`), binned by distance and selected
 (:func:`_knn_point`), with R grown until the k-th candidate is closer than the faces of
 the block, so the result is exact. Exported from :mod:`lidarstat.neighbors` as
-``grid_knn_point``, ``grid_block_ranges``, ``grid_candidate_count``, ``grid_knn_scratch``
-and ``GRID_CELL_CHUNK``, for the drivers that fuse the search with a per-point model
+``grid_knn_point``, ``grid_block_ranges``, ``grid_candidate_count``, ``grid_knn_scratch``,
+``grid_guaranteed`` and ``GRID_CELL_CHUNK`` (and, in plan, ``grid_walk_block_2d``,
+``grid_block_2d`` and ``grid_select_2d``: a cell's 3 x 3 block copied once, then each of
+its points' nearest), for the drivers that fuse the search with a per-point model
 while the neighbours are in cache: the covariance features (3-D,
 :func:`lidarstat.features._covariance_kernels.knn_cells`) and the planimetric patch
 graph of the moments classification (2-D, :mod:`lidarstat.classify._continuity`).
@@ -266,3 +268,104 @@ def _knn_point(px, py, pz, ix0, iy0, iz0, pts, cell_keys, cell_start, dims, cell
         if m >= k:
             kth = _nearest(bd, bi, m, k, sort, td, ti, tb, sd, si, cnt)
     return kth, m, 0
+
+
+@njit
+def walk_block_2d(ix0, iy0, cell_keys, cell_start, dims, ptr, ranges):
+    """Sorted-position ranges of the occupied cells of the 3 x 3 block around (ix0, iy0)
+    of a planimetric grid (``dims[2] == 1``): one range per column, the same points in
+    the same order as :func:`_block_ranges` with ``rad = 1``.
+
+    `ptr` (6 values) holds the cell indices found for the previous cell; set them to -1
+    before the first cell. Cells visited in ascending key move every bound forward, so
+    the bounds are walked rather than searched. Returns the number of ranges.
+    """
+    n = 0
+    ncell = cell_keys.size
+    for u in range(3):
+        ix = ix0 - 1 + u
+        if ix < 0 or ix > dims[0] - 1:
+            continue
+        lo = ix * dims[1] + max(iy0 - 1, 0)
+        hi = ix * dims[1] + min(iy0 + 1, dims[1] - 1)
+        a = ptr[2 * u]
+        if a < 0:
+            a = np.searchsorted(cell_keys, lo)
+        while a < ncell and cell_keys[a] < lo:
+            a += 1
+        b = max(ptr[2 * u + 1], a)
+        while b < ncell and cell_keys[b] <= hi:
+            b += 1
+        ptr[2 * u] = a
+        ptr[2 * u + 1] = b
+        if b > a:
+            ranges[n, 0] = cell_start[a]
+            ranges[n, 1] = cell_start[b]
+            n += 1
+    return n
+
+
+@njit
+def block_2d(pts, ranges, nr, bx, by, bj):
+    """Copy x, y and the sorted position of every point of `ranges` into bx, by, bj
+    (contiguous, ascending position); returns their number. The planimetric searches of
+    the points of one cell (:func:`select_2d`) then read one block instead of `ranges`."""
+    n = 0
+    for t in range(nr):
+        for j in range(ranges[t, 0], ranges[t, 1]):
+            bx[n] = pts[j, 0]
+            by[n] = pts[j, 1]
+            bj[n] = j
+            n += 1
+    return n
+
+
+@njit
+def select_2d(px, py, bx, by, bj, m, k, tau2, bd, bc, td, ti):
+    """The `k` nearest in plan of (px, py) among ``bx/by/bj[:m]``.
+
+    Written to ``td[:k]`` (squared distances, computed as :func:`_gather`'s with z = 0)
+    and ``ti`` (``bj`` values) in ascending (distance, position) order: at equal
+    distances the lower position first, as :func:`_knn_point` chooses among candidates
+    gathered in ascending position. The distances go to ``bd[:m]`` in one pass; only
+    those within ``sqrt(tau2)`` are indexed in ``bc`` and sorted into the list, the
+    radius doubling (in area) while fewer than `k` are within it (all candidates after
+    four tries). Returns ``min(k, m)``.
+    """
+    for t in range(m):
+        dx = bx[t] - px
+        dy = by[t] - py
+        bd[t] = dx * dx + dy * dy
+    q = 0
+    if m >= k:
+        for grow in range(4):  # widen the radius until k are within it
+            q = 0
+            for t in range(m):
+                bc[q] = t
+                q += bd[t] <= tau2
+            if q >= k:
+                break
+            tau2 *= 2.0
+    if q < k:
+        for t in range(m):
+            bc[t] = t
+        q = m
+    s = 0
+    for u in range(q):
+        t = bc[u]
+        d = bd[t]
+        j = bj[t]
+        if s == k:
+            if d > td[k - 1] or (d == td[k - 1] and j > ti[k - 1]):
+                continue
+            p = k - 1
+        else:
+            p = s
+            s += 1
+        while p > 0 and (td[p - 1] > d or (td[p - 1] == d and ti[p - 1] > j)):
+            td[p] = td[p - 1]
+            ti[p] = ti[p - 1]
+            p -= 1
+        td[p] = d
+        ti[p] = j
+    return s

@@ -78,6 +78,15 @@ def _as_values(values, name: str, func: str) -> np.ndarray:
     return arr
 
 
+def _presorted(sorted_values, n, func):
+    """A caller's ``np.sort(values)`` as float64 (its length checked against `n`)."""
+    xs = np.asarray(sorted_values, dtype=np.float64)
+    if xs.shape != (n,):
+        raise InvalidParameterError(f"`sorted_values` of {func} has shape {xs.shape}; "
+                                    f"expected ({n},)")
+    return xs
+
+
 def _robust_frame(x: np.ndarray) -> tuple[float, float]:
     """Centre (median) and a positive scale (IQR/1.349, else std, else 1) of sorted `x`."""
     n = x.size
@@ -137,8 +146,8 @@ class SequentialMoments:
         return self.order[: self.n - int(cycle)]
 
 
-def sequential_moments(values, *, min_points: int = 4,
-                       return_order: bool = False) -> SequentialMoments:
+def sequential_moments(values, *, min_points: int = 4, return_order: bool = False,
+                       sorted_values=None) -> SequentialMoments:
     """Skewness and kurtosis after removing the largest value at each cycle, all cycles at once.
 
     Parameters
@@ -150,6 +159,9 @@ def sequential_moments(values, *, min_points: int = 4,
     return_order : bool, optional
         Also return the argsort (slower than sorting values alone; a cut at cycle ``k`` is
         also ``values <= threshold[k]``, ties kept together).
+    sorted_values : (N,) ndarray, optional
+        ``np.sort(values)`` when the caller has it (a dip test of the same values sorted
+        them): used instead of sorting again. Not with `return_order`.
 
     Returns
     -------
@@ -190,7 +202,8 @@ def sequential_moments(values, *, min_points: int = 4,
         xs = x[order]
     else:
         order = None
-        xs = np.sort(x)
+        xs = np.sort(x) if sorted_values is None else _presorted(sorted_values, n,
+                                                                  "sequential_moments")
     c, s = _robust_frame(xs)
     y = (xs - c) / s
     m = n - min_points + 1  # cycle k leaves the prefix of length n - k, k = 0 .. m - 1
@@ -310,7 +323,7 @@ def density_estimate(values, *, bandwidth="silverman", gridsize: int = 512) -> D
 
 # --------------------------------------------------------------------------- dip test
 def dip_test(values, *, alpha: float = 0.05, max_points: int = 20000, rng=0,
-             dequantize: bool = True) -> TestResult:
+             dequantize: bool = True, sorted_values=None) -> TestResult:
     """Hartigan and Hartigan's dip test of unimodality (``diptest`` package).
 
     Parameters
@@ -328,6 +341,9 @@ def dip_test(values, *, alpha: float = 0.05, max_points: int = 20000, rng=0,
         Spread values tied by quantisation (integer intensities, centimetre elevations)
         uniformly over their quantisation step; ties otherwise make the empirical CDF a
         staircase the dip test reads as many modes.
+    sorted_values : (N,) ndarray, optional
+        ``np.sort(values)`` when the caller has it: the sort for the ties is skipped
+        (samples of up to `max_points` values). The result is the same.
 
     Returns
     -------
@@ -347,19 +363,26 @@ def dip_test(values, *, alpha: float = 0.05, max_points: int = 20000, rng=0,
     x = _as_values(values, "values", "dip_test")
     alpha = check_scalar(alpha, "alpha", func="dip_test", low=0, high=1)
     gen = np.random.default_rng(rng)
+    xs = None  # x sorted, while it is the sample the statistic is taken of
     if x.size > max_points:
         x = gen.choice(x, size=max_points, replace=False)
+    elif sorted_values is not None:
+        xs = _presorted(sorted_values, x.size, "dip_test")
     if x.size < 4:
         return TestResult(statistic=np.float64(np.nan), pvalue=np.float64(np.nan), df=x.size,
                           reject=np.bool_(False), alpha=alpha)
     if dequantize:
         # ties and the smallest gap between distinct values from one sort: the gaps of
         # the sorted values are 0 between ties and the distinct values' gaps otherwise
-        gaps = np.diff(np.sort(x))
+        if xs is None:
+            xs = np.sort(x)
+        gaps = np.diff(xs)
         steps = gaps[gaps > 0]
         if steps.size < gaps.size and steps.size:
             q = float(np.min(steps))
             x = x + gen.uniform(-0.5 * q, 0.5 * q, size=x.size)
-    dip, p = _dt.diptest(x)
+            xs = None  # the spread values are sorted by the test
+    # the statistic of the sorted sample (diptest sorts it when not given sorted)
+    dip, p = _dt.diptest(x) if xs is None else _dt.diptest(xs, sort_x=False)
     return TestResult(statistic=np.float64(dip), pvalue=np.float64(p), df=x.size,
                       reject=np.bool_(p < alpha), alpha=alpha)
