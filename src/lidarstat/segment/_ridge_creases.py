@@ -379,6 +379,10 @@ def _chain(local, nb, step, cand, factor, along, min_vertices, smooth):
     chains = [out_pts[out_start[li]:out_start[li + 1]] for li in range(nl)]
     chains, alive, owner = join_lines(chains, local, lab, 4.0 * step)
     owner = np.asarray([0] + [o + 1 for o in owner], np.int64)  # by traced line id
+    # the points of each joined line, in input order: one stable sort, not a scan per line
+    of = owner[line_of]
+    by_line = np.argsort(of, kind="stable")
+    first = np.searchsorted(of[by_line], np.arange(nl + 2))
     out = []
     for li in range(nl):  # one iteration per line, not per point
         ids = chains[li]
@@ -386,5 +390,5 @@ def _chain(local, nb, step, cand, factor, along, min_vertices, smooth):
             continue
         v = smooth_vertices(local[ids], smooth)
         length = float(np.linalg.norm(np.diff(v, axis=0), axis=1).sum())
-        out.append((np.flatnonzero(owner[line_of] == li + 1), v, length))
+        out.append((by_line[first[li + 1]:first[li + 2]], v, length))
     return out
