@@ -4,7 +4,7 @@ exhaustive pairwise pass, on pieces of broken polylines over a seed sweep."""
 import numpy as np
 import pytest
 
-from lidarstat.segment._ridge_lines import join_lines
+from lidarstat.segment._ridge_lines import group_rows, join_lines
 
 
 def _exhaustive(chains, vert, ridge, join):
@@ -106,3 +106,14 @@ def test_join_lines_sweep_joins():
         alive = join_lines(chains, vert, ridge, float(rng.uniform(0.15, 0.6)))[1]
         joins += sum(len(c) >= 2 for c in chains) - sum(alive)
     assert joins > 100
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_group_rows_equals_scan(seed):
+    rng = np.random.default_rng(seed)
+    n_groups = int(rng.integers(1, 60))
+    label = rng.integers(0, n_groups, int(rng.integers(0, 3000)))
+    got = group_rows(label, n_groups)
+    assert len(got) == n_groups
+    for g in range(n_groups):
+        np.testing.assert_array_equal(got[g], np.flatnonzero(label == g))

@@ -18,6 +18,15 @@ def smooth_vertices(v, w):
     return (c[hi] - c[lo]) / (hi - lo)[:, None]
 
 
+def group_rows(label, n_groups):
+    """Rows of each label ``0 .. n_groups - 1``, ascending within a group: one stable sort,
+    not a scan of every row per group."""
+    label = np.asarray(label, np.int64)
+    order = np.argsort(label, kind="stable")
+    first = np.searchsorted(label[order], np.arange(n_groups + 1))
+    return [order[first[g]:first[g + 1]] for g in range(n_groups)]
+
+
 def join_lines(chains, vert, ridge, join):
     """Greedily join chains of the same type whose ends are within `join` and aligned.
 
