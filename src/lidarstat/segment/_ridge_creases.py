@@ -34,7 +34,7 @@ import numpy as np
 from ..features import FitStatus, fit_jets, height_variance, jet_tests, point_spacing
 from ..neighbors import knn_neighbors
 from . import _ridge_kernels as _rk
-from ._ridge_lines import join_lines, smooth_vertices
+from ._ridge_lines import group_rows, join_lines, smooth_vertices
 
 #: Code of a crease point in the ``ridge`` field.
 CREASE = 3
@@ -379,6 +379,7 @@ def _chain(local, nb, step, cand, factor, along, min_vertices, smooth):
     chains = [out_pts[out_start[li]:out_start[li + 1]] for li in range(nl)]
     chains, alive, owner = join_lines(chains, local, lab, 4.0 * step)
     owner = np.asarray([0] + [o + 1 for o in owner], np.int64)  # by traced line id
+    members = group_rows(owner[line_of], nl + 1)
     out = []
     for li in range(nl):  # one iteration per line, not per point
         ids = chains[li]
@@ -386,5 +387,5 @@ def _chain(local, nb, step, cand, factor, along, min_vertices, smooth):
             continue
         v = smooth_vertices(local[ids], smooth)
         length = float(np.linalg.norm(np.diff(v, axis=0), axis=1).sum())
-        out.append((np.flatnonzero(owner[line_of] == li + 1), v, length))
+        out.append((members[li + 1], v, length))
     return out

@@ -359,6 +359,8 @@ def _build_lines(nl, out_pts, out_start, line_of, vert, ridge, cval, min_vertice
     members = np.bincount(line_of, minlength=nl + 1)[1:]
     chains = [out_pts[out_start[li]:out_start[li + 1]] for li in range(nl)]
     chains, alive, owner = join_lines(chains, vert, ridge, join)
+    # points absorbed per joined line: the traced lines' counts summed by owner
+    absorbed = np.bincount(np.asarray(owner, np.int64), weights=members, minlength=nl)
     verts, attrs = [], {name: [] for name in LINE_ATTRIBUTES}
     new_id = np.zeros(nl + 1, np.int64)
     final = {}
@@ -382,7 +384,7 @@ def _build_lines(nl, out_pts, out_start, line_of, vert, ridge, cval, min_vertice
         attrs["line_id"].append(final[li])
         attrs["ridge"].append(int(ridge[ids[0]]))
         attrs["n_vertices"].append(ids.size)
-        attrs["n_points"].append(int(sum(members[k] for k in range(nl) if owner[k] == li)))
+        attrs["n_points"].append(int(absorbed[li]))
         attrs["length"].append(float(seg.sum()))
         attrs["strength"].append(float((mid(kk) * seg).sum()))
         attrs["sharpness"].append(float((mid(np.nan_to_num(kpp)) * seg).sum()))
