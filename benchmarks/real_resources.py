@@ -52,18 +52,13 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 DATA = HERE.parent.parent / "shared" / "data"
 
+from scaling import COMMANDS as TOWN_COMMANDS
 from scaling import _code_of_runs, run
 
-COMMANDS = {
-    "curvature": ["curvature", "{i}", "{o}"],
-    "covariance": ["covariance", "{i}", "{o}"],
-    "ridges": ["ridges", "{i}", "{o}"],
-    "moments": ["moments", "{i}", "{o}", "--no-report"],
-    "segment-covariance": ["segment", "{i}", "{o}", "--method", "covariance"],
-    "segment-curvature": ["segment", "{i}", "{o}", "--method", "curvature"],
-    "segment-sar": ["segment", "{i}", "{o}", "--method", "sar"],
-    "segment-ridges": ["segment", "{i}", "{o}", "--method", "ridges"],
-}
+#: The scaling table's single-file commands with their defaults, and `segment --method
+#: ridges`.
+COMMANDS = {name: argv for name, argv in TOWN_COMMANDS.items() if " --tile" not in name}
+COMMANDS["segment-ridges"] = ["segment", "{i}", "{o}", "--method", "ridges"]
 
 #: path under the data folder -> what it stands for
 FILES = {
