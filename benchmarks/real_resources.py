@@ -287,8 +287,9 @@ def main(argv=None):
     if args.merge:
         parts = [json.loads(Path(p).read_text()) for p in args.merge]
         results = dict(parts[0], files={}, merged_from=[Path(p).name for p in args.merge])
-        for part in parts:
-            results["files"].update(part["files"])
+        for part in parts:  # a later part's run of a command on a file replaces it
+            for name, runs in part["files"].items():
+                results["files"].setdefault(name, {}).update(runs)
         _finish(results, out)
         return
     if args.outliers_only:

@@ -120,3 +120,29 @@ def test_summary_and_fields_report_creases():
     assert res.to_fields()["ridge"].dtype == np.uint8
     assert (res.to_fields()["ridge"] == CREASE).any()
     assert res.params["crease_growth_radius"] > res.params["crease_radius"]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_crease_points_do_not_depend_on_the_neighbour_blocks(seed, monkeypatch):
+    """The crease test searches its neighbourhoods in blocks and keeps them only up to
+    CREASE_PAIRS; searched again in blocks of a few rows, it marks the same points."""
+    from lidarstat.segment import _ridge_creases as rc
+
+    calls = []
+    crease_points = rc.crease_points
+
+    def keep(points, fields, **kw):
+        calls.append((points, {k: np.array(v) for k, v in fields.items()}, kw))
+        return crease_points(points, fields, **kw)
+
+    monkeypatch.setattr(rc, "crease_points", keep)
+    ridges(_fold(seed)[0])
+    monkeypatch.setattr(rc, "crease_points", crease_points)
+    assert calls
+    for points, fields, kw in calls:
+        whole = rc.crease_points(points, fields, **kw)
+        assert whole.any()
+        monkeypatch.setattr(rc, "CREASE_PAIRS", 7 * rc.CREASE_K)
+        monkeypatch.setattr(rc, "CREASE_BLOCK", 3 * rc.CREASE_K)
+        assert np.array_equal(rc.crease_points(points, fields, **kw), whole)
+        monkeypatch.undo()

@@ -138,81 +138,116 @@ def crease_points(points, fields, *, alpha, n_eff, radius=0.0, spacing=None):
     reach = max(band_reach, along_reach) / spacing
     k = min(max(CREASE_K, int(np.ceil(1.5 * np.pi * reach * reach))), n)
     # the neighbourhoods of the points examined only (candidates and those they compare
-    # with), row pos[i] for point i: k is hundreds at a wide crease radius
-    pos = np.full(n, -1, np.int64)
-    hoods = {"idx": np.empty((0, k), np.int32), "dist": np.empty((0, k))}
-
-    def query(at):
-        nb = knn_neighbors(points, k, query=at)
-        pos[at] = hoods["idx"].shape[0] + np.arange(at.size)
-        hoods["idx"] = np.concatenate([hoods["idx"], nb.indices.reshape(-1, k)])
-        hoods["dist"] = np.concatenate([hoods["dist"], nb.distances.reshape(-1, k)])
-
-    def idx(at):
-        return hoods["idx"][pos[at]]
-
-    def dist(at):
-        return hoods["dist"][pos[at]]
-
+    # with): k is hundreds at a wide crease radius, so they are kept while they fit in
+    # CREASE_PAIRS and searched again block by block beyond
+    hoods = _Hoods(points, k)
     normals = np.full((n, 3), np.nan)
     across_dir = np.zeros((n, 3))
     axis_dir = np.zeros((n, 3))
 
-    def fold_across(at):
+    def fold_across(at, idx, dist):
         """Across the crease at `at`, in the point's tangent plane: normal to the crease
         line, the least axis of the neighbours' normals within the band's reach (the
         normals turn about the crease line, so they span the plane normal to it)."""
-        ok = dist(at) <= band_reach
-        todo = np.setdiff1d(np.unique(idx(at)[ok]), np.flatnonzero(np.isfinite(normals[:, 0])))
+        ok = dist <= band_reach
+        todo = np.setdiff1d(np.unique(idx[ok]), np.flatnonzero(np.isfinite(normals[:, 0])))
         if todo.size:
             normals[todo] = _pca_normals(points, todo)
-        nn = np.nan_to_num(normals[idx(at)]) * ok[..., None]
+        nn = np.nan_to_num(normals[idx]) * ok[..., None]
         m = np.einsum("nki,nkj->nij", nn, nn)
         axis = np.linalg.eigh(m)[1][:, :, 0]
         axis_dir[at] = axis
         c = np.cross(axis, normals[at])
         across_dir[at] = c / np.maximum(np.linalg.norm(c, axis=1), 1e-12)[:, None]
 
-    def cosines(at):
+    def cosines(at, idx, d):
         """Per neighbour: the sine of its offset's angle to the crease line, signed by
         the side (the sign of the offset along the across direction): the surface bends
         at the crease, so the offsets to the other side leave the tangent plane."""
-        off = points[idx(at)] - points[at][:, None, :]
-        d = dist(at)
+        off = points[idx] - points[at][:, None, :]
         with np.errstate(invalid="ignore", divide="ignore"):
             c = np.einsum("nkj,nj->nk", off, axis_dir[at]) / d
             side = np.where(np.einsum("nkj,nj->nk", off, across_dir[at]) >= 0, 1.0, -1.0)
-        return np.where(d > 0, side * np.sqrt(np.clip(1.0 - c * c, 0.0, 1.0)), 0.0), d
+        return np.where(d > 0, side * np.sqrt(np.clip(1.0 - c * c, 0.0, 1.0)), 0.0)
+
+    def along_mask(at, idx, d):
+        return ((np.abs(cosines(at, idx, d)) <= COS_ALONG) & (d <= along_reach)) | (d == 0)
 
     rows = np.flatnonzero(strong)
-    query(rows)
-    fold_across(rows)
-    cos, d = cosines(rows)
+    near = []
+    for at, idx, d in hoods.blocks(rows):
+        fold_across(at, idx, d)
+        near.append(np.unique(idx[(np.abs(cosines(at, idx, d)) >= COS_ACROSS)
+                                  & (d <= across_reach)]))
     # the score at every point a candidate compares with
-    near = np.unique(idx(rows)[(np.abs(cos) >= COS_ACROSS) & (d <= across_reach)])
-    more = np.setdiff1d(near, rows)
-    query(more)
-    fold_across(more)
+    near = np.unique(np.concatenate(near))
+    for at, idx, d in hoods.blocks(np.setdiff1d(near, rows)):
+        fold_across(at, idx, d)
     need = np.union1d(near, rows)
-    cos_n, d_n = cosines(need)
-    along = ((np.abs(cos_n) <= COS_ALONG) & (d_n <= along_reach)) | (d_n == 0)
     # the depth of every point an average along the crease takes in
-    extra = np.setdiff1d(np.unique(idx(need)[along]), need)
-    query(extra)
-    fold_across(extra)
-    scored = np.union1d(need, extra)
-    cos_s, d_s = cosines(scored)
-    cone = (np.abs(cos_s) >= COS_ACROSS) & (d_s > 0) & (d_s <= band_reach) & strong[idx(scored)]
+    extra = np.unique(np.concatenate([np.unique(idx[along_mask(at, idx, d)])
+                                      for at, idx, d in hoods.blocks(need)]))
+    extra = np.setdiff1d(extra, need)
+    for at, idx, d in hoods.blocks(extra):
+        fold_across(at, idx, d)
     depth = np.zeros(n)
-    depth[scored] = np.minimum((cone & (cos_s > 0)).sum(axis=1),
-                               (cone & (cos_s < 0)).sum(axis=1))
+    for at, idx, d in hoods.blocks(np.union1d(need, extra)):
+        cos = cosines(at, idx, d)
+        cone = (np.abs(cos) >= COS_ACROSS) & (d > 0) & (d <= band_reach) & strong[idx]
+        depth[at] = np.minimum((cone & (cos > 0)).sum(axis=1), (cone & (cos < 0)).sum(axis=1))
     smooth = np.zeros(n)
-    smooth[need] = (depth[idx(need)] * along).sum(axis=1) / np.maximum(along.sum(axis=1), 1)
-    across = (np.abs(cos) >= COS_ACROSS) & (d > 0) & (d <= across_reach)
-    higher = ((1.0 - TOLERANCE) * smooth[idx(rows)] > smooth[rows][:, None]) & across
-    both = (across & (cos > 0)).any(axis=1) & (across & (cos < 0)).any(axis=1)
-    mask[rows[~higher.any(axis=1) & both & (smooth[rows] > 0)]] = True
+    for at, idx, d in hoods.blocks(need):
+        along = along_mask(at, idx, d)
+        smooth[at] = (depth[idx] * along).sum(axis=1) / np.maximum(along.sum(axis=1), 1)
+    for at, idx, d in hoods.blocks(rows):
+        cos = cosines(at, idx, d)
+        across = (np.abs(cos) >= COS_ACROSS) & (d > 0) & (d <= across_reach)
+        higher = ((1.0 - TOLERANCE) * smooth[idx] > smooth[at][:, None]) & across
+        both = (across & (cos > 0)).any(axis=1) & (across & (cos < 0)).any(axis=1)
+        mask[at[~higher.any(axis=1) & both & (smooth[at] > 0)]] = True
     return mask
+
+
+#: Neighbour pairs of the crease test kept between its passes (12 bytes a pair); beyond
+#: them the neighbourhoods are searched again in each pass.
+CREASE_PAIRS = 1 << 25
+#: Neighbour pairs a pass of the crease test works on at once (its temporaries hold
+#: about 60 bytes a pair).
+CREASE_BLOCK = 1 << 22
+
+
+class _Hoods:
+    """The `k` nearest neighbours of the points the crease test examines, in blocks of
+    rows; kept for the later passes while they fit in :data:`CREASE_PAIRS` pairs."""
+
+    def __init__(self, points, k):
+        self.points, self.k = points, k
+        self.pos = np.full(points.shape[0], -1, np.int64)
+        self.idx = np.empty((0, k), np.int32)
+        self.dist = np.empty((0, k))
+
+    def blocks(self, at):
+        """``(rows, idx, dist)`` for blocks of the points `at`, in order."""
+        step = max(1, CREASE_BLOCK // self.k)
+        for s in range(0, at.size, step):
+            b = at[s:s + step]
+            new = b[self.pos[b] < 0]
+            if new.size:
+                nb = knn_neighbors(self.points, self.k, query=new)
+                ni = nb.indices.reshape(-1, self.k)
+                nd = nb.distances.reshape(-1, self.k)
+                if (self.idx.shape[0] + new.size) * self.k > CREASE_PAIRS:
+                    kept = self.pos[b] >= 0
+                    idx = np.empty((b.size, self.k), ni.dtype)
+                    dist = np.empty((b.size, self.k))
+                    idx[kept], dist[kept] = self.idx[self.pos[b[kept]]], self.dist[self.pos[b[kept]]]
+                    idx[~kept], dist[~kept] = ni, nd
+                    yield b, idx, dist
+                    continue
+                self.pos[new] = self.idx.shape[0] + np.arange(new.size)
+                self.idx = np.concatenate([self.idx, ni.astype(np.int32, copy=False)])
+                self.dist = np.concatenate([self.dist, nd])
+            yield b, self.idx[self.pos[b]], self.dist[self.pos[b]]
 
 
 #: Neighbours of the plane fits whose normals give the direction across a crease.
