@@ -128,3 +128,21 @@ def test_schedulers_give_the_same_ids(tmp_path, capsys):
                                           read(p)["segment_id"])
         else:
             assert (tmp_path / "b" / p.name).read_text() == p.read_text()
+
+
+def test_a_pending_record_is_resumed_only_with_the_same_options():
+    """The key of a catalogue run (``_run_key``) changes with an option that shapes the
+    segments or with what the run chose from the data, not with how it runs."""
+    from lidarstat.cli._app import build_parser
+    from lidarstat.cli._catalogue import _run_key
+
+    def key(*extra, chosen=None):
+        args = build_parser().parse_args(["segment", "tiles", "out", *COMMON, *extra])
+        return _run_key("segment", args, chosen or {})
+
+    base = key()
+    assert key("--workers", "1", "--scheduler", "sync") == base
+    assert key("--radius", "1.6") != base
+    assert key("--alpha", "0.01") != base
+    assert key(chosen={"scales": np.array([1.0, 2.0])}) != key(
+        chosen={"scales": np.array([1.0, 2.5])})

@@ -272,3 +272,36 @@ def test_copc_tiles_are_joined_as_their_las_tiles(tmp_path):
     (ka, a), (kb, b) = _by_point(tmp_path / "out_tiles"), _by_point(tmp_path / "out_copc")
     np.testing.assert_array_equal(ka, kb)
     assert _same_partition(a, b) and len(np.unique(a[a > 0])) >= 5
+
+
+def test_records_of_other_options_are_run_again_not_joined(tmp_path):
+    """A run stopped with one set of options, rerun with another (its ``run_key``): every
+    tile runs again and the result is a clean run's of the second options, never a join
+    of tiles run with different options."""
+    _, xyz = _cloud(tmp_path, seed=8)
+    lo = _cut(xyz, tmp_path / "tiles", 3.0)
+    _, first = _tile_functions(1, 0.05, 0.3, lo, 3.0)
+    _, second = _tile_functions(2, 0.05, 0.9, lo, 3.0)
+    n_tiles = len(list((tmp_path / "tiles").glob("*.laz")))
+    process_catalogue(second, tmp_path / "tiles", tmp_path / "ref", buffer=0.5,
+                      labels={"seg": True}, run_key="b")
+    calls = []
+
+    def failing(tile):
+        calls.append(1)
+        if len(calls) == 4:
+            raise RuntimeError("stopped")
+        return first(tile)
+
+    with pytest.raises(RuntimeError):
+        process_catalogue(failing, tmp_path / "tiles", tmp_path / "out", buffer=0.5,
+                          labels={"seg": True}, scheduler="sync", run_key="a")
+    assert len(list((tmp_path / "out" / ".lidarstat-pending").glob("*.join"))) == 3
+    calls.clear()
+    runs = process_catalogue(lambda t: calls.append(1) or second(t), tmp_path / "tiles",
+                             tmp_path / "out", buffer=0.5, labels={"seg": True},
+                             scheduler="sync", run_key="b")
+    assert len(calls) == n_tiles and {r.status for r in runs} == {"done"}
+    for p in sorted((tmp_path / "ref").glob("*.laz")):
+        np.testing.assert_array_equal(read(tmp_path / "out" / p.name).attributes["seg"],
+                                      read(p).attributes["seg"])

@@ -172,6 +172,7 @@ def _run_catalogue(args, command):
     tile_func, join = fields_of(args, extra), {}
     if isinstance(tile_func, tuple):  # labels joined across the tiles (segment)
         tile_func, join = tile_func
+        join = {**join, "run_key": _run_key(command, args, extra)}
     runs = process_catalogue(tile_func, cat, out, buffer=buffer,
                              template=args.template, resume=not args.overwrite,
                              scheduler=args.scheduler, workers=args.workers,
@@ -215,6 +216,26 @@ def _run_catalogue(args, command):
                  "points": r.n_points, "buffer_points": r.n_buffer, "seconds": r.seconds}
                 for r in runs]})
     return 0
+
+
+def _run_key(command, args, extra) -> str:
+    """The method and every option that shapes its results, and what it chose from the
+    data: a pending tile's record is resumed only by a run with the same key."""
+    skip = _RUN_OPTIONS | {"input", "output"}
+    options = {k: v for k, v in vars(args).items()
+               if not k.startswith("_") and k not in skip and not callable(v)}
+    return repr(_plain([command, options, extra]))
+
+
+def _plain(value):
+    """`value` as nested lists of numbers and strings, dicts sorted by key."""
+    if isinstance(value, dict):
+        return sorted((str(k), _plain(v)) for k, v in value.items())
+    if hasattr(value, "tolist"):  # NumPy arrays and scalars
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value if isinstance(value, (int, float, bool, type(None))) else str(value)
 
 
 def _dispatch(run_one, command):

@@ -25,7 +25,8 @@ and its records let the rerun go on (tiles with a record are not run again). A r
 stopped in step 3 leaves some outputs and every record: the rerun joins the same
 records again and writes the outputs still missing. An output without a record (of an
 earlier complete run) is not joined with tiles run now: the run is refused until it is
-overwritten. Memory: the link records of the border points (25 bytes each) and a few
+overwritten. A record is resumed only by a run of the same method with the same options
+(its ``key``); a record of other options is run again. Memory: the link records of the border points (25 bytes each) and a few
 numbers per label, not the points of the area.
 """
 
@@ -71,7 +72,7 @@ def _in_neighbours_windows(cat, i: int, xyz: np.ndarray, buffer: float) -> np.nd
 
 
 def put_pending(cat, i: int, out: Path, outdir: Path, tile, fields: dict, info: dict,
-                labels: dict, buffer: float) -> None:
+                labels: dict, buffer: float, key: str | None = None) -> None:
     """Step 1 for tile `i`: its output (labels as numbered by the method) and its record, in PENDING."""
     n = tile.n_core
     shared = np.flatnonzero(_in_neighbours_windows(cat, i, tile.core.xyz, buffer))
@@ -79,7 +80,7 @@ def put_pending(cat, i: int, out: Path, outdir: Path, tile, fields: dict, info: 
     numbers = np.r_[cat.point_offsets()[i] + shared, tile.buffer_ids].astype(np.int64)
     core_fields = {name: values[:n] for name, values in fields.items()}
     record = {"input": str(cat.files[i].path), "n_points": n, "buffer": float(buffer),
-              "info": info, "tops": {}, "counts": {}, "links": {}}
+              "key": key, "info": info, "tops": {}, "counts": {}, "links": {}}
     for name, join in labels.items():
         if name not in fields:
             raise InvalidParameterError(f"{cat.files[i].path}: the method returned no "
@@ -110,10 +111,13 @@ def _load(path: Path) -> dict | None:
         return None
 
 
-def plan(cat, paths: list[Path], outdir: Path, buffer: float, resume: bool
-         ) -> tuple[list[int], list[int], bool]:
+def plan(cat, paths: list[Path], outdir: Path, buffer: float, resume: bool,
+         key: str | None = None) -> tuple[list[int], list[int], bool]:
     """Which tiles run, which are resumed from their record, and whether the join and
-    the outputs are to be made at all (False: every output exists, none pending)."""
+    the outputs are to be made at all (False: every output exists, none pending).
+
+    A record is kept only for the same input, buffer and `key` (the method and its
+    options): a record of a run with other options is run again, never joined."""
     outdir = Path(outdir)
     if not resume:
         shutil.rmtree(outdir / PENDING, ignore_errors=True)
@@ -124,6 +128,7 @@ def plan(cat, paths: list[Path], outdir: Path, buffer: float, resume: bool
         if rec is not None and (rec["input"] != str(cat.files[i].path)
                                 or rec["n_points"] != cat.files[i].n_points
                                 or rec["buffer"] != float(buffer)
+                                or rec.get("key") != key
                                 or not _pending(out, outdir).exists()):
             rec = None  # another run's: run the tile again
         kept.append(rec is not None)

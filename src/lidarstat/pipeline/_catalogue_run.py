@@ -91,9 +91,9 @@ def _run_tile(func, cat: Catalogue, i: int, out: Path, buffer: float, points_per
                                         f"{len(tile.xyz)} points")
         core_fields[name] = values[:n]
     if join is not None:
-        labels, outdir = join
+        labels, outdir, key = join
         fields = {name: np.asarray(values) for name, values in fields.items()}
-        _join.put_pending(cat, i, out, outdir, tile, fields, dict(info), labels, buffer)
+        _join.put_pending(cat, i, out, outdir, tile, fields, dict(info), labels, buffer, key)
         return TileRun(i, cat.files[i].path, out, "done", n, len(tile.buffer.xyz),
                        time.perf_counter() - t0, _scalars(info))
     with output_group(defer=False):  # each tile appears when complete (resume)
@@ -113,8 +113,8 @@ def process_catalogue(func: Callable[[BufferedTile], dict], catalogue, outdir, *
                       scheduler: str = "threads", workers: int | None = None,
                       address: str | None = None, points_per_chunk: int = 1_000_000,
                       progress: Callable | None = None, labels: dict | None = None,
-                      collect: Callable | None = None, finish: Callable | None = None
-                      ) -> list[TileRun]:
+                      collect: Callable | None = None, finish: Callable | None = None,
+                      run_key: str | None = None) -> list[TileRun]:
     """Run `func` on every tile of a catalogue with a buffer; one output per tile.
 
     Parameters
@@ -161,6 +161,11 @@ def process_catalogue(func: Callable[[BufferedTile], dict], catalogue, outdir, *
     finish : callable, optional
         With `labels`: ``finish(maps)`` once, before the outputs are written, `maps`
         mapping each field of `labels` to a :class:`LabelMap` (node -> id written).
+    run_key : str, optional
+        With `labels`: names the method and its options. A stopped run's pending tile is
+        resumed only by a run with the same `run_key` (and input and buffer); a tile
+        whose record has another key is run again, so that tiles run with different
+        options are never joined.
 
     Returns
     -------
@@ -179,8 +184,8 @@ def process_catalogue(func: Callable[[BufferedTile], dict], catalogue, outdir, *
     runs: list[TileRun | None] = [None] * len(cat)
     join = None
     if labels:
-        join = (dict(labels), Path(outdir))
-        todo, resumed, needed = _join.plan(cat, paths, Path(outdir), buffer, resume)
+        join = (dict(labels), Path(outdir), run_key)
+        todo, resumed, needed = _join.plan(cat, paths, Path(outdir), buffer, resume, run_key)
         for i in range(len(cat)):
             if not needed or i in resumed:
                 runs[i] = TileRun(i, cat.files[i].path, paths[i],
