@@ -294,3 +294,31 @@ def test_evaluate_two_catalogues_scores_the_area(tmp_path, capsys):
     rc = main(["evaluate", str(tmp_path / "res"), "--reference", str(tmp_path / "ref")])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "tile_0_0.laz: no reference tile" in err[0]
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_each_line_is_written_by_exactly_one_tile(seed):
+    """Tiles whose point bounds leave gaps between them (and may overlap): every line is
+    kept by one tile, the one whose bounds hold its middle vertex when one does."""
+    from types import SimpleNamespace
+
+    from lidarstat.cli._catalogue_methods import _lines_in_tile
+    from lidarstat.segment import Polylines
+
+    g = np.random.default_rng(seed)
+    lo = np.array([[x, y] for x in range(3) for y in range(3)], float) * 10.0
+    extents = np.c_[lo + g.uniform(-0.5, 1.5, lo.shape), lo + 10 - g.uniform(-0.5, 1.5, lo.shape)]
+    lines = Polylines([g.uniform(-2, 32, (int(g.integers(2, 6)), 3)) for _ in range(400)],
+                      {"line_id": np.arange(1, 401)})
+    mids = np.array([v[len(v) // 2, :2] for v in lines.vertices])
+    kept = np.zeros(400, int)
+    for i, e in enumerate(extents):
+        tile = SimpleNamespace(xmin=e[0], ymin=e[1], xmax=e[2], ymax=e[3])
+        ids = _lines_in_tile(lines, tile, extents, i).attributes["line_id"] - 1
+        kept[ids] += 1
+        inside = np.all((mids >= e[:2]) & (mids <= e[2:]), axis=1)
+        alone = inside & (np.all((mids[:, None] >= extents[None, :, :2])
+                                 & (mids[:, None] <= extents[None, :, 2:]), axis=2)
+                          .sum(axis=1) == 1)
+        assert np.isin(np.flatnonzero(alone), ids).all()
+    assert (kept == 1).all()

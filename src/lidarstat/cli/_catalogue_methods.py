@@ -251,7 +251,7 @@ def _ridges_buffer(args, cat):
 
 def _ridges_prepare(args, cat):
     return {"outputs": _outputs(args, cat), "offsets": _offsets(cat),
-            **ridges_decide(args, cat)}
+            "extents": [f.bounds2d for f in cat.files], **ridges_decide(args, cat)}
 
 
 def ridges_decide(args, cat):
@@ -308,7 +308,8 @@ def _ridges_fields(args, extra):
                      ratio=args.ratio, min_length=args.min_length,
                      scales=extra.get("scales"))
         out = Path(extra["outputs"][tile.extent.path])
-        lines = _lines_in_tile(res.lines, tile.extent)
+        index = list(extra["outputs"]).index(tile.extent.path)
+        lines = _lines_in_tile(res.lines, tile.extent, extra["extents"], index)
         # line ids unique over the area, in the points' field and the lines alike
         offset = extra["offsets"][tile.extent.path]
         if "line_id" in lines.attributes:
