@@ -1,0 +1,136 @@
+"""Where the terrain step's grid lies (:mod:`._terrain`): its cell on sparse points, the
+empty bands it leaves out, and the filled cells that become vertices of its TIN.
+
+The step's tests compare a cell with its neighbours, so what they need of the plane is
+the cells holding points and a few rings of cells around them; a grid over the whole
+bounding box would cost memory in proportion to the area, empty or not. Three rules keep
+it in proportion to the points:
+
+* **cell** (:func:`terrain_cell`): no finer than the points' spacing (the median
+  distance of a point to its nearest planimetric neighbour). Where points are further
+  apart than the cell, almost every cell is alone among empty neighbours and the
+  neighbour tests have nothing to compare;
+* **bands** (:class:`BandFrame`): rows and columns of cells farther than
+  :data:`BAND_HALO` cells from every row (column) holding a point are taken out, so two
+  clumps of points kilometres apart lie :data:`BAND_HALO` cells from the gap's sides.
+  Every operation of the step reads at most 90 cells around a cell holding a point (the
+  seeds' progressive opening, radii 1 to 9) and, for those, their nearest seed (under
+  ``90 sqrt(2)`` cells away); a seed across a narrowed gap stays farther than that;
+* **vertices** (:func:`near_points`): the filled cells become vertices of the TIN only
+  within :data:`VERTEX_RING` cells of a cell holding a point. Every cell holds a vertex,
+  so a Delaunay triangle's empty circumcircle has a radius under ``sqrt(2)`` cells and a
+  triangle holding a point has its vertices within ``2 sqrt(2)`` cells of it: the far
+  vertices change no triangle under a point.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["BAND_HALO", "VERTEX_RING", "BandFrame", "near_points", "terrain_cell"]
+
+#: Cells kept on either side of the rows and columns holding points: a narrowed gap of
+#: ``2 BAND_HALO`` cells keeps a seed across it farther (``2 BAND_HALO - 90``) from the
+#: cells the opening reads than their nearest seed (``90 sqrt(2)`` = 127.3).
+BAND_HALO = 128
+#: Rings of filled cells around the cells holding points that are vertices of the TIN
+#: (a triangle holding a point reaches ``2 sqrt(2)`` cells from it).
+VERTEX_RING = 3
+#: Points whose nearest-neighbour distance estimates the spacing (a deterministic stride).
+_SPACING_SAMPLE = 100_000
+
+
+def terrain_cell(xy, cell) -> float:
+    """The terrain grid's cell: `cell`, or the points' spacing where that is larger.
+
+    The spacing is the median distance of a point to its nearest planimetric neighbour
+    (over at most 100,000 points taken at a fixed stride). It is computed only when the
+    points are fewer than the cells of their bounding box: with more points than cells
+    the grid is the data's own, at `cell`.
+    """
+    from scipy.spatial import cKDTree
+
+    n = len(xy)
+    if n < 2:
+        return float(cell)
+    span = xy.max(axis=0) - xy.min(axis=0)
+    if n >= np.prod(np.floor(span / cell) + 1):
+        return float(cell)
+    tree = cKDTree(xy)
+    probe = xy[::max(1, n // _SPACING_SAMPLE)]
+    d, _ = tree.query(probe, k=2)
+    return max(float(cell), float(np.median(d[:, 1])))
+
+
+def near_points(lowest, ring=VERTEX_RING):
+    """Cells within `ring` cells (Chebyshev) of a cell holding a point (finite `lowest`)."""
+    from scipy import ndimage as ndi
+
+    have = np.isfinite(lowest)
+    if have.all():
+        return have
+    return ndi.maximum_filter(have, size=2 * ring + 1, mode="constant", cval=False)
+
+
+def _keep_near(occupied, halo):
+    """Indices within `halo` of an occupied one (1-D)."""
+    c = np.r_[0, np.cumsum(occupied)]
+    n = occupied.size
+    i = np.arange(n)
+    return c[np.minimum(i + halo + 1, n)] - c[np.maximum(i - halo, 0)] > 0
+
+
+class BandFrame:
+    """The grid's columns and rows without the empty bands (:data:`BAND_HALO`).
+
+    ``shift[0][i]`` (``shift[1][j]``) is the number of columns (rows) taken out before
+    column ``i`` (row ``j``); :meth:`__call__` moves a point left (down) by that many
+    cells, so its cell is ``i - shift[0][i]``.
+
+    Parameters
+    ----------
+    shift : tuple of two (n,) ndarrays of int64
+    cell : float
+    """
+
+    def __init__(self, shift, cell):
+        self.shift = shift
+        self.cell = float(cell)
+
+    @classmethod
+    def of(cls, xy, cell, halo=BAND_HALO, block=1 << 20):
+        """The frame of `xy` (all >= 0), or ``None`` when no band is wider than
+        ``2 halo`` cells or a moved point would change cell by rounding."""
+        n = len(xy)
+        if n == 0:
+            return None
+        sizes = (np.floor(xy.max(axis=0) / cell).astype(np.int64) + 1).tolist()
+        occupied = [np.zeros(m, bool) for m in sizes]
+        for s in range(0, n, block):
+            for a in (0, 1):
+                occupied[a][np.floor(xy[s:s + block, a] / cell).astype(np.int64)] = True
+        shift = []
+        for occ in occupied:
+            out = ~_keep_near(occ, halo)
+            shift.append(np.cumsum(out) - out)
+        if not any(s[-1] for s in shift):
+            return None
+        frame = cls(tuple(shift), cell)
+        for s in range(0, n, block):  # the cells the moved points fall in
+            ij = np.floor(xy[s:s + block] / cell).astype(np.int64)
+            moved = np.floor(frame(xy[s:s + block]) / cell).astype(np.int64)
+            want = np.c_[ij[:, 0] - frame.shift[0][ij[:, 0]], ij[:, 1] - frame.shift[1][ij[:, 1]]]
+            if not np.array_equal(moved, want):
+                return None
+        return frame
+
+    def __call__(self, xy) -> np.ndarray:
+        """`xy` moved into the frame (a point in a band taken out lands on the next kept
+        row or column)."""
+        xy = np.asarray(xy, dtype=np.float64)
+        out = np.empty_like(xy)
+        for a in (0, 1):
+            s = self.shift[a]
+            i = np.clip(np.floor(xy[:, a] / self.cell), 0, s.size - 1).astype(np.int64)
+            out[:, a] = xy[:, a] - self.cell * s[i]
+        return out
