@@ -421,8 +421,8 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
 
 def terrain_step(xy, z, ground, *, ux=1.0, uz=1.0):
     """The terrain step with :data:`TERRAIN_DEFAULTS`, lengths converted to coordinate
-    units (`ux`, `uz`: metres per horizontal and vertical unit), the cell no finer than
-    the points' spacing (:func:`~._terrain_frame.terrain_cell`).
+    units (`ux`, `uz`: metres per horizontal and vertical unit), the cell coarser only
+    on points too sparse for it (:func:`~._terrain_frame.terrain_cell`).
 
     Returns ``(ground, height, surface, tolerance)``.
     """

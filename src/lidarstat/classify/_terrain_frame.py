@@ -6,18 +6,18 @@ the cells holding points and a few rings of cells around them; a grid over the w
 bounding box would cost memory in proportion to the area, empty or not. Three rules keep
 it in proportion to the points:
 
-* **cell** (:func:`terrain_cell`): no finer than the points' spacing (the median
-  distance of a point to its nearest planimetric neighbour). Where points are further
-  apart than the cell, almost every cell is alone among empty neighbours and the
-  neighbour tests have nothing to compare;
+* **cell** (:func:`terrain_cell`): coarser only where the grid would pass 16 cells a
+  point (and a million cells): points four cells apart or more leave almost every cell
+  alone among empty neighbours, and the neighbour tests have nothing to compare;
 * **bands** (:class:`BandFrame`): rows and columns of cells farther than
   :data:`BAND_HALO` cells from every row (column) holding a point are taken out, so two
   clumps of points kilometres apart lie :data:`BAND_HALO` cells from the gap's sides.
   Every operation of the step reads at most 90 cells around a cell holding a point (the
   seeds' progressive opening, radii 1 to 9) and, for those, their nearest seed (under
   ``90 sqrt(2)`` cells away); a seed across a narrowed gap stays farther than that;
-* **vertices** (:func:`near_points`): the filled cells become vertices of the TIN only
-  within :data:`VERTEX_RING` cells of a cell holding a point. Every cell holds a vertex,
+* **vertices** (:func:`near_points`): where the cells farther than :data:`VERTEX_RING`
+  from every cell holding a point outnumber those, the filled cells become vertices of
+  the TIN only within that ring. Every cell holds a vertex,
   so a Delaunay triangle's empty circumcircle has a radius under ``sqrt(2)`` cells and a
   triangle holding a point has its vertices within ``2 sqrt(2)`` cells of it: the far
   vertices change no triangle under a point.
@@ -27,7 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BAND_HALO", "VERTEX_RING", "BandFrame", "near_points", "terrain_cell"]
+__all__ = ["BAND_HALO", "CELLS_PER_POINT", "MIN_CELLS", "VERTEX_RING", "BandFrame",
+           "near_points", "terrain_cell"]
 
 #: Cells kept on either side of the rows and columns holding points: a narrowed gap of
 #: ``2 BAND_HALO`` cells keeps a seed across it farther (``2 BAND_HALO - 90``) from the
@@ -36,40 +37,57 @@ BAND_HALO = 128
 #: Rings of filled cells around the cells holding points that are vertices of the TIN
 #: (a triangle holding a point reaches ``2 sqrt(2)`` cells from it).
 VERTEX_RING = 3
-#: Points whose nearest-neighbour distance estimates the spacing (a deterministic stride).
-_SPACING_SAMPLE = 100_000
+#: Most cells of the grid a point (:func:`terrain_cell`), and the fewest that are always
+#: allowed.
+CELLS_PER_POINT = 16
+MIN_CELLS = 1 << 20
 
 
-def terrain_cell(xy, cell) -> float:
-    """The terrain grid's cell: `cell`, or the points' spacing where that is larger.
+def terrain_cell(xy, cell, halo=BAND_HALO) -> float:
+    """The terrain grid's cell: `cell`, or larger where the grid would pass
+    :data:`CELLS_PER_POINT` cells a point (and :data:`MIN_CELLS` cells).
 
-    The spacing is the median distance of a point to its nearest planimetric neighbour
-    (over at most 100,000 points taken at a fixed stride). It is computed only when the
-    points are fewer than the cells of their bounding box: with more points than cells
-    the grid is the data's own, at `cell`.
+    The grid counted is the one the step uses (:class:`BandFrame`: the empty bands taken
+    out); the cell grows by a quarter at a time until the grid fits. A grid that fine
+    has points :data:`CELLS_PER_POINT` ** 0.5 cells apart or more: almost every cell
+    holding a point has none among its 8 neighbours, so the neighbour tests have nothing
+    to compare at either cell and the surface is the TIN of the ground points.
     """
-    from scipy.spatial import cKDTree
-
     n = len(xy)
-    if n < 2:
-        return float(cell)
-    span = xy.max(axis=0) - xy.min(axis=0)
-    if n >= np.prod(np.floor(span / cell) + 1):
-        return float(cell)
-    tree = cKDTree(xy)
-    probe = xy[::max(1, n // _SPACING_SAMPLE)]
-    d, _ = tree.query(probe, k=2)
-    return max(float(cell), float(np.median(d[:, 1])))
+    cell = float(cell)
+    limit = max(CELLS_PER_POINT * n, MIN_CELLS)
+    if n < 2 or np.prod(np.floor(xy.max(axis=0) / cell) + 1) <= limit:
+        return cell
+    while _grid_cells(xy, cell, halo) > limit:
+        cell *= 1.25
+    return cell
+
+
+def _grid_cells(xy, cell, halo, block=1 << 20):
+    """Cells of the grid of `xy` at `cell` without its empty bands."""
+    sizes = (np.floor(xy.max(axis=0) / cell).astype(np.int64) + 1).tolist()
+    occupied = [np.zeros(m, bool) for m in sizes]
+    for s in range(0, len(xy), block):
+        for a in (0, 1):
+            occupied[a][np.floor(xy[s:s + block, a] / cell).astype(np.int64)] = True
+    return int(np.prod([_keep_near(o, halo).sum() for o in occupied]))
 
 
 def near_points(lowest, ring=VERTEX_RING):
-    """Cells within `ring` cells (Chebyshev) of a cell holding a point (finite `lowest`)."""
+    """The cells that are vertices of the TIN when filled: within `ring` cells
+    (Chebyshev) of a cell holding a point (finite `lowest`) when the others outnumber
+    the cells holding points, else every cell (the far ones cost little then, and
+    leaving them out would change which diagonal Qhull takes in squares of co-circular
+    filled centres elsewhere)."""
     from scipy import ndimage as ndi
 
     have = np.isfinite(lowest)
     if have.all():
         return have
-    return ndi.maximum_filter(have, size=2 * ring + 1, mode="constant", cval=False)
+    near = ndi.maximum_filter(have, size=2 * ring + 1, mode="constant", cval=False)
+    if near.size - np.count_nonzero(near) <= np.count_nonzero(have):
+        return np.ones(have.shape, bool)
+    return near
 
 
 def _keep_near(occupied, halo):
