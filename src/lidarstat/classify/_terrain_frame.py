@@ -16,7 +16,7 @@ it in proportion to the points:
   seeds' progressive opening, radii 1 to 9) and, for those, their nearest seed (under
   ``90 sqrt(2)`` cells away); a seed across a narrowed gap stays farther than that;
 * **vertices** (:func:`near_points`): where the cells farther than :data:`VERTEX_RING`
-  from every cell holding a point outnumber those, the filled cells become vertices of
+  from every cell holding a point outnumber those (inside their box), the filled cells become vertices of
   the TIN only within that ring. Every cell holds a vertex,
   so a Delaunay triangle's empty circumcircle has a radius under ``sqrt(2)`` cells and a
   triangle holding a point has its vertices within ``2 sqrt(2)`` cells of it: the far
@@ -75,8 +75,8 @@ def _grid_cells(xy, cell, halo, block=1 << 20):
 
 def near_points(lowest, ring=VERTEX_RING):
     """The cells that are vertices of the TIN when filled: within `ring` cells
-    (Chebyshev) of a cell holding a point (finite `lowest`) when the others outnumber
-    the cells holding points, else every cell (the far ones cost little then, and
+    (Chebyshev) of a cell holding a point (finite `lowest`) when the others inside the
+    box of the cells holding points outnumber those, else every cell (the far ones cost little then, and
     leaving them out would change which diagonal Qhull takes in squares of co-circular
     filled centres elsewhere)."""
     from scipy import ndimage as ndi
@@ -85,7 +85,9 @@ def near_points(lowest, ring=VERTEX_RING):
     if have.all():
         return have
     near = ndi.maximum_filter(have, size=2 * ring + 1, mode="constant", cval=False)
-    if near.size - np.count_nonzero(near) <= np.count_nonzero(have):
+    rows, cols = np.flatnonzero(have.any(axis=1)), np.flatnonzero(have.any(axis=0))
+    box = near[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1] if rows.size else near
+    if box.size - np.count_nonzero(box) <= np.count_nonzero(have):
         return np.ones(have.shape, bool)
     return near
 
