@@ -50,15 +50,18 @@ def test_hole_far_filled_cells_are_no_vertices(seed):
     differ = ring[1] != every[1]
     assert differ.mean() < 0.02 and differ[ring[0]].mean() < 0.005
     assert np.abs(ring[1] - every[1]).max() < 0.25
-    # the hole's inner cells are not vertices: 105 x 105 cells less 3 rings
-    assert ring[2].tin.P.shape[0] < every[2].tin.P.shape[0] - 99 * 99
+    # the hole's inner cells are not vertices: about 105 x 105 cells less 3 rings
+    assert ring[2].tin.P.shape[0] < every[2].tin.P.shape[0] - 95 * 95
 
 
 def test_near_points_ring():
     low = np.full((20, 20), np.inf)
-    low[5, 5] = 1.0
+    low[2, 2] = low[17, 17] = 1.0  # 184 far cells in their 16 x 16 box
     near = near_points(low, ring=3)
-    assert near.sum() == 49 and near[2, 8] and not near[1, 5] and not near[9, 5]
+    assert near.sum() == 72 and near[5, 0] and not near[6, 2] and not near[9, 9]
+    low = np.zeros((20, 20))
+    low[:, 12:] = np.inf  # 8 empty columns outside the box of the others: all kept
+    assert near_points(low, ring=3).all()
     low = np.zeros((20, 20))
     low[:, 12:] = np.inf  # 8 empty columns, 1 beyond the ring: every cell stays
     assert near_points(low, ring=3).all()
@@ -69,14 +72,14 @@ def test_two_clumps_far_apart(seed):
     """Two scenes 560 m apart on the diagonal (gaps of 230-240 cells: the full grid, and
     no step reads across) and 20 km apart (a 7,000 x 7,000-cell box): the far pair's
     grid has the empty bands taken out (about 350 x 350 cells). The classes are those of
-    the near pair but for at most 0.2 % of the points (measured 0-0.06 %), and heights
-    differ on at most 10 % (measured 2.7-7.8 %): the filled cells and the TIN are
+    the near pair but for at most 0.2 % of the points (measured 0-0.03 %), and heights
+    differ on at most 15 % (measured 5.4-8.9 %): the filled cells and the TIN are
     Delaunay triangulations of lattice points, whose co-circular squares take the
     diagonal Qhull's order of processing gives, so they depend on every vertex. The full
-    grid differs as much between gaps of 560 and 900 m (classes 0-0.02 %, heights
-    2.8-7.2 %, seeds 0-2)."""
-    a = make_terrain_scene("bridge", rng=seed)
-    b = make_terrain_scene("ramp", rng=seed + 10)
+    grid differs as much between gaps of 560 and 900 m (classes 0.01-0.08 %, heights
+    7.3-8.9 %, seeds 0-2)."""
+    a = make_terrain_scene("bridge", density=1.0, rng=seed)
+    b = make_terrain_scene("ramp", density=1.0, rng=seed + 10)
     seeds = np.r_[_seeds(a), _seeds(b)]
     out = {}
     for d in (560.0, 20_000.0):
@@ -86,17 +89,17 @@ def test_two_clumps_far_apart(seed):
     assert near[2].frame is None and far[2].frame is not None
     assert far[2].grid.size < 400 ** 2
     assert (near[0] != far[0]).mean() < 0.002
-    assert (near[1] != far[1]).mean() < 0.1
+    assert (near[1] != far[1]).mean() < 0.15
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_thinned_copy(seed):
-    """Every 25th point of a scene (0.02 points per m2, 7 m apart): at the kept points
+    """Every 25th point of a scene (0.02 points per m2, 7 m apart; 1,440 points): at the kept points
     the terrain step on the thinned copy agrees with the step on the whole scene
-    (the same seeds) on at least 98 % of the classes (measured 99.0-99.6 %: on a tenth
+    (the same seeds) on at least 98 % of the classes (measured 98.4-99.2 %: on a tenth
     of the points the growth and the wall tests see fewer neighbours). The grid keeps its
     2 m cell: 6 cells a point, under the 16 that coarsen it."""
-    s = make_terrain_scene("embankment", extent=(400.0, 320.0), density=0.5, rng=seed)
+    s = make_terrain_scene("embankment", extent=(300.0, 240.0), density=0.5, rng=seed)
     seeds = _seeds(s)
     whole = terrain_step(s.xyz[:, :2], s.xyz[:, 2], seeds)
     keep = np.arange(len(seeds)) % 25 == 0
@@ -108,7 +111,7 @@ def test_thinned_copy(seed):
 @pytest.mark.parametrize("seed", SEEDS)
 def test_coarser_cell_on_very_sparse_points(seed):
     """4,000 points over 3 x 3 km (one a 2,250 m2): a 2 m grid would hold 560 cells a
-    point; the cell grows until the grid holds at most 16 a point and a million cells.
+    point; the cell grows until the grid holds at most 16 a point and 262,144 cells.
     The ground of a plane with boxes is found at that cell as at 2 m: the neighbour
     tests see no neighbours at either cell."""
     g = np.random.default_rng(seed)
@@ -119,7 +122,7 @@ def test_coarser_cell_on_very_sparse_points(seed):
     z[box] += 6.0
     cell = terrain_cell(xy, 2.0)
     assert cell > 2.0
-    assert np.prod(np.floor(xy.max(axis=0) / cell) + 1) <= max(16 * n, 1 << 20)
+    assert np.prod(np.floor(xy.max(axis=0) / cell) + 1) <= max(16 * n, 1 << 18)
     ground, *_ = terrain_step(xy, z, ~box)
     assert np.array_equal(ground, ~box)
 
@@ -139,8 +142,8 @@ _RSS = textwrap.dedent("""
     import resource, numpy as np
     from lidarstat.classify._terrain import terrain_step
     from lidarstat.synth import make_terrain_scene
-    a = make_terrain_scene("bridge", rng=0)
-    b = make_terrain_scene("ramp", rng=1)
+    a = make_terrain_scene("bridge", density=1.0, rng=0)
+    b = make_terrain_scene("ramp", density=1.0, rng=1)
     seeds = np.r_[a.ground, b.ground]
     peaks = []
     for d in (200.0, 20000.0):

@@ -7,7 +7,7 @@ bounding box would cost memory in proportion to the area, empty or not. Three ru
 it in proportion to the points:
 
 * **cell** (:func:`terrain_cell`): coarser only where the grid would pass 16 cells a
-  point (and a million cells): points four cells apart or more leave almost every cell
+  point (and 262,144 cells): points four cells apart or more leave almost every cell
   alone among empty neighbours, and the neighbour tests have nothing to compare;
 * **bands** (:class:`BandFrame`): rows and columns of cells farther than
   :data:`BAND_HALO` cells from every row (column) holding a point are taken out, so two
@@ -40,7 +40,7 @@ VERTEX_RING = 3
 #: Most cells of the grid a point (:func:`terrain_cell`), and the fewest that are always
 #: allowed.
 CELLS_PER_POINT = 16
-MIN_CELLS = 1 << 20
+MIN_CELLS = 1 << 18
 
 
 def terrain_cell(xy, cell, halo=BAND_HALO) -> float:
