@@ -69,7 +69,8 @@ def _real(out, files):
         a = cloud.attributes
         kw = {}
         if "number_of_returns" in a:
-            kw = dict(number_of_returns=a["number_of_returns"], return_number=a["return_number"])
+            kw = {"number_of_returns": a["number_of_returns"],
+                  "return_number": a["return_number"]}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             units = linear_units(cloud.crs, header=cloud.las_header, source=str(data / f))

@@ -51,9 +51,11 @@ follows the points, not their bounding box.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
+from ._terrain_frame import MAX_EDGE, BandFrame, near_points, terrain_cell
 from ._terrain_grid import (
     drop_bumps,
     drop_opened,
@@ -62,7 +64,6 @@ from ._terrain_grid import (
     reject_plateaus,
     reject_walled,
 )
-from ._terrain_frame import BandFrame, near_points, terrain_cell
 from ._terrain_kernels import (block_spread, cell_lowest, cell_values, fill_triangles,
                                first_on_surface, gather_cells, grid_bilinear)
 
@@ -215,7 +216,8 @@ def _tin(xy, z, surface_z, grid, lowest, cell):
 
     ny = grid.shape[1]
     pick = first_on_surface(xy, z, np.ascontiguousarray(surface_z), float(cell))
-    filled = np.flatnonzero((~np.isfinite(surface_z) & near_points(lowest)).ravel())
+    near = near_points(lowest)
+    filled = np.flatnonzero((~np.isfinite(surface_z) & near).ravel())
     # in cell units rounded to 1e-9 cell: the vertices are often co-circular (the filled
     # cells' centres), and which diagonal the triangulation takes must not depend on the
     # last bits of the coordinates, i.e. on the file's unit
@@ -224,7 +226,19 @@ def _tin(xy, z, surface_z, grid, lowest, cell):
     V = np.r_[z[pick], grid.ravel()[filled]]
     if len(P) < 3:
         return None
-    return TinSurface(P, V, 1.0)
+    # without the far cells, triangles span the empty areas; none holds a point (one
+    # holding a point reaches 2 sqrt(2) cells), and binning them would cost their area
+    return TinSurface(P, V, 1.0, keep=None if near.all() else partial(_near_triangles, near))
+
+
+def _near_triangles(near, corners):
+    """Triangles (``(T, 3, 2)`` corners in cell units) no longer than
+    :data:`~._terrain_frame.MAX_EDGE` or whose centroid lies in a `near` cell."""
+    edge = np.max([np.hypot(*(corners[:, i] - corners[:, i - 1]).T) for i in range(3)],
+                  axis=0)
+    ij = np.floor(corners.mean(axis=1)).astype(np.int64)
+    ij = np.clip(ij, 0, np.array(near.shape) - 1)
+    return (edge <= MAX_EDGE) | near[ij[:, 0], ij[:, 1]]
 
 
 def noise_fence(xy, height, ground, *, cell, fence, min_points=64, max_radius=8):

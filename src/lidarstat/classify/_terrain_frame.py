@@ -16,19 +16,21 @@ it in proportion to the points:
   seeds' progressive opening, radii 1 to 9) and, for those, their nearest seed (under
   ``90 sqrt(2)`` cells away); a seed across a narrowed gap stays farther than that;
 * **vertices** (:func:`near_points`): where the cells farther than :data:`VERTEX_RING`
-  from every cell holding a point outnumber those (inside their box), the filled cells become vertices of
-  the TIN only within that ring. Every cell holds a vertex,
-  so a Delaunay triangle's empty circumcircle has a radius under ``sqrt(2)`` cells and a
+  from every cell holding a point outnumber those (inside their box), the filled cells
+  are vertices of the TIN only within that ring. Every cell holds a vertex, so a
+  Delaunay triangle's empty circumcircle has a radius under ``sqrt(2)`` cells and a
   triangle holding a point has its vertices within ``2 sqrt(2)`` cells of it: the far
-  vertices change no triangle under a point.
+  vertices change no triangle under a point (but for the diagonal Qhull takes in a
+  square of four co-circular centres). The triangles longer than :data:`MAX_EDGE` over
+  far cells then span the empty areas, hold no point and are left out.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BAND_HALO", "CELLS_PER_POINT", "MIN_CELLS", "VERTEX_RING", "BandFrame",
-           "near_points", "terrain_cell"]
+__all__ = ["BAND_HALO", "CELLS_PER_POINT", "MAX_EDGE", "MIN_CELLS", "VERTEX_RING",
+           "BandFrame", "near_points", "terrain_cell"]
 
 #: Cells kept on either side of the rows and columns holding points: a narrowed gap of
 #: ``2 BAND_HALO`` cells keeps a seed across it farther (``2 BAND_HALO - 90``) from the
@@ -37,6 +39,11 @@ BAND_HALO = 128
 #: Rings of filled cells around the cells holding points that are vertices of the TIN
 #: (a triangle holding a point reaches ``2 sqrt(2)`` cells from it).
 VERTEX_RING = 3
+#: Longest triangle edge of a TIN without the far cells (cells) unless its centroid lies
+#: near the points: with a vertex in every cell a triangle's circumradius is under
+#: ``sqrt(2)``, so its edges under ``2 sqrt(2)``, but at the grid's edge (slivers along
+#: the hull); the longer ones over far cells span the empty areas the far cells left.
+MAX_EDGE = 6.0
 #: Most cells of the grid a point (:func:`terrain_cell`), and the fewest that are always
 #: allowed.
 CELLS_PER_POINT = 16
@@ -76,9 +83,9 @@ def _grid_cells(xy, cell, halo, block=1 << 20):
 def near_points(lowest, ring=VERTEX_RING):
     """The cells that are vertices of the TIN when filled: within `ring` cells
     (Chebyshev) of a cell holding a point (finite `lowest`) when the others inside the
-    box of the cells holding points outnumber those, else every cell (the far ones cost little then, and
-    leaving them out would change which diagonal Qhull takes in squares of co-circular
-    filled centres elsewhere)."""
+    box of the cells holding points outnumber those, else every cell (the far ones cost
+    little then, and leaving them out would change which diagonal Qhull takes in
+    squares of co-circular filled centres elsewhere)."""
     from scipy import ndimage as ndi
 
     have = np.isfinite(lowest)
