@@ -131,8 +131,8 @@ CAUSES = {
         "cause": "the lower envelope is the lowest point of every 1 m cell of the bounding "
                  "box, grey-opened with the 20 m window: a thinned file of 6,280 points over "
                  "5 x 5 km gives 25 million cells, 1,017 MiB at the opening's maximum "
-                 "filter. The terrain step, which passed 3 GB there (every empty 2 m cell a "
-                 "TIN vertex), follows the points (classify/_terrain_frame.py).",
+                 "filter. The terrain step's grid follows the points "
+                 "(classify/_terrain_frame.py).",
         "fix": "the terrain step's rules for the envelope: rows and columns far from the "
                "points left out (the opening reads 20 m around a cell), a coarser cell "
                "where the grid would pass some cells a point."},

@@ -158,8 +158,7 @@ def test_peak_memory_does_not_grow_with_the_gap():
     """The step on two clumps 200 m apart, then 20 km apart (a bounding box of 200 km2,
     50 million 2 m cells: gigabytes on a full grid) in one process: the second run
     raises the process's peak resident memory by less than 40 MiB (measured 20 MiB: the
-    256 cells of the narrowed gap; 340 MiB while the TIN binned its triangles over the
-    gap)."""
+    256 cells of the narrowed gap)."""
     r = subprocess.run([sys.executable, "-c", _RSS], capture_output=True, text=True,
                        timeout=120, check=True)
     near, far = map(float, r.stdout.split())
