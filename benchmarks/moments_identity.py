@@ -7,7 +7,9 @@ intensity and returns, without intensity, in a frame with negative coordinates, 
 low-noise echoes and with copies of points - and writes every per-point field, the
 building fields and each analysis step's dip tests and cut to one ``.npz``; ``compare``
 counts, per array, the values that differ (NaN equal to NaN) and writes the counts as
-JSON. A speed change that claims identical results must count zeros.
+JSON. A speed change that claims identical results must count zeros. ``--files`` adds real
+files of ``../shared/data`` (their classes, heights and tolerances, run as the command runs
+them: intensity, returns and the file's units).
 
 Usage::
 
@@ -54,10 +56,35 @@ def _clouds(n, seeds):
             yield "noise_copies", z[idx], inten[idx], nret[idx], rnum[idx]
 
 
-def dump(path, n=200_000, seeds=3):
+def _real(out, files):
+    """The fields of `moments` on real files (relative to ``../shared/data``) into `out`."""
+    import warnings
+
+    from lidarstat.classify import moments
+    from lidarstat.io import linear_units, read
+
+    data = HERE.parents[1] / "shared" / "data"
+    for f in files:
+        cloud = read(data / f)
+        a = cloud.attributes
+        kw = {}
+        if "number_of_returns" in a:
+            kw = {"number_of_returns": a["number_of_returns"],
+                  "return_number": a["return_number"]}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            units = linear_units(cloud.crs, header=cloud.las_header, source=str(data / f))
+            r = moments(cloud.xyz, a.get("intensity"), source=str(data / f), units=units, **kw)
+        for k, v in r.to_fields().items():
+            out[f"{f}/{k}"] = np.asarray(v)
+        print(f"{f}: {len(cloud.xyz):,} points", flush=True)
+
+
+def dump(path, n=200_000, seeds=3, files=()):
     from lidarstat.classify import moments
 
     out = {}
+    _real(out, files)
     for name, xyz, inten, nret, rnum in _clouds(n, seeds):
         r = moments(xyz, inten, number_of_returns=nret, return_number=rnum)
         for k, v in r.to_fields().items():
@@ -113,6 +140,8 @@ def main(argv=None):
     d.add_argument("out")
     d.add_argument("--points", type=int, default=200_000)
     d.add_argument("--seeds", type=int, default=3)
+    d.add_argument("--files", nargs="*", default=(),
+                   help="real files too (paths under ../shared/data)")
     c = sub.add_parser("compare")
     c.add_argument("a")
     c.add_argument("b")
@@ -120,7 +149,7 @@ def main(argv=None):
     c.add_argument("--note", default=None, help="what code each dump ran (stored in --out)")
     args = ap.parse_args(argv)
     if args.cmd == "dump":
-        dump(args.out, args.points, args.seeds)
+        dump(args.out, args.points, args.seeds, args.files)
         return 0
     return compare(args.a, args.b, args.out, args.note)
 

@@ -126,17 +126,16 @@ CAUSES = {
                "profiled on the Delft crop separately)."},
     "moments": {
         "profiled_on": ["pdal_testdata/mvk-thin.las"],
-        "step": "classify/_terrain.py refine_terrain: reject_plateaus, then _tin "
-                "(TinSurface's Delaunay)",
-        "cause": "the terrain grid's cell is fixed in metres whatever the density, and "
-                 "every empty cell of the grid becomes a vertex of the terrain TIN (its "
-                 "filled centre): a thinned file of 6,280 points over 5 x 5 km gives a "
-                 "grid of millions of cells, 1,335 MiB in reject_plateaus and past "
-                 "2,900 MiB in the Delaunay triangulation of the cells' centres.",
-        "fix": "a cell no finer than the point spacing where the points are sparse, or "
-               "TIN vertices only for the filled cells near the data (the far ones "
-               "interpolate the same grid); either changes the terrain of sparse files, "
-               "so not done here."},
+        "step": "classify/_moments_ground.py ground_cut: opening_surface (the lower "
+                "envelope's grey opening)",
+        "cause": "the lower envelope is the lowest point of every 1 m cell of the bounding "
+                 "box, grey-opened with the 20 m window: a thinned file of 6,280 points over "
+                 "5 x 5 km gives 25 million cells, 1,017 MiB at the opening's maximum "
+                 "filter. The terrain step's grid follows the points "
+                 "(classify/_terrain_frame.py).",
+        "fix": "the terrain step's rules for the envelope: rows and columns far from the "
+               "points left out (the opening reads 20 m around a cell), a coarser cell "
+               "where the grid would pass some cells a point."},
     "segment-sar": {
         "profiled_on": [next(f for f in FILES if "St_Barth" in f)],
         "step": "stats/_sar_logdet.py: the log-determinant of the SAR likelihood",

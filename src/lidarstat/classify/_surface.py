@@ -375,6 +375,11 @@ class TinSurface:
         Values at the vertices.
     cell : float
         Side of the grid cells the triangles are binned into (about the vertex spacing).
+    keep : callable, optional
+        ``keep(corners) -> (T,) bool`` of the triangles' ``(T, 3, 2)`` corners: the others
+        are left out (a point in one is outside the TIN). A TIN over wide empty areas
+        whose triangles there hold no query then bins only the triangles near the data
+        (binning costs a triangle's box).
 
     Examples
     --------
@@ -384,7 +389,7 @@ class TinSurface:
     [1.5, 0.25, 9.0]
     """
 
-    def __init__(self, P, V, cell: float):
+    def __init__(self, P, V, cell: float, keep=None):
         from scipy.spatial import Delaunay, QhullError
 
         self.P = np.ascontiguousarray(P, dtype=np.float64)
@@ -403,6 +408,8 @@ class TinSurface:
                 g = max(0.5 * float(cell), float(span.max()) / 4096.0, 1e-12)
                 nx, ny = (np.floor(span / g).astype(np.int64) + 1).tolist()
                 simp = np.ascontiguousarray(d.simplices, dtype=np.int64)
+                if keep is not None:
+                    simp = np.ascontiguousarray(simp[keep(self.P[simp])])
                 indptr, tri = _bin_triangles(self.P, simp, float(lo[0]), float(lo[1]), g,
                                              nx, ny)
                 self._tri = (float(lo[0]), float(lo[1]), g, nx, ny, indptr, tri, simp,

@@ -31,7 +31,8 @@ and:
    (a plinth, a raised square: :func:`grow_platforms`);
 4. **surface**: the TIN of the ground cells' lowest points at their own positions (a
    grid of cell centres would lie under a slope by ``slope * cell / 2``), empty cells
-   filled by linear interpolation (nearest cell outside their hull);
+   filled by linear interpolation (nearest cell outside their hull), those near the
+   points its vertices too;
 5. **test**: a point is ground when its height above the surface lies within
    ``[-(below + s * slope), tolerance + s * slope]``, ``slope`` the surface's gradient
    at the point (Pingel et al. 2013's slope-dependent elevation threshold);
@@ -43,14 +44,18 @@ and:
 
 Each of these is a raster operation (vectorised over cells) or a compiled loop over the
 points (:mod:`._terrain_kernels`).
+The grid leaves out the empty bands of the plane (:mod:`._terrain_frame`): its memory
+follows the points, not their bounding box.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
+from ._terrain_frame import MAX_EDGE, BandFrame, near_points, terrain_cell
 from ._terrain_grid import (
     drop_bumps,
     drop_opened,
@@ -100,31 +105,40 @@ class TerrainModel:
         ``[i cell, (i + 1) cell) x [j cell, (j + 1) cell)``.
     tin : callable, optional
         The surface as a TIN (``f(xy / cell) -> z``): the lowest ground point of every surface
-        cell at its own position, the filled cells at their centres. A cell-centre grid
-        of lowest points lies under a slope by about ``slope * cell / 2``; the TIN passes
-        through the ground points themselves.
+        cell at its own position, the filled cells near the points at their centres. A
+        cell-centre grid of lowest points lies under a slope by about ``slope * cell / 2``;
+        the TIN passes through the ground points themselves.
+    frame : BandFrame, optional
+        The grid's rows and columns without the empty bands: `xy` is moved into it first
+        (:class:`~._terrain_frame.BandFrame`).
     """
 
     grid: np.ndarray
     slope: np.ndarray
     cell: float
     tin: object = None
+    frame: object = None
 
     def __call__(self, xy) -> np.ndarray:
         """Elevation of the surface at `xy`: linear on the TIN of the cells' lowest
         ground points at their own positions when there is one, else bilinear between
         cell centres."""
         if self.tin is not None:  # built in cell units (see _tin)
-            return self.tin(np.ascontiguousarray(xy, dtype=np.float64) / self.cell)
+            xy = self._framed(xy)
+            return self.tin(xy / self.cell)
         return self.at(xy, self.grid)
 
     def slope_at(self, xy) -> np.ndarray:
         """Slope of the surface at `xy` (bilinear between cell centres)."""
         return self.at(xy, self.slope)
 
+    def _framed(self, xy):
+        xy = np.ascontiguousarray(xy, dtype=np.float64)
+        return xy if self.frame is None else self.frame(xy)
+
     def at(self, xy, grid) -> np.ndarray:
         """Bilinear interpolation of a grid of this model's cells at `xy`."""
-        xy = np.ascontiguousarray(xy, dtype=np.float64)
+        xy = self._framed(xy)
         out = np.empty(len(xy))
         if len(xy):
             grid_bilinear(xy, np.ascontiguousarray(grid, dtype=np.float64), float(self.cell),
@@ -194,14 +208,16 @@ def _fill(grid):
     return out
 
 
-def _tin(xy, z, surface_z, grid, cell):
-    """TIN of the surface cells' lowest points at their own positions and of the filled
-    cells' centres (:class:`TerrainModel`)."""
+def _tin(xy, z, surface_z, grid, lowest, cell):
+    """TIN of the surface cells' lowest points at their own positions and of the centres
+    of the filled cells near the points (:func:`~._terrain_frame.near_points`;
+    :class:`TerrainModel`)."""
     from ._surface import TinSurface
 
     ny = grid.shape[1]
     pick = first_on_surface(xy, z, np.ascontiguousarray(surface_z), float(cell))
-    filled = np.flatnonzero(~np.isfinite(surface_z).ravel())
+    near = near_points(lowest)
+    filled = np.flatnonzero((~np.isfinite(surface_z) & near).ravel())
     # in cell units rounded to 1e-9 cell: the vertices are often co-circular (the filled
     # cells' centres), and which diagonal the triangulation takes must not depend on the
     # last bits of the coordinates, i.e. on the file's unit
@@ -210,7 +226,19 @@ def _tin(xy, z, surface_z, grid, cell):
     V = np.r_[z[pick], grid.ravel()[filled]]
     if len(P) < 3:
         return None
-    return TinSurface(P, V, 1.0)
+    # without the far cells, triangles span the empty areas; none holds a point (one
+    # holding a point reaches 2 sqrt(2) cells), and binning them would cost their area
+    return TinSurface(P, V, 1.0, keep=None if near.all() else partial(_near_triangles, near))
+
+
+def _near_triangles(near, corners):
+    """Triangles (``(T, 3, 2)`` corners in cell units) no longer than
+    :data:`~._terrain_frame.MAX_EDGE` or whose centroid lies in a `near` cell."""
+    edge = np.max([np.hypot(*(corners[:, i] - corners[:, i - 1]).T) for i in range(3)],
+                  axis=0)
+    ij = np.floor(corners.mean(axis=1)).astype(np.int64)
+    ij = np.clip(ij, 0, np.array(near.shape) - 1)
+    return (edge <= MAX_EDGE) | near[ij[:, 0], ij[:, 1]]
 
 
 def noise_fence(xy, height, ground, *, cell, fence, min_points=64, max_radius=8):
@@ -357,6 +385,11 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
     xy = np.ascontiguousarray(xy, dtype=np.float64)
     z = np.ascontiguousarray(z, dtype=np.float64)
     ground = np.ascontiguousarray(ground, dtype=np.bool_)
+    frame = BandFrame.of(xy, cell)
+    if frame is not None:  # the grid without its empty bands (the model moves xy itself)
+        xy, xy_in = frame(xy), xy
+    else:
+        xy_in = xy
     nx = int(np.floor(xy[:, 0].max() / cell)) + 1
     ny = int(np.floor(xy[:, 1].max() / cell)) + 1
     lowest, ground_z = cell_lowest(xy, z, ground, float(cell), nx, ny)
@@ -383,14 +416,15 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
     grid = _fill(surface_z)
     gx, gy = np.gradient(grid, cell) if min(grid.shape) > 1 else (np.zeros_like(grid),) * 2
     model = TerrainModel(grid=grid, slope=np.hypot(gx, gy), cell=float(cell),
-                         tin=_tin(xy, z, surface_z, grid, cell))
-    height, upper, keep = _test_points(model, xy, z, tolerance=tolerance,
+                         tin=_tin(xy, z, surface_z, grid, lowest, cell), frame=frame)
+    del lowest, ground_z, seeds_z, grown_z, surface_z
+    height, upper, keep = _test_points(model, xy_in, z, tolerance=tolerance,
                                        slope_tolerance=slope_tolerance, below=below)
     if fence > 0 and keep.any():
         bound = noise_fence(xy, height, keep, cell=cell, fence=fence, min_points=fence_points,
                             max_radius=fence_radius)
         for s, e in _blocks(len(z)):
-            u = np.minimum(upper[s:e], bound[s:e] + slope_tolerance * model.slope_at(xy[s:e]),
+            u = np.minimum(upper[s:e], bound[s:e] + slope_tolerance * model.slope_at(xy_in[s:e]),
                            out=upper[s:e])
             keep[s:e] &= height[s:e] <= u
         del bound
@@ -401,7 +435,8 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
 
 def terrain_step(xy, z, ground, *, ux=1.0, uz=1.0):
     """The terrain step with :data:`TERRAIN_DEFAULTS`, lengths converted to coordinate
-    units (`ux`, `uz`: metres per horizontal and vertical unit).
+    units (`ux`, `uz`: metres per horizontal and vertical unit), the cell coarser only
+    on points too sparse for it (:func:`~._terrain_frame.terrain_cell`).
 
     Returns ``(ground, height, surface, tolerance)``.
     """
@@ -410,7 +445,8 @@ def terrain_step(xy, z, ground, *, ux=1.0, uz=1.0):
     # metre it is that times uz / ux
     aspect = uz / ux
     xy = np.ascontiguousarray(xy, dtype=np.float64)
-    t = refine_terrain(xy, z, ground, cell=d["cell"] / ux, tolerance=d["tolerance"] / uz,
+    t = refine_terrain(xy, z, ground, cell=terrain_cell(xy, d["cell"] / ux),
+                       tolerance=d["tolerance"] / uz,
                        slope_tolerance=d["slope_tolerance"] * aspect / uz,
                        step=d["step"] / uz, max_rise=d["max_slope"] / aspect,
                        below=d["below"] / uz, wall_fraction=d["wall_fraction"],
