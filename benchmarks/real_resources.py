@@ -137,16 +137,26 @@ CAUSES = {
                "points left out (the opening reads 20 m around a cell), a coarser cell "
                "where the grid would pass some cells a point."},
     "segment-sar": {
-        "profiled_on": [next(f for f in FILES if "St_Barth" in f)],
-        "step": "stats/_sar_logdet.py: the log-determinant of the SAR likelihood",
-        "cause": "not memory (526 MiB at the peak): 23 % of the samples in the sparse LU "
-                 "of log|I - rho W| at each likelihood evaluation (_lu), 7 % in the "
-                 "eigenvalues of W (_eigenvalues), the rest spread over the unit fits, "
-                 "the Forward Search and the search areas; St-Barthelemy's many small "
-                 "roofs make many units, each with its own evaluations.",
-        "fix": "reuse one factorisation or W's eigenvalues across the evaluations of a "
-               "unit (log|I - rho W| = sum log(1 - rho lambda_i)); a profile of the "
-               "number of evaluations a unit is the next step."},
+        "profiled_on": [next(f for f in FILES if "samp11" in f),
+                        next(f for f in FILES if "St_Barth" in f)],
+        "step": "segment/_sar_units.py refine_raw_clusters: the per-unit fits and tests",
+        "cause": "half of the CPU seconds on samp11 went to OpenBLAS handing tens of "
+                 "thousands of small dense calls (a plane's basis, a unit's eigenvalues, "
+                 "its refits) to its second thread and spinning between them; with BLAS "
+                 "on one thread (the command runs so) 48.0 -> 24.1 CPU s, the outputs "
+                 "identical (results_sar_speed.json). What remains is spread: 767 "
+                 "likelihood fits on samp11, each about 20 evaluations of "
+                 "log|I - rho W| (one sparse LU each above 150 points: 3,129 LUs, about "
+                 "a tenth of the time; W's eigenvalues once per fit below), the power "
+                 "series of the lag solve, the split's local normals and the "
+                 "goodness-of-fit traces. The sparse samples have many small units a "
+                 "point (0.17-0.7 points/m2: a roof is a few dozen points), each with "
+                 "those fixed costs.",
+        "fix": "fewer fits a unit (the final refit estimates rho again on a raw cluster "
+               "the search stage has fitted, often unchanged) or a cheaper lag solve; the log-determinant is no "
+               "longer the main cost (an LU costs 0.4-6.6 ms at 150-3,000 points, W's "
+               "eigenvalues once cost less than 20 LUs only up to 600-1,200 points: "
+               "results_sar_speed.json, key logdet)."},
 }
 #: a file below MIN_POINTS is an outlier when its run holds this much above the fixed cost
 SMALL_FILE_MIB = 500.0

@@ -273,3 +273,59 @@ def test_refinement_models_a_wall_in_its_own_plane(rng):
         assert np.ptp(v[:, 1]) > 4.0  # along most of the 8 m wall
     # the ground units remain height fields with vertical normals
     assert np.all(np.abs(np.asarray(seg.table["normal_z"])[frame == 0]) > 0.9999)
+
+
+def test_the_sar_stage_runs_with_one_blas_thread(monkeypatch, rng):
+    """Inside refine_raw_clusters BLAS runs on one thread; the limit is lifted after."""
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    import lidarstat.segment._sar_units as units
+
+    def blas_threads():
+        return [i["num_threads"] for i in threadpoolctl.threadpool_info()
+                if i["user_api"] == "blas"]
+
+    seen = []
+    refine = units.refine_cluster
+
+    def spy(*args, **kwargs):
+        seen.append(blas_threads())
+        return refine(*args, **kwargs)
+
+    monkeypatch.setattr(units, "refine_cluster", spy)
+    pts = _scene(rng, density=4.0)[0]
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        before = blas_threads()
+        segment_sar(pts, radius=1.5, planes=False)
+        after = blas_threads()
+    if max(before, default=1) < 2:
+        pytest.skip("BLAS has one thread here: nothing to limit")
+    assert seen and all(t == [1] * len(before) for t in seen)
+    assert after == before
+
+
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_sar_results_do_not_depend_on_blas_threads(monkeypatch, seed):
+    """The same segments, table and fields with BLAS on one thread and on two (seed sweep
+    of the roof scene; float fields to 1e-9 relative, the rounding of a threaded BLAS)."""
+    import contextlib
+
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    pts = _scene(np.random.default_rng(seed), density=6.0)[0]
+    one = segment_sar(pts, radius=1.2)
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        if max((i["num_threads"] for i in threadpoolctl.threadpool_info()
+                if i["user_api"] == "blas"), default=1) < 2:
+            pytest.skip("BLAS has one thread here: nothing to compare")
+        monkeypatch.setattr(threadpoolctl, "threadpool_limits",
+                            lambda **kw: contextlib.nullcontext())
+        many = segment_sar(pts, radius=1.2)
+    np.testing.assert_array_equal(one.labels, many.labels)
+    assert one.table.keys() == many.table.keys()
+    for k in one.table:
+        np.testing.assert_allclose(np.asarray(one.table[k], dtype=float),
+                                   np.asarray(many.table[k], dtype=float), rtol=1e-9,
+                                   atol=1e-12, err_msg=k)
+    for k in one.fields:
+        np.testing.assert_allclose(np.asarray(one.fields[k], dtype=float),
+                                   np.asarray(many.fields[k], dtype=float), rtol=1e-9,
+                                   atol=1e-12, err_msg=k)

@@ -19,6 +19,7 @@ import numpy as np
 
 from .._shared._deprecate import renamed_parameters
 from .._shared._geometry import mean_spacing as _mean_spacing
+from .._shared._threads import single_blas_thread
 from .._shared.validation import check_option, check_points, check_scalar
 from ..neighbors import check_copies, radius_neighbors
 from ._forward_search import STOP_RULES, StopRule
@@ -51,6 +52,7 @@ def _units_noise(sd, sigma_local):
 
 @renamed_parameters(bandwidth="radius", alpha_residual="envelope_alpha", min_size="min_points",
                     threshold="search", stop="fs_stop", block="fs_block")
+@single_blas_thread
 def segment_sar(points, *, radius=None, sigma=None, alpha=0.05, edge_alpha=0.05,
                 fs_alpha=0.001, envelope_alpha=0.001, fs_stop="both", degree=1, max_degree=3,
                 adaptive="multiscale", criterion="rice", grow_radius=None, search=None,

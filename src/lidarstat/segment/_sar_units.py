@@ -15,6 +15,7 @@ import warnings
 import numpy as np
 
 from .._shared._deprecate import renamed_parameters
+from .._shared._threads import single_blas_thread
 from .._shared.validation import check_option, check_scalar
 from ..errors import InvalidParameterError, LidarstatWarning
 from ._forward_search import STOP_RULES, StopRule
@@ -77,6 +78,7 @@ def _table(points, labels, units, keep_units):
 
 @renamed_parameters(threshold="search", alpha="fs_alpha", alpha_residual="envelope_alpha",
                     stop="fs_stop", block="fs_block", min_size="min_points")
+@single_blas_thread
 def refine_raw_clusters(points, raw_labels, *, search, w_radius, degrees=1, max_degree=3,
                         fs_alpha=0.001, envelope_alpha=0.001, fs_stop="both", fs_block=1,
                         max_steps=500, min_points=10, merge_alpha=0.01, outlier_alpha=0.01,
