@@ -117,8 +117,8 @@ def test_chunked_write_is_the_file_laspy_writes_at_once(tmp_path, rng, monkeypat
 
 
 def test_a_failed_chunk_write_fails_the_write_and_leaves_no_file(tmp_path, rng, monkeypatch):
-    """Chunks are written by a worker thread while the next is built: an error of one
-    chunk's write reaches the caller, later chunks are not written, no output remains."""
+    """An error of one chunk's write reaches the caller as the write's error, later
+    chunks are not written, no output remains."""
     from lidarstat.errors import PointCloudWriteError
     from lidarstat.io import _las
 

@@ -18,7 +18,6 @@ and LAS writes alike), and a streamed write fixes the header before it has seen 
 from __future__ import annotations
 
 import copy
-import threading
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
@@ -504,40 +503,6 @@ def write_stream(path: Path, chunks, fmt: str) -> int:
         path, header, cloud, assign)) for cloud, new in chunks), fmt)
 
 
-class _Pending:
-    """Each part's records written by one worker thread while the next part is built.
-
-    ``then(write, rec)`` waits for the previous write (raising its error) and starts
-    ``write(rec)``: the writes keep their order, one at a time, and the file's bytes are
-    those of writing in the loop; reading and building a part (NumPy copies) overlap the
-    system's write of the previous one. ``wait()`` waits for the last write.
-    """
-
-    def __init__(self):
-        self._thread = None
-        self._error = None
-
-    def then(self, write, rec):
-        self.wait()
-
-        def run():
-            try:
-                write(rec)
-            except BaseException as exc:  # handed to the building thread
-                self._error = exc
-
-        self._thread = threading.Thread(target=run, name="lidarstat-write", daemon=True)
-        self._thread.start()
-
-    def wait(self, quiet=False):
-        if self._thread is not None:
-            self._thread.join()
-            self._thread = None
-        error, self._error = self._error, None
-        if error is not None and not quiet:
-            raise error
-
-
 def _write_parts(path: Path, parts, fmt: str) -> int:
     """Write ``(cloud, new_fields, make_record)`` parts to a LAS/LAZ file, atomically.
 
@@ -549,7 +514,6 @@ def _write_parts(path: Path, parts, fmt: str) -> int:
     try:
         with atomic_path(path) as tmp:
             writer = None
-            pending = _Pending()
             try:
                 for cloud, new, make_record in parts:
                     if writer is None:
@@ -558,13 +522,11 @@ def _write_parts(path: Path, parts, fmt: str) -> int:
                                             do_compress=fmt == "laz", laz_backend=_BACKEND)
                     assign, _ = _plan(path, cloud, new, writer.header)
                     rec = make_record(writer.header, assign)
-                    pending.then(writer.write_points, rec)
+                    writer.write_points(rec)
                     total += len(rec)
-                pending.wait()
                 if writer is None:
                     raise InvalidParameterError(f"{path}: nothing to write (no points)")
             finally:
-                pending.wait(quiet=True)
                 if writer is not None:
                     writer.close()
     except (OSError, InvalidParameterError, PointCloudReadError):
