@@ -128,7 +128,6 @@ def knn_reach(cat, k: int) -> float:
     import numpy as np
     from scipy.spatial import cKDTree
 
-
     xyz = cat.tile_xyz(_largest(cat))
     k = min(int(k), len(xyz))
     d = cKDTree(xyz).query(xyz, k=k, workers=-1)[0]
