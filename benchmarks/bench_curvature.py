@@ -447,14 +447,24 @@ def main_whole(args):
     warm = tmp / "warm.las"  # a small piece on which the first runs compile the kernels
     write(warm, PointCloud(xyz=xyz[xyz[:, 0] < xyz[:, 0].min() + 0.01 * np.ptp(xyz[:, 0])]))
     whole_lidarstat(warm, tmp / "warm_out.las", calibrate_radius(xyz, 50)[0], env)
+    old_env = None
+    if args.before:  # another version of the package, run alternately with this one
+        old_env = dict(env, PYTHONPATH=args.before,
+                       NUMBA_CACHE_DIR=str(tmp / "numba_cache_before"))
+        whole_lidarstat(warm, tmp / "warm_out.las", calibrate_radius(xyz, 50)[0], old_env)
     for tgt in (() if args.skip_fixed else args.targets):
         r, med = calibrate_radius(xyz, tgt)
-        ls_runs, cc_runs = [], []
+        ls_runs, cc_runs, old_runs = [], [], []
         for _ in range(args.repeats):
             ls_runs.append(whole_lidarstat(las, tmp / "out.las", r, env))
+            if old_env is not None:
+                old_runs.append(whole_lidarstat(las, tmp / "out_before.las", r, old_env))
             if exe:
                 cc_runs.append(whole_cloudcompare(exe, ply, tmp / "cc_out.ply", r))
         row = dict(radius=r, median_neighbors_sample=med, lidarstat=_median_run(ls_runs))
+        if old_runs:
+            row["lidarstat_before"] = dict(_median_run(old_runs), version=args.before)
+            row["same_output_as_before"] = _same_bytes(tmp / "out.las", tmp / "out_before.las")
         if cc_runs:
             row["cloudcompare"] = _median_run(cc_runs)
             row["ratio"] = row["lidarstat"]["seconds"] / row["cloudcompare"]["seconds"]
@@ -463,12 +473,8 @@ def main_whole(args):
         prof = run_child("profile", env, input=las, output=tmp / "prof.las", radius=r)
         prof["start_exit"] = prof["process_wall"] - prof["seconds"]
         res["profile"][str(tgt)] = prof
-        if args.before:
-            # the same profile of another version of the package, in the same run
-            old_env = dict(env, PYTHONPATH=args.before,
-                           NUMBA_CACHE_DIR=str(tmp / "numba_cache_before"))
-            if tgt == args.targets[0]:
-                run_child("profile", old_env, input=warm, output=tmp / "warm_out.las", radius=r)
+        if old_env is not None:
+            # the same profile of the other version of the package, in the same run
             prof = run_child("profile", old_env, input=las, output=tmp / "prof.las", radius=r)
             prof["start_exit"] = prof["process_wall"] - prof["seconds"]
             prof["version"] = args.before
@@ -491,10 +497,25 @@ def main_whole(args):
     print(f"wrote {args.out}" + (f" (key {args.key})" if args.key else ""))
 
 
+def _same_bytes(a, b):
+    """Whether files `a` and `b` hold the same bytes."""
+    with open(a, "rb") as fa, open(b, "rb") as fb:
+        while True:
+            x, y = fa.read(1 << 24), fb.read(1 << 24)
+            if x != y:
+                return False
+            if not x:
+                return True
+
+
 def _print_row(tgt, row):
     ls = row["lidarstat"]
     cc = row.get("cloudcompare")
     text = f"  {tgt}: lidarstat {ls['seconds']:.2f} s (cpu {ls['cpu_seconds']:.2f} s)"
+    if "lidarstat_before" in row:
+        old = row["lidarstat_before"]
+        text += (f", before {old['seconds']:.2f} s (cpu {old['cpu_seconds']:.2f} s, same "
+                 f"output: {row['same_output_as_before']})")
     if cc:
         text += (f", CloudCompare {cc['seconds']:.2f} s (cpu {cc['cpu_seconds']:.2f} s), "
                  f"ratio {row['ratio']:.2f} (cpu {row['ratio_cpu']:.2f})")
@@ -681,8 +702,9 @@ def main(argv=None):
     ap.add_argument("--shared", action="store_true",
                     help="record that other work ran on the machine meanwhile")
     ap.add_argument("--before", default=None, metavar="SRC",
-                    help="with --whole: also profile the package found at SRC (a PYTHONPATH, "
-                    "e.g. the src folder of an earlier checkout) in the same run")
+                    help="with --whole: also run and profile the package found at SRC (a "
+                    "PYTHONPATH, e.g. the src folder of an earlier checkout) in the same run, "
+                    "alternately with this one, and compare the two outputs byte by byte")
     ap.add_argument("--key", default=None,
                     help="with --whole: store the run under this key of --out, keeping the "
                     "file's other keys")

@@ -37,7 +37,8 @@ def test_a_core_command_parses_alone_and_the_same():
 
 def test_curvature_run_does_not_import_scipy_stats_or_other_methods(tmp_path):
     # nor scipy.special at a fixed radius: the tests' tails and the sigma estimate's
-    # chi-square medians run in kernels
+    # chi-square medians run in kernels; nor scipy.linalg, which Numba's start would
+    # import to learn whether a BLAS is there (lidarstat._shared._jit)
     import numpy as np
 
     from lidarstat.io import PointCloud, write
@@ -50,7 +51,7 @@ def test_curvature_run_does_not_import_scipy_stats_or_other_methods(tmp_path):
         "from lidarstat.cli._app import main\n"
         f"assert main(['curvature', {str(tmp_path / 'in.las')!r}, {str(tmp_path / 'out.las')!r},"
         " '--radius', '0.6', '-q']) == 0\n",
-        prefixes=("scipy.stats", "scipy.spatial", "scipy.special", "lidarstat.segment",
+        prefixes=("scipy.stats", "scipy.spatial", "scipy.linalg", "scipy.special", "lidarstat.segment",
                   "lidarstat.classify", "lidarstat.pipeline", "lidarstat.report", "matplotlib",
                   "dask", "pandas", "rasterio"),
         # the other local models of lidarstat.features and the rasters of lidarstat.io
@@ -60,10 +61,27 @@ def test_curvature_run_does_not_import_scipy_stats_or_other_methods(tmp_path):
     assert (tmp_path / "out.las").exists()
 
 
+def test_a_kernel_using_blas_still_finds_it():
+    # the start answers Numba's BLAS question without importing scipy.linalg; a kernel
+    # calling np.dot must still import it when compiled, and the answer must be yes
+    code = ("import sys\n"
+            "import numpy as np\n"
+            "import lidarstat._shared._jit as jit\n"
+            "from numba import njit\n"
+            "import numba.np.arraymath as am\n"
+            "assert 'scipy.linalg' not in sys.modules and am._HAVE_BLAS\n"
+            "f = njit(lambda a, b: np.dot(a, b))\n"
+            "assert f(np.arange(3.0), np.arange(3.0)) == 5.0\n"
+            "assert 'scipy.linalg' in sys.modules\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
 def test_parsing_imports_no_numerics():
-    """``lidarstat curvature --help`` and a refused option parse without the numerical packages."""
+    """``lidarstat curvature --help`` and a refused option parse without the numerical
+    packages, NumPy included (the catalogue options' modules import it where used)."""
     _run_without("from lidarstat.cli._app import build_parser\nbuild_parser('curvature')\n",
-                 modules=("numba", "scipy", "laspy", "pyproj", "matplotlib", "dask", "pandas"))
+                 modules=("numpy", "numba", "scipy", "laspy", "pyproj", "matplotlib", "dask",
+                          "pandas"))
 
 
 def test_a_module_command_parses_alone_and_the_same():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import laspy
 import numpy as np
+import pytest
 
 import lidarstat.classify  # noqa: F401  (registers the classification's field descriptions)
 import lidarstat.io as lio
@@ -113,6 +114,29 @@ def test_chunked_write_is_the_file_laspy_writes_at_once(tmp_path, rng, monkeypat
                                                      laz_backend=_las._BACKEND)
         assert out.read_bytes() == ref.read_bytes()
         _check(out, fields)
+
+
+def test_a_failed_chunk_write_fails_the_write_and_leaves_no_file(tmp_path, rng, monkeypatch):
+    """An error of one chunk's write reaches the caller as the write's error, later
+    chunks are not written, no output remains."""
+    from lidarstat.errors import PointCloudWriteError
+    from lidarstat.io import _las
+
+    monkeypatch.setattr(_las, "WRITE_CHUNK", 37)
+    written = []
+    real = laspy.LasWriter.write_points
+
+    def write_points(self, points):
+        if len(written) == 2:
+            raise RuntimeError("disk gone")
+        written.append(len(points))
+        real(self, points)
+
+    monkeypatch.setattr(laspy.LasWriter, "write_points", write_points)
+    out = tmp_path / "o.las"
+    with pytest.raises(PointCloudWriteError, match="disk gone"):
+        lio.write(out, lio.PointCloud(rng.random((N, 3)) * 10 + 5e5), fields=_fields(rng))
+    assert written == [37, 37] and not out.exists() and not list(tmp_path.iterdir())
 
 
 def test_rewrite_copies_the_records_as_read(tmp_path, rng):

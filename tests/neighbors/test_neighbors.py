@@ -112,6 +112,28 @@ def test_cell_index_counting_sort_equals_stable_argsort(rng, dim, n, cell):
         assert np.array_equal(got, ref)
 
 
+@pytest.mark.parametrize("parts", [1, 2, 3, 7, 5000])
+def test_counting_scatter_is_the_stable_sort_for_any_split(rng, parts):
+    """The counting sort splits the keys into `parts` ranges placed in parallel: the
+    order is the stable argsort's for any split (empty ranges, more parts than keys)."""
+    from lidarstat.neighbors._kernels import counting_scatter
+
+    n, total = 20_000, 3000
+    keys = rng.integers(0, total, n)
+    keys[:800] = keys[800:1600]  # equal keys keep their input order
+    keys[keys % 7 == 0] = 11  # one crowded key, many empty ones
+    pts = rng.normal(0, 1, (n, 3))
+    origin = np.array([0.5, -1.0, 2.0])
+    counts = np.bincount(keys, minlength=total)
+    start = np.cumsum(counts) - counts
+    order, sorted_points = np.empty(n, dtype=np.int64), np.empty((n, 3))
+    counting_scatter(pts, origin, keys, start, parts, order, sorted_points)
+    ref = np.argsort(keys, kind="stable")
+    assert np.array_equal(order, ref)
+    assert np.array_equal(sorted_points, pts[ref] - origin)
+    assert np.array_equal(start, np.cumsum(counts))
+
+
 @pytest.mark.parametrize("high", [5, 1 << 22, 1 << 45])
 def test_radix_order_equals_stable_argsort(rng, high):
     """Sparse grids sort their keys by LSD radix (1 to 5 passes here): the stable argsort."""

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import enum
 
-from .validation import check_option
-
 __all__ = ["Choice", "Noise", "Test", "Frame", "Weight"]
 
 
@@ -31,6 +29,8 @@ class Choice(str, enum.Enum):
     def parse(cls, value, name: str, *, func: str) -> str:
         """`value` (a member or its string) as the plain string; an invalid one raises
         :class:`~lidarstat.errors.InvalidParameterError` listing the valid values."""
+        from .validation import check_option  # NumPy: not while the parser is built
+
         check_option(value, name, cls.values(), func=func)
         return cls(value).value
 

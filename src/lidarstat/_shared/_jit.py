@@ -14,11 +14,40 @@ each helper is compiled once rather than once per constant, loop kind and intege
 from __future__ import annotations
 
 import contextlib
+import sys
 
 import numba
 import numpy as np
 
 _DEFAULTS = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
+
+
+def _defer_blas_import():
+    """Keep Numba's start from importing ``scipy.linalg`` for kernels that use no BLAS.
+
+    When Numba loads its first kernel (compiled or cached) it imports its NumPy
+    implementations, and ``numba.np.arraymath`` asks ``numba.np.linalg.ensure_blas`` at
+    import whether a BLAS is there, which imports ``scipy.linalg`` (about 0.2 s: a
+    sixth of a cached command's start). SciPy is a dependency, so the answer is known:
+    that one question is answered yes without the import, and the check is put back at
+    once, so a kernel that does use ``np.dot`` or ``np.linalg`` imports SciPy's BLAS
+    when it is compiled, as before. Nothing changes if Numba's modules differ.
+    """
+    try:
+        from numba.np import linalg
+    except ImportError:  # pragma: no cover - another Numba layout
+        return
+    check = getattr(linalg, "ensure_blas", None)
+    if check is None or "numba.np.arraymath" in sys.modules:
+        return
+
+    def answered():
+        linalg.ensure_blas = check
+
+    linalg.ensure_blas = answered
+
+
+_defer_blas_import()
 
 
 def njit(*args, **kwargs):

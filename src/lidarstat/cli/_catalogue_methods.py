@@ -40,8 +40,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 __all__ = ["AREA_SAMPLE_TILES", "COVARIANCE", "RIDGES", "TILE_OPTIONS", "area_ladder",
            "covariance_decide", "curvature_ladder", "jet_ladder", "knn_reach",
            "ridges_decide", "sample_tiles"]
@@ -76,6 +74,8 @@ AREA_SAMPLE_TILES = 9
 def sample_tiles(cat) -> list[int]:
     """The tiles an area's scale is decided on: up to :data:`AREA_SAMPLE_TILES`, spread
     evenly over the catalogue."""
+    import numpy as np
+
     n = len(cat)
     return sorted({int(i) for i in np.linspace(0, n - 1, min(n, AREA_SAMPLE_TILES)).round()})
 
@@ -89,6 +89,7 @@ def area_ladder(cat, ladder_of) -> tuple[float, ...]:
     own, and a point's result would depend on the tile it lies in. Given this ladder,
     every tile runs the whole area's automatic scale.
     """
+    import numpy as np
 
     ladders = [np.asarray(ladder_of(cat.tile_xyz(i)), dtype=np.float64)
                for i in sample_tiles(cat)]
@@ -124,8 +125,8 @@ def _ladder_text(ladder):
 def knn_reach(cat, k: int) -> float:
     """The largest 3-D distance to the `k`-th neighbour on the catalogue's largest tile,
     times :data:`KNN_MARGIN`: a conservative reach of k-nearest-neighbour methods."""
+    import numpy as np
     from scipy.spatial import cKDTree
-
 
     xyz = cat.tile_xyz(_largest(cat))
     k = min(int(k), len(xyz))
@@ -148,6 +149,8 @@ def _say(args, text):
 
 
 def _scalar_sigma(sigma, what):
+    import numpy as np
+
     from ..errors import InvalidParameterError
 
     if np.ndim(sigma) != 0:
@@ -282,6 +285,8 @@ def _lines_in_tile(lines, extent, extents=None, index=None):
     the lines whose middle vertex is nearest to this tile's extent (ties to the first
     tile), so that a line in the gap between two tiles' point bounds is kept once too.
     """
+    import numpy as np
+
     if lines is None or not len(lines):
         return lines
     mid = np.array([v[len(v) // 2, :2] for v in lines.vertices]).reshape(-1, 2)
@@ -298,6 +303,8 @@ def _lines_in_tile(lines, extent, extents=None, index=None):
 
 
 def _ridges_fields(args, extra):
+    import numpy as np
+
     from ..segment import ridges
 
     sigma = extra.get("sigma", args.sigma)

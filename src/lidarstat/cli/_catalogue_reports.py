@@ -16,8 +16,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 __all__ = ["REPORTS", "write_area_report", "write_report"]
 
 #: At most this many points are drawn on the maps of one page (a regular subsample).
@@ -33,6 +31,8 @@ def _surface_type_names():
 
 
 def _outcomes(name, tested, rejected):
+    import numpy as np
+
     tested = np.asarray(tested, bool)
     rejected = np.asarray(rejected, bool) & tested
     return (name, int(rejected.sum()), int((tested & ~rejected).sum()),
@@ -40,6 +40,8 @@ def _outcomes(name, tested, rejected):
 
 
 def _curvature(args, f):
+    import numpy as np
+
     tested = f["status"] == 0
     fitted = np.isin(f["status"], (0, 3))  # 1: too few neighbours, 2: degenerate
     return dict(
@@ -58,6 +60,8 @@ _COVARIANCE_CLASSES = {0: ("undetermined", "#9e9e9e"), 1: ("surface", "#90caf9")
 
 
 def _covariance(args, f):
+    import numpy as np
+
     pc = f["point_class"]
     plane = np.isfinite(f["plane_p"])
     bnd = np.isfinite(f["boundary_p"])
@@ -113,6 +117,8 @@ def _params(args):
 
 
 def _read(paths, names, step=1):
+    import numpy as np
+
     from ..io import read
 
     xyz, fields = [], {n: [] for n in names}
@@ -143,6 +149,8 @@ def write_report(folder, args, output, *, facts=None, seconds=None) -> Path:
 def write_area_report(folder, args, cat, runs, buffer, seconds) -> Path:
     """One page for a catalogue (every tile on the maps, shares per tile) and one page per
     tile behind a link."""
+    import numpy as np
+
     from ..report import write_run_report
 
     folder = Path(folder)

@@ -16,8 +16,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from ._catalogue_methods import (
     _cached,
     _ladder_text,
@@ -53,6 +51,8 @@ def segment_scale(args, cat) -> dict:
       (:func:`lidarstat.features.radius_ladder`), as the one-file run takes it from its
       cloud.
     """
+    import numpy as np
+
     if args.radius is not None or getattr(args, "k", None) is not None:
         return {}
     if args.method == "sar":
@@ -161,6 +161,8 @@ def _segment_fields(args, extra):
     ``n_points`` its points over the area, and its lines (those whose middle vertex is
     nearest to the tile) name the final ids.
     """
+    import numpy as np
+
     from ._tiled import _Lines, _segment_table
 
     run = segment_runner(args, extra.get("area", {}))
@@ -213,6 +215,8 @@ def _segment_fields(args, extra):
 def _write_table(path, table):
     """The tile's rows of the segment table as CSV (scalar columns), atomically."""
     import csv
+
+    import numpy as np
 
     from .._shared._atomic import atomic_path
 

@@ -251,20 +251,37 @@ def grid_keys(points, origin, cell, dims, flat, keys):
         keys[i] = (ix * dims[1] + iy) * dims[2] + iz
 
 
-@njit
-def counting_scatter(points, origin, keys, start, order, sorted_points):
+@njit_parallel
+def counting_scatter(points, origin, keys, start, parts, order, sorted_points):
     """Stable counting sort by key: ``order`` and ``sorted_points = points[order] - origin``.
 
     ``start[key]`` is the first sorted position of each key (exclusive prefix sum of the
-    key counts); it is advanced in place.
+    key counts); it is advanced in place. The keys are split into `parts` ranges (one
+    per thread) of about equal point counts: each range's task reads every key in input
+    order and places the points of its own range, so the order is the serial sort's
+    whatever `parts` is (the scattered writes, the sort's cost, are shared).
     """
-    for i in range(points.shape[0]):
-        p = start[keys[i]]
-        start[keys[i]] = p + 1
-        order[p] = i
-        sorted_points[p, 0] = points[i, 0] - origin[0]
-        sorted_points[p, 1] = points[i, 1] - origin[1]
-        sorted_points[p, 2] = points[i, 2] - origin[2]
+    n = points.shape[0]
+    nk = start.size
+    parts = max(1, parts)
+    bounds = np.empty(parts + 1, dtype=np.int64)
+    bounds[0] = 0
+    bounds[parts] = nk
+    for t in range(1, parts):  # first key whose points start at or after t n / parts
+        bounds[t] = max(bounds[t - 1], np.searchsorted(start, (t * n) // parts))
+    for t in prange(parts):
+        lo = bounds[t]
+        hi = bounds[t + 1]
+        for i in range(n):
+            k = keys[i]
+            if k < lo or k >= hi:
+                continue
+            p = start[k]
+            start[k] = p + 1
+            order[p] = i
+            sorted_points[p, 0] = points[i, 0] - origin[0]
+            sorted_points[p, 1] = points[i, 1] - origin[1]
+            sorted_points[p, 2] = points[i, 2] - origin[2]
 
 
 _RADIX_BITS = 11

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from .._shared._columns import column_max, column_min
@@ -71,7 +72,8 @@ class CellIndex:
             occupied = np.flatnonzero(counts)
             self.order = np.empty(n, dtype=np.int64)
             self.sorted_points = np.empty((n, 3))
-            _kernels.counting_scatter(points, self.origin, keys, start, self.order,
+            _kernels.counting_scatter(points, self.origin, keys, start,
+                                      numba.get_num_threads(), self.order,
                                       self.sorted_points)
             self.cell_keys = occupied.astype(np.int64)
             cell_start = np.empty(occupied.size + 1, dtype=np.int64)
