@@ -171,7 +171,7 @@ def crease_points(points, fields, *, alpha, n_eff, radius=0.0, spacing=None):
         """One search per point of `at`, block by block: its depth (the band's on its
         poorer side), and with `lists` its neighbours along the crease (for the average)
         and across it (for the comparison) with the sides the latter cover."""
-        along, across, both = [], [], []
+        along, across, both = _Lists(), _Lists(), []
         step = max(1, CREASE_BLOCK // k)
         for s in range(0, at.size, step):
             b = at[s:s + step]
@@ -185,29 +185,29 @@ def crease_points(points, fields, *, alpha, n_eff, radius=0.0, spacing=None):
                 continue
             al = ((np.abs(cos) <= COS_ALONG) & (d <= along_reach)) | (d == 0)
             ac = (np.abs(cos) >= COS_ACROSS) & (d > 0) & (d <= across_reach)
-            along.append(_Rows(idx, al))
-            across.append(_Rows(idx, ac))
+            along.add(b, idx, al)
+            across.add(b, idx, ac)
             both.append((ac & (cos > 0)).any(axis=1) & (ac & (cos < 0)).any(axis=1))
         if not lists:
             return None
-        return (_Rows.join(along, at.size), _Rows.join(across, at.size),
-                np.concatenate(both) if both else np.zeros(0, bool))
+        return along, across, np.concatenate(both) if both else np.zeros(0, bool)
 
     # each point examined is searched once: the candidates, the points across the
     # crease they compare with, then the points along the crease their averages take in
     rows = np.flatnonzero(strong)
     along_r, across_r, both_r = examine(rows, True)
-    near = np.setdiff1d(across_r.members(), rows)
+    near = np.flatnonzero(across_r.members(n) & ~strong)
     along_n, _, _ = examine(near, True)
     need = np.union1d(near, rows)
-    extra = np.setdiff1d(np.union1d(along_r.members(), along_n.members()), need)
-    examine(extra, False)
+    extra = along_r.members(n) | along_n.members(n)
+    extra[need] = False
+    examine(np.flatnonzero(extra), False)
     # the depth averaged along the crease
     smooth = np.zeros(n)
-    for at, lst in ((rows, along_r), (near, along_n)):
-        smooth[at] = lst.sums(depth) / np.maximum(lst.counts(), 1)
+    for lst in (along_r, along_n):
+        lst.average(depth, smooth)
     # a candidate is a crease point where no neighbour across scores well above it
-    higher = across_r.exceeds((1.0 - TOLERANCE) * smooth, smooth[rows])
+    higher = across_r.exceeds((1.0 - TOLERANCE) * smooth, smooth)
     mask[rows[~higher & both_r & (smooth[rows] > 0)]] = True
     return mask
 
@@ -217,40 +217,42 @@ def crease_points(points, fields, *, alpha, n_eff, radius=0.0, spacing=None):
 CREASE_BLOCK = 1 << 22
 
 
-class _Rows:
-    """The neighbours selected in each row of a block (`idx` where `keep`), as CSR."""
+class _Lists:
+    """Per block of rows, the neighbours `idx` kept where `keep` (CSR): what the crease
+    test reads again of a point's neighbourhood, a block at a time."""
 
-    def __init__(self, idx, keep):
-        self.indptr = np.r_[0, np.cumsum(keep.sum(axis=1))].astype(np.int64)
-        self.indices = idx[keep].astype(np.int64, copy=False)
+    def __init__(self):
+        self.parts = []
 
-    @classmethod
-    def join(cls, parts, n_rows):
-        out = cls.__new__(cls)
-        if not parts:
-            out.indptr, out.indices = np.zeros(n_rows + 1, np.int64), np.zeros(0, np.int64)
-            return out
-        counts = np.concatenate([np.diff(p.indptr) for p in parts])
-        out.indptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
-        out.indices = np.concatenate([p.indices for p in parts])
-        return out
+    def add(self, rows, idx, keep):
+        indptr = np.zeros(rows.size + 1, np.int64)
+        np.cumsum(keep.sum(axis=1), out=indptr[1:])
+        self.parts.append((rows, indptr, idx[keep]))
 
-    def counts(self):
-        return np.diff(self.indptr)
+    def members(self, n):
+        """Boolean mask of the points in any row."""
+        mark = np.zeros(n, bool)
+        for _, _, ind in self.parts:
+            mark[ind] = True
+        return mark
 
-    def members(self):
-        return np.unique(self.indices)
-
-    def sums(self, values):
-        """Per row, the sum of `values` over its neighbours (in their order)."""
-        return np.add.reduceat(np.r_[values[self.indices], 0.0], self.indptr[:-1]) * \
-            (self.counts() > 0)
+    def average(self, values, out):
+        """``out[row]``: the mean of `values` over the row's neighbours (in their order;
+        0 for an empty row)."""
+        for rows, indptr, ind in self.parts:
+            count = np.diff(indptr)
+            total = np.add.reduceat(np.r_[values[ind], 0.0], indptr[:-1]) * (count > 0)
+            out[rows] = total / np.maximum(count, 1)
 
     def exceeds(self, values, bound):
-        """Per row, whether `values` of any neighbour exceeds the row's `bound`."""
-        row = np.repeat(np.arange(self.indptr.size - 1), self.counts())
-        hit = values[self.indices] > bound[row]
-        return np.bincount(row[hit], minlength=self.indptr.size - 1) > 0
+        """Per row, in order: whether `values` of any neighbour exceeds ``bound[row]``."""
+        out = []
+        for rows, indptr, ind in self.parts:
+            count = np.diff(indptr)
+            row = np.repeat(np.arange(rows.size), count)
+            hit = values[ind] > bound[rows][row]
+            out.append(np.bincount(row[hit], minlength=rows.size) > 0)
+        return np.concatenate(out) if out else np.zeros(0, bool)
 
 
 #: Neighbours of the plane fits whose normals give the direction across a crease.
