@@ -331,6 +331,7 @@ def main(argv=None):
                         args.timeout, args.max_mib)
                 dst.unlink(missing_ok=True)
                 r["points"] = n
+                r["timeout_seconds"] = args.timeout
                 if r.get("peak_mib"):
                     r["bytes_per_point"] = round(r["peak_mib"] * 2**20 / n)
                 if r.get("cpu_seconds") and r["status"] == "ok":

@@ -124,8 +124,8 @@ def test_summary_and_fields_report_creases():
 
 @pytest.mark.parametrize("seed", range(3))
 def test_crease_points_do_not_depend_on_the_neighbour_blocks(seed, monkeypatch):
-    """The crease test searches its neighbourhoods in blocks and keeps them only up to
-    CREASE_PAIRS; searched again in blocks of a few rows, it marks the same points."""
+    """The crease test searches each point's neighbourhood once, in blocks of rows; in
+    blocks of a few rows it marks the same points."""
     from lidarstat.segment import _ridge_creases as rc
 
     calls = []
@@ -142,7 +142,6 @@ def test_crease_points_do_not_depend_on_the_neighbour_blocks(seed, monkeypatch):
     for points, fields, kw in calls:
         whole = rc.crease_points(points, fields, **kw)
         assert whole.any()
-        monkeypatch.setattr(rc, "CREASE_PAIRS", 7 * rc.CREASE_K)
         monkeypatch.setattr(rc, "CREASE_BLOCK", 3 * rc.CREASE_K)
         assert np.array_equal(rc.crease_points(points, fields, **kw), whole)
         monkeypatch.undo()

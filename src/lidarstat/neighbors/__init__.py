@@ -16,7 +16,7 @@ from ._csr import Neighborhoods
 from ._drivers import Drivers, make_drivers
 from ._duplicates import (Duplicates, check_copies, copies_degenerate, find_duplicates,
                           location_hash, map_rows, refuse_dominated, run_on_unique)
-from ._query import CellIndex, knn_neighbors, radius_neighbors
+from ._query import CellIndex, KnnIndex, knn_neighbors, radius_neighbors
 from ._grid_knn import knn_cell_size
 from ._grid_kernels import _CELL_CHUNK as GRID_CELL_CHUNK
 from ._grid_kernels import _block_ranges as grid_block_ranges
@@ -30,7 +30,7 @@ from ._grid_kernels import walk_block_2d as grid_walk_block_2d
 from ._kernels import cells_may_share as grid_cells_may_share
 from ._kernels import radix_order
 
-__all__ = ["Neighborhoods", "CellIndex", "radius_neighbors", "knn_neighbors",
+__all__ = ["Neighborhoods", "CellIndex", "KnnIndex", "radius_neighbors", "knn_neighbors",
            "Duplicates", "find_duplicates", "location_hash", "check_copies",
            "copies_degenerate", "map_rows",
            "refuse_dominated", "run_on_unique", "max_pairs", "Drivers", "make_drivers",

@@ -310,24 +310,46 @@ def knn_neighbors(points, k, *, query=None, workers=-1):
     -------
     Neighborhoods
     """
-    from scipy.spatial import cKDTree
+    return KnnIndex(points).query(k, query=query, workers=workers, func="knn_neighbors")
 
-    points = check_points(points)
-    k = check_scalar(k, "k", func="knn_neighbors", low=1, high=points.shape[0], closed="both",
-                     integer=True)
-    qidx = None if query is None else np.asarray(query, dtype=np.int64).ravel()
-    n_query = points.shape[0] if qidx is None else qidx.size
-    ceiling = _budget.max_pairs()
-    if n_query * k > ceiling:
-        raise TooManyNeighborsError(
-            f"k = {k} gives {n_query * k:,} neighbour pairs ({n_query:,} points), above the "
-            f"ceiling of {ceiling:,} (LIDARSTAT_MAX_PAIRS); lower k or thin the cloud")
-    origin = points.min(axis=0)
-    tree = cKDTree(points - origin)
-    q = points if qidx is None else points[qidx]
-    dist, idx = tree.query(q - origin, k=k, workers=workers)
-    dist = np.asarray(dist, dtype=np.float64).reshape(q.shape[0], k)
-    idx = np.asarray(idx, dtype=index_dtype(points.shape[0])).reshape(q.shape[0], k)
-    indptr = np.arange(q.shape[0] + 1, dtype=np.int64) * k
-    return Neighborhoods(indptr, idx.ravel(), dist.ravel(), points.shape[0], kind="knn", k=k,
-                         query=qidx)
+
+class KnnIndex:
+    """A k-d tree of `points` for repeated k-nearest-neighbour queries of their subsets.
+
+    Built once (SciPy's ``cKDTree`` about the points' lowest corner); :meth:`query`
+    answers as :func:`knn_neighbors` does, which builds one for a single query: callers
+    that query the same cloud block by block keep one index instead of a tree a block.
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+        Searched cloud.
+    """
+
+    def __init__(self, points):
+        from scipy.spatial import cKDTree
+
+        self.points = check_points(points)
+        self.origin = self.points.min(axis=0)
+        self.tree = cKDTree(self.points - self.origin)
+
+    def query(self, k, *, query=None, workers=-1, func="KnnIndex.query"):
+        """The `k` nearest neighbours of the points `query` (indices; default all), as
+        :func:`knn_neighbors`."""
+        points = self.points
+        k = check_scalar(k, "k", func=func, low=1, high=points.shape[0], closed="both",
+                         integer=True)
+        qidx = None if query is None else np.asarray(query, dtype=np.int64).ravel()
+        n_query = points.shape[0] if qidx is None else qidx.size
+        ceiling = _budget.max_pairs()
+        if n_query * k > ceiling:
+            raise TooManyNeighborsError(
+                f"k = {k} gives {n_query * k:,} neighbour pairs ({n_query:,} points), above "
+                f"the ceiling of {ceiling:,} (LIDARSTAT_MAX_PAIRS); lower k or thin the cloud")
+        q = points if qidx is None else points[qidx]
+        dist, idx = self.tree.query(q - self.origin, k=k, workers=workers)
+        dist = np.asarray(dist, dtype=np.float64).reshape(q.shape[0], k)
+        idx = np.asarray(idx, dtype=index_dtype(points.shape[0])).reshape(q.shape[0], k)
+        indptr = np.arange(q.shape[0] + 1, dtype=np.int64) * k
+        return Neighborhoods(indptr, idx.ravel(), dist.ravel(), points.shape[0], kind="knn",
+                             k=k, query=qidx)

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..features import FitStatus, fit_jets, height_variance, jet_tests, point_spacing
-from ..neighbors import knn_neighbors
+from ..neighbors import KnnIndex
 from . import _ridge_kernels as _rk
 from ._ridge_lines import group_rows, join_lines, smooth_vertices
 
@@ -137,128 +137,134 @@ def crease_points(points, fields, *, alpha, n_eff, radius=0.0, spacing=None):
     band_reach = max(across_reach, float(radius))
     reach = max(band_reach, along_reach) / spacing
     k = min(max(CREASE_K, int(np.ceil(1.5 * np.pi * reach * reach))), n)
-    # the neighbourhoods of the points examined only (candidates and those they compare
-    # with): k is hundreds at a wide crease radius, so they are kept while they fit in
-    # CREASE_PAIRS and searched again block by block beyond
-    hoods = _Hoods(points, k)
+    index = KnnIndex(points)
     normals = np.full((n, 3), np.nan)
-    across_dir = np.zeros((n, 3))
-    axis_dir = np.zeros((n, 3))
+    depth = np.zeros(n)
 
     def fold_across(at, idx, dist):
         """Across the crease at `at`, in the point's tangent plane: normal to the crease
         line, the least axis of the neighbours' normals within the band's reach (the
         normals turn about the crease line, so they span the plane normal to it)."""
         ok = dist <= band_reach
-        todo = np.setdiff1d(np.unique(idx[ok]), np.flatnonzero(np.isfinite(normals[:, 0])))
+        todo = np.zeros(n, bool)
+        todo[idx[ok]] = True
+        todo = np.flatnonzero(todo & np.isnan(normals[:, 0]))
         if todo.size:
-            normals[todo] = _pca_normals(points, todo)
-        nn = np.nan_to_num(normals[idx]) * ok[..., None]
+            normals[todo] = _pca_normals(index, todo)
+        nn = np.where(ok[..., None], normals[idx], 0.0)  # the normals within reach
         m = np.einsum("nki,nkj->nij", nn, nn)
         axis = np.linalg.eigh(m)[1][:, :, 0]
-        axis_dir[at] = axis
         c = np.cross(axis, normals[at])
-        across_dir[at] = c / np.maximum(np.linalg.norm(c, axis=1), 1e-12)[:, None]
+        return axis, c / np.maximum(np.linalg.norm(c, axis=1), 1e-12)[:, None]
 
-    def cosines(at, idx, d):
+    def cosines(at, idx, d, axis, across):
         """Per neighbour: the sine of its offset's angle to the crease line, signed by
         the side (the sign of the offset along the across direction): the surface bends
         at the crease, so the offsets to the other side leave the tangent plane."""
         off = points[idx] - points[at][:, None, :]
         with np.errstate(invalid="ignore", divide="ignore"):
-            c = np.einsum("nkj,nj->nk", off, axis_dir[at]) / d
-            side = np.where(np.einsum("nkj,nj->nk", off, across_dir[at]) >= 0, 1.0, -1.0)
+            c = np.einsum("nkj,nj->nk", off, axis) / d
+            side = np.where(np.einsum("nkj,nj->nk", off, across) >= 0, 1.0, -1.0)
         return np.where(d > 0, side * np.sqrt(np.clip(1.0 - c * c, 0.0, 1.0)), 0.0)
 
-    def along_mask(at, idx, d):
-        return ((np.abs(cosines(at, idx, d)) <= COS_ALONG) & (d <= along_reach)) | (d == 0)
+    def examine(at, lists):
+        """One search per point of `at`, block by block: its depth (the band's on its
+        poorer side), and with `lists` its neighbours along the crease (for the average)
+        and across it (for the comparison) with the sides the latter cover."""
+        along, across, both = _Lists(), _Lists(), []
+        step = max(1, CREASE_BLOCK // k)
+        for s in range(0, at.size, step):
+            b = at[s:s + step]
+            nb = index.query(k, query=b)
+            idx, d = nb.indices.reshape(-1, k), nb.distances.reshape(-1, k)
+            cos = cosines(b, idx, d, *fold_across(b, idx, d))
+            cone = (np.abs(cos) >= COS_ACROSS) & (d > 0) & (d <= band_reach) & strong[idx]
+            depth[b] = np.minimum((cone & (cos > 0)).sum(axis=1),
+                                  (cone & (cos < 0)).sum(axis=1))
+            if not lists:
+                continue
+            al = ((np.abs(cos) <= COS_ALONG) & (d <= along_reach)) | (d == 0)
+            ac = (np.abs(cos) >= COS_ACROSS) & (d > 0) & (d <= across_reach)
+            along.add(b, idx, al)
+            across.add(b, idx, ac)
+            both.append((ac & (cos > 0)).any(axis=1) & (ac & (cos < 0)).any(axis=1))
+        if not lists:
+            return None
+        return along, across, np.concatenate(both) if both else np.zeros(0, bool)
 
+    # each point examined is searched once: the candidates, the points across the
+    # crease they compare with, then the points along the crease their averages take in
     rows = np.flatnonzero(strong)
-    near = []
-    for at, idx, d in hoods.blocks(rows):
-        fold_across(at, idx, d)
-        near.append(np.unique(idx[(np.abs(cosines(at, idx, d)) >= COS_ACROSS)
-                                  & (d <= across_reach)]))
-    # the score at every point a candidate compares with
-    near = np.unique(np.concatenate(near))
-    for at, idx, d in hoods.blocks(np.setdiff1d(near, rows)):
-        fold_across(at, idx, d)
+    along_r, across_r, both_r = examine(rows, True)
+    near = np.flatnonzero(across_r.members(n) & ~strong)
+    along_n, _, _ = examine(near, True)
     need = np.union1d(near, rows)
-    # the depth of every point an average along the crease takes in
-    extra = np.unique(np.concatenate([np.unique(idx[along_mask(at, idx, d)])
-                                      for at, idx, d in hoods.blocks(need)]))
-    extra = np.setdiff1d(extra, need)
-    for at, idx, d in hoods.blocks(extra):
-        fold_across(at, idx, d)
-    depth = np.zeros(n)
-    for at, idx, d in hoods.blocks(np.union1d(need, extra)):
-        cos = cosines(at, idx, d)
-        cone = (np.abs(cos) >= COS_ACROSS) & (d > 0) & (d <= band_reach) & strong[idx]
-        depth[at] = np.minimum((cone & (cos > 0)).sum(axis=1), (cone & (cos < 0)).sum(axis=1))
+    extra = along_r.members(n) | along_n.members(n)
+    extra[need] = False
+    examine(np.flatnonzero(extra), False)
+    # the depth averaged along the crease
     smooth = np.zeros(n)
-    for at, idx, d in hoods.blocks(need):
-        along = along_mask(at, idx, d)
-        smooth[at] = (depth[idx] * along).sum(axis=1) / np.maximum(along.sum(axis=1), 1)
-    for at, idx, d in hoods.blocks(rows):
-        cos = cosines(at, idx, d)
-        across = (np.abs(cos) >= COS_ACROSS) & (d > 0) & (d <= across_reach)
-        higher = ((1.0 - TOLERANCE) * smooth[idx] > smooth[at][:, None]) & across
-        both = (across & (cos > 0)).any(axis=1) & (across & (cos < 0)).any(axis=1)
-        mask[at[~higher.any(axis=1) & both & (smooth[at] > 0)]] = True
+    for lst in (along_r, along_n):
+        lst.average(depth, smooth)
+    # a candidate is a crease point where no neighbour across scores well above it
+    higher = across_r.exceeds((1.0 - TOLERANCE) * smooth, smooth)
+    mask[rows[~higher & both_r & (smooth[rows] > 0)]] = True
     return mask
 
 
-#: Neighbour pairs of the crease test kept between its passes (12 bytes a pair); beyond
-#: them the neighbourhoods are searched again in each pass.
-CREASE_PAIRS = 1 << 25
 #: Neighbour pairs a pass of the crease test works on at once (its temporaries hold
 #: about 60 bytes a pair).
 CREASE_BLOCK = 1 << 22
 
 
-class _Hoods:
-    """The `k` nearest neighbours of the points the crease test examines, in blocks of
-    rows; kept for the later passes while they fit in :data:`CREASE_PAIRS` pairs."""
+class _Lists:
+    """Per block of rows, the neighbours `idx` kept where `keep` (CSR): what the crease
+    test reads again of a point's neighbourhood, a block at a time."""
 
-    def __init__(self, points, k):
-        self.points, self.k = points, k
-        self.pos = np.full(points.shape[0], -1, np.int64)
-        self.idx = np.empty((0, k), np.int32)
-        self.dist = np.empty((0, k))
+    def __init__(self):
+        self.parts = []
 
-    def blocks(self, at):
-        """``(rows, idx, dist)`` for blocks of the points `at`, in order."""
-        step = max(1, CREASE_BLOCK // self.k)
-        for s in range(0, at.size, step):
-            b = at[s:s + step]
-            new = b[self.pos[b] < 0]
-            if new.size:
-                nb = knn_neighbors(self.points, self.k, query=new)
-                ni = nb.indices.reshape(-1, self.k)
-                nd = nb.distances.reshape(-1, self.k)
-                if (self.idx.shape[0] + new.size) * self.k > CREASE_PAIRS:
-                    kept = self.pos[b] >= 0
-                    idx = np.empty((b.size, self.k), ni.dtype)
-                    dist = np.empty((b.size, self.k))
-                    idx[kept], dist[kept] = self.idx[self.pos[b[kept]]], self.dist[self.pos[b[kept]]]
-                    idx[~kept], dist[~kept] = ni, nd
-                    yield b, idx, dist
-                    continue
-                self.pos[new] = self.idx.shape[0] + np.arange(new.size)
-                self.idx = np.concatenate([self.idx, ni.astype(np.int32, copy=False)])
-                self.dist = np.concatenate([self.dist, nd])
-            yield b, self.idx[self.pos[b]], self.dist[self.pos[b]]
+    def add(self, rows, idx, keep):
+        indptr = np.zeros(rows.size + 1, np.int64)
+        np.cumsum(keep.sum(axis=1), out=indptr[1:])
+        self.parts.append((rows, indptr, idx[keep]))
+
+    def members(self, n):
+        """Boolean mask of the points in any row."""
+        mark = np.zeros(n, bool)
+        for _, _, ind in self.parts:
+            mark[ind] = True
+        return mark
+
+    def average(self, values, out):
+        """``out[row]``: the mean of `values` over the row's neighbours (in their order;
+        0 for an empty row)."""
+        for rows, indptr, ind in self.parts:
+            count = np.diff(indptr)
+            total = np.add.reduceat(np.r_[values[ind], 0.0], indptr[:-1]) * (count > 0)
+            out[rows] = total / np.maximum(count, 1)
+
+    def exceeds(self, values, bound):
+        """Per row, in order: whether `values` of any neighbour exceeds ``bound[row]``."""
+        out = []
+        for rows, indptr, ind in self.parts:
+            count = np.diff(indptr)
+            row = np.repeat(np.arange(rows.size), count)
+            hit = values[ind] > bound[rows][row]
+            out.append(np.bincount(row[hit], minlength=rows.size) > 0)
+        return np.concatenate(out) if out else np.zeros(0, bool)
 
 
 #: Neighbours of the plane fits whose normals give the direction across a crease.
 NORMAL_K = 10
 
 
-def _pca_normals(points, at):
+def _pca_normals(index, at):
     """Unit normals at `at`: the least axis of the covariance of the :data:`NORMAL_K`
-    nearest points."""
+    nearest points (`index`: a :class:`lidarstat.neighbors.KnnIndex` of the points)."""
+    points = index.points
     k = min(NORMAL_K, points.shape[0])
-    nb = knn_neighbors(points, k, query=at)
+    nb = index.query(k, query=at)
     x = points[nb.indices.reshape(-1, k)]
     x = x - x.mean(axis=1, keepdims=True)
     return np.linalg.eigh(np.einsum("nki,nkj->nij", x, x))[1][:, :, 0]
@@ -323,8 +329,10 @@ def _scatter(fields, factor, rows, n):
 def find_creases(local, nb, step, radii, *, sigma, noise, sensor, weight, alpha,
                  min_vertices, smooth, min_length=None):
     """Crease points and lines of `local` (coordinates about their mean), climbing the
-    ladder `radii` (``ridges`` passes two: the crease rung and the next). At each rung the jets are fitted where those of
-    the rung below are rejected (level `alpha`; every point at the first), crease
+    ladder `radii` (``ridges`` passes two: the crease rung and the next). At each rung the
+    jets are fitted where those of the rung below are rejected (level `alpha`; every point
+    at the first; at the last, only the rung below's crease points, whose misfit's growth
+    is all that is read there), crease
     points are the crests of the misfit across a band of jets rejected at the
     Bonferroni level, and they are chained into lines, each line tested on its own rung
     (length, growth of the misfit to the rung above). A line of a larger rung whose
@@ -357,8 +365,10 @@ def find_creases(local, nb, step, radii, *, sigma, noise, sensor, weight, alpha,
                              spacing=spacing)
         found.append((cand, f_full, full["chi2_p"],
                       np.nan_to_num(across_directions(full)[1]), np.full(n, np.nan)))
-        # climb where the jets are still rejected
-        rows = np.flatnonzero(full["status"] == FitStatus.MODEL_REJECTED)
+        # climb where the jets are still rejected; of the last rung only the growth of
+        # the candidates' misfit is read, so only they are fitted there
+        rows = np.flatnonzero(cand if j == len(radii) - 2
+                              else full["status"] == FitStatus.MODEL_REJECTED)
     mask = np.zeros(n, bool)
     line = np.zeros(n, np.int64)
     rung = np.full(n, -1, np.int64)
