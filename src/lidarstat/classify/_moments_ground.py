@@ -135,11 +135,17 @@ def ground_cut(xy, z, rank, roots, p: MomentsOptions, inten, *, opening_window, 
     return ground, height, cut, surf, fields, steps, windows
 
 
-def drop_raised_patches(xy, z, rank, ground, height, surf, *, surface_cell, step):
+def drop_raised_patches(xy, z, rank, ground, height, surf, *, surface_cell, step,
+                        raised=None):
     """Ground patches of the lowest-point grid standing above their surroundings on
     (almost) every side become objects; their heights are taken above the surface
-    refitted without them. Returns ``(ground, height, surface)``."""
-    raised = ground & raised_patches(xy, z, step=step, rank=rank)
+    refitted without them. Returns ``(ground, height, surface)``.
+
+    `raised`: ``raised_patches(xy, z, step=step, rank=rank)`` when the caller has it (the
+    patches read only the coordinates, so they can be found beside the window passes)."""
+    if raised is None:
+        raised = raised_patches(xy, z, step=step, rank=rank)
+    raised = ground & raised
     if raised.any() and (ground & ~raised).sum() >= 3:
         ground = ground & ~raised
         surf = ground_surface(xy, z, cell=surface_cell, rank=rank, where=np.flatnonzero(ground))
