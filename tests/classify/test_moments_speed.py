@@ -227,6 +227,23 @@ def test_canonical_order_equals_lexsort(seed):
         assert np.array_equal(canonical_order(x, y, z, inten), np.lexsort(keys))
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_canonical_order_in_blocks_of_runs_equals_lexsort(seed):
+    # above _TIE_BLOCK points the runs of equal x are sorted in blocks of whole runs in
+    # parallel: runs longer than a block, runs across the even split, one-point runs
+    from lidarstat.classify._moments_kernels import _TIE_BLOCK, canonical_order
+
+    g = np.random.default_rng(seed)
+    n = 4 * _TIE_BLOCK + int(g.integers(1, _TIE_BLOCK))
+    x = np.round(g.uniform(0, (3, 40, 5000)[seed], n))
+    if seed == 0:
+        x[: 2 * _TIE_BLOCK] = 1.0  # one run over two blocks' worth of points
+    y, z = (np.round(g.uniform(0, 4, n)) for _ in range(2))
+    w = g.integers(0, 3, n).astype(np.uint16)
+    assert np.array_equal(canonical_order(x, y, z, w), np.lexsort((w, z, y, x)))
+    assert np.array_equal(canonical_order(x, y, z), np.lexsort((z, y, x)))
+
+
 def _low_outliers_reference(xy, z, *, points_per_cell=4.0, k=5.0, min_depth=0.5,
                             iterations=3):
     """The low-noise rule in plain NumPy: lexsort for the cell minima, np.partition for
