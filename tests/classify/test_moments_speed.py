@@ -115,6 +115,21 @@ def test_schedulers_give_identical_results(rng):
     assert len({t["window"] for t in runs[0].windows}) == len(runs[0].windows)
 
 
+@pytest.mark.parametrize("seed", range(2))
+def test_steps_beside_each_other_equal_the_steps_in_turn(seed):
+    # workers > 1 builds the raised patches' graph beside the window passes and finds the
+    # roads beside the building tests; workers=1 runs them in turn
+    xyz, inten, nret, rnum, _ = _scene(np.random.default_rng(seed), 12000)
+    kw = dict(number_of_returns=nret, return_number=rnum, window=30, min_window=10)
+    one, two = (moments(xyz, inten, workers=w, **kw) for w in (1, 2))
+    assert (one.classification == 11).any()  # a road step ran
+    for k, v in one.to_fields().items():
+        assert np.array_equal(v, two.to_fields()[k], equal_nan=v.dtype.kind == "f"), k
+    for k, v in one.building_fields.items():
+        assert np.array_equal(v, two.building_fields[k], equal_nan=v.dtype.kind == "f"), k
+    assert [s.to_dict() for s in one.steps] == [s.to_dict() for s in two.steps]
+
+
 def test_lengths_in_metres_whatever_the_file_unit(rng):
     """The same scene in feet with units=0.3048 gets the labels of the metre scene."""
     xyz, inten, nret, rnum, _ = _scene(rng, 8000)
