@@ -48,11 +48,12 @@ def _clouds(n, seeds):
         if seed == 2:  # low noise and copies of points
             g = np.random.default_rng(seed)
             low = g.choice(n, 40, replace=False)
-            z = xyz.copy()
-            z[low, 2] -= g.uniform(2.0, 8.0, low.size)
+            # in place: the clouds yielded before are classified by then (memory at 10M)
+            xyz[low, 2] -= g.uniform(2.0, 8.0, low.size)
             copies = g.choice(n, n // 50, replace=False)
             idx = np.r_[np.arange(n), copies]
-            yield "noise_copies", z[idx], inten[idx], nret[idx], rnum[idx]
+            xyz, inten, nret, rnum = (a[idx] for a in (xyz, inten, nret, rnum))
+            yield "noise_copies", xyz, inten, nret, rnum
 
 
 def dump(path, n=200_000, seeds=3):
