@@ -319,15 +319,17 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         raise
     cluster_id = fields["cluster_id"]
     del fields, roots  # the last pass's own ground and cuts: `ground` and `cut` hold them
-    if continuous:
+    refine = terrain and method is MomentsMethod.MOMENTS
+    if refine:
+        height = surf = None  # replaced by the terrain's: freed before it allocates
+    if continuous:  # the surface without the patches only where no terrain replaces it
         ground, height, surf = drop_raised_patches(
             xy, z, perm, ground, height, surf, surface_cell=surface_cell / ux, step=0.3 / uz,
-            raised=None if patches is None else patches.result())
+            raised=None if patches is None else patches.result(), refit=not refine)
         del patches
     del perm  # the ranks of the ground steps' ties
     release_freed()
-    if terrain and method is MomentsMethod.MOMENTS:
-        height = surf = None  # replaced by the terrain's: freed before it allocates
+    if refine:
         ground, height, surf, tolerance = terrain_step(xy, z, ground, ux=ux, uz=uz)
         release_freed()
     else:
