@@ -11,7 +11,6 @@ so runs of equal x are short).
 from __future__ import annotations
 
 import numpy as np
-
 from numba import prange
 
 from .._shared._jit import njit, njit_parallel
