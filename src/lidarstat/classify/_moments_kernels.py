@@ -141,7 +141,9 @@ def canonical_order(x, y, z, intensity=None) -> np.ndarray:
     bits of non-negative doubles order as the numbers do), a comparison sort otherwise.
     The other keys are gathered into that order once, so the runs are sorted on
     contiguous memory; inside a run the stable sort left the points in input order, so
-    the position in it breaks the last ties as the index does.
+    the position in it breaks the last ties as the index does. The radix passes, the
+    gather and the runs (in blocks of whole runs) run in parallel; the permutation does
+    not depend on the threads.
 
     Examples
     --------
