@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -49,11 +50,12 @@ def _clouds(n, seeds):
         if seed == 2:  # low noise and copies of points
             g = np.random.default_rng(seed)
             low = g.choice(n, 40, replace=False)
-            z = xyz.copy()
-            z[low, 2] -= g.uniform(2.0, 8.0, low.size)
+            # in place: the clouds yielded before are classified by then (memory at 10M)
+            xyz[low, 2] -= g.uniform(2.0, 8.0, low.size)
             copies = g.choice(n, n // 50, replace=False)
             idx = np.r_[np.arange(n), copies]
-            yield "noise_copies", z[idx], inten[idx], nret[idx], rnum[idx]
+            xyz, inten, nret, rnum = (a[idx] for a in (xyz, inten, nret, rnum))
+            yield "noise_copies", xyz, inten, nret, rnum
 
 
 def _real(out, files):
@@ -83,22 +85,38 @@ def _real(out, files):
 def dump(path, n=200_000, seeds=3, files=()):
     from lidarstat.classify import moments
 
-    out = {}
-    _real(out, files)
-    for name, xyz, inten, nret, rnum in _clouds(n, seeds):
-        r = moments(xyz, inten, number_of_returns=nret, return_number=rnum)
-        for k, v in r.to_fields().items():
-            out[f"{name}/{k}"] = np.asarray(v)
-        for k, v in r.building_fields.items():
-            out[f"{name}/building:{k}"] = np.asarray(v)
-        dips = [(d["dip"], d["pvalue"]) for s in r.steps for d in s.dip.values()]
-        out[f"{name}/steps:dips"] = np.array(dips, float).reshape(-1, 2)
-        out[f"{name}/steps:cuts"] = np.array([s.choice.threshold for s in r.steps], float)
-        out[f"{name}/windows:thresholds"] = np.array(
-            [np.nan if w["threshold"] is None else w["threshold"] for w in r.windows], float)
-        print(f"{name}: {len(xyz):,} points", flush=True)
-    np.savez_compressed(path, **out)
-    print(f"wrote {len(out)} arrays to {path}")
+    count = 0
+    real = {}
+    _real(real, files)
+    # each cloud's arrays go to the archive as they are made (the layout of
+    # ``np.savez_compressed``): at 10 million points a sweep's fields would not fit
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED, allowZip64=True) as zf:
+        for k, v in real.items():
+            with zf.open(k + ".npy", "w", force_zip64=True) as fh:
+                np.lib.format.write_array(fh, np.ascontiguousarray(v), allow_pickle=False)
+        count += len(real)
+        del real
+        for name, xyz, inten, nret, rnum in _clouds(n, seeds):
+            r = moments(xyz, inten, number_of_returns=nret, return_number=rnum)
+            out = {}
+            for k, v in r.to_fields().items():
+                out[f"{name}/{k}"] = np.asarray(v)
+            for k, v in r.building_fields.items():
+                out[f"{name}/building:{k}"] = np.asarray(v)
+            dips = [(d["dip"], d["pvalue"]) for s in r.steps for d in s.dip.values()]
+            out[f"{name}/steps:dips"] = np.array(dips, float).reshape(-1, 2)
+            out[f"{name}/steps:cuts"] = np.array([s.choice.threshold for s in r.steps], float)
+            out[f"{name}/windows:thresholds"] = np.array(
+                [np.nan if w["threshold"] is None else w["threshold"] for w in r.windows],
+                float)
+            del r
+            for k, v in out.items():
+                with zf.open(k + ".npy", "w", force_zip64=True) as fh:
+                    np.lib.format.write_array(fh, np.ascontiguousarray(v), allow_pickle=False)
+            count += len(out)
+            del out
+            print(f"{name}: {len(xyz):,} points", flush=True)
+    print(f"wrote {count} arrays to {path}")
 
 
 def compare(a_path, b_path, out=None, note=None):

@@ -115,6 +115,21 @@ def test_schedulers_give_identical_results(rng):
     assert len({t["window"] for t in runs[0].windows}) == len(runs[0].windows)
 
 
+@pytest.mark.parametrize("seed", range(2))
+def test_steps_beside_each_other_equal_the_steps_in_turn(seed):
+    # workers > 1 builds the raised patches' graph beside the window passes and finds the
+    # roads beside the building tests; workers=1 runs them in turn
+    xyz, inten, nret, rnum, _ = _scene(np.random.default_rng(seed), 12000)
+    kw = dict(number_of_returns=nret, return_number=rnum, window=30, min_window=10)
+    one, two = (moments(xyz, inten, workers=w, **kw) for w in (1, 2))
+    assert (one.classification == 11).any()  # a road step ran
+    for k, v in one.to_fields().items():
+        assert np.array_equal(v, two.to_fields()[k], equal_nan=v.dtype.kind == "f"), k
+    for k, v in one.building_fields.items():
+        assert np.array_equal(v, two.building_fields[k], equal_nan=v.dtype.kind == "f"), k
+    assert [s.to_dict() for s in one.steps] == [s.to_dict() for s in two.steps]
+
+
 def test_lengths_in_metres_whatever_the_file_unit(rng):
     """The same scene in feet with units=0.3048 gets the labels of the metre scene."""
     xyz, inten, nret, rnum, _ = _scene(rng, 8000)
@@ -225,6 +240,23 @@ def test_canonical_order_equals_lexsort(seed):
     for inten in (w, None):
         keys = tuple(c for c in (inten, z, y, x) if c is not None)
         assert np.array_equal(canonical_order(x, y, z, inten), np.lexsort(keys))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_canonical_order_in_blocks_of_runs_equals_lexsort(seed):
+    # above _TIE_BLOCK points the runs of equal x are sorted in blocks of whole runs in
+    # parallel: runs longer than a block, runs across the even split, one-point runs
+    from lidarstat.classify._moments_kernels import _TIE_BLOCK, canonical_order
+
+    g = np.random.default_rng(seed)
+    n = 4 * _TIE_BLOCK + int(g.integers(1, _TIE_BLOCK))
+    x = np.round(g.uniform(0, (3, 40, 5000)[seed], n))
+    if seed == 0:
+        x[: 2 * _TIE_BLOCK] = 1.0  # one run over two blocks' worth of points
+    y, z = (np.round(g.uniform(0, 4, n)) for _ in range(2))
+    w = g.integers(0, 3, n).astype(np.uint16)
+    assert np.array_equal(canonical_order(x, y, z, w), np.lexsort((w, z, y, x)))
+    assert np.array_equal(canonical_order(x, y, z), np.lexsort((z, y, x)))
 
 
 def _low_outliers_reference(xy, z, *, points_per_cell=4.0, k=5.0, min_depth=0.5,

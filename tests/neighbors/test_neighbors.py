@@ -147,6 +147,19 @@ def test_radix_order_equals_stable_argsort(rng, high):
     assert np.array_equal(skeys, keys[ref])
 
 
+@pytest.mark.parametrize("high", [2, 5000, 2**40])
+def test_radix_order_in_blocks_equals_stable_argsort(rng, high):
+    """Above two blocks of keys each pass counts and scatters the blocks in parallel: the
+    order is still the stable argsort's (equal keys in input order across blocks)."""
+    from lidarstat.neighbors._kernels import _RADIX_BLOCK, radix_order
+
+    keys = rng.integers(0, high, 3 * _RADIX_BLOCK + 12_345)
+    order, skeys = radix_order(keys, max(high - 1, 1).bit_length())
+    ref = np.argsort(keys, kind="stable")
+    assert np.array_equal(order, ref)
+    assert np.array_equal(skeys, keys[ref])
+
+
 def test_neighborhoods_hold_one_index_dtype(rng):
     """Every search gives int32 indices below 2**31 points, whatever type it was given, so
     each kernel taking neighbour indices compiles once (half the memory of int64)."""

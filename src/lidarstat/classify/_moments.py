@@ -31,6 +31,7 @@ from .._shared._deprecate import renamed_parameters
 from .._shared._memory import release_freed
 from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError, LidarstatDeprecationWarning, LidarstatWarning
+from ._continuity import raised_patches
 from ._cycle import ElevationRule
 from ._moments_ground import drop_raised_patches, ground_cut, heights
 from ._moments_kernels import canonical_order, compact_rows
@@ -135,7 +136,9 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         Seed of the dip tests' subsample (samples above 20,000 values) and dequantisation
         (tied values); a Generator gives one seed for every test.
     workers : int, optional
-        Threads for the windows (default: CPU count).
+        Threads for the windows (default: CPU count). Above 1 the raised patches' graph
+        is also built beside the window passes and the roads found beside the building
+        tests; 1 runs every step in turn. The result is the same.
     scheduler : {'threads', 'sync', 'dask'}
         How root windows run (:func:`lidarstat.pipeline.map_tiles`); every scheduler gives
         the same result.
@@ -300,21 +303,33 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     inten = None if inten is None else inten[perm]
     multi = multi[perm]
 
-    # 3-4. window analyses and the ground
-    ground, height, cut, surf, fields, steps, windows = ground_cut(
-        xy, z, perm, roots, p, inten, opening_window=opening_window / ux,
-        opening_cell=1.0 / ux, surface_cell=surface_cell / ux, iterations=iterations,
-        scheduler=scheduler, workers=workers)
+    # 3-4. window analyses and the ground; the raised patches' graph reads only the
+    # coordinates, so it is built beside them, on the core the surface fits leave idle
+    continuous = continuity and method is MomentsMethod.MOMENTS
+    patches = _beside(continuous and workers != 1, raised_patches, xy, z, step=0.3 / uz,
+                      rank=perm)
+    try:
+        ground, height, cut, surf, fields, steps, windows = ground_cut(
+            xy, z, perm, roots, p, inten, opening_window=opening_window / ux,
+            opening_cell=1.0 / ux, surface_cell=surface_cell / ux, iterations=iterations,
+            scheduler=scheduler, workers=workers)
+    except BaseException:
+        if patches is not None:
+            patches.cancel()
+        raise
     cluster_id = fields["cluster_id"]
     del fields, roots  # the last pass's own ground and cuts: `ground` and `cut` hold them
-    if continuity and method is MomentsMethod.MOMENTS:
-        ground, height, surf = drop_raised_patches(xy, z, perm, ground, height, surf,
-                                                   surface_cell=surface_cell / ux,
-                                                   step=0.3 / uz)
+    refine = terrain and method is MomentsMethod.MOMENTS
+    if refine:
+        height = surf = None  # replaced by the terrain's: freed before it allocates
+    if continuous:  # the surface without the patches only where no terrain replaces it
+        ground, height, surf = drop_raised_patches(
+            xy, z, perm, ground, height, surf, surface_cell=surface_cell / ux, step=0.3 / uz,
+            raised=None if patches is None else patches.result(), refit=not refine)
+        del patches
     del perm  # the ranks of the ground steps' ties
     release_freed()
-    if terrain and method is MomentsMethod.MOMENTS:
-        height = surf = None  # replaced by the terrain's: freed before it allocates
+    if refine:
         ground, height, surf, tolerance = terrain_step(xy, z, ground, ux=ux, uz=uz)
         release_freed()
     else:
@@ -324,21 +339,28 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         q = pts_noise - origin
         low_height = heights(q[:, 2], surf(q[:, :2]))
     del pts_noise, surf  # the surface's TIN: not needed again
-    # 5. roads
-    road, road_step = road_points(xy, inten, ground, p, road_rule=road_rule,
-                                  road_cell_points=road_cell_points,
-                                  threshold=_road_threshold(road_threshold),
-                                  first_step=len(steps) + 1)
+    # 5-6. roads, and buildings (tested roof planes): both read the ground and nothing of
+    # each other, so the roads (one core) run beside the building tests
+    road_options = dict(road_rule=road_rule, road_cell_points=road_cell_points,
+                        threshold=_road_threshold(road_threshold), first_step=len(steps) + 1)
+    roads = _beside(workers != 1, road_points, xy, inten, ground, p, **road_options)
+    try:
+        blds, brows = building_step(xy, z, height, ground, multi, (ux, uz),
+                                    min_object_height=min_object_height / uz,
+                                    min_height=vegetation_heights[1], options=p)
+    except BaseException:
+        if roads is not None:
+            roads.cancel()
+        raise
+    road, road_step = (road_points(xy, inten, ground, p, **road_options) if roads is None
+                       else roads.result())
+    del roads
     if road_step is not None:
         steps.append(road_step)
     has_intensity = inten is not None
     del inten
     release_freed()
-    # 6. buildings (tested roof planes), objects and classes
-    blds, brows = building_step(xy, z, height, ground, multi, (ux, uz),
-                                min_object_height=min_object_height / uz,
-                                min_height=vegetation_heights[1], options=p)
-    release_freed()
+    # objects and classes
     building = np.zeros(len(z), bool)
     building[brows] = blds.building
     cls = asprs_classes(xy, height, ground, road, multi, buildings=building,
@@ -389,6 +411,19 @@ def classify_moments(*args, **kwargs) -> MomentsClassification:
     return moments(*args, **kwargs)
 
 
+def _beside(run, func, *args, **kwargs):
+    """``func(*args, **kwargs)`` started in a thread of its own (a Future), or None when
+    not `run` (the caller then calls it in turn)."""
+    if not run:
+        return None
+    from concurrent.futures import ThreadPoolExecutor
+
+    pool = ThreadPoolExecutor(1, thread_name_prefix="lidarstat-moments")
+    future = pool.submit(func, *args, **kwargs)
+    pool.shutdown(wait=False)  # the thread ends with its one task
+    return future
+
+
 def _road_threshold(value):
     """A given road cut: a finite number, -inf (no road), or None (decided here)."""
     if value is None or (isinstance(value, float) and value == -np.inf):
@@ -417,7 +452,11 @@ def _without_low_noise(noise, pts, inten, nret, rnum, source, in_place=False):
     has_returns = nret is not None and rnum is not None
     multi = np.zeros(len(pts), bool)
     if has_returns:
-        multi = (nret.astype(int) > 1) & (rnum.astype(int) < nret.astype(int))
+        same = nret.dtype == rnum.dtype and nret.dtype.kind in "ui"
+        if same and nret.dtype.itemsize < 8:  # compared as they are: no int64 copies
+            multi = (nret > 1) & (rnum < nret)
+        else:
+            multi = (nret.astype(int) > 1) & (rnum.astype(int) < nret.astype(int))
     return pts, inten, multi, has_returns
 
 

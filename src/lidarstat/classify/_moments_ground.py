@@ -135,13 +135,23 @@ def ground_cut(xy, z, rank, roots, p: MomentsOptions, inten, *, opening_window, 
     return ground, height, cut, surf, fields, steps, windows
 
 
-def drop_raised_patches(xy, z, rank, ground, height, surf, *, surface_cell, step):
+def drop_raised_patches(xy, z, rank, ground, height, surf, *, surface_cell, step,
+                        raised=None, refit=True):
     """Ground patches of the lowest-point grid standing above their surroundings on
     (almost) every side become objects; their heights are taken above the surface
-    refitted without them. Returns ``(ground, height, surface)``."""
-    raised = ground & raised_patches(xy, z, step=step, rank=rank)
+    refitted without them. Returns ``(ground, height, surface)``.
+
+    `raised`: ``raised_patches(xy, z, step=step, rank=rank)`` when the caller has it (the
+    patches read only the coordinates, so they can be found beside the window passes).
+    `refit` False: the ground alone, ``(ground, None, None)``, for a caller that replaces
+    the surface and heights (the terrain step)."""
+    if raised is None:
+        raised = raised_patches(xy, z, step=step, rank=rank)
+    raised = ground & raised
     if raised.any() and (ground & ~raised).sum() >= 3:
         ground = ground & ~raised
-        surf = ground_surface(xy, z, cell=surface_cell, rank=rank, where=np.flatnonzero(ground))
-        height = heights(z, surf(xy), overwrite=True)
-    return ground, height, surf
+        if refit:
+            surf = ground_surface(xy, z, cell=surface_cell, rank=rank,
+                                  where=np.flatnonzero(ground))
+            height = heights(z, surf(xy), overwrite=True)
+    return (ground, height, surf) if refit else (ground, None, None)

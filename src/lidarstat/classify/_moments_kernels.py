@@ -11,8 +11,9 @@ so runs of equal x are short).
 from __future__ import annotations
 
 import numpy as np
+from numba import prange
 
-from .._shared._jit import njit
+from .._shared._jit import njit, njit_parallel
 from ..neighbors import radix_order
 
 __all__ = ["canonical_order", "compact_rows"]
@@ -80,20 +81,56 @@ def _sort_run(order, lo, hi, y, z, w, buf):  # pragma: no cover - compiled
         order[lo:hi] = buf[:m]
 
 
-@njit
-def _sort_ties(order, first, y, z, w):  # pragma: no cover - compiled
-    """Sort every run of equal `first` (in `order`) by y, z and w."""
-    n = order.size
-    buf = np.empty(n, np.int64)
-    a = 0
-    while a < n:
-        b = a + 1
-        va = first[order[a]]
-        while b < n and first[order[b]] == va:
-            b += 1
-        if b - a > 1:
-            _sort_run(order, a, b, y, z, w, buf)
-        a = b
+#: Points per block of :func:`_sort_ties` (blocks of whole runs sorted in parallel).
+_TIE_BLOCK = 1 << 16
+
+
+@njit_parallel
+def _sort_ties(first, y, z, w, x_order, out):  # pragma: no cover - compiled
+    """Sort every run of equal `first` (sorted) by y, z and w, and write the order of the
+    points, ``x_order`` composed with it, to `out`. The runs are independent: blocks of
+    whole runs are sorted in parallel, each through a buffer of its own."""
+    n = first.size
+    nblk = max(1, n // _TIE_BLOCK)
+    bounds = np.empty(nblk + 1, np.int64)
+    bounds[0] = 0
+    for k in range(1, nblk):
+        c = max(k * (n // nblk), bounds[k - 1])
+        while 0 < c < n and first[c] == first[c - 1]:  # a block starts at a run's start
+            c += 1
+        bounds[k] = c
+    bounds[nblk] = n
+    for k in prange(nblk):
+        lo = bounds[k]
+        hi = bounds[k + 1]
+        if hi <= lo:
+            continue
+        pos = np.arange(lo, hi)
+        buf = np.empty(hi - lo, np.int64)
+        a = lo
+        while a < hi:
+            b = a + 1
+            while b < hi and first[b] == first[a]:
+                b += 1
+            if b - a > 1:
+                _sort_run(pos, a - lo, b - lo, y, z, w, buf)
+            a = b
+        for i in range(hi - lo):
+            out[lo + i] = x_order[pos[i]]
+
+
+@njit_parallel
+def _gather_keys(x, y, z, w, order, first, ys, zs, ws):  # pragma: no cover - compiled
+    """``first, ys, zs, ws = x[order], y[order], z[order], w[order]`` (`w` may be empty),
+    in parallel."""
+    has_w = w.size > 0
+    for i in prange(order.size):
+        j = order[i]
+        first[i] = x[j]
+        ys[i] = y[j]
+        zs[i] = z[j]
+        if has_w:
+            ws[i] = w[j]
 
 
 def canonical_order(x, y, z, intensity=None) -> np.ndarray:
@@ -104,7 +141,9 @@ def canonical_order(x, y, z, intensity=None) -> np.ndarray:
     bits of non-negative doubles order as the numbers do), a comparison sort otherwise.
     The other keys are gathered into that order once, so the runs are sorted on
     contiguous memory; inside a run the stable sort left the points in input order, so
-    the position in it breaks the last ties as the index does.
+    the position in it breaks the last ties as the index does. The radix passes, the
+    gather and the runs (in blocks of whole runs) run in parallel; the permutation does
+    not depend on the threads.
 
     Examples
     --------
@@ -116,14 +155,19 @@ def canonical_order(x, y, z, intensity=None) -> np.ndarray:
     """
     x = np.ascontiguousarray(x, dtype=np.float64)
     order = _x_order(x)
-    first = np.take(x, order)
-    y, z = (np.take(np.asarray(a, dtype=np.float64), order) for a in (y, z))
+    n = x.size
     w = (np.empty(0) if intensity is None
-         else np.take(np.asarray(intensity, dtype=np.float64), order))
-    pos = np.arange(x.size, dtype=np.int64)
-    _sort_ties(pos, first, y, z, w)
-    del first, y, z, w
-    return np.take(order, pos)
+         else np.ascontiguousarray(intensity, dtype=np.float64))
+    keys = np.empty((3, n)), np.empty(n if w.size else 0)
+    _gather_keys(x, np.ascontiguousarray(y, dtype=np.float64),
+                 np.ascontiguousarray(z, dtype=np.float64), w, order, keys[0][0],
+                 keys[0][1], keys[0][2], keys[1])
+    del w
+    out = np.empty(n, np.int64)
+    # inside a run the stable sort of x left the points in input order: their position
+    # in the run breaks the last ties as the index does
+    _sort_ties(keys[0][0], keys[0][1], keys[0][2], keys[1], order, out)
+    return out
 
 
 def _x_order(x):

@@ -6,9 +6,8 @@ acquisition or random order walks O(sqrt(T)) triangles per point, and a point ou
 hull falls back to a brute-force scan of all T triangles. Both grow faster than N (the
 10-million-point classification did not finish). Here the triangles are binned once into
 a regular grid of cells (CSR of the cells each triangle's box overlaps) and every point
-tests only the triangles of its cell: O(N + T) whatever the order, in one thread (two
-threads gained 1.14x at 2M points and cost four times the compile time:
-``parallel_runtime`` of ``benchmarks/results_first_run.json``). The
+tests only the triangles of its cell: O(N + T) whatever the order, in parallel over the
+points (each writes its own value: the same values in any thread count). The
 barycentric coordinates use scipy's own affine transforms (``Delaunay.transform``) in
 scipy's order of operations, so values agree with ``LinearNDInterpolator`` to rounding.
 """
@@ -305,7 +304,7 @@ def _inside(tf, t, x, y, eps):  # pragma: no cover - compiled
     return c0, c1, c2, (c0 >= -eps) and (c1 >= -eps) and (c2 >= -eps)
 
 
-@njit
+@njit_parallel
 def _tin_eval(q, ox, oy, g, nx, ny, indptr, tri, simplices, tf, V, eps, eps_broad,
               out):  # pragma: no cover - compiled
     """Linear interpolation on the TIN; NaN outside it (within `eps_broad` at the hull)."""

@@ -287,35 +287,54 @@ def counting_scatter(points, origin, keys, start, parts, order, sorted_points):
 _RADIX_BITS = 11
 
 
-@njit
+#: Keys per block of :func:`radix_order` (at most `_RADIX_BLOCKS` blocks).
+_RADIX_BLOCK = 1 << 18
+_RADIX_BLOCKS = 64
+
+
+@njit_parallel
 def radix_order(keys, nbits):
     """Stable sort of non-negative `keys` below ``2**nbits``: ``(order, keys[order])``.
 
     LSD radix sort, `_RADIX_BITS` bits per pass: the same permutation as
     ``np.argsort(keys, kind="stable")`` in O(N) per pass (a few passes for the grid keys
-    of a cloud, instead of the comparison sort's O(N log N)).
+    of a cloud, instead of the comparison sort's O(N log N)). Each pass counts the digits
+    of consecutive blocks of keys in parallel, gives every (digit, block) its first
+    position (digits ascending, blocks in order within a digit) and scatters the blocks
+    in parallel: the positions do not depend on the threads, the order is the serial
+    sort's.
     """
     n = keys.size
-    order = np.arange(n)
-    cur = keys.copy()
+    nblk = min(max(n // _RADIX_BLOCK, 1), _RADIX_BLOCKS)
+    order = np.empty(n, dtype=np.int64)
+    cur = np.empty(n, dtype=np.int64)
+    for i in prange(n):
+        order[i] = i
+        cur[i] = keys[i]
     nxt_order = np.empty(n, dtype=np.int64)
     nxt = np.empty(n, dtype=np.int64)
     nb = 1 << _RADIX_BITS
     mask = nb - 1
-    count = np.empty(nb + 1, dtype=np.int64)
+    count = np.empty((nblk, nb), dtype=np.int64)
     shift = 0
     while shift < nbits:
-        count[:] = 0
-        for i in range(n):
-            count[((cur[i] >> shift) & mask) + 1] += 1
-        for b in range(nb):
-            count[b + 1] += count[b]
-        for i in range(n):
-            d = (cur[i] >> shift) & mask
-            p = count[d]
-            count[d] = p + 1
-            nxt[p] = cur[i]
-            nxt_order[p] = order[i]
+        for k in prange(nblk):
+            count[k, :] = 0
+            for i in range(k * n // nblk, (k + 1) * n // nblk):
+                count[k, (cur[i] >> shift) & mask] += 1
+        first = 0
+        for d in range(nb):
+            for k in range(nblk):
+                c = count[k, d]
+                count[k, d] = first
+                first += c
+        for k in prange(nblk):
+            for i in range(k * n // nblk, (k + 1) * n // nblk):
+                d = (cur[i] >> shift) & mask
+                at = count[k, d]
+                count[k, d] = at + 1
+                nxt[at] = cur[i]
+                nxt_order[at] = order[i]
         cur, nxt = nxt, cur
         order, nxt_order = nxt_order, order
         shift += _RADIX_BITS
