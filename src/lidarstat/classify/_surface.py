@@ -380,6 +380,10 @@ class TinSurface:
         are left out (a point in one is outside the TIN). A TIN over wide empty areas
         whose triangles there hold no query then bins only the triangles near the data
         (binning costs a triangle's box).
+    frame : BandFrame, optional
+        `P` is given moved into this :class:`~._terrain_frame.BandFrame`; every query is
+        moved into it too (a TIN over clumps far apart then bins the narrowed gaps, not
+        the whole box).
 
     Examples
     --------
@@ -389,9 +393,10 @@ class TinSurface:
     [1.5, 0.25, 9.0]
     """
 
-    def __init__(self, P, V, cell: float, keep=None):
+    def __init__(self, P, V, cell: float, keep=None, frame=None):
         from scipy.spatial import Delaunay, QhullError
 
+        self.frame = frame
         self.P = np.ascontiguousarray(P, dtype=np.float64)
         self.V = np.ascontiguousarray(V, dtype=np.float64)
         self._kdtree = None  # the vertices' k-d tree, built when a query needs it
@@ -425,7 +430,8 @@ class TinSurface:
         return self._kdtree
 
     def __call__(self, q) -> np.ndarray:
-        q = np.ascontiguousarray(q, dtype=np.float64)
+        q = np.ascontiguousarray(q if self.frame is None else self.frame(q),
+                                 dtype=np.float64)
         if self._tri is None:
             return self.V[self._tree.query(q)[1]]
         out = np.empty(len(q))
@@ -460,7 +466,7 @@ def _extrapolate(P, V, tree, q, k=8):
 
 
 def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median", rank=None,
-                   where=None):
+                   where=None, frame=None):
     """Return ``f(xy) -> z`` interpolating ground points (one per cell) linearly on a TIN.
 
     Parameters
@@ -479,6 +485,9 @@ def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median", r
         Ascending rows of the ground points when `xy_ground`, `z_ground` and `rank` are
         given for a whole cloud: the same surface as for ``xy_ground[where]``,
         ``z_ground[where]``, ``rank[where]``, without those copies.
+    frame : BandFrame, optional
+        The TIN is made in this frame (:class:`~._terrain_frame.BandFrame`: the empty
+        bands of cells taken out) and moves its queries into it.
 
     Returns
     -------
@@ -490,4 +499,5 @@ def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median", r
         order.
     """
     sel = _cell_pick(xy_ground, z_ground, cell, which, rank, where)
-    return TinSurface(xy_ground[sel], z_ground[sel], cell)
+    P = xy_ground[sel]
+    return TinSurface(P if frame is None else frame(P), z_ground[sel], cell, frame=frame)
