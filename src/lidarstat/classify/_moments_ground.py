@@ -20,7 +20,7 @@ from ._moments_options import MomentsOptions
 from ._moments_windows import window_pass
 from ._seams import interpolate_cuts
 from ._surface import ground_surface
-from ._terrain_frame import BandFrame
+from ._terrain_frame import BandFrame, terrain_cell
 
 __all__ = ["drop_raised_patches", "ground_cut", "heights", "opening_surface"]
 
@@ -110,8 +110,9 @@ def ground_cut(xy, z, rank, roots, p: MomentsOptions, inten, *, opening_window, 
     roots : list of Tile
         Root windows (:func:`~._moments_windows.root_windows`).
     opening_window, opening_cell, surface_cell : float
-        Window and grid cell of the lower envelope, cell of the ground surface
-        (coordinate units).
+        Window and grid cell of the lower envelope (coarser where its raster would pass
+        16 cells a point: :func:`~._terrain_frame.terrain_cell`), cell of the ground
+        surface (coordinate units).
 
     Returns
     -------
@@ -123,9 +124,11 @@ def ground_cut(xy, z, rank, roots, p: MomentsOptions, inten, *, opening_window, 
     fields, steps, windows
         The final pass's fields (``cluster_id``), analyses and windows.
     """
-    # the plane without its empty bands of 1 m cells: the envelope's raster, and the
-    # frame of the surfaces' TINs (a triangle across clumps 20 km apart would be binned
-    # over the whole box: gigabytes)
+    # the envelope's raster follows the points as the terrain grid does: its cell
+    # coarser only where it would pass 16 cells a point, its empty bands left out; the
+    # surfaces' TINs use that frame too (a triangle across clumps 20 km apart would be
+    # binned over the whole box: gigabytes)
+    opening_cell = terrain_cell(xy, opening_cell)
     frame = BandFrame.of(xy, opening_cell)
     height = heights(z, opening_surface(xy, z, window=opening_window, cell=opening_cell,
                                         frame=frame), overwrite=True)

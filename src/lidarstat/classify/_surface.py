@@ -20,6 +20,7 @@ from numba import prange
 
 from .._shared._columns import column_max, column_min
 from .._shared._jit import njit, njit_parallel
+from ._terrain_frame import CELLS_PER_POINT, MIN_CELLS
 
 __all__ = ["ground_surface", "cell_keys", "TinSurface"]
 
@@ -409,8 +410,13 @@ class TinSurface:
             if d is not None and d.nsimplex > 0:
                 lo = column_min(self.P)
                 span = column_max(self.P) - lo
-                # half-cell bins: about 3 candidate triangles per bin instead of 8
-                g = max(0.5 * float(cell), float(span.max()) / 4096.0, 1e-12)
+                # half-cell bins: about 3 candidate triangles per bin instead of 8; no
+                # more bins than the terrain grid's cells (:func:`~._terrain_frame.
+                # terrain_cell`) for as many vertices: sparse vertices make large
+                # triangles, binned over their whole box
+                limit = max(CELLS_PER_POINT * len(self.P), MIN_CELLS)
+                g = max(0.5 * float(cell), float(span.max()) / 4096.0,
+                        float(np.sqrt(span[0] * span[1] / limit)), 1e-12)
                 nx, ny = (np.floor(span / g).astype(np.int64) + 1).tolist()
                 simp = np.ascontiguousarray(d.simplices, dtype=np.int64)
                 if keep is not None:
