@@ -102,3 +102,38 @@ def test_peak_memory_does_not_grow_with_the_gap():
                        timeout=120, check=True)
     near, far = map(float, r.stdout.split())
     assert far - near < 40.0, (near, far)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_very_sparse_points_coarser_envelope_and_bins(seed):
+    """4,000 points over 3 x 3 km (one a 2,250 m2, as PDAL's thinned mvk): the lower
+    envelope's 1 m raster would hold 2,250 cells a point; its cell grows as the terrain
+    grid's does (at most 16 cells a point and 262,144 cells), and the ground TINs bin
+    their triangles into at most as many cells (every vertex in its own triangles' boxes
+    of 2 m bins: 6 million bins, hundreds of MiB)."""
+    from lidarstat.classify import _moments_ground, _surface
+
+    g = np.random.default_rng(seed)
+    n = 4000
+    xy = g.uniform(0, 3000, (n, 2))
+    z = 0.02 * xy[:, 0] + g.normal(0, 0.05, n)
+    z[g.random(n) < 0.1] += 6.0  # boxes
+    cells, bins = [], []
+    opening, tin = _moments_ground.opening_surface, _surface.TinSurface.__init__
+
+    def spy_opening(*args, **kw):
+        cells.append(kw["cell"])
+        return opening(*args, **kw)
+
+    def spy_tin(self, *args, **kw):
+        tin(self, *args, **kw)
+        if self._tri is not None:
+            bins.append((self._tri[3] * self._tri[4], len(self.P)))
+
+    with mock.patch.object(_moments_ground, "opening_surface", spy_opening), \
+            mock.patch.object(_surface.TinSurface, "__init__", spy_tin):
+        moments(np.c_[xy, z], g.uniform(20, 200, n))
+    assert len(cells) == 1 and cells[0] > 1.0
+    assert (3000 / cells[0]) ** 2 <= max(16 * n, 1 << 18)
+    # bins of side g with (span / g)^2 <= the limit: one more a side at most
+    assert bins and all(b <= (max(16 * m, 1 << 18) ** 0.5 + 1) ** 2 for b, m in bins), bins
