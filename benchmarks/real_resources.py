@@ -124,18 +124,6 @@ CAUSES = {
                "per-row results), or query by the reach (radius) rather than the largest "
                "k, into preallocated rows; not changed here (the ridges code is being "
                "profiled on the Delft crop separately)."},
-    "moments": {
-        "profiled_on": ["pdal_testdata/mvk-thin.las"],
-        "step": "classify/_moments_ground.py ground_cut: opening_surface (the lower "
-                "envelope's grey opening)",
-        "cause": "the lower envelope is the lowest point of every 1 m cell of the bounding "
-                 "box, grey-opened with the 20 m window: a thinned file of 6,280 points over "
-                 "5 x 5 km gives 25 million cells, 1,017 MiB at the opening's maximum "
-                 "filter. The terrain step's grid follows the points "
-                 "(classify/_terrain_frame.py).",
-        "fix": "the terrain step's rules for the envelope: rows and columns far from the "
-               "points left out (the opening reads 20 m around a cell), a coarser cell "
-               "where the grid would pass some cells a point."},
     "segment-sar": {
         "profiled_on": [next(f for f in FILES if "samp11" in f),
                         next(f for f in FILES if "St_Barth" in f)],

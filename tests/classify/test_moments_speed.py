@@ -8,8 +8,10 @@ from classify.test_moments_classify import _scene
 from lidarstat.classify import _cycle, _moments_ground, _moments_windows, _surface, moments
 
 
-def _scipy_surface(xy_ground, z_ground, *, cell, which="median", rank=None, where=None):
-    """The scipy surface: LinearNDInterpolator, the nearest vertices' plane outside."""
+def _scipy_surface(xy_ground, z_ground, *, cell, which="median", rank=None, where=None,
+                   frame=None):
+    """The scipy surface: LinearNDInterpolator, the nearest vertices' plane outside (in
+    the `frame` without the empty bands, as the TIN)."""
     from scipy.interpolate import LinearNDInterpolator
     from scipy.spatial import Delaunay, cKDTree
 
@@ -18,14 +20,17 @@ def _scipy_surface(xy_ground, z_ground, *, cell, which="median", rank=None, wher
         rank = None if rank is None else rank[where]
     sel = _surface._cell_pick(xy_ground, z_ground, cell, which, rank)
     P, V = xy_ground[sel], z_ground[sel]
+    P = P if frame is None else frame(P)
     lin, tree = LinearNDInterpolator(Delaunay(P), V), cKDTree(P)
 
     def f(q):
+        q = q if frame is None else frame(q)
         v = lin(q)
         bad = np.isnan(v)
         v[bad] = _surface._extrapolate(P, V, tree, q[bad])
         return v
 
+    f.frame = frame
     return f
 
 

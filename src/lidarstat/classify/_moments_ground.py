@@ -20,6 +20,7 @@ from ._moments_options import MomentsOptions
 from ._moments_windows import window_pass
 from ._seams import interpolate_cuts
 from ._surface import ground_surface
+from ._terrain_frame import BandFrame, terrain_cell
 
 __all__ = ["drop_raised_patches", "ground_cut", "heights", "opening_surface"]
 
@@ -28,16 +29,28 @@ __all__ = ["drop_raised_patches", "ground_cut", "heights", "opening_surface"]
 _RASTER_CELL_BYTES = 48
 
 
-def opening_surface(xy, z, *, window: float, cell: float = 1.0) -> np.ndarray:
+def opening_surface(xy, z, *, window: float, cell: float = 1.0, frame=False) -> np.ndarray:
     """Lower envelope of the cloud: grey opening of the lowest-point grid (per point).
 
     The opening (erosion then dilation with a ``window x window`` square) removes every
     object narrower than the window and keeps planar slopes exactly (the opening of a
     linear function is itself), so ``z - opening`` is a height above ground that is not
     biased by the terrain trend. Empty cells take the value of the nearest filled cell.
+
+    The raster leaves out the empty bands of rows and columns farther than
+    :data:`~._terrain_frame.BAND_HALO` cells from every point
+    (:class:`~._terrain_frame.BandFrame`): the opening of a cell holding a point reads
+    the cells within ``k - 1`` of it, whose nearest filled cells lie within
+    ``(k - 1) sqrt(2)`` (under 30 cells for the 20 m window), and a cell across a
+    narrowed gap stays farther than that, so the envelope under the points is the one
+    of the whole raster. `frame` is ``BandFrame.of(xy, cell)`` when the caller has it.
     """
     from scipy import ndimage as ndi
 
+    if frame is False:
+        frame = BandFrame.of(xy, cell)
+    if frame is not None:  # the raster follows the points, not their bounding box
+        xy = frame(xy)
     # cells on multiples of `cell` (not on the points' corner): every tile of an area
     # sees the same raster
     ij = np.floor(xy / cell).astype(np.int64)
@@ -56,11 +69,8 @@ def opening_surface(xy, z, *, window: float, cell: float = 1.0) -> np.ndarray:
 
 
 def _check_raster(shape, cell):
-    """Refuse a ground raster larger than a quarter of the physical memory.
-
-    The raster covers the cloud's bounding box, so its size follows the extent, not the
-    points: two small areas 100 km apart would make a 100,000 x 100,000 raster (75 GB).
-    """
+    """Refuse a ground raster larger than a quarter of the physical memory (a cloud
+    whose occupied rows and columns are that many: a wide area densely spread)."""
     from .._shared._memory import physical_memory
     from ..errors import InvalidPointsError
 
@@ -100,20 +110,28 @@ def ground_cut(xy, z, rank, roots, p: MomentsOptions, inten, *, opening_window, 
     roots : list of Tile
         Root windows (:func:`~._moments_windows.root_windows`).
     opening_window, opening_cell, surface_cell : float
-        Window and grid cell of the lower envelope, cell of the ground surface
-        (coordinate units).
+        Window and grid cell of the lower envelope (coarser where its raster would pass
+        16 cells a point: :func:`~._terrain_frame.terrain_cell`), cell of the ground
+        surface (coordinate units).
 
     Returns
     -------
     ground, height, cut : (N,) ndarrays
         Ground mask, heights above the last surface, each point's interpolated cut.
     surface : callable or None
-        The last ground surface (None when ``iterations == 0``).
+        The last ground surface (None when ``iterations == 0``), made in the frame of the
+        1 m cells without their empty bands (:class:`~._terrain_frame.BandFrame`).
     fields, steps, windows
         The final pass's fields (``cluster_id``), analyses and windows.
     """
-    height = heights(z, opening_surface(xy, z, window=opening_window, cell=opening_cell),
-                     overwrite=True)
+    # the envelope's raster follows the points as the terrain grid does: its cell
+    # coarser only where it would pass 16 cells a point, its empty bands left out; the
+    # surfaces' TINs use that frame too (a triangle across clumps 20 km apart would be
+    # binned over the whole box: gigabytes)
+    opening_cell = terrain_cell(xy, opening_cell)
+    frame = BandFrame.of(xy, opening_cell)
+    height = heights(z, opening_surface(xy, z, window=opening_window, cell=opening_cell,
+                                        frame=frame), overwrite=True)
     xyh = np.empty((z.size, 3))
     xyh[:, :2] = xy
     surf = None
@@ -129,7 +147,7 @@ def ground_cut(xy, z, rank, roots, p: MomentsOptions, inten, *, opening_window, 
         if not last:
             fields = None  # this pass's window fields: the cut above holds what is needed
             surf = ground_surface(xy, z, cell=surface_cell, rank=rank,
-                                  where=np.flatnonzero(ground))
+                                  where=np.flatnonzero(ground), frame=frame)
             height = None  # the heights of this pass go before the next are made
             height = heights(z, surf(xy), overwrite=True)
     return ground, height, cut, surf, fields, steps, windows
@@ -152,6 +170,8 @@ def drop_raised_patches(xy, z, rank, ground, height, surf, *, surface_cell, step
         ground = ground & ~raised
         if refit:
             surf = ground_surface(xy, z, cell=surface_cell, rank=rank,
-                                  where=np.flatnonzero(ground))
+                                  where=np.flatnonzero(ground),
+                                  frame=(BandFrame.of(xy, surface_cell) if surf is None
+                                         else surf.frame))
             height = heights(z, surf(xy), overwrite=True)
     return (ground, height, surf) if refit else (ground, None, None)

@@ -24,6 +24,7 @@ import numpy as np
 from numba import prange
 
 from .._shared._jit import njit, njit_parallel
+from ._terrain_frame import BandFrame
 
 __all__ = ["interpolate_cuts"]
 
@@ -57,6 +58,11 @@ def interpolate_cuts(xy, cut, cell: float) -> np.ndarray:
     out = np.empty(cut.size)
     if not cut.size:
         return out
+    # the grid without the empty bands of cells (:class:`~._terrain_frame.BandFrame`):
+    # a point reads the four cells around it, none across a narrowed gap
+    frame = BandFrame.of(xy, cell)
+    if frame is not None:
+        xy = frame(xy)
     nx = int(np.floor(xy[:, 0].max() / cell)) + 1
     ny = int(np.floor(xy[:, 1].max() / cell)) + 1
     grid = _cell_cuts(xy, cut, float(cell), nx, ny)

@@ -19,6 +19,7 @@ from numba import prange
 
 from .._shared._columns import column_max, column_min
 from .._shared._jit import njit, njit_parallel
+from ._terrain_frame import CELLS_PER_POINT, MIN_CELLS
 
 __all__ = ["ground_surface", "cell_keys", "TinSurface"]
 
@@ -379,6 +380,10 @@ class TinSurface:
         are left out (a point in one is outside the TIN). A TIN over wide empty areas
         whose triangles there hold no query then bins only the triangles near the data
         (binning costs a triangle's box).
+    frame : BandFrame, optional
+        `P` is given moved into this :class:`~._terrain_frame.BandFrame`; every query is
+        moved into it too (a TIN over clumps far apart then bins the narrowed gaps, not
+        the whole box).
 
     Examples
     --------
@@ -388,9 +393,10 @@ class TinSurface:
     [1.5, 0.25, 9.0]
     """
 
-    def __init__(self, P, V, cell: float, keep=None):
+    def __init__(self, P, V, cell: float, keep=None, frame=None):
         from scipy.spatial import Delaunay, QhullError
 
+        self.frame = frame
         self.P = np.ascontiguousarray(P, dtype=np.float64)
         self.V = np.ascontiguousarray(V, dtype=np.float64)
         self._kdtree = None  # the vertices' k-d tree, built when a query needs it
@@ -403,8 +409,13 @@ class TinSurface:
             if d is not None and d.nsimplex > 0:
                 lo = column_min(self.P)
                 span = column_max(self.P) - lo
-                # half-cell bins: about 3 candidate triangles per bin instead of 8
-                g = max(0.5 * float(cell), float(span.max()) / 4096.0, 1e-12)
+                # half-cell bins: about 3 candidate triangles per bin instead of 8; no
+                # more bins than the terrain grid's cells (:func:`~._terrain_frame.
+                # terrain_cell`) for as many vertices: sparse vertices make large
+                # triangles, binned over their whole box
+                limit = max(CELLS_PER_POINT * len(self.P), MIN_CELLS)
+                g = max(0.5 * float(cell), float(span.max()) / 4096.0,
+                        float(np.sqrt(span[0] * span[1] / limit)), 1e-12)
                 nx, ny = (np.floor(span / g).astype(np.int64) + 1).tolist()
                 simp = np.ascontiguousarray(d.simplices, dtype=np.int64)
                 if keep is not None:
@@ -424,7 +435,8 @@ class TinSurface:
         return self._kdtree
 
     def __call__(self, q) -> np.ndarray:
-        q = np.ascontiguousarray(q, dtype=np.float64)
+        q = np.ascontiguousarray(q if self.frame is None else self.frame(q),
+                                 dtype=np.float64)
         if self._tri is None:
             return self.V[self._tree.query(q)[1]]
         out = np.empty(len(q))
@@ -459,7 +471,7 @@ def _extrapolate(P, V, tree, q, k=8):
 
 
 def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median", rank=None,
-                   where=None):
+                   where=None, frame=None):
     """Return ``f(xy) -> z`` interpolating ground points (one per cell) linearly on a TIN.
 
     Parameters
@@ -478,6 +490,9 @@ def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median", r
         Ascending rows of the ground points when `xy_ground`, `z_ground` and `rank` are
         given for a whole cloud: the same surface as for ``xy_ground[where]``,
         ``z_ground[where]``, ``rank[where]``, without those copies.
+    frame : BandFrame, optional
+        The TIN is made in this frame (:class:`~._terrain_frame.BandFrame`: the empty
+        bands of cells taken out) and moves its queries into it.
 
     Returns
     -------
@@ -489,4 +504,5 @@ def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median", r
         order.
     """
     sel = _cell_pick(xy_ground, z_ground, cell, which, rank, where)
-    return TinSurface(xy_ground[sel], z_ground[sel], cell)
+    P = xy_ground[sel]
+    return TinSurface(P if frame is None else frame(P), z_ground[sel], cell, frame=frame)
