@@ -29,7 +29,7 @@ from ._terrain_frame import BandFrame
 __all__ = ["interpolate_cuts"]
 
 
-def interpolate_cuts(xy, cut, cell: float) -> np.ndarray:
+def interpolate_cuts(xy, cut, cell: float, frame=False) -> np.ndarray:
     """Per-point cuts interpolated bilinearly between the centres of ``cell`` squares.
 
     Parameters
@@ -40,6 +40,9 @@ def interpolate_cuts(xy, cut, cell: float) -> np.ndarray:
         Each point's window cut (``inf`` where the window found none).
     cell : float
         Side of the interpolation cells (the finest window size).
+    frame : BandFrame or None, optional
+        ``BandFrame.of(xy, cell)`` when the caller has it (None: `xy` is already in
+        its frame, or the frame is the whole grid).
 
     Returns
     -------
@@ -60,7 +63,8 @@ def interpolate_cuts(xy, cut, cell: float) -> np.ndarray:
         return out
     # the grid without the empty bands of cells (:class:`~._terrain_frame.BandFrame`):
     # a point reads the four cells around it, none across a narrowed gap
-    frame = BandFrame.of(xy, cell)
+    if frame is False:
+        frame = BandFrame.of(xy, cell)
     if frame is not None:
         xy = frame(xy)
     nx = int(np.floor(xy[:, 0].max() / cell)) + 1
