@@ -225,6 +225,7 @@ STEPS = (
     ("driver: freed memory handed back", "lidarstat.classify._moments", "release_freed"),
     ("ground: frames, pass inputs, masks", "lidarstat.classify._moments", "ground_cut"),
     ("TIN evaluation", "lidarstat.classify._surface", "_tin_eval"),
+    ("TIN evaluation", "lidarstat.classify._surface", "_extrapolate"),  # outside the hull
     ("low noise", "lidarstat.classify._moments", "low_outliers"),
     ("windows", "lidarstat.classify._moments", "root_windows"),
     ("ground: opening", "lidarstat.classify._moments_ground", "opening_surface"),
@@ -240,6 +241,8 @@ STEPS = (
     ("fields (input order)", "lidarstat.classify._moments", "_expand"),
     ("write", "lidarstat.io", "write"),
     ("write", "lidarstat.io", "rewrite"),  # LAS/LAZ out: the input's records copied
+    ("write: records copied, fields packed", "lidarstat.io._las", "_copied_record"),
+    ("write: laspy header statistics, file write", "laspy.laswriter", "LasWriter.write_points"),
 )
 
 #: The main thread's wait for the steps run beside the others (``_beside``'s Futures).
@@ -274,7 +277,11 @@ def child_profile(inp, out, trim=True):
     del lidarstat  # imported as the command imports them on its first call
     started = _since_process_start()
     for label, mod, attr in STEPS:
-        steps.wrap(label, importlib.import_module(mod), attr)
+        owner = importlib.import_module(mod)
+        *path, attr = attr.split(".")  # a class's method: wrapped on the class
+        for name in path:
+            owner = getattr(owner, name)
+        steps.wrap(label, owner, attr)
     steps.wrap_beside(WAIT_STEP[0], importlib.import_module(WAIT_STEP[1]))
     t1, c1 = time.perf_counter(), time.process_time()
     rc = main(["moments", str(inp), str(out), "--no-report", "-q"])
@@ -376,7 +383,7 @@ def print_rows(rows):
             continue
         print(f"\n{mode}, {r['points']:,} points (peak {p['vmhwm_mib']} MiB):")
         for k, v in p["seconds"].items():
-            print(f"  {k:34s} {v:7.2f} s  {p['cpu_seconds'].get(k, 0):7.2f} s CPU  "
+            print(f"  {k:44s} {v:7.2f} s  {p['cpu_seconds'].get(k, 0):7.2f} s CPU  "
                   f"{p['peak_rss_mib'].get(k, 0):6d} MiB")
         for k, v in p.get("beside", {}).items():
             print(f"  beside, in its thread: {k:18s} {v['seconds']:7.2f} s  "
