@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..stats import density_estimate, dip_test, sequential_moments
+from ..stats import density_estimate, dip_test, sequential_moments, sort_values
 from ._cycle import choose_cycle, skewness_balance_cycle
 from ._moments_options import MomentsMethod, MomentsOptions
 from ._moments_result import MomentsStep, thin_curves
@@ -55,8 +55,8 @@ def _analysis(values, category, p: MomentsOptions, *, window, step, population, 
                           elevation_rule=p.elevation_rule)
     rec = None
     if record:
-        de = (density_estimate(values, bandwidth=p.bandwidth, gridsize=256) if p.evidence
-              else None)
+        de = (density_estimate(values, bandwidth=p.bandwidth, gridsize=256,
+                               sorted_values=sm.sorted_values) if p.evidence else None)
         rec = MomentsStep(window=window, step=step, population=population, category=category,
                           n=int(values.size), dip=dips, choice=ch, curves=thin_curves(sm),
                           density=de)
@@ -115,7 +115,7 @@ def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, 
     rec = None
     vs = None  # v sorted: for the analysis and the dip tests
     if idx.size >= 2 * p.min_points + 4:
-        vs = np.sort(v)
+        vs = sort_values(v)
         dips = (dip_tests({"elevation": v}, p, {"elevation": vs}) if record and p.evidence
                 else {})
         ch, rec, vs = _analysis(v, "elevation", p, window=window_id, step=1,
@@ -166,7 +166,7 @@ def paper_clusters(cats: dict, p: MomentsOptions, window, steps: list, first_clu
         sub = {k: v[todo] for k, v in cats.items()}
         # sorted once for the dip tests and the analysis (a dip test of more values
         # draws a sample and sorts that: the analysis sorts its own then)
-        ssub = {k: np.sort(v) for k, v in sub.items() if v.size <= _DIP_MAX_POINTS}
+        ssub = {k: sort_values(v) for k, v in sub.items() if v.size <= _DIP_MAX_POINTS}
         dips = dip_tests(sub, p, ssub)
         multi = {k: d for k, d in dips.items() if d["multimodal"]}
         if not multi and step > 1:
@@ -189,7 +189,7 @@ def paper_clusters(cats: dict, p: MomentsOptions, window, steps: list, first_clu
         if comp and cluster.size >= 2 * p.min_points:
             c2 = comp[0]
             v2 = cats[c2][cluster]
-            vs2 = np.sort(v2) if v2.size <= _DIP_MAX_POINTS else None
+            vs2 = sort_values(v2) if v2.size <= _DIP_MAX_POINTS else None
             d2 = dip_tests({c2: v2}, p, {c2: vs2})
             if d2[c2]["multimodal"]:
                 ch2, rec2 = analyse(v2, c2, p, window=window, step=step,
