@@ -2,9 +2,9 @@
 
 Every window analysis of the moments classification sorts its heights (the sequential
 moments read the prefixes of the sorted values, the dip test the sorted sample), five
-passes over the cloud and the dip tests of every split and cluster: at 10 million points
-these sorts are about a third of the window passes' time. Sorting the doubles' bits by
-their digits (:func:`._sort_kernels.radix_sort`) costs O(N) and gives the same array.
+passes over the cloud and the dip tests of every split and cluster, a large part of the
+window passes' work. Sorting the doubles' bits by their digits
+(:func:`._sort_kernels.radix_sort`) costs O(N) and gives the same array.
 """
 
 from __future__ import annotations
