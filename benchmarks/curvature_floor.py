@@ -142,7 +142,7 @@ def _stage_kernel():
     @njit
     def run(stage, c0, c1, pts, cell_keys, cell_start, dims, radius):
         ws = qk._workspace()
-        R, cov3, ev, evec, mom, rhs, part = ws[0], ws[1], ws[2], ws[3], ws[4], ws[12], ws[13]
+        R, cov3, ev, evec, mom, rhs, part = ws[0], ws[1], ws[2], ws[3], ws[4], ws[11], ws[12]
         ranges = np.empty((9, 2), dtype=np.int64)
         cap = 1024
         idx = np.empty(cap, dtype=np.int32)
