@@ -191,6 +191,23 @@ def _residual_ss(U, V, H, W, nk, beta, part):
 
 
 @njit
+def _row_product(A, a, B):
+    """Row `a` of the 6 x 6 product A B: six running sums over k in order (each entry as
+    ``sum_k A[a, k] B[k, c]`` in one loop over k, which the compiler keeps in registers
+    and vector lanes)."""
+    m0 = m1 = m2 = m3 = m4 = m5 = 0.0
+    for k in range(6):
+        f = A[a, k]
+        m0 += f * B[k, 0]
+        m1 += f * B[k, 1]
+        m2 += f * B[k, 2]
+        m3 += f * B[k, 3]
+        m4 += f * B[k, 4]
+        m5 += f * B[k, 5]
+    return m0, m1, m2, m3, m4, m5
+
+
+@njit
 def _spd_inverse6(a, rel_tol, L, LI, inv):
     """Inverse of the SPD 6 x 6 `a` into `inv` via its Cholesky factor `L`, whose inverse
     (lower) goes to `LI`: as :func:`cholesky_inverse_n` with m = 6, but dividing once per
@@ -371,12 +388,8 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
         for c in range(6):
             t2 += Ninv[a, c] * N2[c, a]
             t3 += Ninv[a, c] * (_COEF[c * 6 + a] * mom[2, _MONO[c * 6 + a]])
-    for a in range(6):
-        for c in range(6):
-            acc = 0.0
-            for k in range(6):
-                acc += N2[a, k] * Ninv[k, c]
-            L[a, c] = acc  # L reused: M = N2 Ninv
+    for a in range(6):  # L reused: M = N2 Ninv
+        L[a, 0], L[a, 1], L[a, 2], L[a, 3], L[a, 4], L[a, 5] = _row_product(N2, a, Ninv)
     trSN2 = 0.0
     for a in range(6):
         for c in range(6):
@@ -385,15 +398,13 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
     for a in range(6):
         da = 1.0 if a == 0 else (inv_b if a < 3 else inv_b * inv_b)
         beta_out[row, a] = tmp[a] * da
+        if cov_mode == COV_PAPER:
+            cof = (Ninv[a, 0], Ninv[a, 1], Ninv[a, 2], Ninv[a, 3], Ninv[a, 4], Ninv[a, 5])
+        else:
+            cof = _row_product(Ninv, a, L)
         for c in range(a, 6):
             dc = 1.0 if c == 0 else (inv_b if c < 3 else inv_b * inv_b)
-            if cov_mode == COV_PAPER:
-                acc = Ninv[a, c]
-            else:
-                acc = 0.0
-                for k in range(6):
-                    acc += Ninv[a, k] * L[k, c]
-            acc *= da * dc
+            acc = cof[c] * (da * dc)
             cof_out[row, a, c] = acc
             cof_out[row, c, a] = acc
     stats_out[row, 0] = q
