@@ -209,10 +209,11 @@ def _row_product(A, a, B):
 
 @njit
 def _spd_inverse6(a, rel_tol, L, LI, inv):
-    """Inverse of the SPD 6 x 6 `a` into `inv` via its Cholesky factor `L`, whose inverse
-    (lower) goes to `LI`: as :func:`cholesky_inverse_n` with m = 6, but dividing once per
-    pivot (its reciprocal is the diagonal of `LI`) and with loops of fixed length that the
-    compiler unrolls. False if a pivot is not above `rel_tol` times the largest diagonal.
+    """Inverse of the SPD 6 x 6 `a` (its lower triangle is read) into `inv` via its
+    Cholesky factor `L`, whose inverse (lower) goes to `LI`: as :func:`cholesky_inverse_n`
+    with m = 6, but dividing once per pivot (its reciprocal is the diagonal of `LI`) and
+    with loops of fixed length that the compiler unrolls. False if a pivot is not above
+    `rel_tol` times the largest diagonal.
     """
     scale = 0.0
     for k in range(6):
@@ -271,7 +272,8 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
     `buf` (at least e - s rows, 4 columns) is scratch for the neighbours, used as four
     columns of its size: their offsets and weights (pass 0, which also sums what the
     frame's covariance needs), then their u, v, h (pass 1), so that the moment and
-    residual passes read each coordinate contiguously.
+    residual passes read each coordinate contiguously; the residual pass (2) leaves the
+    terms w e^2 in the h column.
     """
     R, cov3, ev, evec, mom, N, N2, L, LI, Ninv, tmp, rhs, part = ws
     cols = buf.reshape((4, buf.shape[0]))  # columns d0 / u, d1 / v, d2 / h, w
