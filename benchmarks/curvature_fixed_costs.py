@@ -13,6 +13,11 @@ seed), whole processes, alternating, median of ``--repeats``, wall and CPU secon
 * ``cloudcompare_io``: CloudCompare 2.11 opening the binary PLY and saving it again
   (``-O IN.ply -SAVE_CLOUDS``, no ``-CURV``): its start, read and write.
 
+Where ``lidarstat_fixed``'s wall time beyond its CPU time goes, from the child itself at its
+end (``wall_beyond_cpu``): the time its threads waited for a processor while ready to run
+(``/proc/self/task/*/schedstat``, second field), its voluntary context switches (each a
+wait: I/O, a lock, a sleep), page faults and the bytes it wrote (``/proc/self/io``).
+
 Writes the key ``fixed_costs`` of ``results_curvature_floor.json``::
 
     nice -n 10 python benchmarks/curvature_fixed_costs.py --shared
@@ -54,6 +59,19 @@ del xyz
 rewrite(src, dst, lambda start, chunk: {k: a[start:start + len(chunk)]
                                         for k, a in fields.items()},
         decode=False, points_per_chunk=1 << 15)
+import json, os, resource
+wait = 0.0
+for t in os.listdir("/proc/self/task"):
+    with open(f"/proc/self/task/{t}/schedstat") as f:
+        wait += int(f.read().split()[1]) / 1e9
+with open("/proc/self/io") as f:
+    io = dict(line.split(": ") for line in f.read().strip().splitlines())
+ru = resource.getrusage(resource.RUSAGE_SELF)
+with open(sys.argv[3], "w") as f:
+    json.dump(dict(runqueue_wait_seconds=wait, voluntary_switches=ru.ru_nvcsw,
+                   involuntary_switches=ru.ru_nivcsw, major_faults=ru.ru_majflt,
+                   minor_faults=ru.ru_minflt, write_bytes=int(io["write_bytes"]),
+                   wchar=int(io["wchar"])), f)
 """
 
 
@@ -77,7 +95,7 @@ def main(argv=None):
     exe = shutil.which("CloudCompare") or shutil.which("cloudcompare")
     cmds = {"python_start": [sys.executable, "-c", "pass"],
             "lidarstat_fixed": [sys.executable, "-c", FIXED_CHILD, str(las),
-                                str(tmp / "out.las")]}
+                                str(tmp / "out.las"), str(tmp / "probe.json")]}
     if exe:
         cmds["cloudcompare_io"] = [exe, "-SILENT", "-AUTO_SAVE", "OFF", "-NO_TIMESTAMP",
                                    "-O", "-GLOBAL_SHIFT", "AUTO", str(ply), "-C_EXPORT_FMT",
@@ -85,17 +103,31 @@ def main(argv=None):
     cc_env = dict(os.environ, QT_QPA_PLATFORM="offscreen")
     run_external_cpu(cmds["lidarstat_fixed"], env=env)  # the kernel's cache, once
     runs = {k: [] for k in cmds}
+    probes = []
     for _ in range(args.repeats):
         for k, cmd in cmds.items():
             runs[k].append(run_external_cpu(cmd, env=cc_env if k == "cloudcompare_io" else env))
+            if k == "lidarstat_fixed":
+                probe = json.loads((tmp / "probe.json").read_text())
+                probe["wall_minus_cpu_seconds"] = (runs[k][-1]["seconds"]
+                                                   - runs[k][-1]["cpu_seconds"])
+                probes.append(probe)
     res = {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
            "machine_shared": bool(args.shared), "points": int(xyz.shape[0]),
            "repeats": args.repeats,
            "how": "see the module docstring of benchmarks/curvature_fixed_costs.py; "
                   "whole processes, alternating, medians; cpu_seconds = user + system",
            "rows": {k: _median_run(v) for k, v in runs.items()}}
+    res["rows"]["lidarstat_fixed"]["wall_beyond_cpu"] = {
+        k: float(np.median([p[k] for p in probes])) for k in probes[0]}
+    res["rows"]["lidarstat_fixed"]["wall_beyond_cpu"]["all"] = probes
     for k, r in res["rows"].items():
         print(f"{k}: {r['seconds']:.2f} s (cpu {r['cpu_seconds']:.2f} s)")
+    for p in probes:
+        print(f"  lidarstat_fixed: wall - cpu {p['wall_minus_cpu_seconds']:.2f} s, waiting "
+              f"for a processor {p['runqueue_wait_seconds']:.2f} s, "
+              f"{p['voluntary_switches']} voluntary switches, {p['major_faults']} major "
+              f"faults, {p['write_bytes'] / 1e6:.0f} MB written")
     path = Path(args.out)
     whole = json.loads(path.read_text()) if path.exists() else {}
     whole["fixed_costs"] = res

@@ -38,6 +38,14 @@ Stored under ``stages`` (per neighbour count) in the same file::
 
     NUMBA_NUM_THREADS=1 python benchmarks/curvature_floor.py --stages --neighbors 50 300
 
+``--half-cells`` times the grid search alone (one thread, the serial loop of ``--stages``
+``search`` stage) on an index of cells of the radius (the 27 cells around a point's own)
+and on one of cells of half the radius (the 125 within two cells), with the same query
+radius: candidates per neighbour, the column ranges' cost (binary searches of the
+occupied cells) and the whole search, ns a point; stored under ``half_cells``::
+
+    NUMBA_NUM_THREADS=1 python benchmarks/curvature_floor.py --half-cells --neighbors 50 300
+
 ``--against SRC`` compares two versions of the package: the ``driver`` stage alone (the
 command's search and fit of the same cells, one thread), in child processes that
 alternate between the package found at SRC (a PYTHONPATH, e.g. main's ``src``) and this
@@ -142,7 +150,7 @@ def _stage_kernel():
     @njit
     def run(stage, c0, c1, pts, cell_keys, cell_start, dims, radius):
         ws = qk._workspace()
-        R, cov3, ev, evec, mom, rhs, part = ws[0], ws[1], ws[2], ws[3], ws[4], ws[12], ws[13]
+        R, cov3, ev, evec, mom, rhs, part = ws[0], ws[1], ws[2], ws[3], ws[4], ws[11], ws[12]
         ranges = np.empty((9, 2), dtype=np.int64)
         cap = 1024
         idx = np.empty(cap, dtype=np.int32)
@@ -235,6 +243,101 @@ def _stage_kernel():
         return visits, check
 
     return run
+
+
+def _half_cells_kernel():
+    """A serial loop over cells: the column ranges of the cells within `rad` cells (mode
+    0), or those and the scan of every candidate (mode 1)."""
+    from lidarstat._shared._jit import njit
+    from lidarstat.neighbors import _kernels as nk
+    from lidarstat.neighbors._grid_kernels import column_ranges
+
+    @njit
+    def run(mode, rad, c0, c1, pts, cell_keys, cell_start, dims, radius):
+        m = 2 * rad + 1
+        ranges = np.empty((m * m, 2), dtype=np.int64)
+        cap = 1024
+        idx = np.empty(cap, dtype=np.int32)
+        dist = np.empty(cap)
+        r2 = radius * radius
+        cand = found = nrs = 0
+        for c in range(c0, c1):
+            key = cell_keys[c]
+            iz0 = key % dims[2]
+            rest = key // dims[2]
+            nr = column_ranges(rest // dims[1], rest % dims[1], rad, max(iz0 - rad, 0),
+                               min(iz0 + rad, dims[2] - 1), cell_keys, cell_start, dims,
+                               ranges)
+            nrs += nr
+            if mode == 0:
+                continue
+            need = 0
+            for t in range(nr):
+                need += ranges[t, 1] - ranges[t, 0]
+            if need > cap:
+                cap = max(need, 2 * cap)
+                idx = np.empty(cap, dtype=np.int32)
+                dist = np.empty(cap)
+            for i in range(cell_start[c], cell_start[c + 1]):
+                cand += need
+                found += nk._scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, 3,
+                                  idx, dist, 0, nk.STORE_ALL)
+        return cand, found, nrs
+
+    return run
+
+
+def half_cells(args):
+    """``--half-cells``: the search on cells of the radius and of half the radius."""
+    from lidarstat.neighbors import CellIndex
+
+    xyz, _ = make_cloud(args.points)
+    run = _half_cells_kernel()
+    out = {}
+    for target in args.neighbors:
+        radius = float(calibrate_radius(xyz, target)[0])
+        row = dict(radius=radius)
+        for name, cell, rad in (("cells_of_radius", radius, 1),
+                                ("cells_of_half_radius", radius / 2, 2)):
+            index = CellIndex(xyz, cell)
+            mid = index.n_cells // 2
+            c1 = int(np.searchsorted(index.cell_start,
+                                     index.cell_start[mid] + args.stage_points))
+            c1 = min(max(c1, mid + 1), index.n_cells)
+            npts = int(index.cell_start[c1] - index.cell_start[mid])
+            call = (mid, c1, index.sorted_points, index.cell_keys, index.cell_start,
+                    index.dims, radius)
+            run(1, rad, mid, mid + 1, *call[2:])  # load or compile
+            cpu = {0: [], 1: []}
+            for _ in range(args.repeats):
+                for mode in (0, 1):
+                    c = time.process_time()
+                    cand, found, nrs = run(mode, rad, *call)
+                    cpu[mode].append(time.process_time() - c)
+            row[name] = dict(points=npts, points_per_cell=npts / (c1 - mid),
+                             neighbours_per_point=found / npts,
+                             candidates_per_neighbour=cand / found,
+                             column_ranges_per_point=nrs / npts,
+                             ranges_cpu_ns_per_point=1e9 * min(cpu[0]) / npts,
+                             search_cpu_ns_per_point=1e9 * min(cpu[1]) / npts)
+            r = row[name]
+            print(f"about {target} neighbours, {name}: {r['candidates_per_neighbour']:.2f} "
+                  f"candidates a neighbour, ranges {r['ranges_cpu_ns_per_point']:.0f} ns, "
+                  f"search {r['search_cpu_ns_per_point']:.0f} ns a point")
+        out[str(target)] = row
+    path = Path(args.out)
+    res = json.loads(path.read_text()) if path.exists() else {}
+    res["half_cells"] = dict(
+        date=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        machine_shared=bool(args.shared), cloud_points=int(xyz.shape[0]),
+        repeats=args.repeats,
+        how="single thread (NUMBA_NUM_THREADS=1), process CPU time, minimum of the "
+            "repeats; the search (column ranges and the scan of every candidate, "
+            "neighbours stored) of about --stage-points points of the middle of the cloud "
+            "on CellIndex(xyz, radius) and CellIndex(xyz, radius / 2) with the same query "
+            "radius; see the module docstring of benchmarks/curvature_floor.py",
+        rows=out)
+    path.write_text(json.dumps(res, indent=1) + "\n")
 
 
 def stages(args):
@@ -401,8 +504,12 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--stages", action="store_true",
                     help="time the kernel's steps on one thread (stored under 'stages')")
+    ap.add_argument("--half-cells", action="store_true",
+                    help="time the search on cells of the radius and of half the radius "
+                         "(stored under 'half_cells')")
     ap.add_argument("--stage-points", type=int, default=200_000,
-                    help="with --stages: points of the middle of the cloud to time")
+                    help="with --stages, --half-cells: points of the middle of the cloud "
+                         "to time")
     ap.add_argument("--shared", action="store_true",
                     help="record that other work ran on the machine meanwhile")
     ap.add_argument("--out", default=str(HERE / "results_curvature_floor.json"))
@@ -417,6 +524,8 @@ def main(argv=None):
         return against(args)
     if args.stages:
         return stages(args)
+    if args.half_cells:
+        return half_cells(args)
 
     import numba
 

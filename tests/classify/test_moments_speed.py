@@ -511,3 +511,55 @@ def test_block_spread_equals_numpy_medians_of_each_block(seed):
         assert centre[c] == m
         assert spread[c] == 1.4826 * np.median(np.abs(blk - m))
     assert widened > 50
+
+
+def _same_step(a, b):
+    """Two MomentsStep records hold the same numbers (curves and density element-wise)."""
+    assert (a.window, a.step, a.population, a.category, a.n, a.dip) == (
+        b.window, b.step, b.population, b.category, b.n, b.dip)
+    assert a.choice == b.choice
+    assert a.curves.keys() == b.curves.keys()
+    for k in a.curves:
+        assert np.array_equal(a.curves[k], b.curves[k], equal_nan=True), k
+    assert (a.density is None) == (b.density is None)
+    if a.density is not None:
+        assert np.array_equal(a.density.grid, b.density.grid)
+        assert np.array_equal(a.density.density, b.density.density)
+        assert a.density.bandwidth == b.density.bandwidth
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("evidence", [True, False])
+def test_clusters_from_the_cuts_first_analysis_equal_their_own(seed, evidence):
+    # the paper's first step on a window's heights repeats the window cut's analysis of
+    # the same heights: taken from the cut, its dip test, cycle and record are the ones
+    # the step computes itself, and so are every later step and every label
+    from lidarstat.classify._cycle import ElevationRule
+    from lidarstat.classify._moments_analysis import paper_clusters, progressive_cut
+    from lidarstat.classify._moments_options import MomentsMethod, MomentsOptions
+
+    g = np.random.default_rng(seed)
+    n = 6000 + 3000 * seed
+    xy = g.uniform(0, 64, (n, 2))
+    obj = g.uniform(size=n) < 0.3
+    h = np.round(np.where(obj, g.uniform(2, 15, n), g.normal(0, 0.1, n)), 3)
+    inten = np.round(np.where(g.uniform(size=n) < 0.4, g.normal(40, 5, n),
+                              g.normal(120, 10, n)))
+    p = MomentsOptions(alpha=0.05, min_points=10, smoothing=0.01, cycle=None,
+                       bandwidth="silverman", method=MomentsMethod.MOMENTS,
+                       elevation_rule=ElevationRule.SYMMETRY, window=64.0, min_window=16.0,
+                       ground_spread=3.0, evidence=evidence)
+    reused = 0
+    for cats in ({"elevation": h, "intensity": inten}, {"elevation": h}):
+        own = []
+        lab_a, next_a = paper_clusters(cats, p, -1, own, 1)
+        first = {}
+        progressive_cut(xy, h, np.arange(n), p.window, np.inf, p, "", [], [], True, first)
+        taken = []
+        lab_b, next_b = paper_clusters(cats, p, -1, taken, 1, first)
+        assert np.array_equal(lab_a, lab_b) and next_a == next_b
+        assert len(own) == len(taken)
+        for a, b in zip(own, taken):
+            _same_step(a, b)
+        reused += taken[0].choice is first["choice"]
+    assert reused >= 1  # the elevation analysis was taken, not recomputed

@@ -67,6 +67,11 @@ def test_spd_inverse6_matches_lapack(rng):
         cond = np.linalg.cond(a)
         np.testing.assert_allclose(inv, want, rtol=0, atol=1e-13 * cond * np.abs(want).max())
         np.testing.assert_array_equal(inv, inv.T)
+        upper = a.copy()  # only the lower triangle is read
+        upper[np.triu_indices(6, 1)] = np.nan
+        got = np.empty((6, 6))
+        assert _spd_inverse6(upper, 1e-12, L, LI, got)
+        np.testing.assert_array_equal(got, inv)
     singular = np.ones((6, 6))
     assert not _spd_inverse6(singular, 1e-12, L, LI, inv)
     assert not _spd_inverse6(np.zeros((6, 6)), 1e-12, L, LI, inv)
@@ -88,3 +93,37 @@ def test_moment_sums_match_direct_sums(rng):
         for p in range(3):
             np.testing.assert_allclose(mom[p], mono @ w ** (p + 1), rtol=1e-13, atol=1e-13 * nk)
         np.testing.assert_allclose(rhs, mono[:6] @ (w * h), rtol=1e-13, atol=1e-13 * nk)
+
+
+def test_residual_sum_of_squares_matches_direct_sum(rng):
+    """The lane sums of w (h - x'beta)^2 equal the plain sum; the h column gets the terms."""
+    from lidarstat.features._quadric_kernels import LANES, _residual_ss
+
+    part = np.empty(54 * LANES)
+    for nk in (1, 7, 8, 9, 50, 301):
+        cols = np.ascontiguousarray(rng.uniform(-1, 1, (4, nk + 5)))
+        cols[3] = rng.uniform(0, 1, nk + 5)
+        beta = rng.normal(size=6)
+        u, v, h, w = (c[:nk].copy() for c in cols)
+        x = np.stack([np.ones(nk), u, v, 0.5 * u * u, u * v, 0.5 * v * v], axis=1)
+        terms = w * (h - x @ beta) ** 2
+        tail = cols[2, nk:].copy()
+        q = _residual_ss(cols[0], cols[1], cols[2], cols[3], nk, beta, part)
+        np.testing.assert_allclose(q, terms.sum(), rtol=1e-13)
+        np.testing.assert_allclose(cols[2, :nk], terms, rtol=1e-12, atol=1e-15)
+        np.testing.assert_array_equal(cols[2, nk:], tail)  # nothing past nk is touched
+
+
+def test_row_product_sums_in_order(rng):
+    """Each entry of a row of A B is sum_k A[a, k] B[k, c] added in k order, bit for bit."""
+    from lidarstat.features._quadric_kernels import _row_product
+
+    A, B = rng.normal(size=(6, 6)) * 10.0 ** rng.uniform(-3, 3, (6, 6)), rng.normal(size=(6, 6))
+    for a in range(6):
+        want = []
+        for c in range(6):
+            acc = 0.0
+            for k in range(6):
+                acc += float(A[a, k]) * float(B[k, c])
+            want.append(acc)
+        assert list(_row_product(A, a, B)) == want

@@ -113,3 +113,16 @@ def test_sorted_values_given_change_nothing(seed):
         assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), name
     with pytest.raises(ValueError, match="sorted_values"):
         sequential_moments(x, sorted_values=xs[:-1])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_density_from_sorted_values_is_the_same(seed):
+    g = np.random.default_rng(seed)
+    x = np.round(np.r_[g.normal(0, 0.2, 3000), g.uniform(3, 20, 700)], 3)
+    g.shuffle(x)
+    for bw in ("silverman", "scott", 0.3):
+        a = density_estimate(x, bandwidth=bw, gridsize=256)
+        b = density_estimate(x, bandwidth=bw, gridsize=256, sorted_values=np.sort(x))
+        assert a.bandwidth == b.bandwidth
+        np.testing.assert_array_equal(a.grid, b.grid)
+        np.testing.assert_array_equal(a.density, b.density)

@@ -17,9 +17,11 @@ multimodal by the dip test.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from ..stats import density_estimate, dip_test, sequential_moments
+from ..stats import density_estimate, dip_test, sequential_moments, sort_values
 from ._cycle import choose_cycle, skewness_balance_cycle
 from ._moments_options import MomentsMethod, MomentsOptions
 from ._moments_result import MomentsStep, thin_curves
@@ -55,8 +57,8 @@ def _analysis(values, category, p: MomentsOptions, *, window, step, population, 
                           elevation_rule=p.elevation_rule)
     rec = None
     if record:
-        de = (density_estimate(values, bandwidth=p.bandwidth, gridsize=256) if p.evidence
-              else None)
+        de = (density_estimate(values, bandwidth=p.bandwidth, gridsize=256,
+                               sorted_values=sm.sorted_values) if p.evidence else None)
         rec = MomentsStep(window=window, step=step, population=population, category=category,
                           n=int(values.size), dip=dips, choice=ch, curves=thin_curves(sm),
                           density=de)
@@ -102,25 +104,29 @@ def _cluster_bound(kept, z):
 
 
 def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, steps,
-                    windows, record):
+                    windows, record, first=None):
     """Cut of one window on heights; split into four while its ground stays multimodal.
 
     Returns ``[(indices, threshold), ...]``. A window whose heights do not separate keeps
     its parent's threshold (a window lying on one large roof is unimodal too, so "nothing
     separates" must not mean "everything is ground"). Appends the window's description
-    to `windows` and its analysis to `steps`.
+    to `windows` and its analysis to `steps`. `first`: a dict that receives this
+    window's own analysis (``dips``, ``choice``, ``record``), which the paper's first
+    clustering step of the same heights repeats (:func:`paper_clusters`).
     """
     v = h[idx]
     thr = parent_thr
     rec = None
     vs = None  # v sorted: for the analysis and the dip tests
     if idx.size >= 2 * p.min_points + 4:
-        vs = np.sort(v)
+        vs = sort_values(v)
         dips = (dip_tests({"elevation": v}, p, {"elevation": vs}) if record and p.evidence
                 else {})
         ch, rec, vs = _analysis(v, "elevation", p, window=window_id, step=1,
                                 population="heights above the ground model", dips=dips,
                                 record=record, sorted_values=vs)
+        if first is not None:
+            first.update(dips=dips, choice=ch, record=rec)
         if ch.cycle is not None:
             thr = min(ch.threshold, parent_thr)
             if p.ground_spread > 0 and p.method is MomentsMethod.MOMENTS:
@@ -155,27 +161,43 @@ def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, 
     return [(idx, thr)]
 
 
-def paper_clusters(cats: dict, p: MomentsOptions, window, steps: list, first_cluster: int):
-    """The paper's steps 1-4 on one window's values; (cluster label per point, next id)."""
+def paper_clusters(cats: dict, p: MomentsOptions, window, steps: list, first_cluster: int,
+                   first=None):
+    """The paper's steps 1-4 on one window's values; (cluster label per point, next id).
+
+    `first`: the window's own elevation analysis from :func:`progressive_cut` (its
+    ``first`` dict) on the same values ``cats["elevation"]``: step 1 takes its dip test
+    and, when it analyses elevation, its moments and cycle, instead of repeating them
+    (the same values in the same order: the same numbers)."""
     n = next(iter(cats.values())).size
     labels = np.zeros(n, np.int32)
     todo = np.arange(n)
     next_id = first_cluster
     step = 1
+    known = first if first and first.get("record") is not None else None
     while todo.size >= 2 * p.min_points and step <= p.max_steps:
         sub = {k: v[todo] for k, v in cats.items()}
+        done = {}  # step 1: the elevation's dip test the window's cut made
+        if step == 1 and known is not None and "elevation" in known["dips"]:
+            done["elevation"] = known["dips"]["elevation"]
         # sorted once for the dip tests and the analysis (a dip test of more values
         # draws a sample and sorts that: the analysis sorts its own then)
-        ssub = {k: np.sort(v) for k, v in sub.items() if v.size <= _DIP_MAX_POINTS}
-        dips = dip_tests(sub, p, ssub)
+        ssub = {k: sort_values(v) for k, v in sub.items()
+                if v.size <= _DIP_MAX_POINTS and k not in done}
+        tested = dip_tests({k: v for k, v in sub.items() if k not in done}, p, ssub)
+        dips = {k: done[k] if k in done else tested[k] for k in sub}
         multi = {k: d for k, d in dips.items() if d["multimodal"]}
         if not multi and step > 1:
             break
         pool = multi or dips
         cat = min(pool, key=lambda k: (pool[k]["pvalue"], -pool[k]["dip"]))
-        ch, rec = analyse(sub[cat], cat, p, window=window, step=step,
-                          population="window" if step == 1 else "unclassified", dips=dips,
-                          sorted_values=ssub.get(cat))
+        if step == 1 and cat == "elevation" and known is not None:
+            ch = known["choice"]
+            rec = replace(known["record"], window=window, population="window", dip=dips)
+        else:
+            ch, rec = analyse(sub[cat], cat, p, window=window, step=step,
+                              population="window" if step == 1 else "unclassified",
+                              dips=dips, sorted_values=ssub.get(cat))
         del ssub
         steps.append(rec)
         if ch.cycle is None:
@@ -189,7 +211,7 @@ def paper_clusters(cats: dict, p: MomentsOptions, window, steps: list, first_clu
         if comp and cluster.size >= 2 * p.min_points:
             c2 = comp[0]
             v2 = cats[c2][cluster]
-            vs2 = np.sort(v2) if v2.size <= _DIP_MAX_POINTS else None
+            vs2 = sort_values(v2) if v2.size <= _DIP_MAX_POINTS else None
             d2 = dip_tests({c2: v2}, p, {c2: vs2})
             if d2[c2]["multimodal"]:
                 ch2, rec2 = analyse(v2, c2, p, window=window, step=step,

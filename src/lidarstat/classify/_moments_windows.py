@@ -87,13 +87,14 @@ def _window_keys(xy, ox, oy, size, nrow):  # pragma: no cover - compiled
     return key
 
 
-def _cut_window(xyh, p, record):
+def _cut_window(xyh, p, record, first=None):
     """Progressive cuts of one root window on heights (column 2 of `xyh`): ground mask and
-    each point's (sub-)window cut (inf where the root window found none)."""
+    each point's (sub-)window cut (inf where the root window found none). `first`
+    receives the root window's own analysis (:func:`progressive_cut`)."""
     xy, h = xyh[:, :2], xyh[:, 2]
     steps, infos = [], []
     parts = progressive_cut(xy, h, np.arange(h.size), p.window, np.inf, p, "", steps, infos,
-                            record)
+                            record, first)
     ground = np.zeros(h.size, bool)
     cut = np.empty(h.size)
     for idx, thr in parts:
@@ -105,7 +106,8 @@ def _cut_window(xyh, p, record):
 def _classify_window(xyh, attrs, p, record, final):
     """One root window: its ground cut, and on the final pass also the paper's clustering
     steps (cluster ids local, from 1)."""
-    ground, cut, gsteps, infos = _cut_window(xyh, p, record)
+    first = {} if final else None  # the heights' analysis: the clusters' first step
+    ground, cut, gsteps, infos = _cut_window(xyh, p, record, first)
     if not final:
         return _WindowOut({"ground": ground, "cut": cut}, gsteps, infos)
     h = xyh[:, 2]
@@ -120,7 +122,7 @@ def _classify_window(xyh, attrs, p, record, final):
     cats = {"elevation": h}
     if inten is not None:
         cats["intensity"] = inten
-    lab, next_id = paper_clusters(cats, p, -1, steps, 1)
+    lab, next_id = paper_clusters(cats, p, -1, steps, 1, first)
     return _WindowOut({"ground": ground, "cut": cut, "cluster_id": lab}, gsteps, infos,
                       steps, next_id - 1)
 

@@ -160,11 +160,60 @@ def _moment_sums(U, V, Hh, W, nk, acc, mom, rhs):
 
 
 @njit
+def _residual_ss(U, V, H, W, nk, beta, part):
+    """``sum w (h - x'beta)^2`` over the first `nk` neighbours (scaled beta; `H` is
+    overwritten by the terms ``w e^2``).
+
+    The terms are formed in one elementwise loop (vector lanes) and summed in LANES
+    partial sums added in a fixed order (:func:`_lane_total`): the result does not depend
+    on the processor. `part` (at least LANES) is scratch.
+    """
+    b0 = beta[0]
+    b1 = beta[1]
+    b2 = beta[2]
+    b3 = 0.5 * beta[3]
+    b4 = beta[4]
+    b5 = 0.5 * beta[5]
+    for t in range(nk):
+        u = U[t]
+        v = V[t]
+        r = H[t] - (b0 + u * (b1 + b3 * u + b4 * v) + v * (b2 + b5 * v))
+        H[t] = W[t] * r * r
+    for lane in range(LANES):
+        part[lane] = 0.0
+    n = nk - nk % LANES
+    for t0 in range(0, n, LANES):
+        for lane in range(LANES):
+            part[lane] += H[t0 + lane]
+    for t in range(n, nk):
+        part[t - n] += H[t]
+    return _lane_total(part, 0)
+
+
+@njit
+def _row_product(A, a, B):
+    """Row `a` of the 6 x 6 product A B: six running sums over k in order (each entry as
+    ``sum_k A[a, k] B[k, c]`` in one loop over k, which the compiler keeps in registers
+    and vector lanes)."""
+    m0 = m1 = m2 = m3 = m4 = m5 = 0.0
+    for k in range(6):
+        f = A[a, k]
+        m0 += f * B[k, 0]
+        m1 += f * B[k, 1]
+        m2 += f * B[k, 2]
+        m3 += f * B[k, 3]
+        m4 += f * B[k, 4]
+        m5 += f * B[k, 5]
+    return m0, m1, m2, m3, m4, m5
+
+
+@njit
 def _spd_inverse6(a, rel_tol, L, LI, inv):
-    """Inverse of the SPD 6 x 6 `a` into `inv` via its Cholesky factor `L`, whose inverse
-    (lower) goes to `LI`: as :func:`cholesky_inverse_n` with m = 6, but dividing once per
-    pivot (its reciprocal is the diagonal of `LI`) and with loops of fixed length that the
-    compiler unrolls. False if a pivot is not above `rel_tol` times the largest diagonal.
+    """Inverse of the SPD 6 x 6 `a` (its lower triangle is read) into `inv` via its
+    Cholesky factor `L`, whose inverse (lower) goes to `LI`: as :func:`cholesky_inverse_n`
+    with m = 6, but dividing once per pivot (its reciprocal is the diagonal of `LI`) and
+    with loops of fixed length that the compiler unrolls. False if a pivot is not above
+    `rel_tol` times the largest diagonal.
     """
     scale = 0.0
     for k in range(6):
@@ -208,8 +257,8 @@ def _spd_inverse6(a, rel_tol, L, LI, inv):
 def _workspace():
     """Per-thread scratch arrays of ``_fit_one`` (allocated once per chunk or cell)."""
     return (np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty((3, 3)),
-            np.empty((3, 15)), np.empty((6, 6)), np.empty((6, 6)), np.empty((6, 6)),
-            np.zeros((6, 6)), np.zeros((6, 6)), np.empty((6, 6)), np.empty(6), np.empty(6),
+            np.empty((3, 15)), np.empty((6, 6)), np.empty((6, 6)), np.zeros((6, 6)),
+            np.zeros((6, 6)), np.empty((6, 6)), np.empty(6), np.empty(6),
             np.empty(54 * LANES))
 
 
@@ -223,9 +272,10 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
     `buf` (at least e - s rows, 4 columns) is scratch for the neighbours, used as four
     columns of its size: their offsets and weights (pass 0, which also sums what the
     frame's covariance needs), then their u, v, h (pass 1), so that the moment and
-    residual passes read each coordinate contiguously.
+    residual passes read each coordinate contiguously; the residual pass (2) leaves the
+    terms w e^2 in the h column.
     """
-    R, cov3, ev, evec, mom, N, N2, N3, L, LI, Ninv, tmp, rhs, part = ws
+    R, cov3, ev, evec, mom, N, N2, L, LI, Ninv, tmp, rhs, part = ws
     cols = buf.reshape((4, buf.shape[0]))  # columns d0 / u, d1 / v, d2 / h, w
     rows = cols.T  # row t: the neighbour's (u, v, h, w), as to_frame reads them
     b = bw
@@ -311,16 +361,15 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
     _moment_sums(cols[0], cols[1], cols[2], cols[3], nk, part, mom, rhs)
     rhs[3] *= 0.5
     rhs[5] *= 0.5
+    # N's lower triangle (all the Cholesky reads) and N2 whole (for M = N2 Ninv); N3 only
+    # enters tr(Ninv N3), read from the moments
     for a in range(6):
-        for c in range(a, 6):
+        for c in range(a + 1):
             k = _MONO[a * 6 + c]
             f = _COEF[a * 6 + c]
             N[a, c] = f * mom[0, k]
             N2[a, c] = f * mom[1, k]
-            N3[a, c] = f * mom[2, k]
-            N[c, a] = N[a, c]
             N2[c, a] = N2[a, c]
-            N3[c, a] = N3[a, c]
     if not _spd_inverse6(N, 1e-12, L, LI, Ninv):
         return SINGULAR, p
     for a in range(6):
@@ -329,59 +378,37 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
             acc += Ninv[a, c] * rhs[c]
         tmp[a] = acc
     # Pass 2: the weighted residual sum of squares, explicitly (no cancellation)
-    q = 0.0
-    b0 = tmp[0]
-    b1 = tmp[1]
-    b2 = tmp[2]
-    b3 = 0.5 * tmp[3]
-    b4 = tmp[4]
-    b5 = 0.5 * tmp[5]
-    for t in range(nk):  # the neighbours' local coordinates and weights from pass 1
-        u = cols[0, t]
-        v = cols[1, t]
-        h = cols[2, t]
-        w = cols[3, t]
-        r = h - (b0 + u * (b1 + b3 * u + b4 * v) + v * (b2 + b5 * v))
-        q += w * r * r
+    q = _residual_ss(cols[0], cols[1], cols[2], cols[3], nk, tmp, part)
     sw = mom[0, 0]
     sw2 = mom[1, 0]
-    # traces: tr(Ninv N2), tr(Ninv N3) and, with M = N2 Ninv, tr(S N2) = tr(M M) for the
-    # sandwich S = Ninv N2 Ninv = Ninv M (symmetric: its upper triangle, mirrored)
+    # traces: tr(Ninv N2), tr(Ninv N3) (N3's entries read from the moments) and, with M =
+    # N2 Ninv, tr(S N2) = tr(M M) for the sandwich S = Ninv N2 Ninv = Ninv M (symmetric:
+    # its upper triangle, mirrored); each trace summed over all 36 products in row order
     t2 = 0.0
     t3 = 0.0
     for a in range(6):
         for c in range(6):
             t2 += Ninv[a, c] * N2[c, a]
-            t3 += Ninv[a, c] * N3[c, a]
-    for a in range(6):
-        for c in range(6):
-            acc = 0.0
-            for k in range(6):
-                acc += N2[a, k] * Ninv[k, c]
-            L[a, c] = acc  # L reused: M = N2 Ninv
+            t3 += Ninv[a, c] * (_COEF[c * 6 + a] * mom[2, _MONO[c * 6 + a]])
+    for a in range(6):  # L reused: M = N2 Ninv
+        L[a, 0], L[a, 1], L[a, 2], L[a, 3], L[a, 4], L[a, 5] = _row_product(N2, a, Ninv)
     trSN2 = 0.0
     for a in range(6):
         for c in range(6):
             trSN2 += L[a, c] * L[c, a]
-    if cov_mode == COV_PAPER:
-        for a in range(6):
-            for c in range(6):
-                cof_out[row, a, c] = Ninv[a, c]
-    else:
-        for a in range(6):
-            for c in range(a, 6):
-                acc = 0.0
-                for k in range(6):
-                    acc += Ninv[a, k] * L[k, c]
-                cof_out[row, a, c] = acc
-                cof_out[row, c, a] = acc
-    # rescale to physical units
+    # the cofactor's upper triangle, rescaled to physical units as it is stored, mirrored
     for a in range(6):
         da = 1.0 if a == 0 else (inv_b if a < 3 else inv_b * inv_b)
         beta_out[row, a] = tmp[a] * da
-        for c in range(6):
+        if cov_mode == COV_PAPER:
+            cof = (Ninv[a, 0], Ninv[a, 1], Ninv[a, 2], Ninv[a, 3], Ninv[a, 4], Ninv[a, 5])
+        else:
+            cof = _row_product(Ninv, a, L)
+        for c in range(a, 6):
             dc = 1.0 if c == 0 else (inv_b if c < 3 else inv_b * inv_b)
-            cof_out[row, a, c] *= da * dc
+            acc = cof[c] * (da * dc)
+            cof_out[row, a, c] = acc
+            cof_out[row, c, a] = acc
     stats_out[row, 0] = q
     stats_out[row, 1] = sw
     stats_out[row, 2] = sw - t2

@@ -17,6 +17,7 @@ _WHERE = {
     **dict.fromkeys(("DensityEstimate", "SequentialMoments", "density_estimate", "dip_test",
                      "sequential_moments", "standard_moments"), "_moments"),
     "TestResult": "_results",
+    "sort_values": "_sort",
     **dict.fromkeys(("chi2_isf_many", "chi2_isf_scalar", "chi2_sf_scalar", "gamma_q"),
                     "_tail_kernels"),
     **dict.fromkeys(("SARFit", "sar_fit", "sar_mean_surface", "sar_trend"), "_sar"),
@@ -37,7 +38,7 @@ __all__ = ["TestResult", "binomial_test", "z_critical", "t_critical", "chi2_crit
            "moran_test", "likelihood_ratio_test", "chow_test", "deletion_residual_envelope",
            "truncated_normal_variance",
            "SequentialMoments", "sequential_moments", "standard_moments", "DensityEstimate", "density_estimate",
-           "dip_test", "chi2_isf_many", "chi2_isf_scalar", "chi2_sf_scalar", "gamma_q"]
+           "dip_test", "sort_values", "chi2_isf_many", "chi2_isf_scalar", "chi2_sf_scalar", "gamma_q"]
 
 
 def __getattr__(name: str):

@@ -18,6 +18,7 @@ from .._shared._jit import njit
 from .._shared.validation import check_scalar
 from ..errors import InvalidParameterError, InvalidPointsError
 from ._results import TestResult
+from ._sort import sort_values
 
 __all__ = ["SequentialMoments", "sequential_moments", "standard_moments", "DensityEstimate",
            "density_estimate", "dip_test"]
@@ -202,8 +203,8 @@ def sequential_moments(values, *, min_points: int = 4, return_order: bool = Fals
         xs = x[order]
     else:
         order = None
-        xs = np.sort(x) if sorted_values is None else _presorted(sorted_values, n,
-                                                                  "sequential_moments")
+        xs = sort_values(x) if sorted_values is None else _presorted(sorted_values, n,
+                                                                      "sequential_moments")
     c, s = _robust_frame(xs)
     y = (xs - c) / s
     m = n - min_points + 1  # cycle k leaves the prefix of length n - k, k = 0 .. m - 1
@@ -262,7 +263,8 @@ class DensityEstimate:
         return self.grid[i]
 
 
-def density_estimate(values, *, bandwidth="silverman", gridsize: int = 512) -> DensityEstimate:
+def density_estimate(values, *, bandwidth="silverman", gridsize: int = 512,
+                     sorted_values=None) -> DensityEstimate:
     """Gaussian kernel density of `values`, binned and convolved by FFT (O(N + G log G)).
 
     Parameters
@@ -272,6 +274,10 @@ def density_estimate(values, *, bandwidth="silverman", gridsize: int = 512) -> D
         Data-driven rule (Silverman's robust rule of thumb, ``0.9 min(sd, IQR/1.34) N^-1/5``,
         by default) or the paper's fixed ``h``.
     gridsize : int, optional
+    sorted_values : (N,) ndarray, optional
+        ``np.sort(values)`` when the caller has it: the quartiles and the range are read
+        from it (the same numbers; the standard deviation and the binning keep the
+        order of `values`).
 
     Returns
     -------
@@ -290,7 +296,8 @@ def density_estimate(values, *, bandwidth="silverman", gridsize: int = 512) -> D
                             closed="left", integer=True)
     n = x.size
     sd = float(np.std(x))
-    q75, q25 = np.percentile(x, [75, 25])
+    xs = x if sorted_values is None else _presorted(sorted_values, n, "density_estimate")
+    q75, q25 = np.percentile(xs, [75, 25])
     spread = min(sd, (q75 - q25) / 1.349) if q75 > q25 else sd
     if isinstance(bandwidth, str):
         if bandwidth not in ("silverman", "scott"):
@@ -303,7 +310,9 @@ def density_estimate(values, *, bandwidth="silverman", gridsize: int = 512) -> D
     else:
         method = "given"
         h = check_scalar(bandwidth, "bandwidth", func="density_estimate", low=0)
-    lo, hi = float(x.min()) - 4 * h, float(x.max()) + 4 * h
+    lo, hi = ((float(x.min()), float(x.max())) if sorted_values is None
+              else (float(xs[0]), float(xs[-1])))
+    lo, hi = lo - 4 * h, hi + 4 * h
     grid = np.linspace(lo, hi, gridsize)
     step = grid[1] - grid[0]
     # linear binning
@@ -375,14 +384,14 @@ def dip_test(values, *, alpha: float = 0.05, max_points: int = 20000, rng=0,
         # ties and the smallest gap between distinct values from one sort: the gaps of
         # the sorted values are 0 between ties and the distinct values' gaps otherwise
         if xs is None:
-            xs = np.sort(x)
+            xs = sort_values(x)
         gaps = np.diff(xs)
         steps = gaps[gaps > 0]
         if steps.size < gaps.size and steps.size:
             q = float(np.min(steps))
             x = x + gen.uniform(-0.5 * q, 0.5 * q, size=x.size)
-            xs = None  # the spread values are sorted by the test
-    # the statistic of the sorted sample (diptest sorts it when not given sorted)
-    dip, p = _dt.diptest(x) if xs is None else _dt.diptest(xs, sort_x=False)
+            xs = None  # the spread values: sorted again below
+    # the statistic of the sorted sample
+    dip, p = _dt.diptest(sort_values(x) if xs is None else xs, sort_x=False)
     return TestResult(statistic=np.float64(dip), pvalue=np.float64(p), df=x.size,
                       reject=np.bool_(p < alpha), alpha=alpha)
