@@ -13,7 +13,9 @@ The row of each size is the median of the repeats. The profile (``--profile``) r
 same command once more in a process that times every named step of ``moments`` (start
 and imports, read, low noise, windows, each part of the ground, terrain, roads,
 buildings, classes, fields, write) and samples its resident memory every 10 ms, giving
-each step's wall time and the peak RSS reached during it; ``--profile --profile`` adds a
+each step's wall time and the peak RSS reached during it (the steps run in a thread
+beside the others are also timed in their thread, and the main thread's wait for them
+is a row of its own); ``--profile --profile`` adds a
 second profile in which the freed memory is not handed back to the system between the
 steps (``release_freed``), to show what that saves.
 
@@ -28,6 +30,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import platform
@@ -114,13 +117,17 @@ class _Steps:
 
     Module functions are wrapped; a step called inside another is timed on its own and
     taken out of the outer one. A thread samples the resident set every 10 ms and
-    charges it to the innermost running step. Only the main thread's calls are timed: a
-    step run in a thread beside the others (the raised patches' graph, the roads) is
-    charged, wall and CPU, to the main thread's steps it runs beside.
+    charges it to the innermost running step. The rows add up to the main thread's
+    time: a step run in a thread beside the others (the raised patches' graph, the roads)
+    is charged, wall and CPU, to the main thread's steps it runs beside, and the main
+    thread's wait for its result is a row of its own (:meth:`wrap_beside`). Such a step
+    is also timed in its own thread (wall and that thread's CPU), in `beside`, outside
+    the sum.
     """
 
     def __init__(self):
         self.seconds, self.cpu, self.peak_mib, self.stack, self.saved = {}, {}, {}, [], []
+        self.beside = {}
         self._stop = threading.Event()
         self._page = os.sysconf("SC_PAGE_SIZE")
 
@@ -144,7 +151,10 @@ class _Steps:
     def wrap(self, name, owner, attr):
         orig = getattr(owner, attr)
         self.saved.append((owner, attr, orig))
+        setattr(owner, attr, self._timed(name, orig))
 
+    def _timed(self, name, orig):
+        @functools.wraps(orig)
         def timed(*a, **k):
             if threading.current_thread() is not threading.main_thread():
                 return orig(*a, **k)  # a step run beside the others: its CPU is the process's
@@ -162,7 +172,43 @@ class _Steps:
                     self.stack[-1][2] += dt
                     self.stack[-1][4] += dc
 
-        setattr(owner, attr, timed)
+        return timed
+
+    def wrap_beside(self, name, owner, attr="_beside"):
+        """Time ``owner._beside(run, func, ...)`` (a step started in a thread of its own,
+        a Future): the step in its thread (``beside[func name]``, wall and thread CPU)
+        and the main thread's wait in ``future.result()`` as the step `name`."""
+        orig = getattr(owner, attr)
+        self.saved.append((owner, attr, orig))
+        steps = self
+
+        def in_thread(func):
+            def run(*a, **k):
+                t0, c0 = time.perf_counter(), time.thread_time()
+                try:
+                    return func(*a, **k)
+                finally:
+                    steps.beside[func.__name__] = {
+                        "seconds": round(time.perf_counter() - t0, 3),
+                        "thread_cpu_seconds": round(time.thread_time() - c0, 3)}
+            return run
+
+        class Waited:
+            def __init__(self, future):
+                self._future = future
+
+            def cancel(self):
+                return self._future.cancel()
+
+        def beside(run, func, *a, **k):
+            future = orig(run, in_thread(func), *a, **k)
+            if future is None:
+                return None
+            waited = Waited(future)
+            waited.result = self._timed(name, future.result)
+            return waited
+
+        setattr(owner, attr, beside)
 
 
 #: The named steps of ``lidarstat moments``: (label, module, attribute). A module
@@ -170,8 +216,16 @@ class _Steps:
 STEPS = (
     ("read", "lidarstat.io", "read"),
     ("driver (checks, copies, reorderings)", "lidarstat.classify", "moments"),
+    ("driver: checks", "lidarstat.classify._moments", "check_points"),
+    ("driver: checks", "lidarstat.classify._moments", "_usable_intensity"),
     ("canonical order", "lidarstat.classify._moments", "canonical_order"),
+    ("driver: copies, reorderings", "lidarstat.classify._moments", "_permute_columns"),
+    ("driver: copies, reorderings", "lidarstat.classify._moments", "_without_low_noise"),
+    ("driver: copies, reorderings", "lidarstat.classify._moments", "_window_frame"),
+    ("driver: freed memory handed back", "lidarstat.classify._moments", "release_freed"),
+    ("ground: frames, pass inputs, masks", "lidarstat.classify._moments", "ground_cut"),
     ("TIN evaluation", "lidarstat.classify._surface", "_tin_eval"),
+    ("TIN evaluation", "lidarstat.classify._surface", "_extrapolate"),  # outside the hull
     ("low noise", "lidarstat.classify._moments", "low_outliers"),
     ("windows", "lidarstat.classify._moments", "root_windows"),
     ("ground: opening", "lidarstat.classify._moments_ground", "opening_surface"),
@@ -187,7 +241,12 @@ STEPS = (
     ("fields (input order)", "lidarstat.classify._moments", "_expand"),
     ("write", "lidarstat.io", "write"),
     ("write", "lidarstat.io", "rewrite"),  # LAS/LAZ out: the input's records copied
+    ("write: records copied, fields packed", "lidarstat.io._las", "_copied_record"),
+    ("write: laspy header statistics, file write", "laspy.laswriter", "LasWriter.write_points"),
 )
+
+#: The main thread's wait for the steps run beside the others (``_beside``'s Futures).
+WAIT_STEP = ("waiting for side steps", "lidarstat.classify._moments")
 
 
 def _since_process_start():
@@ -218,7 +277,12 @@ def child_profile(inp, out, trim=True):
     del lidarstat  # imported as the command imports them on its first call
     started = _since_process_start()
     for label, mod, attr in STEPS:
-        steps.wrap(label, importlib.import_module(mod), attr)
+        owner = importlib.import_module(mod)
+        *path, attr = attr.split(".")  # a class's method: wrapped on the class
+        for name in path:
+            owner = getattr(owner, name)
+        steps.wrap(label, owner, attr)
+    steps.wrap_beside(WAIT_STEP[0], importlib.import_module(WAIT_STEP[1]))
     t1, c1 = time.perf_counter(), time.process_time()
     rc = main(["moments", str(inp), str(out), "--no-report", "-q"])
     total, ctotal = time.perf_counter() - t1, time.process_time() - c1
@@ -234,6 +298,7 @@ def child_profile(inp, out, trim=True):
     return {"rc": rc, "ended_s": _since_process_start(), "seconds": {k: round(v, 3) for k, v in secs.items()},
             "cpu_seconds": {k: round(v, 3) for k, v in cpu.items()},
             "peak_rss_mib": {k: round(v) for k, v in steps.peak_mib.items()},
+            "beside": steps.beside,
             "vmhwm_mib": round(hwm / 1024)}
 
 
@@ -318,8 +383,11 @@ def print_rows(rows):
             continue
         print(f"\n{mode}, {r['points']:,} points (peak {p['vmhwm_mib']} MiB):")
         for k, v in p["seconds"].items():
-            print(f"  {k:34s} {v:7.2f} s  {p['cpu_seconds'].get(k, 0):7.2f} s CPU  "
+            print(f"  {k:44s} {v:7.2f} s  {p['cpu_seconds'].get(k, 0):7.2f} s CPU  "
                   f"{p['peak_rss_mib'].get(k, 0):6d} MiB")
+        for k, v in p.get("beside", {}).items():
+            print(f"  beside, in its thread: {k:18s} {v['seconds']:7.2f} s  "
+                  f"{v['thread_cpu_seconds']:7.2f} s CPU of its thread")
 
 
 def main(argv=None):

@@ -173,6 +173,11 @@ def test_rewrite_copies_the_records_as_read(tmp_path, rng):
         lio.rewrite(src, outs[-1], fields_of, points_per_chunk=50, decode=decode)
     assert outs[0].read_bytes() == outs[1].read_bytes()
     assert isinstance(seen[0], lio.PointCloud) and seen[-1] == range(100, N)
+    # the chunks after the first (the last one shorter) refill the first one's record:
+    # the same bytes as one chunk in a new record
+    whole = tmp_path / "whole.las"
+    lio.rewrite(src, whole, fields_of, points_per_chunk=N, decode=False)
+    assert whole.read_bytes() == outs[1].read_bytes()
     a, b = laspy.read(src), laspy.read(outs[1])
     for name in a.point_format.dimension_names:
         want = fields.get(name, a[name])

@@ -39,6 +39,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from .._shared._columns import column_min
 from .._shared._memory import release_freed
 from ..neighbors import knn_neighbors
 from ..stats import binomial_test, chi2_quantile, chi2_test, z_critical
@@ -96,7 +97,7 @@ def ground_sigma(ground_xyz, k, overwrite=False):
     pts = ground_xyz if overwrite else ground_xyz.copy()
     pts -= mean
     if m > 2 * _GROUND_QUERIES:  # whole 8 m blocks, spread evenly: full neighbourhoods
-        lo = pts[:, :2].min(axis=0)
+        lo = column_min(pts[:, :2])
         every = int(np.ceil(m / (2 * _GROUND_QUERIES)))
         block = np.floor((pts[:, 0] - lo[0]) / 8.0).astype(np.int64) * 7  # column by
         block += np.floor((pts[:, 1] - lo[1]) / 8.0).astype(np.int64) * 3  # column
@@ -216,7 +217,7 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
 def _roof_top(pts, roof, cell):
     """Highest roof point of the grid cell of each point and of its eight neighbours
     (-inf where none of the nine cells holds a roof point)."""
-    ij = np.floor((pts[:, :2] - pts[:, :2].min(axis=0)) / cell).astype(np.int64) + 1
+    ij = np.floor((pts[:, :2] - column_min(pts[:, :2])) / cell).astype(np.int64) + 1
     width = int(ij[:, 1].max()) + 2
     key = ij[:, 0] * width + ij[:, 1]
     top = np.full(len(pts), -np.inf)

@@ -256,6 +256,11 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         (intensity, "intensity"), (number_of_returns, "number_of_returns"),
         (return_number, "return_number")))
     inten = _usable_intensity(inten, source)
+    # the vegetation candidates (non-last returns of multi-return pulses): one mask
+    # reordered below, not the two return attributes
+    multi = _multiple_returns(nret, rnum)
+    has_returns = multi is not None
+    del nret, rnum
     ux, uz = unit_factors(units, source)
     # The classes must not depend on the order of the points (the tiles of a catalogue
     # bring them in another order than the whole file): every step runs on the points
@@ -265,15 +270,13 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         _permute_columns(pts, canon)
     else:
         pts = np.take(pts, canon, axis=0)  # rows by np.take: a third of fancy indexing's time
-    inten, nret, rnum = (None if a is None else a[canon] for a in (inten, nret, rnum))
+    inten, multi = (None if a is None else np.take(a, canon) for a in (inten, multi))
 
     # 1. low noise, out of every analysis
     noise = (low_outliers(pts, pts[:, 2], min_depth=0.5 / uz) if low_noise
              else np.zeros(n, bool))
     pts_noise = pts[noise]  # for their heights under the final surface
-    pts, inten, multi, has_returns = _without_low_noise(noise, pts, inten, nret, rnum, source,
-                                                        in_place=reuse)
-    del nret, rnum
+    pts, inten, multi = _without_low_noise(noise, pts, inten, multi, source, in_place=reuse)
     release_freed()  # between steps: what a step freed goes back to the system
 
     # 2. analysis windows; the points in root-window order, local coordinates. Ties are
@@ -300,8 +303,8 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     xy, z = _window_frame(pts, perm, origin, in_place=reuse)
     del pts  # the caller's array (or its copy without the low noise): not needed again
     release_freed()
-    inten = None if inten is None else inten[perm]
-    multi = multi[perm]
+    inten = None if inten is None else np.take(inten, perm)
+    multi = np.take(multi, perm)
 
     # 3-4. window analyses and the ground; the raised patches' graph reads only the
     # coordinates, so it is built beside them, on the core the surface fits leave idle
@@ -438,26 +441,29 @@ def _seed(rng) -> int:
     return check_scalar(rng, "rng", func=_FUNC, low=0, closed="left", integer=True)
 
 
-def _without_low_noise(noise, pts, inten, nret, rnum, source, in_place=False):
-    """The points and attributes left out of the low noise, and the vegetation candidates
-    (non-last returns of multi-return pulses): ``(pts, inten, multi, has_returns)``.
-    `in_place`: the points kept are moved to the front of `pts` (no copy)."""
+def _multiple_returns(nret, rnum):
+    """The vegetation candidates, non-last returns of multi-return pulses (a mask), or
+    None without the return attributes."""
+    if nret is None or rnum is None:
+        return None
+    same = nret.dtype == rnum.dtype and nret.dtype.kind in "ui"
+    if same and nret.dtype.itemsize < 8:  # compared as they are: no int64 copies
+        return (nret > 1) & (rnum < nret)
+    return (nret.astype(int) > 1) & (rnum.astype(int) < nret.astype(int))
+
+
+def _without_low_noise(noise, pts, inten, multi, source, in_place=False):
+    """The points, intensity and vegetation candidates (`multi`, None: none) left out of
+    the low noise: ``(pts, inten, multi)``. `in_place`: the points kept are moved to the
+    front of `pts` (no copy)."""
     if noise.any():
         keep = ~noise
         if keep.sum() < 8:
             raise InvalidParameterError(f"{source or 'points'}: fewer than 8 points left "
                                         "after removing low outliers")
         pts = pts[:compact_rows(pts, keep)] if in_place else pts[keep]
-        inten, nret, rnum = (None if a is None else a[keep] for a in (inten, nret, rnum))
-    has_returns = nret is not None and rnum is not None
-    multi = np.zeros(len(pts), bool)
-    if has_returns:
-        same = nret.dtype == rnum.dtype and nret.dtype.kind in "ui"
-        if same and nret.dtype.itemsize < 8:  # compared as they are: no int64 copies
-            multi = (nret > 1) & (rnum < nret)
-        else:
-            multi = (nret.astype(int) > 1) & (rnum.astype(int) < nret.astype(int))
-    return pts, inten, multi, has_returns
+        inten, multi = (None if a is None else a[keep] for a in (inten, multi))
+    return pts, inten, np.zeros(len(pts), bool) if multi is None else multi
 
 
 def _permute_columns(pts, order):
@@ -474,8 +480,8 @@ def _window_frame(pts, perm, origin, *, in_place):
     C-contiguous block of rows), the (N, 2) block first and z after it."""
     m = perm.size
     if in_place and pts.flags.c_contiguous:
-        cols = [np.subtract(pts[:, j][perm], origin[j]) for j in range(2)]
-        z = pts[:, 2][perm]
+        cols = [np.subtract(np.take(pts[:, j], perm), origin[j]) for j in range(2)]
+        z = np.take(pts[:, 2], perm)
         z -= origin[2]
         flat = pts.reshape(-1)  # a view: the rows are contiguous
         xy = flat[:2 * m].reshape(m, 2)
@@ -486,8 +492,8 @@ def _window_frame(pts, perm, origin, *, in_place):
         return xy, flat[2 * m:]
     xy = np.empty((m, 2))  # column by column: no (N, 2) temporaries
     for j in range(2):
-        np.subtract(pts[:, j][perm], origin[j], out=xy[:, j])
-    z = pts[:, 2][perm]
+        np.subtract(np.take(pts[:, j], perm), origin[j], out=xy[:, j])
+    z = np.take(pts[:, 2], perm)
     z -= origin[2]
     return xy, z
 

@@ -29,6 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._shared._columns import column_max
+
 __all__ = ["BAND_HALO", "CELLS_PER_POINT", "MAX_EDGE", "MIN_CELLS", "VERTEX_RING",
            "BandFrame", "near_points", "terrain_cell"]
 
@@ -63,7 +65,7 @@ def terrain_cell(xy, cell, halo=BAND_HALO) -> float:
     n = len(xy)
     cell = float(cell)
     limit = max(CELLS_PER_POINT * n, MIN_CELLS)
-    if n < 2 or np.prod(np.floor(xy.max(axis=0) / cell) + 1) <= limit:
+    if n < 2 or np.prod(np.floor(column_max(xy) / cell) + 1) <= limit:
         return cell
     while _grid_cells(xy, cell, halo) > limit:
         cell *= 1.25
@@ -72,7 +74,7 @@ def terrain_cell(xy, cell, halo=BAND_HALO) -> float:
 
 def _grid_cells(xy, cell, halo, block=1 << 20):
     """Cells of the grid of `xy` at `cell` without its empty bands."""
-    sizes = (np.floor(xy.max(axis=0) / cell).astype(np.int64) + 1).tolist()
+    sizes = (np.floor(column_max(xy) / cell).astype(np.int64) + 1).tolist()
     occupied = [np.zeros(m, bool) for m in sizes]
     for s in range(0, len(xy), block):
         for a in (0, 1):
@@ -131,7 +133,7 @@ class BandFrame:
         n = len(xy)
         if n == 0:
             return None
-        sizes = (np.floor(xy.max(axis=0) / cell).astype(np.int64) + 1).tolist()
+        sizes = (np.floor(column_max(xy) / cell).astype(np.int64) + 1).tolist()
         occupied = [np.zeros(m, bool) for m in sizes]
         for s in range(0, n, block):
             for a in (0, 1):

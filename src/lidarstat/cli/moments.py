@@ -26,16 +26,15 @@ def _run(args):
                       members=("report.json", "index.html")),
                Output("--dtm", args.dtm, "raster"),
                Output("--summary-json", args.summary_json, "json"))
-    cloud = read(args.input)
+    # LAS/LAZ in and out: the output is the input's records copied chunk by chunk with
+    # the new fields, so only the attributes the classification reads are decoded (every
+    # LAS point format has them)
+    stream = {Path(args.input).suffix.lower(), out.suffix.lower()} <= {".las", ".laz"}
+    cloud = read(args.input, fields=_READS if stream else None)
     if len(cloud) == 0:
         from ..errors import InvalidPointsError
 
         raise InvalidPointsError(f"{args.input}: the file holds no points")
-    # LAS/LAZ in and out: the output is the input's records copied chunk by chunk with
-    # the new fields, so only the attributes the classification reads stay in memory
-    stream = {Path(args.input).suffix.lower(), out.suffix.lower()} <= {".las", ".laz"}
-    if stream:
-        cloud.attributes = {k: v for k, v in cloud.attributes.items() if k in _READS}
     get = (lambda name: cloud[name] if name in cloud else None)
     units = linear_units(cloud.crs, units=args.units, scale=args.scale,
                          header=cloud.las_header, source=str(args.input))

@@ -420,15 +420,16 @@ def write_file(path: Path, cloud: PointCloud, new: dict, fmt: str) -> None:
                                    f"({short_cause(exc)})") from exc
 
 
-def _copy_records(points, header):
+def _copy_records(points, header, into=None):
     """A point record for `header` holding the records of `points` byte for byte.
 
     `header` is the input's header with new extra bytes appended (see
     :func:`rewrite_file`): every field of the input keeps its raw bytes (coordinates as
     the stored integers, bit fields packed as read), so nothing is decoded and encoded
-    again.
+    again. `into`: a record for `header` of as many points to fill (default a new,
+    zeroed one).
     """
-    rec = laspy.ScaleAwarePointRecord.zeros(len(points), header=header)
+    rec = laspy.ScaleAwarePointRecord.zeros(len(points), header=header) if into is None else into
     src, dst = points.array, rec.array
     size = src.dtype.itemsize
     if all(dst.dtype.fields.get(name) == field for name, field in src.dtype.fields.items()):
@@ -455,6 +456,7 @@ def rewrite_file(src: Path, dst: Path, fin: str, fout: str, fields_of, points_pe
     """
     _checked(src, fin, points_per_chunk, None)
     reader = _open_reader(src, fin)
+    reused = {}  # the first chunk's record, filled again for the next ones
 
     def parts():
         try:
@@ -473,16 +475,29 @@ def rewrite_file(src: Path, dst: Path, fin: str, fout: str, fields_of, points_pe
             new = check_fields(fields_of(start, chunk), m)
             start += m
             yield bare, new, lambda header, assign, points=points: _copied_record(
-                dst, header, points, assign)
+                dst, header, points, assign, reused)
 
     with reader:
         return _write_parts(dst, parts(), fout)
 
 
-def _copied_record(path, header, points, assign):
+def _copied_record(path, header, points, assign, reused=None):
     """The records of `points` copied as read (:func:`_copy_records`) with the new
-    fields of `assign` written over them."""
-    rec = _copy_records(points, header)
+    fields of `assign` written over them.
+
+    `reused` (a dict kept over the chunks of one copy, which writes each record before
+    it makes the next): the first chunk's record is filled again for the next chunks
+    of the same header and fields. Every chunk writes the same bytes of it (the input's
+    records, then the same fields), so the bytes none writes stay zero as in a new
+    record, and its memory is paged in (zeroed by the system) once, not once a chunk.
+    """
+    key = (id(header), tuple(assign))
+    into = None
+    if reused is not None and reused.get("key") == key and len(reused["rec"]) >= len(points):
+        into = reused["rec"][:len(points)]
+    rec = _copy_records(points, header, into)
+    if reused is not None and into is None:
+        reused.update(key=key, rec=rec)
     try:
         for name, values in assign.items():
             rec[name] = values
