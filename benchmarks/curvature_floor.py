@@ -287,6 +287,15 @@ def _half_cells_kernel():
     return run
 
 
+def _middle_cells(index, stage_points):
+    """The cells ``[mid, c1)`` of the middle of the index's sorted order holding about
+    `stage_points` points, and their number of points."""
+    mid = index.n_cells // 2
+    c1 = int(np.searchsorted(index.cell_start, index.cell_start[mid] + stage_points))
+    c1 = min(max(c1, mid + 1), index.n_cells)
+    return mid, c1, int(index.cell_start[c1] - index.cell_start[mid])
+
+
 def half_cells(args):
     """``--half-cells``: the search on cells of the radius and of half the radius."""
     from lidarstat.neighbors import CellIndex
@@ -300,11 +309,7 @@ def half_cells(args):
         for name, cell, rad in (("cells_of_radius", radius, 1),
                                 ("cells_of_half_radius", radius / 2, 2)):
             index = CellIndex(xyz, cell)
-            mid = index.n_cells // 2
-            c1 = int(np.searchsorted(index.cell_start,
-                                     index.cell_start[mid] + args.stage_points))
-            c1 = min(max(c1, mid + 1), index.n_cells)
-            npts = int(index.cell_start[c1] - index.cell_start[mid])
+            mid, c1, npts = _middle_cells(index, args.stage_points)
             call = (mid, c1, index.sorted_points, index.cell_keys, index.cell_start,
                     index.dims, radius)
             run(1, rad, mid, mid + 1, *call[2:])  # load or compile
@@ -353,11 +358,7 @@ def stages(args):
     for target in args.neighbors:
         radius = float(calibrate_radius(xyz, target)[0])
         index = CellIndex(xyz, radius)
-        # the cells of the middle of the sorted order, about --stage-points points
-        mid = index.n_cells // 2
-        c1 = int(np.searchsorted(index.cell_start, index.cell_start[mid] + args.stage_points))
-        c1 = min(max(c1, mid + 1), index.n_cells)
-        npts = int(index.cell_start[c1] - index.cell_start[mid])
+        mid, c1, npts = _middle_cells(index, args.stage_points)
         call = (mid, c1, index.sorted_points, index.cell_keys, index.cell_start, index.dims,
                 radius)
         row = {}
