@@ -97,3 +97,29 @@ def test_views_give_the_copies_result_and_keep_the_inputs(seed):
         map_tiles(lambda p: p.__setitem__((slice(None), 2), 0.0) or {"z": p[:, 2]}, xyz,
                   tiles=tile_grid(xyz, 10.0), views=True)
     assert np.array_equal(xyz, before[0]) and np.array_equal(w, before[1])
+
+
+@pytest.mark.parametrize("scheduler", ["sync", "threads"])
+def test_points_given_as_attributes_alone(scheduler):
+    # without `xyz` the tiles' points are their attributes (columns held apart): the
+    # same fields as the (N, 3) array whose columns they are, views for block tiles
+    g = np.random.default_rng(5)
+    xyz = g.uniform(0, 40, (3000, 3))
+    xyz = xyz[np.concatenate([t.points for t in tile_grid(xyz, 10.0)])]
+    xy, z = np.ascontiguousarray(xyz[:, :2]), xyz[:, 2].copy()
+    tiles = tile_grid(xyz, 10.0)
+    ref = map_tiles(lambda p: {"s": p[:, 0] * p[:, 2] - p[:, 1], "m": p[:, 2] > p[:, 2].mean()},
+                    xyz, tiles=tiles, scheduler=scheduler)
+    got = map_tiles(lambda a: {"s": a["xy"][:, 0] * a["z"] - a["xy"][:, 1],
+                               "m": a["z"] > a["z"].mean()},
+                    None, tiles=tiles, attributes={"xy": xy, "z": z}, scheduler=scheduler,
+                    views=True)
+    assert np.array_equal(ref["s"], got["s"]) and np.array_equal(ref["m"], got["m"])
+    assert not ref["m"].all() and ref["m"].any()
+    with pytest.raises(ValueError, match="read-only"):
+        map_tiles(lambda a: a["z"].__setitem__(0, 1.0) or {}, None, tiles=tiles,
+                  attributes={"xy": xy, "z": z}, views=True)
+    with pytest.raises(InvalidParameterError, match="without `xyz`"):
+        map_tiles(lambda a: {}, None, size=10.0, attributes={"z": z})
+    with pytest.raises(InvalidParameterError, match="rows"):
+        map_tiles(lambda a: {}, None, tiles=tiles, attributes={"xy": xy, "z": z[:-1]})

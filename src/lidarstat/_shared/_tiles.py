@@ -220,7 +220,10 @@ def map_tiles(func: Callable, xyz, *, size: float | None = None, halo: float = 0
         tile, core and halo. Anything estimated from the whole cloud (a noise level, say)
         must be fixed in `func` beforehand, or tiles would estimate it each on their own.
         With `attributes`, it is called as ``func(points, attributes_of_tile)``.
-    xyz : (N, 3) array
+    xyz : (N, 3) array or None
+        None: the points are their `attributes` alone (given `tiles`), and `func` is
+        called as ``func(attributes_of_tile)`` (a caller holding its columns apart
+        makes no (N, 3) array for them).
     size : float
         Core tile side (not needed when `tiles` is given).
     halo : float
@@ -262,7 +265,14 @@ def map_tiles(func: Callable, xyz, *, size: float | None = None, halo: float = 0
     >>> out["z2"].tolist(), seen
     ([0.0, 2.0, 4.0, 6.0, 8.0, 10.0], [(0, 0), (1, 0), (2, 0)])
     """
-    xyz = check_points(xyz, name="xyz", min_points=1)
+    if xyz is None:  # the points are their attributes alone: ``func(attributes)``
+        if tiles is None or not attributes:
+            raise InvalidParameterError("map_tiles without `xyz` needs `tiles` and "
+                                        "`attributes`")
+        n = len(next(iter(attributes.values())))
+    else:
+        xyz = check_points(xyz, name="xyz", min_points=1)
+        n = len(xyz)
     check_option(scheduler, "scheduler", ("sync", "threads", "dask"), func="map_tiles")
     if workers is not None:
         workers = check_scalar(workers, "workers", func="map_tiles", low=1, closed="left",
@@ -274,10 +284,10 @@ def map_tiles(func: Callable, xyz, *, size: float | None = None, halo: float = 0
     if attributes is not None:
         attributes = {name: np.asarray(a) for name, a in attributes.items()}
         for name, a in attributes.items():
-            if a.shape[:1] != (len(xyz),):
+            if a.shape[:1] != (n,):
                 raise InvalidParameterError(
                     f"map_tiles: attribute '{name}' has {a.shape[:1]} rows for "
-                    f"{len(xyz)} points")
+                    f"{n} points")
     out: dict[str, np.ndarray] = {}
     done = 0
 
@@ -291,14 +301,18 @@ def map_tiles(func: Callable, xyz, *, size: float | None = None, halo: float = 0
         rows = block if whole else tile.points[tile.core]
         for name, arr in fields.items():
             if name not in out:
-                out[name] = np.zeros((len(xyz),) + arr.shape[1:], dtype=arr.dtype)
+                out[name] = np.zeros((n,) + arr.shape[1:], dtype=arr.dtype)
             out[name][rows] = arr if whole else arr[tile.core]
         done += tile.points.size if whole else rows.size
         if progress is not None:
-            progress(done, len(xyz))
+            progress(done, n)
 
     def args(tile):
         rows = _block(tile.points) if views else None
+        if xyz is None:
+            if rows is None:
+                return ({name: a[tile.points] for name, a in attributes.items()},)
+            return ({name: _read_only(a[rows]) for name, a in attributes.items()},)
         if rows is None:
             if attributes is None:
                 return (xyz[tile.points],)

@@ -132,16 +132,13 @@ def ground_cut(xy, z, rank, roots, p: MomentsOptions, inten, *, opening_window, 
     frame = BandFrame.of(xy, opening_cell)
     height = heights(z, opening_surface(xy, z, window=opening_window, cell=opening_cell,
                                         frame=frame), overwrite=True)
-    xyh = np.empty((z.size, 3))
-    xyh[:, :2] = xy
     surf = None
     # the cuts' grid and its frame are the same in every pass: moved once
     cut_frame = BandFrame.of(xy, p.finest_window)
     cut_xy = xy if cut_frame is None else cut_frame(xy)
     for it in range(iterations + 1):
         last = it == iterations
-        xyh[:, 2] = height
-        fields, steps, windows = window_pass(xyh, roots, p, inten, scheduler, workers,
+        fields, steps, windows = window_pass(xy, height, roots, p, inten, scheduler, workers,
                                              final=last)
         cut = interpolate_cuts(cut_xy, fields["cut"], p.finest_window, frame=None)
         ground = height <= cut

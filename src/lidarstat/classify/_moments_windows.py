@@ -87,11 +87,10 @@ def _window_keys(xy, ox, oy, size, nrow):  # pragma: no cover - compiled
     return key
 
 
-def _cut_window(xyh, p, record, first=None):
-    """Progressive cuts of one root window on heights (column 2 of `xyh`): ground mask and
-    each point's (sub-)window cut (inf where the root window found none). `first`
-    receives the root window's own analysis (:func:`progressive_cut`)."""
-    xy, h = xyh[:, :2], xyh[:, 2]
+def _cut_window(xy, h, p, record, first=None):
+    """Progressive cuts of one root window on heights `h` at planimetric coordinates `xy`:
+    ground mask and each point's (sub-)window cut (inf where the root window found none).
+    `first` receives the root window's own analysis (:func:`progressive_cut`)."""
     steps, infos = [], []
     parts = progressive_cut(xy, h, np.arange(h.size), p.window, np.inf, p, "", steps, infos,
                             record, first)
@@ -103,14 +102,15 @@ def _cut_window(xyh, p, record, first=None):
     return ground, cut, steps, infos
 
 
-def _classify_window(xyh, attrs, p, record, final):
-    """One root window: its ground cut, and on the final pass also the paper's clustering
-    steps (cluster ids local, from 1)."""
+def _classify_window(attrs, p, record, final):
+    """One root window (`attrs`: its ``xy``, heights ``h`` and ``intensity``): its ground
+    cut, and on the final pass also the paper's clustering steps (cluster ids local,
+    from 1)."""
     first = {} if final else None  # the heights' analysis: the clusters' first step
-    ground, cut, gsteps, infos = _cut_window(xyh, p, record, first)
+    h = attrs["h"]
+    ground, cut, gsteps, infos = _cut_window(attrs["xy"], h, p, record, first)
     if not final:
         return _WindowOut({"ground": ground, "cut": cut}, gsteps, infos)
-    h = xyh[:, 2]
     inten = attrs.get("intensity")
     if inten is not None:  # the driver may hold integer intensity: float64, exactly
         inten = inten.astype(np.float64, copy=False)
@@ -127,14 +127,15 @@ def _classify_window(xyh, attrs, p, record, final):
                       steps, next_id - 1)
 
 
-def window_pass(xyh, roots, p: MomentsOptions, inten, scheduler, workers, *, final):
-    """Every root window's ground cut (and on the `final` pass its clusters and records).
+def window_pass(xy, h, roots, p: MomentsOptions, inten, scheduler, workers, *, final):
+    """Every root window's ground cut on heights `h` at planimetric coordinates `xy` (and
+    on the `final` pass its clusters and records).
 
     Returns
     -------
     fields : dict
         ``ground``, ``cut`` (and ``cluster_id``, unique over windows, on the final pass)
-        per point, in the order of `xyh`.
+        per point, in the order of `xy`.
     steps : list of MomentsStep
         The ground cuts' analyses, then the clustering analyses (final pass only).
     windows : list of dict
@@ -147,8 +148,8 @@ def window_pass(xyh, roots, p: MomentsOptions, inten, scheduler, workers, *, fin
     def keep(tile, res):
         outs[index[tile.key]] = res
 
-    attrs = {} if inten is None else {"intensity": inten}
-    fields = map_tiles(lambda pts, a: _classify_window(pts, a, p, final, final), xyh,
+    attrs = {"xy": xy, "h": h} if inten is None else {"xy": xy, "h": h, "intensity": inten}
+    fields = map_tiles(lambda a: _classify_window(a, p, final, final), None,
                        tiles=roots, attributes=attrs, scheduler=scheduler, workers=workers,
                        collect=keep, views=True)
     steps, infos = [], []
