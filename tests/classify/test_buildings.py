@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from lidarstat.classify import BUILDING_FIELDS, building_tests, moments
-from lidarstat.errors import InvalidParameterError, TooManyNeighborsError
+from lidarstat.errors import InvalidParameterError
 from lidarstat.stats import binomial_test
 from lidarstat.synth import make_roof_scene
 
@@ -174,22 +174,3 @@ def test_fields_follow_the_points_through_low_noise_and_reordering():
     assert np.all(f["building_evidence"][~bld] != 1) and np.all(f["building_evidence"][~bld] != 2)
     truth = a["classification"] == 6
     assert _scores(bld, truth)[2] >= 0.97
-
-
-@pytest.mark.parametrize("seed", range(3))
-def test_block_neighbour_search_gives_the_whole_search(seed, monkeypatch):
-    # the candidates' neighbours found a block of query points at a time are the rows of
-    # one search of the whole candidates, ties (points on a millimetre grid) included
-    from lidarstat.classify import _buildings
-    from lidarstat.neighbors import knn_neighbors
-
-    g = np.random.default_rng(seed)
-    pts = np.round(g.uniform(0, 5, (4000, 3)), 2)
-    monkeypatch.setattr(_buildings, "_KNN_BLOCK", 333)
-    got = _buildings._knn_rows(pts, 12)
-    ref = knn_neighbors(pts, 12)
-    assert got.indices.dtype == ref.indices.dtype == np.int32
-    assert np.array_equal(got.indptr, ref.indptr) and np.array_equal(got.indices, ref.indices)
-    monkeypatch.setenv("LIDARSTAT_MAX_PAIRS", str(12 * 4000 - 1))
-    with pytest.raises(TooManyNeighborsError, match="LIDARSTAT_MAX_PAIRS"):
-        _buildings._knn_rows(pts, 12)

@@ -209,3 +209,22 @@ def test_may_have_copies_proves_distinct_locations(seed):
     # a cell too large to compare pairwise counts as a possible copy
     crowded = np.vstack([pts, rng.random((300, 3)) * 0.01 + pts[0]])
     assert CellIndex(crowded, 0.5).may_have_copies()
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_knn_indices_by_blocks_give_the_whole_search(seed, monkeypatch):
+    # the neighbours found a block of query points at a time (the building tests' search)
+    # are the rows of one search of the whole cloud, ties (points on a millimetre grid)
+    # included
+    from lidarstat.errors import TooManyNeighborsError
+    from lidarstat.neighbors import KnnIndex, knn_neighbors
+
+    g = np.random.default_rng(seed)
+    pts = np.round(g.uniform(0, 5, (4000, 3)), 2)
+    got = KnnIndex(pts).query_indices(12, block=333)
+    ref = knn_neighbors(pts, 12)
+    assert got.indices.dtype == ref.indices.dtype == np.int32
+    assert np.array_equal(got.indptr, ref.indptr) and np.array_equal(got.indices, ref.indices)
+    monkeypatch.setenv("LIDARSTAT_MAX_PAIRS", str(12 * 4000 - 1))
+    with pytest.raises(TooManyNeighborsError, match="LIDARSTAT_MAX_PAIRS"):
+        KnnIndex(pts).query_indices(12, block=333)

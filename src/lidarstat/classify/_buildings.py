@@ -35,13 +35,12 @@ runs on the *candidates* (points that are neither ground nor closer than
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 
 import numpy as np
 
 from .._shared._columns import column_min
 from .._shared._memory import release_freed
-from ..neighbors import KnnIndex, knn_neighbors, max_pairs
+from ..neighbors import KnnIndex, knn_neighbors
 from ..stats import binomial_test, chi2_quantile, chi2_test, z_critical
 from . import _buildings_kernels as _k
 
@@ -111,29 +110,6 @@ def ground_sigma(ground_xyz, k, overwrite=False):
     return float(np.sqrt(np.median(rss) / chi2_quantile(0.5, k - 3)))
 
 
-#: Query points per block of the candidates' neighbour search.
-_KNN_BLOCK = 1 << 18
-
-
-def _knn_rows(pts, k):
-    """The `k` nearest neighbours of every point of `pts` (``indptr``, ``indices``), the
-    rows of :func:`~lidarstat.neighbors.knn_neighbors` found block by block into one
-    index array: the search's distances and wide indices are a block's, not the
-    cloud's (the tests do not read distances)."""
-    index = KnnIndex(pts)
-    n = len(pts)
-    if n * k > max_pairs():  # above the pairs' ceiling: the whole search's refusal
-        index.query(k, func="building_tests")
-    indices = None
-    for a in range(0, n, _KNN_BLOCK):
-        b = min(n, a + _KNN_BLOCK)
-        part = index.query(k, query=np.arange(a, b), func="building_tests").indices
-        if indices is None:
-            indices = np.empty(n * k, part.dtype)
-        indices[a * k:b * k] = part
-    return SimpleNamespace(indptr=np.arange(n + 1, dtype=np.int64) * k, indices=indices)
-
-
 def _planes(pts, nb, rows):
     centroid = np.empty((rows, 3))
     normal = np.empty((rows, 3))
@@ -193,7 +169,7 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
         params["sigma"] = sigma
         return BuildingTests(building, fields, params)
     pts = np.ascontiguousarray(xyz[idx] - xyz[idx].mean(axis=0))
-    nb = _knn_rows(pts, k)
+    nb = KnnIndex(pts).query_indices(k, func="building_tests")  # distances: not used
     release_freed()  # the search's work arrays, before the tests allocate theirs
     centroid, normal, rss = _planes(pts, nb, idx.size)
     if sigma is None:  # no ground: the candidates' own planes, the same median rule

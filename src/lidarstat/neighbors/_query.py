@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numba
 import numpy as np
 
@@ -340,12 +342,7 @@ class KnnIndex:
         k = check_scalar(k, "k", func=func, low=1, high=points.shape[0], closed="both",
                          integer=True)
         qidx = None if query is None else np.asarray(query, dtype=np.int64).ravel()
-        n_query = points.shape[0] if qidx is None else qidx.size
-        ceiling = _budget.max_pairs()
-        if n_query * k > ceiling:
-            raise TooManyNeighborsError(
-                f"k = {k} gives {n_query * k:,} neighbour pairs ({n_query:,} points), above "
-                f"the ceiling of {ceiling:,} (LIDARSTAT_MAX_PAIRS); lower k or thin the cloud")
+        _refuse_knn_pairs(points.shape[0] if qidx is None else qidx.size, k)
         q = points if qidx is None else points[qidx]
         dist, idx = self.tree.query(q - self.origin, k=k, workers=workers)
         dist = np.asarray(dist, dtype=np.float64).reshape(q.shape[0], k)
@@ -353,3 +350,28 @@ class KnnIndex:
         indptr = np.arange(q.shape[0] + 1, dtype=np.int64) * k
         return Neighborhoods(indptr, idx.ravel(), dist.ravel(), points.shape[0], kind="knn",
                              k=k, query=qidx)
+
+    def query_indices(self, k, *, block=1 << 18, func="KnnIndex.query_indices"):
+        """The `k` nearest neighbours of every point, indices only (``indptr``,
+        ``indices``: the rows of :meth:`query`), searched `block` points at a time into
+        one index array: the distances and wide indices of the search are a block's, not
+        the cloud's. The whole search is refused above the pairs' ceiling, as
+        :meth:`query`."""
+        n = self.points.shape[0]
+        k = check_scalar(k, "k", func=func, low=1, high=n, closed="both", integer=True)
+        _refuse_knn_pairs(n, k)
+        indices = np.empty(n * k, index_dtype(n))
+        for a in range(0, n, block):
+            b = min(n, a + block)
+            indices[a * k:b * k] = self.query(k, query=np.arange(a, b), func=func).indices
+        return SimpleNamespace(indptr=np.arange(n + 1, dtype=np.int64) * k, indices=indices)
+
+
+def _refuse_knn_pairs(n_query, k):
+    """Raise :class:`TooManyNeighborsError` when `n_query` points' `k` nearest neighbours
+    pass the pairs' ceiling (:func:`~lidarstat.neighbors.max_pairs`)."""
+    ceiling = _budget.max_pairs()
+    if n_query * k > ceiling:
+        raise TooManyNeighborsError(
+            f"k = {k} gives {n_query * k:,} neighbour pairs ({n_query:,} points), above "
+            f"the ceiling of {ceiling:,} (LIDARSTAT_MAX_PAIRS); lower k or thin the cloud")
