@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats as _st
 
+from . import _distributions as _d
 from ._critical import _level
 from ._results import TestResult
 from ._tests import _finish
@@ -29,5 +29,5 @@ def binomial_test(successes, trials, p0, *, alpha) -> TestResult:
         raise ValueError(f"p0 must lie in [0, 1]; got {p0!r}")
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.where(n > 0, k / n, np.nan)
-        p = np.where(n > 0, _st.binom.sf(k - 1, n, p0), np.nan)
+        p = np.where(n > 0, _d.binom_sf(k - 1, n, p0), np.nan)
     return _finish(share, p, n, alpha)

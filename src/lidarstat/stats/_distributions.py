@@ -1,7 +1,10 @@
-"""Tails and quantiles of the normal and chi-square distributions, from ``scipy.special``.
+"""Tails and quantiles of the normal, chi-square and binomial distributions, from
+``scipy.special``.
 
-These are the functions ``scipy.stats.norm`` and ``scipy.stats.chi2`` evaluate (``ndtr``,
-``ndtri``, ``chdtrc``, ``chdtri``, ``gammaincinv``), with the same answers outside the
+These are the functions ``scipy.stats.norm``, ``scipy.stats.chi2`` and
+``scipy.stats.binom`` evaluate (``ndtr``, ``ndtri``, ``chdtrc``, ``chdtri``,
+``gammaincinv``, the binomial tail as the regularised incomplete beta ``betainc``), with
+the same answers outside the
 distributions' domains (NaN for a degree of freedom that is not positive or a probability
 outside [0, 1], the tail probability 1 below the support), without importing
 ``scipy.stats``: the commands that only need these start in a fraction of the time.
@@ -13,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["chi2_isf", "chi2_ppf", "chi2_sf", "norm_isf", "norm_ppf", "norm_sf"]
+__all__ = ["binom_sf", "chi2_isf", "chi2_ppf", "chi2_sf", "norm_isf", "norm_ppf", "norm_sf"]
 
 
 class _Special:
@@ -79,3 +82,20 @@ def norm_isf(q):
 def norm_ppf(q):
     """The `q` quantile of the standard normal."""
     return _out(_sc.ndtri(_prob(q)))
+
+
+def binom_sf(k, n, p):
+    """``P(X > k)`` for ``X ~ Binomial(n, p)``: ``k`` is floored; 1 below the support, 0 at
+    or above ``n``; NaN where an argument is NaN, ``n`` is not a non-negative integer or
+    ``p`` lies outside [0, 1]. Inside the support it is ``I_p(k + 1, n - k)``, the
+    regularised incomplete beta function.
+    """
+    k = np.floor(np.asarray(k, dtype=np.float64))
+    n = np.asarray(n, dtype=np.float64)
+    p = _prob(p)
+    with np.errstate(invalid="ignore"):
+        bad = ~((n >= 0) & (n == np.floor(n)) & np.isfinite(n)) | np.isnan(k) | np.isnan(p)
+        inside = (k >= 0) & (k < n)
+        tail = _sc.betainc(np.where(inside, k + 1.0, 1.0), np.where(inside, n - k, 1.0), p)
+        out = np.where(inside, tail, np.where(k < 0, 1.0, 0.0))
+    return _out(np.where(bad, np.nan, out))
