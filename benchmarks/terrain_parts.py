@@ -20,13 +20,19 @@ is taken out of it) in wall seconds and CPU seconds of the process (all threads)
 * ``other``: the rest of the step.
 
 The total is the step's wall and CPU; ``--identity`` also checks the outputs of the
-repeats against an ``.npz`` of another version's (``--save`` writes one).
+repeats against an ``.npz`` of another version's (``--save`` writes one). ``tin``
+measures the step's Delaunay alone (:func:`tin_findings`): Qhull's CPU seconds, whether
+it lets Python run beside it, and how many triangles a build in two overlapping halves
+changes (Qhull chooses the diagonal of four co-circular vertices by its own insertion
+order, so halves do not give the same TIN).
 
 Usage::
 
     PYTHONPATH=src python benchmarks/terrain_parts.py capture --points 2000000 /tmp/t2m.npz
     PYTHONPATH=src python benchmarks/terrain_parts.py time /tmp/t2m.npz --repeats 3 \\
         --out benchmarks/results_terrain_parts.json --label LABEL
+    PYTHONPATH=src python benchmarks/terrain_parts.py tin /tmp/t2m.npz \\
+        --out benchmarks/results_terrain_parts.json --label tin_2M
 """
 
 from __future__ import annotations
@@ -191,6 +197,77 @@ def time_parts(path, repeats, save=None, identity=None):
             "differing_values": same}
 
 
+def tin_findings(path, margin=10.0):
+    """What the terrain TIN's Delaunay costs and whether it can be split: its vertices
+    (captured from :func:`terrain_step` on `path`), Qhull's CPU seconds on them, whether
+    Qhull lets Python run beside it (a Python loop's count of turns during the build
+    against the same time asleep), and the triangles two overlapping halves (split at
+    the median x, `margin` cells of overlap, each triangle taken from the half holding
+    its centroid) give that the whole build does not."""
+    import threading
+
+    from scipy.spatial import Delaunay
+
+    from lidarstat.classify import _surface, _terrain
+
+    d = np.load(path)
+    got = {}
+    orig = _surface.TinSurface.__init__
+
+    def keep(self, P, V, cell, **kw):
+        got["P"] = np.array(P)
+        return orig(self, P, V, cell, **kw)
+
+    _surface.TinSurface.__init__ = keep
+    try:
+        _terrain.terrain_step(d["xy"], d["z"], d["ground"], ux=float(d["ux"]),
+                              uz=float(d["uz"]))
+    finally:
+        _surface.TinSurface.__init__ = orig
+    P = got["P"]
+    cpu = []
+    for _ in range(2):
+        c0 = time.process_time()
+        whole = Delaunay(P).simplices
+        cpu.append(time.process_time() - c0)
+
+    def turns(during):
+        count, stop = [0], threading.Event()
+
+        def spin():
+            while not stop.is_set():
+                count[0] += 1
+
+        th = threading.Thread(target=spin)
+        t0 = time.perf_counter()
+        th.start()
+        during()
+        stop.set()
+        th.join()
+        return count[0] / (time.perf_counter() - t0)
+
+    beside = turns(lambda: Delaunay(P))
+    idle = turns(lambda: time.sleep(0.5))
+    cx = float(np.median(P[:, 0]))
+    parts = []
+    for low in (True, False):
+        rows = np.flatnonzero(P[:, 0] < cx + margin if low else P[:, 0] >= cx - margin)
+        tri = rows[Delaunay(P[rows]).simplices]
+        c = P[tri].mean(axis=1)[:, 0]
+        parts.append(tri[c < cx] if low else tri[c >= cx])
+
+    def canon(t):
+        return set(map(tuple, np.sort(t, axis=1).tolist()))
+
+    a, b = canon(whole), canon(np.concatenate(parts))
+    return {"vertices": int(len(P)), "triangles": len(a),
+            "qhull_cpu_s": [round(c, 3) for c in cpu],
+            "python_turns_per_s_during_qhull": round(beside),
+            "python_turns_per_s_asleep": round(idle),
+            "halves_triangles": len(b), "triangles_only_in_whole": len(a - b),
+            "triangles_only_in_halves": len(b - a)}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -204,15 +281,27 @@ def main(argv=None):
     t.add_argument("--identity", default=None, help="count differences from this .npz")
     t.add_argument("--out", default=None, help="results JSON to add the run to")
     t.add_argument("--label", default=None)
+    q = sub.add_parser("tin")
+    q.add_argument("inputs")
+    q.add_argument("--out", default=None, help="results JSON to add the findings to")
+    q.add_argument("--label", default=None)
     args = ap.parse_args(argv)
     if args.cmd == "capture":
         capture(args.points, args.out)
         return
-    row = time_parts(args.inputs, args.repeats, save=args.save, identity=args.identity)
+    if args.cmd == "tin":
+        row = tin_findings(args.inputs)
+    else:
+        row = time_parts(args.inputs, args.repeats, save=args.save, identity=args.identity)
     print(json.dumps(row, indent=1))
     if args.out:
         p = Path(args.out)
         res = json.loads(p.read_text()) if p.exists() else {
+            "what": "the terrain step of moments on the arguments it gets on the synthetic "
+                    "cloud of bench_moments.py: wall and CPU seconds (all threads) of the "
+                    "step and of each part, medians of the repeats, and the outputs' "
+                    "differences from the code without the change (runs base_*: that "
+                    "code, run alternately with new_*); tin_*: the step's Delaunay alone",
             "script": "benchmarks/terrain_parts.py", "machine_shared": True,
             "machine": f"{platform.machine()}, {__import__('os').cpu_count()} cores",
             "runs": {}}
