@@ -95,7 +95,7 @@ PARTS = (
     ("test: other", "lidarstat.classify._terrain", "_test_points"),
     ("test: TIN evaluation", "lidarstat.classify._surface", "TinSurface.__call__"),
     ("test: slope", "lidarstat.classify._terrain", "grid_bilinear"),
-    ("test: heights", "lidarstat.classify._terrain", "test_heights"),
+    ("test: heights", "lidarstat.classify._terrain", "height_test"),
     ("fence: other", "lidarstat.classify._terrain", "noise_fence"),
     ("fence: other", "lidarstat.classify._terrain", "_fence_cells"),
     ("fence: cells", "lidarstat.classify._terrain", "cell_values"),
@@ -188,7 +188,7 @@ def time_parts(path, repeats, save=None, identity=None):
         vals = [r[key] if name is None else r[key].get(name, 0.0) for r in runs]
         return round(float(np.median(vals)), 3)
 
-    return {"points": int(len(args[1])), "repeats": repeats,
+    return {"points": len(args[1]), "repeats": repeats,
             "wall_s": med("wall"), "cpu_s": med("cpu"),
             "runs_wall_s": [round(r["wall"], 3) for r in runs],
             "runs_cpu_s": [round(r["cpu"], 3) for r in runs],
@@ -260,7 +260,7 @@ def tin_findings(path, margin=10.0):
         return set(map(tuple, np.sort(t, axis=1).tolist()))
 
     a, b = canon(whole), canon(np.concatenate(parts))
-    return {"vertices": int(len(P)), "triangles": len(a),
+    return {"vertices": len(P), "triangles": len(a),
             "qhull_cpu_s": [round(c, 3) for c in cpu],
             "python_turns_per_s_during_qhull": round(beside),
             "python_turns_per_s_asleep": round(idle),

@@ -256,8 +256,8 @@ def test_point_test_and_fence_equal_their_definition(seed):
     scene = _scene(TERRAIN_SCENES[seed % len(TERRAIN_SCENES)], seed)
     xy = scene.xyz[:, :2] - scene.xyz[:, :2].min(axis=0)
     z = scene.xyz[:, 2]
-    kw = dict(cell=2.0, tolerance=0.5, slope_tolerance=1.25, step=0.3, max_rise=1.0,
-              below=1.0)
+    kw = {"cell": 2.0, "tolerance": 0.5, "slope_tolerance": 1.25, "step": 0.3,
+          "max_rise": 1.0, "below": 1.0}
     t = refine_terrain(xy, z, scene.ground, fence=7.0, fence_points=64, fence_radius=8, **kw)
     model = t.surface
     height = np.round(z - model(xy), 6)

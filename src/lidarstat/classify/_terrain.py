@@ -66,7 +66,7 @@ from ._terrain_grid import (
 )
 from ._terrain_kernels import (block_spread, cell_lowest, cell_values, fence_test,
                                fill_triangles, first_on_surface, gather_cells, grid_bilinear,
-                               test_heights)
+                               height_test)
 
 __all__ = ["TERRAIN_DEFAULTS", "TerrainModel", "TerrainRefinement", "drop_bumps",
            "drop_opened", "grow_ground", "grow_platforms", "noise_fence", "refine_terrain",
@@ -314,7 +314,7 @@ def _blocks(n):
 
 def _test_points(model, xy_in, xy, z, *, tolerance, slope_tolerance, below):
     """Heights above the surface, upper bounds and the ground test of every point:
-    ``(height, upper, keep)`` (:func:`~._terrain_kernels.test_heights`).
+    ``(height, upper, keep)`` (:func:`~._terrain_kernels.height_test`).
 
     ``height = round(z - surface, 6)``, ``upper = tolerance + s slope``, ground when
     ``-(below + s slope) <= height <= upper`` (``s = slope_tolerance``). The surface is
@@ -325,9 +325,9 @@ def _test_points(model, xy_in, xy, z, *, tolerance, slope_tolerance, below):
     height, upper, keep = np.empty(n), np.empty(n), np.empty(n, bool)
     slope = np.ascontiguousarray(model.slope, dtype=np.float64)
     for s, e in _blocks(n):
-        test_heights(xy[s:e], z[s:e], model(xy_in[s:e]), slope, model.cell,
-                     float(slope_tolerance), float(tolerance), float(below), height[s:e],
-                     upper[s:e], keep[s:e])
+        height_test(xy[s:e], z[s:e], model(xy_in[s:e]), slope, model.cell,
+                    float(slope_tolerance), float(tolerance), float(below), height[s:e],
+                    upper[s:e], keep[s:e])
     return height, upper, keep
 
 

@@ -8,7 +8,7 @@ from numba import prange
 from .._shared._jit import njit, njit_parallel
 
 __all__ = ["block_spread", "cell_lowest", "cell_values", "fence_test", "fill_triangles",
-           "first_on_surface", "gather_cells", "grid_bilinear", "test_heights"]
+           "first_on_surface", "gather_cells", "grid_bilinear", "height_test"]
 
 
 @njit
@@ -56,8 +56,8 @@ def grid_bilinear(xy, grid, cell, out):  # pragma: no cover - compiled
 
 
 @njit_parallel
-def test_heights(xy, z, surface, slope, cell, slope_tolerance, tolerance, below, height,
-                 upper, keep):  # pragma: no cover - compiled
+def height_test(xy, z, surface, slope, cell, slope_tolerance, tolerance, below, height,
+                upper, keep):  # pragma: no cover - compiled
     """The terrain test of every point: ``height = round(z - surface, 6)``, ``upper =
     tolerance + s slope`` and ``keep = -(below + s slope) <= height <= upper``, ``slope``
     the bilinear interpolation of the `slope` grid at `xy` (``s = slope_tolerance``)."""
@@ -188,7 +188,7 @@ def _block_median(values, offsets, nx, ny, i, j, w, n, dist, origin, guess, widt
     """Median of the block's ``x`` (:func:`_scan_block`): first among those within
     `width` of `guess` (a neighbouring block's), all of them when that range misses it
     or `width` is NaN."""
-    if width == width:
+    if not np.isnan(width):
         below, s = _scan_block(values, offsets, nx, ny, i, j, w, dist, origin,
                                guess - width, guess + width, buf)
         if _holds_median(below, s, n):
