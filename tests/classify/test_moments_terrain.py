@@ -244,3 +244,68 @@ def test_surface_passes_through_ground_on_a_slope(seed):
                        slope_tolerance=1.25, step=0.3, max_rise=1.0, below=1.0)
     assert abs(np.median(t.height)) < 0.05 and t.height.min() > -6 * 0.02
     assert t.ground.all()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_point_test_and_fence_equal_their_definition(seed):
+    """The compiled point test and noise fence of :func:`refine_terrain` give, bit for
+    bit, the heights, bounds and ground of their definition written out with the
+    model's public pieces: ``height = round(z - surface, 6)``, ``upper = tolerance + s
+    slope``, ground within ``[-(below + s slope), upper]``, then ``upper = min(upper,
+    fence bound + s slope)`` and ground only under it."""
+    scene = _scene(TERRAIN_SCENES[seed % len(TERRAIN_SCENES)], seed)
+    xy = scene.xyz[:, :2] - scene.xyz[:, :2].min(axis=0)
+    z = scene.xyz[:, 2]
+    kw = {"cell": 2.0, "tolerance": 0.5, "slope_tolerance": 1.25, "step": 0.3,
+          "max_rise": 1.0, "below": 1.0}
+    t = refine_terrain(xy, z, scene.ground, fence=7.0, fence_points=64, fence_radius=8, **kw)
+    model = t.surface
+    height = np.round(z - model(xy), 6)
+    extra = 1.25 * model.slope_at(xy)
+    upper = 0.5 + extra
+    keep = (height <= upper) & (height >= -(1.0 + extra))
+    bound = noise_fence(xy, height, keep, cell=2.0, fence=7.0, min_points=64, max_radius=8)
+    upper = np.minimum(upper, bound + extra)
+    keep &= height <= upper
+    assert np.array_equal(t.height, height)
+    assert np.array_equal(t.tolerance, upper)
+    assert np.array_equal(t.ground, keep)
+    assert np.isfinite(bound[keep]).mean() > 0.9  # the fence bounds most of the ground
+    plain = refine_terrain(xy, z, scene.ground, **kw)  # no fence
+    assert np.array_equal(plain.ground, (height <= 0.5 + extra) & (height >= -(1.0 + extra)))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_block_spread_is_exact_where_neighbouring_blocks_differ(seed):
+    """The median and MAD of each block are selected first near the previous cell's; on
+    cells whose values jump from one cell to the next (offsets of +-50, spreads from 0
+    to 10), with ties and blocks of one repeated value, that guess misses and the
+    result is still ``np.median``'s."""
+    from lidarstat.classify._terrain_kernels import block_spread
+
+    g = np.random.default_rng(seed)
+    nx, ny = 19, 13
+    key = np.repeat(np.arange(nx * ny), g.integers(0, 30, nx * ny))
+    shift = g.choice([-50.0, 0.0, 50.0], nx * ny)
+    scale = g.choice([0.0, 0.01, 1.0, 10.0], nx * ny)
+    v = np.round(shift[key] + scale[key] * g.standard_normal(key.size), 2)
+    offsets = np.r_[0, np.cumsum(np.bincount(key, minlength=nx * ny))]
+    centre, spread = np.full(nx * ny, -1.0), np.full(nx * ny, -1.0)
+    cells = np.flatnonzero(g.uniform(size=nx * ny) < 0.9)
+    block_spread(offsets, v, nx, ny, cells, 40, 3, centre, spread)
+    for c in cells:
+        i, j = divmod(int(c), ny)
+        for w in range(1, 4):
+            rows = range(max(0, i - w), min(nx, i + w + 1))
+            blk = np.concatenate([v[offsets[a * ny + max(0, j - w)]:
+                                    offsets[a * ny + min(ny - 1, j + w) + 1]] for a in rows])
+            if blk.size >= 40:
+                break
+        if blk.size < 3:
+            assert np.isnan(centre[c]) and np.isnan(spread[c])
+            continue
+        m = np.median(blk)
+        assert centre[c] == m
+        assert spread[c] == 1.4826 * np.median(np.abs(blk - m))
+    untouched = np.setdiff1d(np.arange(nx * ny), cells)
+    assert (centre[untouched] == -1).all() and (spread[untouched] == -1).all()

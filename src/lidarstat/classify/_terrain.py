@@ -64,8 +64,9 @@ from ._terrain_grid import (
     reject_plateaus,
     reject_walled,
 )
-from ._terrain_kernels import (block_spread, cell_lowest, cell_values, fill_triangles,
-                               first_on_surface, gather_cells, grid_bilinear)
+from ._terrain_kernels import (block_spread, cell_lowest, cell_values, fence_test,
+                               fill_triangles, first_on_surface, gather_cells, grid_bilinear,
+                               height_test)
 
 __all__ = ["TERRAIN_DEFAULTS", "TerrainModel", "TerrainRefinement", "drop_bumps",
            "drop_opened", "grow_ground", "grow_platforms", "noise_fence", "refine_terrain",
@@ -274,8 +275,19 @@ def noise_fence(xy, height, ground, *, cell, fence, min_points=64, max_radius=8)
     -------
     (N,) ndarray of float64
     """
-    n = len(height)
     xy = np.ascontiguousarray(xy, dtype=np.float64)
+    centre, spread, ny = _fence_cells(xy, height, ground, cell=cell, min_points=min_points,
+                                      max_radius=max_radius)
+    bound = np.empty(len(height))
+    gather_cells(xy, float(cell), ny, centre, spread, float(fence), bound)
+    return bound
+
+
+def _fence_cells(xy, height, ground, *, cell, min_points, max_radius):
+    """The median and robust standard deviation of the ground heights of every cell's
+    block (:func:`noise_fence`): ``(centre, spread, ny)``, flat over the ``(nx, ny)``
+    cells of `xy` (C-contiguous), NaN where a cell holds no ground."""
+    n = len(height)
     nx = int(np.floor(xy[:, 0].max() / cell)) + 1 if n else 1
     ny = int(np.floor(xy[:, 1].max() / cell)) + 1 if n else 1
     # the cells are found point by point in compiled loops: no per-point key arrays
@@ -288,10 +300,7 @@ def noise_fence(xy, height, ground, *, cell, fence, min_points=64, max_radius=8)
     if cells.size:
         block_spread(offsets, values, nx, ny, cells, int(min_points), int(max_radius),
                      centre, spread)
-    del values
-    bound = np.empty(n)
-    gather_cells(xy, float(cell), ny, centre, spread, float(fence), bound)
-    return bound
+    return centre, spread, ny
 
 
 #: Points tested against the surface at a time (bounds the temporaries of the test).
@@ -303,20 +312,22 @@ def _blocks(n):
     return [(s, min(n, s + _BLOCK)) for s in range(0, n, _BLOCK)]
 
 
-def _test_points(model, xy, z, *, tolerance, slope_tolerance, below):
-    """Heights above the surface, upper bounds and the ground test of every point, block
-    by block: ``(height, upper, keep)``.
+def _test_points(model, xy_in, xy, z, *, tolerance, slope_tolerance, below):
+    """Heights above the surface, upper bounds and the ground test of every point:
+    ``(height, upper, keep)`` (:func:`~._terrain_kernels.height_test`).
 
     ``height = round(z - surface, 6)``, ``upper = tolerance + s slope``, ground when
-    ``-(below + s slope) <= height <= upper`` (``s = slope_tolerance``).
+    ``-(below + s slope) <= height <= upper`` (``s = slope_tolerance``). The surface is
+    evaluated at `xy_in` block by block (bounded temporaries), the slope at `xy` (`xy_in`
+    in the model's frame).
     """
     n = len(z)
     height, upper, keep = np.empty(n), np.empty(n), np.empty(n, bool)
+    slope = np.ascontiguousarray(model.slope, dtype=np.float64)
     for s, e in _blocks(n):
-        h = np.round(z[s:e] - model(xy[s:e]), 6, out=height[s:e])
-        extra = slope_tolerance * model.slope_at(xy[s:e])
-        u = np.add(tolerance, extra, out=upper[s:e])
-        keep[s:e] = (h <= u) & (h >= -(below + extra))
+        height_test(xy[s:e], z[s:e], model(xy_in[s:e]), slope, model.cell,
+                    float(slope_tolerance), float(tolerance), float(below), height[s:e],
+                    upper[s:e], keep[s:e])
     return height, upper, keep
 
 
@@ -418,16 +429,14 @@ def refine_terrain(xy, z, ground, *, cell, tolerance, slope_tolerance, step, max
     model = TerrainModel(grid=grid, slope=np.hypot(gx, gy), cell=float(cell),
                          tin=_tin(xy, z, surface_z, grid, lowest, cell), frame=frame)
     del lowest, ground_z, seeds_z, grown_z, surface_z
-    height, upper, keep = _test_points(model, xy_in, z, tolerance=tolerance,
+    height, upper, keep = _test_points(model, xy_in, xy, z, tolerance=tolerance,
                                        slope_tolerance=slope_tolerance, below=below)
     if fence > 0 and keep.any():
-        bound = noise_fence(xy, height, keep, cell=cell, fence=fence, min_points=fence_points,
-                            max_radius=fence_radius)
-        for s, e in _blocks(len(z)):
-            u = np.minimum(upper[s:e], bound[s:e] + slope_tolerance * model.slope_at(xy_in[s:e]),
-                           out=upper[s:e])
-            keep[s:e] &= height[s:e] <= u
-        del bound
+        centre, spread, ny = _fence_cells(xy, height, keep, cell=cell, min_points=fence_points,
+                                          max_radius=fence_radius)
+        fence_test(xy, float(cell), ny, centre, spread, float(fence),
+                   np.ascontiguousarray(model.slope, dtype=np.float64), float(slope_tolerance),
+                   height, upper, keep)
     return TerrainRefinement(ground=keep, height=height, tolerance=upper, surface=model,
                              grown_cells=grown, rejected_cells=rejected,
                              plateau_cells=plateaus)
