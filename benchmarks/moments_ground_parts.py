@@ -90,7 +90,9 @@ def time_parts(folder):
     from lidarstat.classify import _seams, _surface
 
     folder = Path(folder)
-    ld = lambda name: np.load(folder / f"{name}.npy")  # noqa: E731
+    def ld(name):
+        return np.load(folder / f"{name}.npy")
+
     xy, z, rank = ld("xy"), ld("z"), ld("rank")
     cell, cut_cell = float(ld("cell")[0]), float(ld("cut_cell")[0])
     passes = sum(1 for _ in folder.glob("where*.npy"))
@@ -109,6 +111,10 @@ def time_parts(folder):
         wall[part] += time.perf_counter() - t0
         return out
 
+    def two_threads(P):
+        with ThreadPoolExecutor(2) as pool:
+            return list(pool.map(Delaunay, [P, P]))
+
     vertices = []
     for i in range(passes):
         sel = timed("pick", _surface._cell_pick, xy, z, cell, "median", rank, ld(f"where{i}"))
@@ -117,10 +123,8 @@ def time_parts(folder):
         timed("delaunay", Delaunay, P)
         surf = timed("tin_build", _surface.TinSurface, P, z[sel], cell)
         timed("evaluation", surf, xy)
-        timed("delaunay_one_after_other", lambda: [Delaunay(P) for _ in range(2)])
-        with ThreadPoolExecutor(2) as pool:
-            timed("delaunay_two_threads",
-                  lambda: list(pool.map(Delaunay, [P, P])))  # noqa: B023
+        timed("delaunay_one_after_other", lambda P: [Delaunay(P), Delaunay(P)], P)
+        timed("delaunay_two_threads", two_threads, P)
     for i in range(cuts):
         timed("cut", _seams.interpolate_cuts, xy, ld(f"cut{i}"), cut_cell, frame=None)
     return {"passes": passes, "cuts": cuts, "vertices": vertices,
