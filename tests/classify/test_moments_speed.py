@@ -80,6 +80,36 @@ def test_cell_pick_equals_lexsort(rng, which):
     assert _surface._cell_pick(far, z, 4.0, which).size == np.unique(key).size
 
 
+@pytest.mark.parametrize("which", ["min", "median"])
+def test_cell_pick_of_rows_equals_pick_of_their_copy(rng, which, monkeypatch):
+    """The pick among the rows `where` (keys, counting sort and cells in parallel blocks)
+    is the serial pick of the copy ``xy[where]``, whatever the blocks."""
+    from lidarstat.classify import _surface_kernels as k
+
+    n = 30000
+    xy = rng.uniform(0, 80, (n, 2))
+    z = np.round(rng.normal(size=n), 1)  # many ties: broken by rank
+    rank = rng.permutation(n)
+    where = np.flatnonzero(rng.uniform(size=n) < 0.7)
+    ref = where[_surface._cell_pick(xy[where], z[where], 4.0, which, rank[where])]
+    assert np.array_equal(_surface._cell_pick(xy, z, 4.0, which, rank, where), ref)
+    monkeypatch.setattr(_surface, "_PARALLEL_PICK", 0)  # the parallel path at any size
+    assert np.array_equal(_surface._cell_pick(xy, z, 4.0, which, rank, where), ref)
+    key = _surface.cell_keys(xy[where], 4.0)
+    order, starts = _surface.cell_order(key)
+    for blocks in (1, 3, 7):  # uneven blocks, more than the threads
+        got = np.empty(where.size, np.int64)
+        nkeys = k.cell_keys_where(xy, where, 4.0, blocks, got)
+        assert np.array_equal(got, key) and nkeys == key.max() + 1
+        rows, st = k.order_where(key, nkeys, where, blocks)
+        assert np.array_equal(rows, where[order]) and np.array_equal(st, starts)
+        assert np.array_equal(k.pick_cells(rows, z, st, which == "median", rank, blocks), ref)
+    far = xy * [1, 1e4]  # sparse cells over a huge box: the argsort path
+    ref = where[_surface._cell_pick(far[where], z[where], 4.0, which, rank[where])]
+    assert np.array_equal(_surface._cell_pick(far, z, 4.0, which, rank, where), ref)
+    assert _surface._cell_pick(xy, z, 4.0, which, rank, where[:0]).size == 0
+
+
 @pytest.mark.parametrize("n, w", [(10, 3), (11, 5), (3000, 31), (40000, 401)])
 def test_smoothing_equals_convolution(rng, n, w):
     y = np.cumsum(rng.normal(size=n)) + 50.0

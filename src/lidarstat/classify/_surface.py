@@ -25,6 +25,9 @@ __all__ = ["ground_surface", "cell_keys", "TinSurface"]
 
 _EPS = 100 * np.finfo(float).eps  # scipy's tolerance inside a simplex
 _EPS_BROAD = float(np.sqrt(np.finfo(float).eps))  # scipy's tolerance at the hull
+#: Fewest ground points whose cell picks run in parallel blocks (below, the serial
+#: kernels on copies of their rows: no thread is woken for a few milliseconds' work).
+_PARALLEL_PICK = 1 << 19
 
 
 def cell_keys(xy: np.ndarray, cell: float, origin=None) -> np.ndarray:
@@ -208,45 +211,29 @@ def _cell_pick(xy, z, cell, which, rank=None, where=None):
     if where is None:
         order, starts = cell_order(cell_keys(xy, cell))
         return _pick_per_cell(order, z, starts, which == "median", rank)
+    from numba import get_num_threads
+
+    from . import _surface_kernels as k
+
     where = np.ascontiguousarray(where, dtype=np.int64)
-    xy = np.asarray(xy, dtype=np.float64)
-    order, starts = cell_order(_cell_keys_where(xy, where, cell))
-    order = where[order]  # rows of `xy`: ties by index stay in the subset's order
-    return _pick_per_cell(order, z, starts, which == "median", rank)
-
-
-def _cell_keys_where(xy, where, cell):
-    """:func:`cell_keys` of ``xy[where]`` without the (M, 2) copy."""
-    out = np.empty(where.size, np.int64)
-    if not out.size:
-        return out
-    lo = np.empty(2)
-    hi_y = _where_bounds(xy, where, lo)
-    ncol = int(np.floor((hi_y - lo[1]) / cell)) + 1
-    _cell_keys_at(xy, where, float(lo[0]), float(lo[1]), float(cell), ncol, out)
-    return out
-
-
-@njit
-def _where_bounds(xy, where, lo):  # pragma: no cover - compiled
-    """Column minima of ``xy[where]`` into `lo`; the largest y."""
-    lo[0] = np.inf
-    lo[1] = np.inf
-    hi = -np.inf
-    for t in range(where.size):
-        i = where[t]
-        lo[0] = min(lo[0], xy[i, 0])
-        lo[1] = min(lo[1], xy[i, 1])
-        hi = max(hi, xy[i, 1])
-    return hi
-
-
-@njit
-def _cell_keys_at(xy, where, ox, oy, cell, ncol, out):  # pragma: no cover - compiled
-    for t in range(where.size):
-        i = where[t]
-        out[t] = (np.int64(np.floor((xy[i, 0] - ox) / cell)) * ncol
-                  + np.int64(np.floor((xy[i, 1] - oy) / cell)))
+    if where.size < _PARALLEL_PICK:  # the copies cost less than starting the threads
+        sel = _cell_pick(np.asarray(xy)[where], z[where], cell, which,
+                         rank[where] if rank.size else None)
+        return where[sel]  # ties by index in the copy: by row, `where` ascending
+    xy = np.ascontiguousarray(xy, dtype=np.float64)
+    # blocks of points and of cells worked in parallel; the counting sort's table holds
+    # a count per key and block: as many blocks as threads only where the cells hold
+    # many points each (then the table is small beside the points)
+    threads = min(get_num_threads(), 8)
+    key = np.empty(where.size, np.int64)
+    nkeys = k.cell_keys_where(xy, where, float(cell), threads, key)
+    if nkeys > 4 * key.size + 1_000_000:  # sparse cells over a huge box
+        order, starts = cell_order(key)
+        order = where[order]  # rows of `xy`: ties by index stay in the subset's order
+    else:
+        blocks = max(1, min(threads, key.size // nkeys))
+        order, starts = k.order_where(key, nkeys, where, blocks)
+    return k.pick_cells(order, z, starts, which == "median", rank, threads)
 
 
 # --------------------------------------------------------------------------- TIN kernels
