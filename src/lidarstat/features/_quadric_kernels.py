@@ -6,7 +6,8 @@ neighbours, tricube weights w_j = (1 - (d_ij/b)^3)^3 and a local frame R (rows e
 * local coordinates (u, v, h) = R d_j, scaled U = u/b, V = v/b for conditioning;
 * design row x_j = [1, U, V, U^2/2, U V, V^2/2] (eq. 4 of Crosilla et al. 2009);
 * N = X'WX, N2 = X'W^2X, N3 = X'W^3X assembled from weighted moment sums of the 15
-  monomials U^i V^j, i + j <= 4 (one pass); r = X'Wh; beta = N^-1 r (eq. 5) via Cholesky;
+  monomials U^i V^j, i + j <= 4 (two passes over the neighbours, no per-point design
+  matrix); r = X'Wh; beta = N^-1 r (eq. 5) via Cholesky;
 * residuals e_j = h_j - x_j'beta, Q = e'We (numerator of eq. 6);
 * traces for the exact moments of Q under H0 (from the 6 x 6 matrices, no leverage
   pass): tr(B) = sum w - tr(N^-1 N2) and
