@@ -22,14 +22,16 @@ the neighbour search every method pays. Writes ``results_curvature_floor.json``:
 (``NUMBA_NUM_THREADS=1``), each stage adding one step to the previous (a serial loop of
 the benchmark over the cells of the middle of the cloud calling the library's functions):
 
-* ``search``: the grid scan of every candidate of the 27 cells (squared distances
-  stored, square roots of the neighbours);
-* ``offsets``: + the offsets and tricube weights of the neighbours into four columns,
-  with the weighted sums of the offsets and their products (the frame's covariance);
+* ``search``: the candidates of the 27 cells gathered once per cell into contiguous
+  columns, the squared distance to every candidate, the positions and squared
+  distances of those inside;
+* ``offsets``: + the tricube weights (square roots included) and offsets of the
+  neighbours into four columns, and the weighted sums of the offsets and their products (the frame's
+  covariance);
 * ``frame``: + the PCA frame (covariance about the weighted mean, eigenpairs,
   orientation);
 * ``moments``: + local coordinates and the 15 x 3 + 6 weighted moment sums;
-* ``fit``: the whole per-point fit of the command (``_fit_one``: the above, the 6 x 6
+* ``fit``: the whole per-point fit of the command (``_fit_local``: the above, the 6 x 6
   Cholesky inverse, the residual pass, the traces and the sandwich cofactor);
 * ``driver``: the command's own call (``_run_cells``: the parallel driver on one thread,
   the per-block budget check, the outputs written to the block's arrays).
@@ -37,6 +39,8 @@ the benchmark over the cells of the middle of the cloud calling the library's fu
 Stored under ``stages`` (per neighbour count) in the same file::
 
     NUMBA_NUM_THREADS=1 python benchmarks/curvature_floor.py --stages --neighbors 50 300
+
+(``--key NAME`` stores the ``--stages`` or ``--against`` figures under NAME instead.)
 
 ``--half-cells`` times the grid search alone (one thread, the serial loop of ``--stages``
 ``search`` stage) on an index of cells of the radius (the 27 cells around a point's own)
@@ -143,21 +147,21 @@ STAGES = ("search", "offsets", "frame", "moments", "fit", "driver")
 def _stage_kernel():
     """A serial loop over cells running the first `stage` steps of the command's fit."""
     from lidarstat._shared._jit import njit
+    from lidarstat._shared._kernels import mirror3
     from lidarstat.features import _frame_kernels as fk
+    from lidarstat.features import _quadric_cells as qc
     from lidarstat.features import _quadric_kernels as qk
     from lidarstat.neighbors import _kernels as nk
 
     @njit
     def run(stage, c0, c1, pts, cell_keys, cell_start, dims, radius):
         ws = qk._workspace()
-        R, cov3, ev, evec, mom, rhs, part = ws[0], ws[1], ws[2], ws[3], ws[4], ws[11], ws[12]
+        R, cov3, ev, evec, mom, rhs = ws[0], ws[1], ws[2], ws[3], ws[4], ws[11]
         ranges = np.empty((9, 2), dtype=np.int64)
         cap = 1024
-        idx = np.empty(cap, dtype=np.int32)
-        dist = np.empty(cap)
-        buf = np.empty((cap, 4))
-        cols = buf.reshape((4, cap))
-        rows = cols.T
+        cand = np.empty((4, cap))
+        cols = np.empty((4, cap))
+        sel = np.empty(cap, dtype=np.int32)
         beta, cof, frm, st = (np.empty((1, 6)), np.empty((1, 6, 6)), np.empty((1, 3, 3)),
                               np.empty((1, 4)))
         sensor = np.zeros(3)
@@ -171,52 +175,25 @@ def _stage_kernel():
                 need += ranges[t, 1] - ranges[t, 0]
             if need > cap:
                 cap = max(need, 2 * cap)
-                idx = np.empty(cap, dtype=np.int32)
-                dist = np.empty(cap)
-                buf = np.empty((cap, 4))
-                cols = buf.reshape((4, cap))
-                rows = cols.T
+                cand = np.empty((4, cap))
+                cols = np.empty((4, cap))
+                sel = np.empty(cap, dtype=np.int32)
+            m = qc.gather(pts, ranges, nr, cand)
             for i in range(cell_start[c], cell_start[c + 1]):
-                n = nk._scan(pts[i, 0], pts[i, 1], pts[i, 2], pts, ranges, nr, r2, 3, idx,
-                             dist, 0, nk.STORE_ALL)
-                visits += n
+                px, py, pz = pts[i, 0], pts[i, 1], pts[i, 2]
+                nkp = qc.within(px, py, pz, cand, m, r2, sel, cols[3])
+                visits += nkp
                 if stage == 0:
-                    check += dist[0]
+                    check += cols[3, 0]
                     continue
+                p, b = qc.neighbour_columns(px, py, pz, cand, sel, nkp, radius, cols)
                 if stage == 4:
-                    qk._fit_one(i, pts, idx, dist, 0, n, radius, fk.FRAME_PCA, sensor, False,
-                                7, qk.COV_SANDWICH, ws, buf, 0, beta, cof, frm, st)
+                    qk._fit_local(cols, nkp, p, px, py, pz, b, fk.FRAME_PCA, sensor, False,
+                                  7, qk.COV_SANDWICH, ws, 0, beta, cof, frm, st)
                     check += beta[0, 0]
                     continue
-                nkp = 0
-                inv_b = 1.0 / radius
-                sw = s0 = s1 = s2 = 0.0
-                c00 = c01 = c02 = c11 = c12 = c22 = 0.0
-                for t in range(n):
-                    g = dist[t] * inv_b
-                    g = 1.0 - g * g * g
-                    w = g * g * g
-                    if not dist[t] < radius or w <= 0.0:
-                        continue
-                    j = idx[t]
-                    d0 = pts[j, 0] - pts[i, 0]
-                    d1 = pts[j, 1] - pts[i, 1]
-                    d2 = pts[j, 2] - pts[i, 2]
-                    cols[0, nkp] = d0
-                    cols[1, nkp] = d1
-                    cols[2, nkp] = d2
-                    cols[3, nkp] = w
-                    nkp += 1
-                    sw += w
-                    s0 += w * d0
-                    s1 += w * d1
-                    s2 += w * d2
-                    c00 += w * d0 * d0
-                    c01 += w * d0 * d1
-                    c02 += w * d0 * d2
-                    c11 += w * d1 * d1
-                    c12 += w * d1 * d2
-                    c22 += w * d2 * d2
+                sw, s0, s1, s2, c00, c01, c02, c11, c12, c22 = qk.frame_sums(
+                    cols[0], cols[1], cols[2], cols[3], nkp)
                 if stage == 1 or nkp < 6:
                     check += cols[0, 0] + c00 + c01 + c02 + c11 + c12 + c22 + s0 + s1 + s2
                     continue
@@ -229,16 +206,14 @@ def _stage_kernel():
                 cov3[1, 1] = c11 - m1 * s1
                 cov3[1, 2] = c12 - m1 * s2
                 cov3[2, 2] = c22 - m2 * s2
-                cov3[1, 0] = cov3[0, 1]
-                cov3[2, 0] = cov3[0, 2]
-                cov3[2, 1] = cov3[1, 2]
-                fk.frame_from_covariance(cov3, pts[i, 0], pts[i, 1], pts[i, 2], fk.FRAME_PCA,
-                                         sensor, False, R, ev, evec, True)
+                mirror3(cov3)
+                fk.frame_from_covariance(cov3, px, py, pz, fk.FRAME_PCA, sensor, False, R, ev,
+                                         evec, True)
                 if stage == 2:
                     check += R[0, 0]
                     continue
-                fk.to_frame(rows, nkp, R, 1.0 / radius)
-                qk._moment_sums(cols[0], cols[1], cols[2], cols[3], nkp, part, mom, rhs)
+                fk.to_frame(cols.T, nkp, R, 1.0 / radius)
+                qk._moment_sums(cols[0], cols[1], cols[2], cols[3], nkp, mom, rhs)
                 check += mom[0, 0]
         return visits, check
 
@@ -396,7 +371,7 @@ def stages(args):
                   f"{r['cpu_ns_per_point']:7.0f} ns per point (step {r['step_ns_per_point']:6.0f})")
     path = Path(args.out)
     res = json.loads(path.read_text()) if path.exists() else {}
-    res["stages"] = dict(
+    res[args.key or "stages"] = dict(
         date=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         machine_shared=bool(args.shared), threads=numba.config.NUMBA_NUM_THREADS,
         cloud_points=int(xyz.shape[0]), repeats=args.repeats,
@@ -469,7 +444,7 @@ def against(args):
               f"ratio {row['ratio']:.3f}")
     path = Path(args.out)
     res = json.loads(path.read_text()) if path.exists() else {}
-    res["driver_against"] = dict(
+    res[args.key or "driver_against"] = dict(
         date=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         machine_shared=bool(args.shared), against=args.against, rounds=args.rounds,
         repeats=args.repeats, cloud_points=args.points,
@@ -517,6 +492,9 @@ def main(argv=None):
     ap.add_argument("--against", default=None, metavar="SRC",
                     help="compare the driver stage with the package at SRC, alternating")
     ap.add_argument("--rounds", type=int, default=3, help="with --against: rounds [3]")
+    ap.add_argument("--key", default=None,
+                    help="with --stages, --against: store under this key instead of "
+                         "'stages' / 'driver_against'")
     ap.add_argument("--child-driver", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child_driver:

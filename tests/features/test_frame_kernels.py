@@ -77,15 +77,31 @@ def test_spd_inverse6_matches_lapack(rng):
     assert not _spd_inverse6(np.zeros((6, 6)), 1e-12, L, LI, inv)
 
 
-def test_moment_sums_match_direct_sums(rng):
-    """The lane-blocked sums equal the plain sums of w^(p+1) U^i V^j and w h U^i V^j."""
-    from lidarstat.features._quadric_kernels import LANES, _MONO, _moment_sums
+def test_frame_sums_match_direct_sums(rng):
+    """The lane sums of w, w d and w d d' equal the plain sums (columns only read)."""
+    from lidarstat.features._quadric_kernels import frame_sums
 
-    acc, mom, rhs = np.empty(54 * LANES), np.empty((3, 15)), np.empty(6)
+    for nk in (0, 1, 7, 8, 9, 50, 301):
+        cols = np.ascontiguousarray(rng.uniform(-1, 1, (4, nk + 5)))
+        cols[3] = rng.uniform(0, 1, nk + 5)
+        before = cols.copy()
+        got = frame_sums(cols[0], cols[1], cols[2], cols[3], nk)
+        d, w = cols[:3, :nk], cols[3, :nk]
+        want = [w.sum(), *(d @ w)] + [(w * d[a] * d[c]).sum()
+                                      for a, c in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))]
+        np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-13 * nk)
+        np.testing.assert_array_equal(cols, before)
+
+
+def test_moment_sums_match_direct_sums(rng):
+    """The lane sums equal the plain sums of w^(p+1) U^i V^j and w h U^i V^j."""
+    from lidarstat.features._quadric_kernels import _MONO, _moment_sums
+
+    mom, rhs = np.empty((3, 15)), np.empty(6)
     for nk in (1, 7, 8, 9, 50, 301):
         cols = np.ascontiguousarray(rng.uniform(-1, 1, (4, nk + 5)))
         cols[3] = rng.uniform(0, 1, nk + 5)
-        _moment_sums(cols[0], cols[1], cols[2], cols[3], nk, acc, mom, rhs)
+        _moment_sums(cols[0], cols[1], cols[2], cols[3], nk, mom, rhs)
         u, v, h, w = (c[:nk] for c in cols)
         powers = [(i - j, j) for i in range(5) for j in range(i + 1)]  # 1 U V U2 UV V2 ...
         mono = np.array([u ** a * v ** b for a, b in powers])
@@ -96,10 +112,9 @@ def test_moment_sums_match_direct_sums(rng):
 
 
 def test_residual_sum_of_squares_matches_direct_sum(rng):
-    """The lane sums of w (h - x'beta)^2 equal the plain sum; the h column gets the terms."""
-    from lidarstat.features._quadric_kernels import LANES, _residual_ss
+    """The lane sums of w (h - x'beta)^2 equal the plain sum; the columns are only read."""
+    from lidarstat.features._quadric_kernels import _residual_ss
 
-    part = np.empty(54 * LANES)
     for nk in (1, 7, 8, 9, 50, 301):
         cols = np.ascontiguousarray(rng.uniform(-1, 1, (4, nk + 5)))
         cols[3] = rng.uniform(0, 1, nk + 5)
@@ -107,11 +122,10 @@ def test_residual_sum_of_squares_matches_direct_sum(rng):
         u, v, h, w = (c[:nk].copy() for c in cols)
         x = np.stack([np.ones(nk), u, v, 0.5 * u * u, u * v, 0.5 * v * v], axis=1)
         terms = w * (h - x @ beta) ** 2
-        tail = cols[2, nk:].copy()
-        q = _residual_ss(cols[0], cols[1], cols[2], cols[3], nk, beta, part)
+        before = cols.copy()
+        q = _residual_ss(cols[0], cols[1], cols[2], cols[3], nk, beta)
         np.testing.assert_allclose(q, terms.sum(), rtol=1e-13)
-        np.testing.assert_allclose(cols[2, :nk], terms, rtol=1e-12, atol=1e-15)
-        np.testing.assert_array_equal(cols[2, nk:], tail)  # nothing past nk is touched
+        np.testing.assert_array_equal(cols, before)
 
 
 def test_row_product_sums_in_order(rng):

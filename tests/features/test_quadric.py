@@ -139,15 +139,18 @@ def test_statistics_kernel_matches_numpy_reference(test):
                                    rtol=1e-6, atol=1e-12, equal_nan=True, err_msg=k)
 
 
-@pytest.mark.parametrize("frame", ["z", "pca"])
-def test_fused_cell_kernel_equals_csr_kernel(rng, frame):
+@pytest.mark.parametrize("frame, bandwidth", [("z", 0.5), ("pca", 0.5), ("pca", 0.35)])
+def test_fused_cell_kernel_equals_csr_kernel(rng, frame, bandwidth):
+    """The fused search and fit over grid cells gives the CSR kernel's fits; with a
+    bandwidth below the search radius its neighbours beyond the bandwidth (weight 0 in
+    the fused kernel, left out by the CSR one) change nothing."""
     from lidarstat.features._quadric import _run_cells
     from lidarstat.neighbors import CellIndex
 
     pts = rng.random((3000, 3)) * [6, 6, 0.4] + [3e5, 4e6, 50]
     index = CellIndex(pts, 0.5)
-    csr = fit_quadrics(pts, radius_neighbors(pts, 0.5), frame=frame)
-    out = _run_cells(index, 0, index.n_cells, bandwidth=0.5, frame=frame, sensor=None,
+    csr = fit_quadrics(pts, radius_neighbors(pts, 0.5), frame=frame, bandwidth=bandwidth)
+    out = _run_cells(index, 0, index.n_cells, bandwidth=bandwidth, frame=frame, sensor=None,
                      min_neighbors=7, covariance="sandwich")
     o = index.order
     np.testing.assert_array_equal(out["status"], csr.status[o])

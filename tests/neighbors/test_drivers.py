@@ -15,8 +15,8 @@ SRC = str(Path(__file__).resolve().parents[2] / "src")
 
 _KEYS = """
 import json
-from lidarstat.features import _jet_kernels as jk, _quadric_kernels as qk
-drivers = (jk.fit_jets_block, jk.fit_jets_cells, qk.fit_quadrics_block, qk.fit_quadrics_cells)
+from lidarstat.features import _jet_kernels as jk, _quadric_cells as qc, _quadric_kernels as qk
+drivers = (jk.fit_jets_block, jk.fit_jets_cells, qk.fit_quadrics_block, qc.fit_quadrics_cells)
 cg = drivers[0].targetctx.codegen()
 print(json.dumps([str(d._cache._index_key((), cg)) for d in drivers]))
 """

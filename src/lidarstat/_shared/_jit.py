@@ -3,7 +3,9 @@
 Every kernel uses ``@njit`` or ``@njit_parallel`` from here: ``cache=True`` so tests and the
 CLI load compiled code from ``__pycache__`` instead of recompiling at every start,
 ``nogil=True`` so kernels can run in threads (Dask), ``fastmath=False`` because the
-statistics rely on IEEE semantics (NaN propagation, no reassociation of the moment sums).
+statistics rely on IEEE semantics (NaN propagation, every term rounded as written); a
+small function of running sums over neighbours may take ``fastmath={"reassoc"}`` alone,
+so that the compiler sums in vector lanes (``features/_quadric_kernels.py``).
 
 A kernel called from another kernel is compiled for the argument types of the call
 (:func:`one_signature`): constants count as plain ``int64``/``bool``/``float64`` and every

@@ -13,6 +13,7 @@ from .._shared.validation import check_option, check_points, check_scalar
 from ..errors import InvalidParameterError
 from ..neighbors import Neighborhoods
 from . import _frame_kernels as _fk
+from . import _quadric_cells as _qc
 from . import _quadric_kernels as _k
 
 FRAMES = {"z": _fk.FRAME_Z, "auto": _fk.FRAME_AUTO, "pca": _fk.FRAME_PCA}
@@ -134,7 +135,7 @@ def _run_cells(index, c0, c1, *, bandwidth, frame, sensor, min_neighbors, covari
     has_sensor = sensor is not None
     sensor_arr = np.zeros(3) if sensor is None else np.asarray(sensor, dtype=np.float64)
     with dynamic_schedule():  # chunks of cells of unequal work
-        _k.fit_quadrics_cells(
+        _qc.fit_quadrics_cells(
             c0, c1, index.sorted_points, index.cell_keys, index.cell_start, index.dims,
             float(index.radius), active,
             (float(bandwidth), FRAMES[Frame(frame).value], sensor_arr, has_sensor,

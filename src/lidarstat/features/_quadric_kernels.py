@@ -6,7 +6,8 @@ neighbours, tricube weights w_j = (1 - (d_ij/b)^3)^3 and a local frame R (rows e
 * local coordinates (u, v, h) = R d_j, scaled U = u/b, V = v/b for conditioning;
 * design row x_j = [1, U, V, U^2/2, U V, V^2/2] (eq. 4 of Crosilla et al. 2009);
 * N = X'WX, N2 = X'W^2X, N3 = X'W^3X assembled from weighted moment sums of the 15
-  monomials U^i V^j, i + j <= 4 (one pass); r = X'Wh; beta = N^-1 r (eq. 5) via Cholesky;
+  monomials U^i V^j, i + j <= 4 (two passes over the neighbours, no per-point design
+  matrix); r = X'Wh; beta = N^-1 r (eq. 5) via Cholesky;
 * residuals e_j = h_j - x_j'beta, Q = e'We (numerator of eq. 6);
 * traces for the exact moments of Q under H0 (from the 6 x 6 matrices, no leverage
   pass): tr(B) = sum w - tr(N^-1 N2) and
@@ -51,143 +52,200 @@ _COEF = (1.0, 1.0, 1.0, 0.5, 1.0, 0.5,
          0.5, 0.5, 0.5, 0.25, 0.5, 0.25)
 
 
-#: Neighbours per lane block of the moment sums (:func:`_moment_sums`)
-LANES = 8
+# The per-neighbour sums below are the fit's hot loops: 10 (frame), 24 + 27 (moments),
+# 1 (residual) running sums over the neighbours' columns. Each is its own function compiled with the
+# one fast-math flag that lets the compiler split a running sum into vector lanes
+# (``reassoc``: partial sums of every lane in registers, added at the end); no other
+# flag (no contraction into fused multiply-adds, NaN and infinity semantics kept), so
+# every term is rounded as written and only the order of the additions is the
+# compiler's (it follows the processor's vector width: the last bits of a sum may
+# differ between processors, never between runs on one). A function has at most about
+# 27 sums so that they stay in the 32 vector registers.
+_SUMS = {"reassoc"}
+
+
+@njit(fastmath=_SUMS)
+def frame_sums(D0, D1, D2, W, nk):
+    """``(sum w, sum w d, sum w d d')`` of the first `nk` offsets ``(D0, D1, D2)`` and
+    weights `W`: ``sw, s0, s1, s2, c00, c01, c02, c11, c12, c22`` (what the frame's
+    weighted covariance needs; see :func:`_fit_local`)."""
+    sw = s0 = s1 = s2 = 0.0
+    c00 = c01 = c02 = c11 = c12 = c22 = 0.0
+    for t in range(nk):
+        w = W[t]
+        d0 = D0[t]
+        d1 = D1[t]
+        d2 = D2[t]
+        w0 = w * d0
+        w1 = w * d1
+        w2 = w * d2
+        sw += w
+        s0 += w0
+        s1 += w1
+        s2 += w2
+        c00 += w0 * d0
+        c01 += w0 * d1
+        c02 += w0 * d2
+        c11 += w1 * d1
+        c12 += w1 * d2
+        c22 += w2 * d2
+    return sw, s0, s1, s2, c00, c01, c02, c11, c12, c22
+
+
+@njit(fastmath=_SUMS)
+def _low_moments(U, V, Hh, W, nk, mom, rhs):
+    """Columns 0-5 of `mom` (monomials 1 U V U^2 UV V^2) and `rhs`."""
+    a0 = a1 = a2 = a3 = a4 = a5 = 0.0
+    b0 = b1 = b2 = b3 = b4 = b5 = 0.0
+    c0 = c1 = c2 = c3 = c4 = c5 = 0.0
+    r0 = r1 = r2 = r3 = r4 = r5 = 0.0
+    for t in range(nk):
+        u = U[t]
+        v = V[t]
+        w = W[t]
+        uu = u * u
+        uv = u * v
+        vv = v * v
+        w2 = w * w
+        w3 = w2 * w
+        wh = w * Hh[t]
+        a0 += w
+        a1 += w * u
+        a2 += w * v
+        a3 += w * uu
+        a4 += w * uv
+        a5 += w * vv
+        b0 += w2
+        b1 += w2 * u
+        b2 += w2 * v
+        b3 += w2 * uu
+        b4 += w2 * uv
+        b5 += w2 * vv
+        c0 += w3
+        c1 += w3 * u
+        c2 += w3 * v
+        c3 += w3 * uu
+        c4 += w3 * uv
+        c5 += w3 * vv
+        r0 += wh
+        r1 += wh * u
+        r2 += wh * v
+        r3 += wh * uu
+        r4 += wh * uv
+        r5 += wh * vv
+    for p, (m0, m1, m2, m3, m4, m5) in enumerate(((a0, a1, a2, a3, a4, a5),
+                                                   (b0, b1, b2, b3, b4, b5),
+                                                   (c0, c1, c2, c3, c4, c5))):
+        mom[p, 0] = m0
+        mom[p, 1] = m1
+        mom[p, 2] = m2
+        mom[p, 3] = m3
+        mom[p, 4] = m4
+        mom[p, 5] = m5
+    rhs[0] = r0
+    rhs[1] = r1
+    rhs[2] = r2
+    rhs[3] = r3
+    rhs[4] = r4
+    rhs[5] = r5
+
+
+@njit(fastmath=_SUMS)
+def _high_moments(U, V, W, nk, mom):
+    """Columns 6-14 of `mom` (monomials U^3 U^2V UV^2 V^3 U^4 U^3V U^2V^2 UV^3 V^4)."""
+    a6 = a7 = a8 = a9 = a10 = a11 = a12 = a13 = a14 = 0.0
+    b6 = b7 = b8 = b9 = b10 = b11 = b12 = b13 = b14 = 0.0
+    c6 = c7 = c8 = c9 = c10 = c11 = c12 = c13 = c14 = 0.0
+    for t in range(nk):
+        u = U[t]
+        v = V[t]
+        w = W[t]
+        uu = u * u
+        uv = u * v
+        vv = v * v
+        w2 = w * w
+        w3 = w2 * w
+        m6 = uu * u
+        m7 = uu * v
+        m8 = u * vv
+        m9 = vv * v
+        m10 = uu * uu
+        m11 = uu * uv
+        m12 = uu * vv
+        m13 = uv * vv
+        m14 = vv * vv
+        a6 += w * m6
+        a7 += w * m7
+        a8 += w * m8
+        a9 += w * m9
+        a10 += w * m10
+        a11 += w * m11
+        a12 += w * m12
+        a13 += w * m13
+        a14 += w * m14
+        b6 += w2 * m6
+        b7 += w2 * m7
+        b8 += w2 * m8
+        b9 += w2 * m9
+        b10 += w2 * m10
+        b11 += w2 * m11
+        b12 += w2 * m12
+        b13 += w2 * m13
+        b14 += w2 * m14
+        c6 += w3 * m6
+        c7 += w3 * m7
+        c8 += w3 * m8
+        c9 += w3 * m9
+        c10 += w3 * m10
+        c11 += w3 * m11
+        c12 += w3 * m12
+        c13 += w3 * m13
+        c14 += w3 * m14
+    for p, (m6, m7, m8, m9, m10, m11, m12, m13, m14) in enumerate((
+            (a6, a7, a8, a9, a10, a11, a12, a13, a14),
+            (b6, b7, b8, b9, b10, b11, b12, b13, b14),
+            (c6, c7, c8, c9, c10, c11, c12, c13, c14))):
+        mom[p, 6] = m6
+        mom[p, 7] = m7
+        mom[p, 8] = m8
+        mom[p, 9] = m9
+        mom[p, 10] = m10
+        mom[p, 11] = m11
+        mom[p, 12] = m12
+        mom[p, 13] = m13
+        mom[p, 14] = m14
 
 
 @njit
-def _lane_total(acc, k):
-    """Sum of the LANES partial sums of accumulator `k`, in a fixed order."""
-    a = k * LANES
-    return (((acc[a] + acc[a + 1]) + (acc[a + 2] + acc[a + 3]))
-            + ((acc[a + 4] + acc[a + 5]) + (acc[a + 6] + acc[a + 7])))
-
-
-@njit
-def _moment_sums(U, V, Hh, W, nk, acc, mom, rhs):
+def _moment_sums(U, V, Hh, W, nk, mom, rhs):
     """The weighted moment sums of one neighbourhood: ``mom[p, k] = sum w^(p+1) m_k`` over
     the 15 monomials ``m_k = U^i V^j`` (i + j <= 4, order of ``_MONO``) and
-    ``rhs[k] = sum w h m_k`` (k < 6).
+    ``rhs[k] = sum w h m_k`` (k < 6), over the first `nk` entries of the columns.
 
-    Neighbour t goes to lane ``t % LANES``: each lane sums its neighbours in their order
-    and the lanes are added in a fixed order (:func:`_lane_total`), so the result does not
-    depend on the processor; the loop over the lanes of a block is elementwise, which the
-    compiler turns into vector instructions (it only reads the neighbours' columns: a
-    store to them in the same loop keeps it scalar). `acc` (at least ``54 * LANES``) is
-    scratch.
+    Two passes over the columns (monomials of degree up to 2 with `rhs`, then those of
+    degree 3 and 4), each running sum in vector lanes (see ``_SUMS``).
     """
-    for a in range(54 * LANES):
-        acc[a] = 0.0
-    for t0 in range(0, nk, LANES):
-        nl = min(LANES, nk - t0)
-        for L in range(nl):
-            t = t0 + L
-            u = U[t]
-            v = V[t]
-            w = W[t]
-            uu = u * u
-            uv = u * v
-            vv = v * v
-            w2 = w * w
-            w3 = w2 * w
-            wh = w * Hh[t]
-            m6 = uu * u
-            m7 = uu * v
-            m8 = u * vv
-            m9 = vv * v
-            m10 = uu * uu
-            m11 = uu * uv
-            m12 = uu * vv
-            m13 = uv * vv
-            m14 = vv * vv
-            # rows 0-14: w m_k; 15-29: w^2 m_k; 30-44: w^3 m_k; 45-50: w h m_k
-            acc[0 * LANES + L] += w
-            acc[1 * LANES + L] += w * u
-            acc[2 * LANES + L] += w * v
-            acc[3 * LANES + L] += w * uu
-            acc[4 * LANES + L] += w * uv
-            acc[5 * LANES + L] += w * vv
-            acc[6 * LANES + L] += w * m6
-            acc[7 * LANES + L] += w * m7
-            acc[8 * LANES + L] += w * m8
-            acc[9 * LANES + L] += w * m9
-            acc[10 * LANES + L] += w * m10
-            acc[11 * LANES + L] += w * m11
-            acc[12 * LANES + L] += w * m12
-            acc[13 * LANES + L] += w * m13
-            acc[14 * LANES + L] += w * m14
-            acc[15 * LANES + L] += w2
-            acc[16 * LANES + L] += w2 * u
-            acc[17 * LANES + L] += w2 * v
-            acc[18 * LANES + L] += w2 * uu
-            acc[19 * LANES + L] += w2 * uv
-            acc[20 * LANES + L] += w2 * vv
-            acc[21 * LANES + L] += w2 * m6
-            acc[22 * LANES + L] += w2 * m7
-            acc[23 * LANES + L] += w2 * m8
-            acc[24 * LANES + L] += w2 * m9
-            acc[25 * LANES + L] += w2 * m10
-            acc[26 * LANES + L] += w2 * m11
-            acc[27 * LANES + L] += w2 * m12
-            acc[28 * LANES + L] += w2 * m13
-            acc[29 * LANES + L] += w2 * m14
-            acc[30 * LANES + L] += w3
-            acc[31 * LANES + L] += w3 * u
-            acc[32 * LANES + L] += w3 * v
-            acc[33 * LANES + L] += w3 * uu
-            acc[34 * LANES + L] += w3 * uv
-            acc[35 * LANES + L] += w3 * vv
-            acc[36 * LANES + L] += w3 * m6
-            acc[37 * LANES + L] += w3 * m7
-            acc[38 * LANES + L] += w3 * m8
-            acc[39 * LANES + L] += w3 * m9
-            acc[40 * LANES + L] += w3 * m10
-            acc[41 * LANES + L] += w3 * m11
-            acc[42 * LANES + L] += w3 * m12
-            acc[43 * LANES + L] += w3 * m13
-            acc[44 * LANES + L] += w3 * m14
-            acc[45 * LANES + L] += wh
-            acc[46 * LANES + L] += wh * u
-            acc[47 * LANES + L] += wh * v
-            acc[48 * LANES + L] += wh * uu
-            acc[49 * LANES + L] += wh * uv
-            acc[50 * LANES + L] += wh * vv
-    for p in range(3):
-        for k in range(15):
-            mom[p, k] = _lane_total(acc, 15 * p + k)
-    for k in range(6):
-        rhs[k] = _lane_total(acc, 45 + k)
+    _low_moments(U, V, Hh, W, nk, mom, rhs)
+    _high_moments(U, V, W, nk, mom)
 
 
-@njit
-def _residual_ss(U, V, H, W, nk, beta, part):
-    """``sum w (h - x'beta)^2`` over the first `nk` neighbours (scaled beta; `H` is
-    overwritten by the terms ``w e^2``).
-
-    The terms are formed in one elementwise loop (vector lanes) and summed in LANES
-    partial sums added in a fixed order (:func:`_lane_total`): the result does not depend
-    on the processor. `part` (at least LANES) is scratch.
-    """
+@njit(fastmath=_SUMS)
+def _residual_ss(U, V, H, W, nk, beta):
+    """``sum w (h - x'beta)^2`` over the first `nk` neighbours (scaled beta), explicitly (no
+    cancellation), in vector lanes (see ``_SUMS``)."""
     b0 = beta[0]
     b1 = beta[1]
     b2 = beta[2]
     b3 = 0.5 * beta[3]
     b4 = beta[4]
     b5 = 0.5 * beta[5]
+    q = 0.0
     for t in range(nk):
         u = U[t]
         v = V[t]
         r = H[t] - (b0 + u * (b1 + b3 * u + b4 * v) + v * (b2 + b5 * v))
-        H[t] = W[t] * r * r
-    for lane in range(LANES):
-        part[lane] = 0.0
-    n = nk - nk % LANES
-    for t0 in range(0, n, LANES):
-        for lane in range(LANES):
-            part[lane] += H[t0 + lane]
-    for t in range(n, nk):
-        part[t - n] += H[t]
-    return _lane_total(part, 0)
+        q += W[t] * r * r
+    return q
 
 
 @njit
@@ -255,45 +313,34 @@ def _spd_inverse6(a, rel_tol, L, LI, inv):
 
 @njit
 def _workspace():
-    """Per-thread scratch arrays of ``_fit_one`` (allocated once per chunk or cell)."""
+    """Per-thread scratch arrays of ``_fit_local`` (allocated once per chunk or cell)."""
     return (np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty((3, 3)),
             np.empty((3, 15)), np.empty((6, 6)), np.empty((6, 6)), np.zeros((6, 6)),
-            np.zeros((6, 6)), np.empty((6, 6)), np.empty(6), np.empty(6),
-            np.empty(54 * LANES))
+            np.zeros((6, 6)), np.empty((6, 6)), np.empty(6), np.empty(6))
 
 
 @njit
 def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov_mode, ws, buf,
              row, beta_out, cof_out, frame_out, stats_out):
-    """Fit point i into row `row` of the outputs; returns (status, p). stats_out[row] = [Q,
-    sum w, trB, trB2]. (Rows, not views of them: a view per point costs reference counting on
-    the arrays that every thread shares.)
+    """Fit point i from its neighbours ``idx[s:e]`` at distances ``dist[s:e]`` into row
+    `row` of the outputs; returns (status, p) (see :func:`_fit_local`).
 
-    `buf` (at least e - s rows, 4 columns) is scratch for the neighbours, used as four
-    columns of its size: their offsets and weights (pass 0, which also sums what the
-    frame's covariance needs), then their u, v, h (pass 1), so that the moment and
-    residual passes read each coordinate contiguously; the residual pass (2) leaves the
-    terms w e^2 in the h column.
+    `buf` (at least e - s rows, 4 columns) is scratch for the neighbours: pass 0 puts the
+    offsets d_j = x_j - x_i and the weights of those with positive weight into its four
+    columns of its size (as :func:`_fit_local` takes them).
     """
-    R, cov3, ev, evec, mom, N, N2, L, LI, Ninv, tmp, rhs, part = ws
-    cols = buf.reshape((4, buf.shape[0]))  # columns d0 / u, d1 / v, d2 / h, w
-    rows = cols.T  # row t: the neighbour's (u, v, h, w), as to_frame reads them
+    cols = buf.reshape((4, buf.shape[0]))  # columns d0, d1, d2, w
     b = bw
     if b <= 0.0:  # kNN: the bandwidth is the farthest neighbour's distance (LOESS)
         for t in range(s, e):
             if dist[t] > b:
                 b = dist[t]
-    # Pass 0: the offsets d_j = x_j - x_i and weights of the neighbours with positive
-    # weight, once, into `buf` (read contiguously by the moment passes), and the weighted
-    # sums of the offsets and of their products that give the frame's covariance
     px = pts[i, 0]
     py = pts[i, 1]
     pz = pts[i, 2]
     inv_b = 1.0 / b
     p = 0
     nk = 0
-    sw = s0 = s1 = s2 = 0.0
-    c00 = c01 = c02 = c11 = c12 = c22 = 0.0
     for t in range(s, e):
         d = dist[t]
         if not d < b:
@@ -305,26 +352,30 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
         if w <= 0.0:
             continue
         j = idx[t]
-        d0 = pts[j, 0] - px
-        d1 = pts[j, 1] - py
-        d2 = pts[j, 2] - pz
-        cols[0, nk] = d0
-        cols[1, nk] = d1
-        cols[2, nk] = d2
+        cols[0, nk] = pts[j, 0] - px
+        cols[1, nk] = pts[j, 1] - py
+        cols[2, nk] = pts[j, 2] - pz
         cols[3, nk] = w
         nk += 1
-        w0 = w * d0
-        w1 = w * d1
-        sw += w
-        s0 += w0
-        s1 += w1
-        s2 += w * d2
-        c00 += w0 * d0
-        c01 += w0 * d1
-        c02 += w0 * d2
-        c11 += w1 * d1
-        c12 += w1 * d2
-        c22 += w * d2 * d2
+    return _fit_local(cols, nk, p, px, py, pz, b, frame, sensor, has_sensor, min_nb, cov_mode,
+                      ws, row, beta_out, cof_out, frame_out, stats_out)
+
+
+@njit
+def _fit_local(cols, nk, p, px, py, pz, b, frame, sensor, has_sensor, min_nb, cov_mode, ws,
+               row, beta_out, cof_out, frame_out, stats_out):
+    """Fit the point at (px, py, pz) into row `row` of the outputs; returns (status, p).
+    stats_out[row] = [Q, sum w, trB, trB2]. (Rows, not views of them: a view per point
+    costs reference counting on the arrays that every thread shares.)
+
+    `cols` (4 rows of at least `nk`) holds the offsets d_j = x_j - x_i and the tricube
+    weights (rows 0-3) of `nk` neighbours, in their order (a weight may be 0: such a
+    neighbour adds exact zeros to every sum); `p` counts the neighbours within the
+    bandwidth `b`. Its first three rows become the local
+    coordinates u, v, h (pass 1), read contiguously by the moment and residual passes.
+    """
+    R, cov3, ev, evec, mom, N, N2, L, LI, Ninv, tmp, rhs = ws
+    inv_b = 1.0 / b
     if p < min_nb or p < 6:
         return TOO_FEW, p
     # the fit, hence every result, is the same for any direction of e1 in the tangent plane
@@ -336,6 +387,8 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
         # weighted covariance about the weighted mean, from the sums about the point:
         # sum w (d - m)(d - m)' = sum w d d' - m (sum w d)'; the offsets are within b of
         # the point, so the subtraction loses no more than the sums' own rounding
+        sw, s0, s1, s2, c00, c01, c02, c11, c12, c22 = frame_sums(cols[0], cols[1], cols[2],
+                                                                  cols[3], nk)
         if not sw > 0.0:
             return SINGULAR, p
         m0 = s0 / sw
@@ -354,11 +407,11 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
     for a in range(3):
         for c in range(3):
             frame_out[row, a, c] = R[a, c]
-    # Pass 1: local coordinates (u, v, h) into buf, then the weighted moment sums of the 15
+    # Pass 1: local coordinates (u, v, h), then the weighted moment sums of the 15
     # monomials U^i V^j (i + j <= 4) for w, w^2, w^3 (the entries of X'WX, X'W^2X, X'W^3X)
     # and of w h U^i V^j (i + j <= 2) for X'Wh
-    to_frame(rows, nk, R, inv_b)
-    _moment_sums(cols[0], cols[1], cols[2], cols[3], nk, part, mom, rhs)
+    to_frame(cols.T, nk, R, inv_b)  # rows t: (u, v, h, w), as to_frame reads them
+    _moment_sums(cols[0], cols[1], cols[2], cols[3], nk, mom, rhs)
     rhs[3] *= 0.5
     rhs[5] *= 0.5
     # N's lower triangle (all the Cholesky reads) and N2 whole (for M = N2 Ninv); N3 only
@@ -378,7 +431,7 @@ def _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov
             acc += Ninv[a, c] * rhs[c]
         tmp[a] = acc
     # Pass 2: the weighted residual sum of squares, explicitly (no cancellation)
-    q = _residual_ss(cols[0], cols[1], cols[2], cols[3], nk, tmp, part)
+    q = _residual_ss(cols[0], cols[1], cols[2], cols[3], nk, tmp)
     sw = mom[0, 0]
     sw2 = mom[1, 0]
     # traces: tr(Ninv N2), tr(Ninv N3) (N3's entries read from the moments) and, with M =
@@ -431,6 +484,14 @@ def _quadric_point(i, pts, idx, dist, s, e, r, params, ws, buf, outs):
     status, npts, beta, cof, frames, stats = outs
     st, p = _fit_one(i, pts, idx, dist, s, e, bw, frame, sensor, has_sensor, min_nb, cov_mode,
                      ws, buf, r, beta, cof, frames, stats)
+    finish_row(r, st, p, outs)
+
+
+@njit
+def finish_row(r, st, p, outs):
+    """Status `st` and neighbour count `p` into output row r; NaN beta and statistics
+    unless the fit is OK."""
+    status, npts, beta, cof, frames, stats = outs
     status[r] = st
     npts[r] = p
     if st != OK:
@@ -452,10 +513,6 @@ def _quadric_skip(r, outs):
 
 
 #: ``fit_quadrics_block(pts, query, indptr, idx, dist, params, outs)``: every query point
-#: (positions into `pts`) of CSR rows; ``fit_quadrics_cells(c0, c1, pts, cell_keys,
-#: cell_start, dims, radius, active, params, outs)``: fused neighbour search (3-D sphere of
-#: `radius`) and fit of the points of cells ``c0..c1-1`` (output row r = sorted position
-#: ``cell_start[c0] + r``; ``active[i] == 0``: SKIPPED, NaN outputs). ``params`` and ``outs``
-#: as :func:`_quadric_point`'s.
-fit_quadrics_block, fit_quadrics_cells = make_drivers(_quadric_point, _quadric_workspace,
-                                                      _quadric_skip)
+#: (positions into `pts`) of CSR rows, ``params`` and ``outs`` as :func:`_quadric_point`'s
+#: (the fused search and fit over grid cells is ``_quadric_cells.fit_quadrics_cells``)
+fit_quadrics_block = make_drivers(_quadric_point, _quadric_workspace, _quadric_skip).block

@@ -27,6 +27,7 @@ from ._grid_kernels import _guaranteed as grid_guaranteed
 from ._grid_kernels import block_2d as grid_block_2d
 from ._grid_kernels import select_2d as grid_select_2d
 from ._grid_kernels import walk_block_2d as grid_walk_block_2d
+from ._kernels import _cell_ranges as grid_cell_ranges
 from ._kernels import cells_may_share as grid_cells_may_share
 from ._kernels import radix_order
 
@@ -36,4 +37,5 @@ __all__ = ["Neighborhoods", "CellIndex", "KnnIndex", "radius_neighbors", "knn_ne
            "refuse_dominated", "run_on_unique", "max_pairs", "Drivers", "make_drivers",
            "knn_cell_size", "GRID_CELL_CHUNK", "grid_block_ranges", "grid_candidate_count",
            "grid_knn_point", "grid_knn_scratch", "grid_guaranteed", "grid_block_2d",
-           "grid_select_2d", "grid_walk_block_2d", "grid_cells_may_share", "radix_order"]
+           "grid_select_2d", "grid_walk_block_2d", "grid_cell_ranges", "grid_cells_may_share",
+           "radix_order"]
