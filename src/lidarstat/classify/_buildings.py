@@ -40,7 +40,7 @@ import numpy as np
 
 from .._shared._columns import column_min
 from .._shared._memory import release_freed
-from ..neighbors import KnnIndex, knn_neighbors
+from ..neighbors import knn_indices, knn_neighbors
 from ..stats import binomial_test, chi2_quantile, chi2_test, z_critical
 from . import _buildings_kernels as _k
 
@@ -175,7 +175,7 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
         params["sigma"] = sigma
         return BuildingTests(building, fields, params)
     pts = np.ascontiguousarray(xyz[idx] - xyz[idx].mean(axis=0))
-    nb = KnnIndex(pts).query_indices(k, func="building_tests")  # distances: not used
+    nb = knn_indices(pts, k, func="building_tests")  # distances: not used
     release_freed()  # the search's work arrays, before the tests allocate theirs
     centroid, normal, rss = _planes(pts, nb, idx.size)
     if sigma is None:  # no ground: the candidates' own planes, the same median rule
