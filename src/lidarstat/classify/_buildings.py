@@ -40,7 +40,7 @@ import numpy as np
 
 from .._shared._columns import column_min
 from .._shared._memory import release_freed
-from ..neighbors import KnnIndex, knn_neighbors
+from ..neighbors import knn_indices, knn_neighbors
 from ..stats import binomial_test, chi2_quantile, chi2_test, z_critical
 from . import _buildings_kernels as _k
 
@@ -85,29 +85,27 @@ class BuildingTests:
     params: dict = field(default_factory=dict)
 
 
-def ground_sigma(ground_xyz, k, overwrite=False):
+def ground_sigma(xy, z, ground, k, units=(1.0, 1.0)):
     """Noise std from the orthogonal planes of the ground's ``k``-neighbourhoods (None
     with fewer than ``k + 1`` ground points); on a large ground, of the points in an even
-    spread of 8 m blocks. With `overwrite` the array is centred in place (no copy)."""
-    m = len(ground_xyz)
-    if m <= k:
+    spread of 8 m blocks. The ground is the rows `ground` of `xy` (N, 2) and `z` (N,), in
+    (horizontal, vertical) `units` of metres, read in place: only the sample is copied."""
+    if np.count_nonzero(ground) <= k:
         return None
-    mean = ground_xyz.mean(axis=0)
-    pts = ground_xyz if overwrite else ground_xyz.copy()
-    pts -= mean
-    if m > 2 * _GROUND_QUERIES:  # whole 8 m blocks, spread evenly: full neighbourhoods
-        lo = column_min(pts[:, :2])
-        every = int(np.ceil(m / (2 * _GROUND_QUERIES)))
-        block = np.floor((pts[:, 0] - lo[0]) / 8.0).astype(np.int64) * 7  # column by
-        block += np.floor((pts[:, 1] - lo[1]) / 8.0).astype(np.int64) * 3  # column
-        pts = pts[block % every == 0]
-        del block
-        m = len(pts)
-    pts = np.ascontiguousarray(pts)
+    ux, uz = units
+    pts = _k.ground_sample(xy, z, ground, float(ux), float(uz), 2 * _GROUND_QUERIES, 8.0)
+    m = len(pts)
     query = np.arange(0, m, max(1, m // _GROUND_QUERIES))
     nb = knn_neighbors(pts, k, query=query)
     _, _, rss = _planes(pts, nb, query.size)
     return float(np.sqrt(np.median(rss) / chi2_quantile(0.5, k - 3)))
+
+
+def _array_sigma(g, k):
+    """:func:`ground_sigma` of the ground coordinates `g` (M, 3) in metres."""
+    g = np.asarray(g, dtype=np.float64)
+    return ground_sigma(np.ascontiguousarray(g[:, :2]), np.ascontiguousarray(g[:, 2]),
+                        np.ones(len(g), bool), k)
 
 
 def _planes(pts, nb, rows):
@@ -120,7 +118,7 @@ def _planes(pts, nb, rows):
 
 def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=None,
                    min_points=10, min_height=2.0, return_share=0.3, cell=1.0,
-                   k=12, ground_xyz=None) -> BuildingTests:
+                   k=12, ground_xyz=None, ground_columns=None) -> BuildingTests:
     """Building points among the candidates (module docstring; lengths in metres).
 
     Parameters
@@ -150,6 +148,12 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
         when they are not rows of `xyz` (then `ground` is not used). A caller that passes
         only the candidates saves the fields and copies of every other point; the array
         is made and released inside the noise estimate.
+    ground_columns : tuple, optional
+        ``(xy, z, mask, units)``: the ground as the rows `mask` of the planimetric
+        coordinates `xy` (M, 2) and heights `z` (M,), C-contiguous float64, in
+        ``units = (horizontal, vertical)`` metres, when they are not rows of `xyz` (then
+        `ground` and `ground_xyz` are not used). The noise estimate reads them in place
+        and copies only its sample of the ground.
     """
     n = len(xyz)
     fields = {"building_plane_p": np.full(n, np.nan), "building_residual": np.full(n, np.nan),
@@ -159,9 +163,11 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
                                             _EVIDENCE["none"]).astype(np.uint8)}
     estimated = sigma is None
     idx = np.flatnonzero(candidate)
-    if estimated:
-        sigma = ground_sigma(xyz[ground] if ground_xyz is None else ground_xyz(), k,
-                             overwrite=True)
+    if estimated and ground_columns is not None:
+        gxy, gz, gmask, units = ground_columns
+        sigma = ground_sigma(gxy, gz, gmask, k, units=units)
+    elif estimated:
+        sigma = _array_sigma(xyz[ground] if ground_xyz is None else ground_xyz(), k)
     params = {"building_alpha": alpha, "k": k, "return_share": return_share,
               "sigma_estimated": estimated, "n_patches": 0, "n_roof_patches": 0}
     building = np.zeros(n, bool)
@@ -169,7 +175,7 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
         params["sigma"] = sigma
         return BuildingTests(building, fields, params)
     pts = np.ascontiguousarray(xyz[idx] - xyz[idx].mean(axis=0))
-    nb = KnnIndex(pts).query_indices(k, func="building_tests")  # distances: not used
+    nb = knn_indices(pts, k, func="building_tests")  # distances: not used
     release_freed()  # the search's work arrays, before the tests allocate theirs
     centroid, normal, rss = _planes(pts, nb, idx.size)
     if sigma is None:  # no ground: the candidates' own planes, the same median rule
@@ -177,27 +183,29 @@ def building_tests(xyz, candidate, ground, multi, height, *, alpha=0.01, sigma=N
     sigma = max(float(sigma), 1e-4)
     params["sigma"] = sigma
     plane = chi2_test(rss / sigma**2, k - 3, alpha=alpha)
+    mi = multi[idx]
     dist = np.empty(idx.size)
     owner = np.empty(idx.size, np.int64)
+    n_nb_multi = np.empty(idx.size, np.int64)  # non-last returns among the k neighbours
     _k.nearest_plane_residual(pts, nb.indptr, nb.indices, centroid, normal, ~plane.reject,
-                              dist, owner)
+                              mi, dist, owner, n_nb_multi)
+    del owner, centroid, normal
     z = dist / (sigma * np.sqrt(1.0 + 1.0 / k))
     on_plane = z <= z_critical(alpha)
     patch = _k.planar_patches(nb.indptr, nb.indices, on_plane)
+    del nb
     m = int(patch.max())
     size = np.bincount(patch, minlength=m + 1)[1:]
-    n_multi = np.bincount(patch, weights=multi[idx].astype(float), minlength=m + 1)[1:]
+    n_multi = np.bincount(patch, weights=mi.astype(float), minlength=m + 1)[1:]
     share = binomial_test(n_multi, size, return_share, alpha=alpha)
     roof_patch = np.r_[False, (size >= min_points) & ~share.reject]
     high = height[idx] >= min_height
     roof = roof_patch[patch] & high
     top = _roof_top(pts, roof, cell)
-    mi = multi[idx]
     # foliage: a neighbourhood whose share of non-last returns is significantly above
-    # `return_share` never joins a roof
-    deg = np.diff(nb.indptr)
-    n_nb_multi = np.add.reduceat(mi[nb.indices].astype(np.int32), nb.indptr[:-1])
-    foliage = binomial_test(n_nb_multi, deg, return_share, alpha=alpha).reject
+    # `return_share` never joins a roof (every row holds k neighbours: the test of each
+    # count 0..k once)
+    foliage = binomial_test(np.arange(k + 1), k, return_share, alpha=alpha).reject[n_nb_multi]
     in_cell = (high & ~foliage & ~roof
                & (pts[:, 2] <= top + np.where(mi, _TOL_MULTI, _TOL_SINGLE)))
     building[idx] = roof | in_cell
@@ -225,12 +233,7 @@ def _roof_top(pts, roof, cell):
     order = np.argsort(rk, kind="stable")
     seeds, start = np.unique(rk[order], return_index=True)
     zmax = np.maximum.reduceat(pts[roof, 2][order], start)
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            q = key + dx * width + dy
-            pos = np.minimum(np.searchsorted(seeds, q), seeds.size - 1)
-            hit = seeds[pos] == q
-            top[hit] = np.maximum(top[hit], zmax[pos[hit]])
+    _k.roof_top(key, seeds, zmax, width, top)
     return top
 
 

@@ -27,7 +27,7 @@ def building_step(xy, z, height, ground, multi, units, *, min_object_height, min
 
     Returns ``(tests, rows)``: the test of the candidates alone (objects at least
     `min_object_height` high; its mask and fields are per candidate) and their rows. The
-    ground's coordinates are copied only inside the noise estimate.
+    noise estimate reads the ground's rows in place.
     """
     ux, uz = units
     rows = np.flatnonzero(~ground & (height >= min_object_height))
@@ -43,7 +43,7 @@ def building_step(xy, z, height, ground, multi, units, *, min_object_height, min
     tests = building_tests(metres(rows), np.ones(rows.size, bool), None, multi[rows], h,
                            alpha=options.building_alpha, sigma=options.sigma,
                            min_points=options.min_points, min_height=min_height,
-                           ground_xyz=lambda: metres(np.flatnonzero(ground)))
+                           ground_columns=(xy, z, ground, units))
     return tests, rows
 
 

@@ -36,7 +36,7 @@ from .._shared.validation import check_option
 from ..stats import density_estimate, dip_test, sequential_moments
 from ._cycle import CycleChoice, choose_cycle
 from ._moments_result import MomentsStep, thin_curves
-from ._surface import cell_keys, cell_median_values
+from ._surface import _cell_keys_where, cell_keys, cell_median_values
 
 __all__ = ["RoadRule", "cell_median", "road_cut", "road_points"]
 
@@ -94,6 +94,20 @@ def cell_median(xy, values, *, points_per_cell: float = 8.0, return_cells: bool 
     cell = float(np.sqrt(points_per_cell * span[0] * span[1] / max(n, 1)))
     key = cell_keys(xy, cell)
     return cell_median_values(key, v, return_cells=return_cells)
+
+
+def _cell_median_at(xy, rows, values, points_per_cell, chunk=1 << 20):
+    """``cell_median(xy[rows], values, points_per_cell=..., return_cells=True)`` without
+    the (M, 2) copy of the rows: their bounds a chunk at a time, their cell keys in place."""
+    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+    for a in range(0, rows.size, chunk):
+        part = xy[rows[a:a + chunk]]
+        lo = np.minimum(lo, column_min(part))
+        hi = np.maximum(hi, column_max(part))
+    span = np.maximum(hi - lo, 1e-9)
+    cell = float(np.sqrt(points_per_cell * span[0] * span[1] / rows.size))
+    key = _cell_keys_where(np.asarray(xy, dtype=np.float64), rows, cell)
+    return cell_median_values(key, values, return_cells=True)
 
 
 def _antimode(de):
@@ -210,8 +224,7 @@ def road_points(xy, intensity, ground, opts, *, road_rule, road_cell_points: flo
     gi = np.flatnonzero(ground)
     if intensity is None or gi.size < 2 * opts.min_points:
         return road, None
-    smoothed, cells = cell_median(xy[gi], intensity[gi], points_per_cell=road_cell_points,
-                                  return_cells=True)
+    smoothed, cells = _cell_median_at(xy, gi, intensity[gi], road_cell_points)
     if threshold is not None:  # a cut decided for a whole area (a catalogue's tiles)
         road[gi[smoothed <= threshold]] = True
         return road, None

@@ -18,6 +18,7 @@ from ._duplicates import (Duplicates, check_copies, copies_degenerate, find_dupl
                           location_hash, map_rows, refuse_dominated, run_on_unique)
 from ._query import CellIndex, KnnIndex, knn_neighbors, radius_neighbors
 from ._grid_knn import knn_cell_size
+from ._knn_indices import knn_indices
 from ._grid_kernels import _CELL_CHUNK as GRID_CELL_CHUNK
 from ._grid_kernels import _block_ranges as grid_block_ranges
 from ._grid_kernels import _count as grid_candidate_count
@@ -32,6 +33,7 @@ from ._kernels import cells_may_share as grid_cells_may_share
 from ._kernels import radix_order
 
 __all__ = ["Neighborhoods", "CellIndex", "KnnIndex", "radius_neighbors", "knn_neighbors",
+           "knn_indices",
            "Duplicates", "find_duplicates", "location_hash", "check_copies",
            "copies_degenerate", "map_rows",
            "refuse_dominated", "run_on_unique", "max_pairs", "Drivers", "make_drivers",
