@@ -34,9 +34,10 @@ from .._shared._columns import column_max, column_min
 from .._shared._deprecate import renamed_parameters
 from .._shared.validation import check_option
 from ..stats import density_estimate, dip_test, sequential_moments
+from . import _surface_kernels as _sk
 from ._cycle import CycleChoice, choose_cycle
 from ._moments_result import MomentsStep, thin_curves
-from ._surface import _cell_keys_where, cell_keys, cell_median_values
+from ._surface import cell_keys, cell_median_values
 
 __all__ = ["RoadRule", "cell_median", "road_cut", "road_points"]
 
@@ -106,7 +107,13 @@ def _cell_median_at(xy, rows, values, points_per_cell, chunk=1 << 20):
         hi = np.maximum(hi, column_max(part))
     span = np.maximum(hi - lo, 1e-9)
     cell = float(np.sqrt(points_per_cell * span[0] * span[1] / rows.size))
-    key = _cell_keys_where(np.asarray(xy, dtype=np.float64), rows, cell)
+    key = np.empty(rows.size, np.int64)
+    if rows.size:
+        from numba import get_num_threads
+
+        _sk.cell_keys_where(np.ascontiguousarray(xy, dtype=np.float64),
+                            np.ascontiguousarray(rows, dtype=np.int64), cell,
+                            min(get_num_threads(), 8), key)
     return cell_median_values(key, values, return_cells=True)
 
 
