@@ -25,7 +25,7 @@ import numpy as np
 from numba import prange
 
 from .._shared._columns import column_max, column_min
-from ..neighbors import GRID_CELL_CHUNK as _CELL_CHUNK, grid_candidate_count as _count, grid_knn_point as _knn_point, grid_knn_scratch as _scratch  # noqa: E501
+from ..neighbors import GRID_CELL_CHUNK as _CELL_CHUNK, grid_candidate_count as _count, grid_knn_found as _knn_found, grid_knn_scratch as _scratch  # noqa: E501
 from ..neighbors import grid_block_2d as _block_2d
 from ..neighbors import grid_guaranteed as _guaranteed
 from ..neighbors import grid_select_2d as _select_2d
@@ -272,8 +272,7 @@ def _knn_smooth(c0, c1, pts, zs, cell_keys, cell_start, dims, cell, k, tau0, ste
     kk = k + 1
     nchunks = (ncell + _CELL_CHUNK - 1) // _CELL_CHUNK
     for ch in prange(nchunks):
-        cap = 1024
-        bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
+        work = _scratch(1024)
         bcap = 1024
         bx = np.empty(bcap)
         by = np.empty(bcap)
@@ -290,9 +289,8 @@ def _knn_smooth(c0, c1, pts, zs, cell_keys, cell_start, dims, cell, k, tau0, ste
             iy0 = key % dims[1]
             nr = _walk_block_2d(ix0, iy0, cell_keys, cell_start, dims, ptr, ranges)
             need = _count(ranges, nr)
-            if need > cap:
-                cap = max(need, 2 * cap)
-                bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
+            if need > work[0].size - 1:
+                work = _scratch(max(need, 2 * (work[0].size - 1)))
             if need > bcap:
                 bcap = max(need, 2 * bcap)
                 bx = np.empty(bcap)
@@ -311,16 +309,10 @@ def _knn_smooth(c0, c1, pts, zs, cell_keys, cell_start, dims, cell, k, tau0, ste
                     kth = sel_d[kk - 1]
                     qd, qi, m = sel_d, sel_i, kk
                 else:
-                    need = 1
-                    while need:
-                        kth, m, need = _knn_point(px, py, 0.0, ix0, iy0, 0, pts, cell_keys,
-                                                  cell_start, dims, cell, kk, False, tau2,
-                                                  ranges, nr, bd, bi, td, ti, tb, sd, si,
-                                                  cnt)
-                        if need:
-                            cap = max(need, 2 * cap)
-                            bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
-                    qd, qi = td, ti
+                    kth, m, work = _knn_found(px, py, 0.0, ix0, iy0, 0, pts, cell_keys,
+                                              cell_start, dims, cell, kk, False, tau2, ranges,
+                                              nr, work)
+                    qd, qi = work[2], work[3]
                 tau2 = kth * 1.3225  # (1.15 r_k)^2 for the next point of the cell
                 r = i - base
                 t = 0

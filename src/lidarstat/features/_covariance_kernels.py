@@ -30,9 +30,8 @@ from numba import prange
 from .._shared._jit import njit, njit_parallel
 from .._shared._kernels import eigh3 as _eigh3
 from ..neighbors import GRID_CELL_CHUNK as _CELL_CHUNK
-from ..neighbors import grid_block_ranges as _block_ranges
-from ..neighbors import grid_candidate_count as _count
-from ..neighbors import grid_knn_point as _knn_point
+from ..neighbors import grid_cell_block as _cell_block
+from ..neighbors import grid_knn_found as _knn_found
 from ..neighbors import grid_knn_scratch as _scratch
 from ._frame_kernels import orient_normal
 
@@ -80,34 +79,20 @@ def knn_cells(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, sort, out
     ncell = c1 - c0
     nchunks = (ncell + _CELL_CHUNK - 1) // _CELL_CHUNK
     for ch in prange(nchunks):
-        cap = 1024
-        bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
+        work = _scratch(1024)
         ranges = np.empty((9, 2), dtype=np.int64)
         cov = np.empty((3, 3))
         evals = np.empty(3)
         evecs = np.empty((3, 3))
         for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
-            key = cell_keys[c]
-            iz0 = key % dims[2]
-            rest = key // dims[2]
-            ix0 = rest // dims[1]
-            iy0 = rest % dims[1]
-            nr = _block_ranges(ix0, iy0, iz0, 1, cell_keys, cell_start, dims, ranges)
-            need = _count(ranges, nr)
-            if need > cap:
-                cap = max(need, 2 * cap)
-                bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
+            ix0, iy0, iz0, nr, work = _cell_block(c, cell_keys, cell_start, dims, ranges, work)
             tau2 = tau0 * tau0
             for i in range(cell_start[c], cell_start[c + 1]):
-                need = 1
-                while need:
-                    kth, m, need = _knn_point(pts[i, 0], pts[i, 1], pts[i, 2], ix0, iy0, iz0,
-                                              pts, cell_keys, cell_start, dims, cell, k, sort,
-                                              tau2, ranges, nr, bd, bi, td, ti, tb, sd, si,
-                                              cnt)
-                    if need:
-                        cap = max(need, 2 * cap)
-                        bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
+                kth, _, work = _knn_found(pts[i, 0], pts[i, 1], pts[i, 2], ix0, iy0, iz0, pts,
+                                          cell_keys, cell_start, dims, cell, k, sort, tau2,
+                                          ranges, nr, work)
+                td = work[2]
+                ti = work[3]
                 tau2 = kth * 1.3225  # (1.15 r_k)^2 for the next point of the cell
                 r = i - base
                 for t in range(k):

@@ -23,6 +23,8 @@ from ._grid_kernels import _CELL_CHUNK as GRID_CELL_CHUNK
 from ._grid_kernels import _block_ranges as grid_block_ranges
 from ._grid_kernels import _count as grid_candidate_count
 from ._grid_kernels import _knn_point as grid_knn_point
+from ._grid_kernels import cell_block as grid_cell_block
+from ._grid_kernels import knn_found as grid_knn_found
 from ._grid_kernels import _scratch as grid_knn_scratch
 from ._grid_kernels import _guaranteed as grid_guaranteed
 from ._grid_kernels import block_2d as grid_block_2d
@@ -39,5 +41,6 @@ __all__ = ["Neighborhoods", "CellIndex", "KnnIndex", "radius_neighbors", "knn_ne
            "refuse_dominated", "run_on_unique", "max_pairs", "Drivers", "make_drivers",
            "knn_cell_size", "GRID_CELL_CHUNK", "grid_block_ranges", "grid_candidate_count",
            "grid_knn_point", "grid_knn_scratch", "grid_guaranteed", "grid_block_2d",
-           "grid_select_2d", "grid_walk_block_2d", "grid_cell_ranges", "grid_cells_may_share",
+           "grid_select_2d", "grid_walk_block_2d", "grid_cell_ranges", "grid_cell_block",
+           "grid_knn_found", "grid_cells_may_share",
            "radix_order"]

@@ -271,6 +271,40 @@ def _knn_point(px, py, pz, ix0, iy0, iz0, pts, cell_keys, cell_start, dims, cell
 
 
 @njit
+def cell_block(c, cell_keys, cell_start, dims, ranges, work):
+    """Cell `c`'s grid position ``(ix0, iy0, iz0)``, the column ranges of its 27-cell block
+    in `ranges` and their number, and `work` (:func:`_scratch` arrays) grown to hold every
+    candidate of the block: ``(ix0, iy0, iz0, nr, work)``."""
+    key = cell_keys[c]
+    iz0 = key % dims[2]
+    rest = key // dims[2]
+    ix0 = rest // dims[1]
+    iy0 = rest % dims[1]
+    nr = _block_ranges(ix0, iy0, iz0, 1, cell_keys, cell_start, dims, ranges)
+    need = _count(ranges, nr)
+    cap = work[0].size - 1
+    if need > cap:
+        work = _scratch(max(need, 2 * cap))
+    return ix0, iy0, iz0, nr, work
+
+
+@njit
+def knn_found(px, py, pz, ix0, iy0, iz0, pts, cell_keys, cell_start, dims, cell, k, sort,
+              tau2, ranges, nr, work):
+    """:func:`_knn_point` with its work arrays `work` (:func:`_scratch`) grown until the
+    candidates fit: ``(kth, m, work)``, the distances and positions in ``work[2]`` and
+    ``work[3]``."""
+    while True:
+        bd, bi, td, ti, tb, sd, si, cnt = work
+        kth, m, need = _knn_point(px, py, pz, ix0, iy0, iz0, pts, cell_keys, cell_start, dims,
+                                  cell, k, sort, tau2, ranges, nr, bd, bi, td, ti, tb, sd, si,
+                                  cnt)
+        if not need:
+            return kth, m, work
+        work = _scratch(max(need, 2 * (bd.size - 1)))
+
+
+@njit
 def walk_block_2d(ix0, iy0, cell_keys, cell_start, dims, ptr, ranges):
     """Sorted-position ranges of the occupied cells of the 3 x 3 block around (ix0, iy0)
     of a planimetric grid (``dims[2] == 1``): one range per column, the same points in

@@ -21,7 +21,7 @@ from numba import prange
 from .._shared._jit import kernel_array, njit_parallel
 from .._shared.validation import check_points, check_scalar
 from ._csr import index_dtype
-from ._grid_kernels import _CELL_CHUNK, _block_ranges, _count, _knn_point, _scratch
+from ._grid_kernels import _CELL_CHUNK, _scratch, cell_block, knn_found
 from ._grid_knn import knn_cell_size
 from ._query import CellIndex, KnnIndex, _refuse_knn_pairs
 
@@ -79,31 +79,17 @@ def _grid_rows(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, order, o
     nchunks = (ncell + _CELL_CHUNK - 1) // _CELL_CHUNK
     kk = k + 1
     for ch in prange(nchunks):
-        cap = 1024
-        bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
+        work = _scratch(1024)
         ranges = np.empty((9, 2), dtype=np.int64)
         for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
-            key = cell_keys[c]
-            iz0 = key % dims[2]
-            rest = key // dims[2]
-            ix0 = rest // dims[1]
-            iy0 = rest % dims[1]
-            nr = _block_ranges(ix0, iy0, iz0, 1, cell_keys, cell_start, dims, ranges)
-            need = _count(ranges, nr)
-            if need > cap:
-                cap = max(need, 2 * cap)
-                bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
+            ix0, iy0, iz0, nr, work = cell_block(c, cell_keys, cell_start, dims, ranges, work)
             tau2 = tau0 * tau0
             for i in range(cell_start[c], cell_start[c + 1]):
-                need = 1
-                while need:
-                    kth, m, need = _knn_point(pts[i, 0], pts[i, 1], pts[i, 2], ix0, iy0, iz0,
-                                              pts, cell_keys, cell_start, dims, cell, kk, True,
-                                              tau2, ranges, nr, bd, bi, td, ti, tb, sd, si,
-                                              cnt)
-                    if need:
-                        cap = max(need, 2 * cap)
-                        bd, bi, td, ti, tb, sd, si, cnt = _scratch(cap)
+                kth, _, work = knn_found(pts[i, 0], pts[i, 1], pts[i, 2], ix0, iy0, iz0, pts,
+                                         cell_keys, cell_start, dims, cell, kk, True, tau2,
+                                         ranges, nr, work)
+                td = work[2]
+                ti = work[3]
                 tau2 = kth * 1.3225  # (1.15 r_k)^2 for the next point of the cell
                 row = order[i] * k
                 same = 0
