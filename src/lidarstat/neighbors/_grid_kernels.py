@@ -270,7 +270,7 @@ def _knn_point(px, py, pz, ix0, iy0, iz0, pts, cell_keys, cell_start, dims, cell
     return kth, m, 0
 
 
-@njit
+@njit(inline="always")
 def cell_block(c, cell_keys, cell_start, dims, ranges, work):
     """Cell `c`'s grid position ``(ix0, iy0, iz0)``, the column ranges of its 27-cell block
     in `ranges` and their number, and `work` (:func:`_scratch` arrays) grown to hold every
@@ -288,7 +288,7 @@ def cell_block(c, cell_keys, cell_start, dims, ranges, work):
     return ix0, iy0, iz0, nr, work
 
 
-@njit
+@njit(inline="always")
 def knn_found(px, py, pz, ix0, iy0, iz0, pts, cell_keys, cell_start, dims, cell, k, sort,
               tau2, ranges, nr, work):
     """:func:`_knn_point` with its work arrays `work` (:func:`_scratch`) grown until the
