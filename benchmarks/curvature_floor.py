@@ -152,6 +152,7 @@ def _stage_kernel():
     from lidarstat.features import _quadric_cells as qc
     from lidarstat.features import _quadric_kernels as qk
     from lidarstat.neighbors import _kernels as nk
+    from lidarstat.neighbors import grid_candidate_count
 
     @njit
     def run(stage, c0, c1, pts, cell_keys, cell_start, dims, radius):
@@ -170,9 +171,7 @@ def _stage_kernel():
         check = 0.0
         for c in range(c0, c1):
             nr = nk._cell_ranges(c, cell_keys, cell_start, dims, 3, ranges)
-            need = 0
-            for t in range(nr):
-                need += ranges[t, 1] - ranges[t, 0]
+            need = grid_candidate_count(ranges, nr)
             if need > cap:
                 cap = max(need, 2 * cap)
                 cand = np.empty((4, cap))
@@ -225,6 +224,7 @@ def _half_cells_kernel():
     0), or those and the scan of every candidate (mode 1)."""
     from lidarstat._shared._jit import njit
     from lidarstat.neighbors import _kernels as nk
+    from lidarstat.neighbors import grid_candidate_count
     from lidarstat.neighbors._grid_kernels import column_ranges
 
     @njit
@@ -246,9 +246,7 @@ def _half_cells_kernel():
             nrs += nr
             if mode == 0:
                 continue
-            need = 0
-            for t in range(nr):
-                need += ranges[t, 1] - ranges[t, 0]
+            need = grid_candidate_count(ranges, nr)
             if need > cap:
                 cap = max(need, 2 * cap)
                 idx = np.empty(cap, dtype=np.int32)

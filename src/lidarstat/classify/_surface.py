@@ -104,20 +104,25 @@ def _pick_per_cell(order, z, starts, which_median, rank):  # pragma: no cover - 
     out = np.empty(m, np.int64)
     buf = np.empty(order.size, np.int64)
     for c in range(m):
-        a, b = starts[c], starts[c + 1]
-        if not which_median:
-            best = order[a]
-            for i in range(a + 1, b):
-                if _less(z, order[i], best, rank):
-                    best = order[i]
-            out[c] = best
-            continue
-        w = buf[: b - a]
-        w[:] = order[a:b]
-        k = (b - a - 1) // 2
-        _select(w, k, z, rank)
-        out[c] = w[k]
+        out[c] = pick_one(order, starts[c], starts[c + 1], z, which_median, rank, buf)
     return out
+
+
+@njit
+def pick_one(order, a, b, z, which_median, rank, buf):  # pragma: no cover - compiled
+    """The lowest or the lower median by z of the points ``order[a:b]`` (ties as
+    :func:`_pick_per_cell`); `buf` holds at least ``b - a`` positions."""
+    if not which_median:
+        best = order[a]
+        for i in range(a + 1, b):
+            if _less(z, order[i], best, rank):
+                best = order[i]
+        return best
+    w = buf[: b - a]
+    w[:] = order[a:b]
+    k = (b - a - 1) // 2
+    _select(w, k, z, rank)
+    return w[k]
 
 
 @njit

@@ -13,7 +13,7 @@ import numpy as np
 from numba import prange
 
 from .._shared._jit import njit_parallel
-from ._surface import _less, _select
+from ._surface import pick_one
 
 __all__ = ["cell_keys_where", "order_where", "pick_cells"]
 
@@ -115,17 +115,5 @@ def pick_cells(order, z, starts, which_median, rank, nblocks):  # pragma: no cov
             big = max(big, starts[c + 1] - starts[c])
         buf = np.empty(big, np.int64)
         for c in range(c0, c1):
-            a, e = starts[c], starts[c + 1]
-            if not which_median:
-                best = order[a]
-                for i in range(a + 1, e):
-                    if _less(z, order[i], best, rank):
-                        best = order[i]
-                out[c] = best
-                continue
-            w = buf[: e - a]
-            w[:] = order[a:e]
-            k = (e - a - 1) // 2
-            _select(w, k, z, rank)
-            out[c] = w[k]
+            out[c] = pick_one(order, starts[c], starts[c + 1], z, which_median, rank, buf)
     return out

@@ -23,7 +23,7 @@ import numpy as np
 from numba import prange
 
 from .._shared._jit import njit, njit_parallel
-from ..neighbors import grid_cell_ranges
+from ..neighbors import grid_candidate_count, grid_cell_ranges
 from ._quadric_kernels import _fit_local, _quadric_skip, _workspace, finish_row
 
 #: Occupied cells per parallel iteration (threads take them as they are free)
@@ -131,9 +131,7 @@ def fit_quadrics_cells(c0, c1, pts, cell_keys, cell_start, dims, radius, active,
         sel = np.empty(cap, dtype=np.int32)
         for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
             nr = grid_cell_ranges(c, cell_keys, cell_start, dims, 3, ranges)
-            need = 0
-            for t in range(nr):
-                need += ranges[t, 1] - ranges[t, 0]
+            need = grid_candidate_count(ranges, nr)
             if need > cap:
                 cap = max(need, 2 * cap)
                 cand = np.empty((4, cap))
