@@ -19,6 +19,7 @@ from ._duplicates import (Duplicates, check_copies, copies_degenerate, find_dupl
 from ._query import CellIndex, KnnIndex, knn_neighbors, radius_neighbors
 from ._grid_knn import knn_cell_size
 from ._knn_indices import knn_indices
+from ._delaunay import delaunay_triangles
 from ._grid_kernels import _CELL_CHUNK as GRID_CELL_CHUNK
 from ._grid_kernels import _block_ranges as grid_block_ranges
 from ._grid_kernels import _count as grid_candidate_count
@@ -35,7 +36,7 @@ from ._kernels import cells_may_share as grid_cells_may_share
 from ._kernels import radix_order
 
 __all__ = ["Neighborhoods", "CellIndex", "KnnIndex", "radius_neighbors", "knn_neighbors",
-           "knn_indices",
+           "knn_indices", "delaunay_triangles",
            "Duplicates", "find_duplicates", "location_hash", "check_copies",
            "copies_degenerate", "map_rows",
            "refuse_dominated", "run_on_unique", "max_pairs", "Drivers", "make_drivers",

@@ -12,9 +12,9 @@ In a catalogue each tile's model is computed from the ground points of the tile 
 buffer* and covers the tile's extent, so the triangles near the tile's border are those of
 the whole area whenever the buffer holds the ground points they are made of.
 
-A Delaunay triangulation takes about 500 bytes a point while it is built (Qhull's
-structures): more than the classification of the same points. Above
-:data:`TIN_BLOCK_POINTS` ground points the raster is therefore built block by block, each
+The triangulation is :func:`lidarstat.neighbors.delaunay_triangles` (the sweep-hull
+insertion, about 160 bytes a point while it is built). Above
+:data:`TIN_BLOCK_POINTS` ground points the raster is built block by block, each
 block from the ground within a margin of it; a cell takes its value only from a triangle
 whose circumcircle lies inside the margin, which is a triangle of the whole
 triangulation, and the other cells are done again with twice the margin. The raster is
@@ -28,9 +28,11 @@ import math
 
 import numpy as np
 
+from .._shared._columns import column_max, column_min
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidPointsError
 from ..io import Raster
+from ..neighbors import delaunay_triangles, find_duplicates
 from ._terrain_kernels import rasterize_tin
 
 __all__ = ["GROUND_CODES_DTM", "TIN_BLOCK_POINTS", "terrain_model"]
@@ -75,8 +77,7 @@ def terrain_model(xyz, classification, *, resolution: float, bounds=None,
         Ground points above which the TIN is built block by block (each block from the
         ground within a margin of it, the margin doubled where a triangle of the block
         may not be one of the whole triangulation): the same raster, with the memory of
-        one block's triangulation (a Delaunay triangulation takes about 500 bytes a
-        point while it is built).
+        one block's triangulation (about 160 bytes a point while it is built).
 
     Returns
     -------
@@ -115,31 +116,31 @@ def terrain_model(xyz, classification, *, resolution: float, bounds=None,
     origin = np.array([left, top])
     # one height per planimetric location (the lowest), so the triangulation is defined
     xy = ground[:, :2] - origin
-    order = np.lexsort((ground[:, 2], xy[:, 1], xy[:, 0]))
-    keep = np.r_[True, np.any(np.diff(xy[order], axis=0) != 0, axis=1)]
-    xy, z = xy[order[keep]], ground[order[keep], 2]
-    del ground, order, keep
+    z = ground[:, 2]
+    copies = find_duplicates(np.c_[xy, np.zeros(len(xy))])
+    if copies.any:
+        lowest = np.full(copies.n_unique, np.inf)
+        np.minimum.at(lowest, copies.inverse, z)
+        xy, z = xy[copies.first], lowest
+    del ground, copies
     if len(xy) <= block_points:
-        tri = _triangulate(xy, strict=True)
-        values = rasterize_tin(tri.points, z, tri.simplices.astype(np.int64),
-                               float(resolution), rows, cols)
+        values = rasterize_tin(xy, z, _triangulate(xy, strict=True), float(resolution),
+                               rows, cols)
     else:
         values = _blocked_tin(xy, z, float(resolution), rows, cols, block_points)
     return Raster(values, left, top, resolution, crs)
 
 
 def _triangulate(xy, *, strict):
-    """The Delaunay triangulation of `xy`; None (or an error when `strict`) when the
-    points lie on one line."""
-    from scipy.spatial import Delaunay, QhullError
-
-    try:
-        return Delaunay(xy)
-    except (QhullError, ValueError):
-        if strict:
-            raise InvalidPointsError("the ground points lie on one line: no terrain surface "
-                                     "can be triangulated") from None
-        return None
+    """The Delaunay triangles of `xy` (vertex indices); None (or an error when
+    `strict`) when the points lie on one line."""
+    tri = delaunay_triangles(xy)
+    if len(tri):
+        return tri
+    if strict:
+        raise InvalidPointsError("the ground points lie on one line: no terrain surface "
+                                 "can be triangulated")
+    return None
 
 
 class _Hull:
@@ -175,31 +176,31 @@ def _blocked_tin(xy, z, resolution, rows, cols, block_points):
     values = np.full((rows, cols), np.nan)
     side = max(8, int(math.sqrt(block_points / len(xy) * rows * cols)))  # cells
     hull = _Hull(xy)
+    extent = (column_min(xy), column_max(xy))
     for r0 in range(0, rows, side):
         for c0 in range(0, cols, side):
             r1, c1 = min(r0 + side, rows), min(c0 + side, cols)
             values[r0:r1, c0:c1] = _tin_block(xy, z, resolution, (r0, r1, c0, c1),
-                                              side * resolution / 8.0, hull)
+                                              side * resolution / 8.0, hull, extent)
     return values
 
 
-def _tin_block(xy, z, res, cells, margin, hull):
+def _tin_block(xy, z, res, cells, margin, hull, extent):
     r0, r1, c0, c1 = cells
     # the block in grid coordinates (x east, y north from the top-left corner)
     bx0, bx1, by0, by1 = c0 * res, c1 * res, -r1 * res, -r0 * res
     out = np.full((r1 - r0, c1 - c0), np.nan)
     pending = np.ones(out.shape, bool)
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    lo, hi = extent
     while True:
         w = (bx0 - margin, by0 - margin, bx1 + margin, by1 + margin)
         everything = w[0] <= lo[0] and w[1] <= lo[1] and w[2] >= hi[0] and w[3] >= hi[1]
         sel = np.flatnonzero((xy[:, 0] >= w[0]) & (xy[:, 0] <= w[2])
                              & (xy[:, 1] >= w[1]) & (xy[:, 1] <= w[3]))
-        tri = _triangulate(xy[sel], strict=everything) if len(sel) >= 3 else None
-        if tri is not None:
+        simp = _triangulate(xy[sel], strict=everything) if len(sel) >= 3 else None
+        if simp is not None:
             # the block's own grid: cell centres relative to its top-left corner
-            pts = tri.points - [bx0, by1]
-            simp = tri.simplices.astype(np.int64)
+            pts = xy[sel] - [bx0, by1]
             safe = np.ones(len(simp), bool) if everything else _circle_inside(pts, simp, (
                 w[0] - bx0, w[1] - by1, w[2] - bx0, w[3] - by1))
             zz = z[sel]
@@ -214,7 +215,7 @@ def _tin_block(xy, z, res, cells, margin, hull):
                 if rr.size:  # outside the subset's hull: pending if inside the whole's
                     centres = np.c_[bx0 + (cc + 0.5) * res, by1 - (rr + 0.5) * res]
                     pending[rr, cc] = hull.contains(centres)
-            del tri
+            del simp
         if everything or not pending.any():
             return out
         margin *= 2.0

@@ -50,9 +50,9 @@ def _figure(xyz, title):
     return fig, ax, plt, order, size
 
 
-def _save(fig, plt, path):
+def _save(fig, plt, path, *, tight=True):
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", bbox_inches="tight")
+        fig.savefig(tmp, format="png", bbox_inches="tight" if tight else None)
     plt.close(fig)
 
 
