@@ -13,7 +13,7 @@ buffer* and covers the tile's extent, so the triangles near the tile's border ar
 the whole area whenever the buffer holds the ground points they are made of.
 
 The triangulation is :func:`lidarstat.neighbors.delaunay_triangles` (the sweep-hull
-insertion, about 160 bytes a point while it is built). Above
+insertion, about 140 bytes a point while it is built). Above
 :data:`TIN_BLOCK_POINTS` ground points the raster is built block by block, each
 block from the ground within a margin of it; a cell takes its value only from a triangle
 whose circumcircle lies inside the margin, which is a triangle of the whole
@@ -77,7 +77,7 @@ def terrain_model(xyz, classification, *, resolution: float, bounds=None,
         Ground points above which the TIN is built block by block (each block from the
         ground within a margin of it, the margin doubled where a triangle of the block
         may not be one of the whole triangulation): the same raster, with the memory of
-        one block's triangulation (about 160 bytes a point while it is built).
+        one block's triangulation (about 140 bytes a point while it is built).
 
     Returns
     -------
