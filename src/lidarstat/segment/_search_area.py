@@ -1,6 +1,6 @@
 """Search areas of the raw clusters over a Delaunay triangulation (seed 002, section 5.3).
 
-The whole cloud is triangulated in plan (SciPy/Qhull). The search area of a raw cluster
+The whole cloud is triangulated in plan (:func:`lidarstat.neighbors.delaunay_triangles`). The search area of a raw cluster
 is the cluster itself plus every point that belongs to no raw cluster and is reachable
 from the cluster along triangulation edges, through unclustered points only, within a
 path length `search`. A point may lie in several search areas (roof ridges do, as in the
@@ -15,19 +15,19 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import Delaunay, QhullError
 
 from .._shared._deprecate import renamed_parameters
 from .._shared._jit import njit
 from .._shared.validation import check_points, check_scalar
 from ..errors import InvalidPointsError, LidarstatDeprecationWarning
+from ..neighbors import delaunay_triangles, find_duplicates
 
 
 def delaunay_graph(points):
     """Symmetric CSR graph of the planimetric Delaunay triangulation with edge lengths.
 
-    Points Qhull leaves out (coincident in plan, e.g. on walls) are linked to the nearest
-    vertex Qhull reports for them.
+    Points sharing a location in plan (on walls) are triangulated once; every other
+    point at that location is linked to the one triangulated.
 
     Returns
     -------
@@ -36,18 +36,20 @@ def delaunay_graph(points):
     """
     points = check_points(points, min_points=3)
     xy = points[:, :2] - points[:, :2].min(axis=0)
-    try:
-        tri = Delaunay(xy, qhull_options="Qbb Qc Qz Q12")
-    except QhullError:
+    copies = find_duplicates(np.c_[xy, np.zeros(len(xy))])
+    vertex = copies.first if copies.any else np.arange(len(xy))
+    s = delaunay_triangles(xy[vertex])
+    if not len(s):
         raise InvalidPointsError(
             f"the {points.shape[0]:,} points have no planimetric triangulation: in plan (x, y) "
-            "they lie on one line or at one location") from None
-    s = tri.simplices.astype(np.int64)
+            "they lie on one line or at one location")
+    s = vertex[s]
     a = np.concatenate([s[:, 0], s[:, 1], s[:, 2]])
     b = np.concatenate([s[:, 1], s[:, 2], s[:, 0]])
-    if tri.coplanar.size:
-        a = np.concatenate([a, tri.coplanar[:, 0].astype(np.int64)])
-        b = np.concatenate([b, tri.coplanar[:, 2].astype(np.int64)])
+    if copies.any:  # each copy to the point triangulated at its location
+        at = copies.first[copies.inverse]
+        a = np.concatenate([a, np.arange(len(xy), dtype=np.int64)])
+        b = np.concatenate([b, at])
     n = points.shape[0]
     keep = a != b
     a, b = a[keep], b[keep]
