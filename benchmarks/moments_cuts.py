@@ -13,7 +13,11 @@ producers' class 6, and the CPU seconds of the classification alone. Variants:
 * ``terrain_grid``: the terrain step's surface bilinear between the 2 m cells' values
   instead of the TIN of their lowest ground points (no Delaunay triangulation);
 * ``patches_on_ground``: the raised-patch graph built on the ground points alone instead
-  of every point.
+  of every point;
+* ``qhull_delaunay``: the ground and terrain TINs triangulated by ``scipy.spatial.Delaunay``
+  (Qhull) instead of ``lidarstat.neighbors.delaunay_triangles``: the same triangles but
+  for the diagonals of co-circular vertices (``--out
+  benchmarks/results_moments_delaunay.json --variants qhull_delaunay``).
 
 A cut is kept only when no figure gets worse by more than 0.05 points. Usage::
 
@@ -41,7 +45,7 @@ from buildings import LEFT_OUT, scores  # noqa: E402
 from ground_filters import ISPRS, PRODUCER, load  # noqa: E402
 
 VARIANTS = ["defaults", "iterations_3", "iterations_2", "iterations_1", "terrain_grid",
-            "patches_on_ground"]
+            "patches_on_ground", "qhull_delaunay"]
 
 
 def _patches_on_ground(xy, z, rank, ground, height, surf, *, surface_cell, step):
@@ -63,6 +67,16 @@ def _patches_on_ground(xy, z, rank, ground, height, surf, *, surface_cell, step)
     return ground, height, surf
 
 
+def _qhull_triangles(xy):
+    """Qhull's Delaunay triangles of `xy` (none when collinear)."""
+    from scipy.spatial import Delaunay, QhullError
+
+    try:
+        return np.ascontiguousarray(Delaunay(xy).simplices, dtype=np.int64)
+    except QhullError:
+        return np.empty((0, 3), np.int64)
+
+
 def variant(name):
     """Keyword arguments of `moments` and the patches (module, attribute, replacement)."""
     from lidarstat.classify import _moments, _terrain
@@ -73,6 +87,11 @@ def variant(name):
         return {}, [(_terrain, "_tin", lambda *a: None)]
     if name == "patches_on_ground":
         return {}, [(_moments, "drop_raised_patches", _patches_on_ground)]
+    if name == "qhull_delaunay":
+        from lidarstat.classify import _surface
+
+        return {}, [(_surface, "delaunay_triangles", _qhull_triangles),
+                    (_terrain, "delaunay_triangles", _qhull_triangles)]
     return {}, []
 
 

@@ -19,6 +19,7 @@ from numba import prange
 
 from .._shared._columns import column_max, column_min
 from .._shared._jit import njit, njit_parallel
+from ..neighbors import delaunay_triangles
 from ._terrain_frame import CELLS_PER_POINT, MIN_CELLS
 
 __all__ = ["ground_surface", "cell_keys", "TinSurface"]
@@ -386,19 +387,14 @@ class TinSurface:
     """
 
     def __init__(self, P, V, cell: float, keep=None, frame=None):
-        from scipy.spatial import Delaunay, QhullError
-
         self.frame = frame
         self.P = np.ascontiguousarray(P, dtype=np.float64)
         self.V = np.ascontiguousarray(V, dtype=np.float64)
         self._kdtree = None  # the vertices' k-d tree, built when a query needs it
         self._tri = None
         if len(self.P) >= 3:
-            try:
-                d = Delaunay(self.P)
-            except QhullError:  # collinear vertices
-                d = None
-            if d is not None and d.nsimplex > 0:
+            simp = delaunay_triangles(self.P)
+            if len(simp):  # none when the vertices are collinear
                 lo = column_min(self.P)
                 span = column_max(self.P) - lo
                 # half-cell bins: about 3 candidate triangles per bin instead of 8; no
@@ -409,7 +405,6 @@ class TinSurface:
                 g = max(0.5 * float(cell), float(span.max()) / 4096.0,
                         float(np.sqrt(span[0] * span[1] / limit)), 1e-12)
                 nx, ny = (np.floor(span / g).astype(np.int64) + 1).tolist()
-                simp = np.ascontiguousarray(d.simplices, dtype=np.int64)
                 if keep is not None:
                     simp = np.ascontiguousarray(simp[keep(self.P[simp])])
                 indptr, tri = _bin_triangles(self.P, simp, float(lo[0]), float(lo[1]), g,

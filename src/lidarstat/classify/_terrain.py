@@ -55,6 +55,7 @@ from functools import partial
 
 import numpy as np
 
+from ..neighbors import delaunay_triangles
 from ._terrain_frame import MAX_EDGE, BandFrame, near_points, terrain_cell
 from ._terrain_grid import (
     drop_bumps,
@@ -186,7 +187,6 @@ def _fill(grid):
     location falls back to a search of every triangle.
     """
     from scipy import ndimage as ndi
-    from scipy.spatial import Delaunay
 
     empty = ~np.isfinite(grid)
     if not empty.any() or empty.all():
@@ -196,11 +196,8 @@ def _fill(grid):
     full = np.argwhere(rim).astype(np.float64)
     todo = empty.copy()
     if len(full) >= 3 and np.ptp(full[:, 0]) > 0 and np.ptp(full[:, 1]) > 0:
-        try:
-            tri = Delaunay(full).simplices.astype(np.int64)
-        except Exception:  # noqa: BLE001 - degenerate (collinear) rims: nearest below
-            tri = None
-        if tri is not None:
+        tri = delaunay_triangles(full)  # none when the rims are collinear: nearest below
+        if len(tri):
             fill_triangles(tri, full, np.ascontiguousarray(grid[rim]), out, todo)
     if todo.any():
         idx = ndi.distance_transform_edt(empty, return_distances=False,
