@@ -19,8 +19,7 @@ from .._shared._deprecate import renamed_parameters
 from .._shared._jit import njit
 from .._shared.validation import check_option
 from ..errors import InvalidParameterError
-from ..stats import SequentialMoments
-from ..stats._moments import moment_push, moment_shape, robust_frame
+from ..stats import SequentialMoments, moment_push, moment_shape, robust_frame
 
 __all__ = ["CycleChoice", "ElevationRule", "choose_cycle", "skewness_balance_cycle",
            "symmetry_cycle"]
@@ -297,7 +296,7 @@ def _symmetric_scan(xs, c, s, lo, hi, z, at, sk_at, ku_at):  # pragma: no cover 
     """``(k, skewness, kurtosis)`` of the symmetry rule on sorted `xs` (robust frame `c`,
     `s`): ``k = -1`` when cycle 0 passes, else the first cycle of ``[lo, hi]`` that passes
     (``hi`` when none does). The running sums of every prefix are kept in one forward
-    pass (:func:`~lidarstat.stats._moments.moment_push`, as the sequential moments add
+    pass (:func:`~lidarstat.stats.moment_push`, as the sequential moments add
     them), and the cycles are tested from ``lo`` on until one passes: the skewness and
     kurtosis of the cycles past the cut are never formed. The test is
     :func:`_symmetric`'s, operation for operation. The skewness and kurtosis of the

@@ -134,7 +134,9 @@ def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, 
     window's own analysis (``dips``, ``choice``, ``record``), which the paper's first
     clustering step of the same heights repeats (:func:`paper_clusters`).
     """
-    v = h[idx]
+    whole = idx.size == h.size  # the root window: idx is every position, in order
+    v = h if whole else h[idx]
+    wxy = xy if whole else xy[idx]
     thr = parent_thr
     rec = None
     vs = None  # v sorted: for the analysis and the dip tests
@@ -154,8 +156,8 @@ def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, 
                 kept = vs[:int(np.searchsorted(vs, thr, side="right"))]
                 thr = max(thr, _cluster_bound(kept, p.ground_spread))
     info = {"window": window_id, "size": size, "n": int(idx.size),
-            "x0": float(xy[idx, 0].min()) if idx.size else None,
-            "y0": float(xy[idx, 1].min()) if idx.size else None,
+            "x0": float(wxy[:, 0].min()) if idx.size else None,
+            "y0": float(wxy[:, 1].min()) if idx.size else None,
             "threshold": float(thr) if np.isfinite(thr) else None, "split": False}
     kept = v <= thr
     if (size / 2 >= p.min_window and idx.size >= 4 * p.min_window_points
@@ -170,8 +172,8 @@ def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, 
             if rec is not None:
                 steps.append(rec)
             out = []
-            origin = (xy[idx, 0].min(), xy[idx, 1].min())
-            for j, child in enumerate(_quadrants(xy[idx], size / 2, origin)):
+            origin = (wxy[:, 0].min(), wxy[:, 1].min())
+            for j, child in enumerate(_quadrants(wxy, size / 2, origin)):
                 out.extend(progressive_cut(xy, h, idx[child], size / 2, thr, p,
                                            f"{window_id}.{j}", steps, windows, record))
             return out

@@ -21,7 +21,7 @@ from ._results import TestResult
 from ._sort import sort_values
 
 __all__ = ["SequentialMoments", "sequential_moments", "standard_moments", "DensityEstimate",
-           "density_estimate", "dip_test"]
+           "density_estimate", "dip_test", "moment_push", "moment_shape", "robust_frame"]
 
 
 # --------------------------------------------------------------------------- kernels
