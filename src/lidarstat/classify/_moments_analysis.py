@@ -69,8 +69,9 @@ def _analysis(values, category, p: MomentsOptions, *, window, step, population, 
         ch = choose_cycle(sm, category, min_points=p.min_points, smoothing=p.smoothing,
                           cycle=p.cycle if step == 1 else None,
                           elevation_rule=p.elevation_rule)
-    rec = _record(values, sm.sorted_values, category, p, ch, thin_curves(sm) if record else None,
-                  window=window, step=step, population=population, dips=dips, record=record)
+    rec = _record(values, sm.sorted_values, category, p, ch,
+                  thin_curves(sm) if record else None, window=window, step=step,
+                  population=population, dips=dips, record=record)
     return ch, rec, sm.sorted_values
 
 
@@ -173,7 +174,9 @@ def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, 
                 steps.append(rec)
             out = []
             origin = (wxy[:, 0].min(), wxy[:, 1].min())
-            for j, child in enumerate(_quadrants(wxy, size / 2, origin)):
+            # a copy of a whole window's rows: the read-only view would be a second
+            # variant of the compiled cell keys
+            for j, child in enumerate(_quadrants(xy[idx] if whole else wxy, size / 2, origin)):
                 out.extend(progressive_cut(xy, h, idx[child], size / 2, thr, p,
                                            f"{window_id}.{j}", steps, windows, record))
             return out
