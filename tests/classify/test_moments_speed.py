@@ -593,3 +593,79 @@ def test_clusters_from_the_cuts_first_analysis_equal_their_own(seed, evidence):
             _same_step(a, b)
         reused += taken[0].choice is first["choice"]
     assert reused >= 1  # the elevation analysis was taken, not recomputed
+
+
+def _symmetry_reference(xs, *, min_points, smoothing, curve_step):
+    """The symmetry rule from every cycle's curves (choose_cycle, thin_curves)."""
+    from lidarstat.classify._moments_result import thin_curves
+    from lidarstat.stats import sequential_moments
+
+    sm = sequential_moments(xs, min_points=max(2, min(4, xs.size)), sorted_values=xs)
+    ch = _cycle.choose_cycle(sm, "elevation", min_points=min_points, smoothing=smoothing,
+                             elevation_rule="symmetry")
+    return ch, (thin_curves(sm) if curve_step else None)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_symmetry_cycle_equals_the_rule_on_every_cycles_curves(seed):
+    # the cut and the thinned curves from the prefix sums are the choice and the curves
+    # of the whole sequential analysis, number for number (ties, constant values, a
+    # symmetric cloud, too few values, the cut at the last cycle tested)
+    from lidarstat.classify._moments_result import curve_step
+
+    g = np.random.default_rng(seed)
+    for n in (2, 5, 24, 25, 300, 5000):
+        for kind in ("bimodal", "ties", "constant", "normal", "skewed"):
+            x = {"bimodal": lambda: np.r_[g.normal(0, 0.2, n), g.normal(6, 0.5, n // 4)],
+                 "ties": lambda: np.round(g.normal(0, 0.3, n), 1),
+                 "constant": lambda: np.full(n, 1.5),
+                 "normal": lambda: g.normal(3, 1, n),
+                 "skewed": lambda: g.exponential(1, n)}[kind]()
+            xs = np.sort(x)
+            m = xs.size - max(2, min(4, xs.size)) + 1
+            for step in (0, curve_step(m)):
+                a, ca = _cycle.symmetry_cycle(xs, min_points=10, smoothing=0.01,
+                                              curve_step=step)
+                b, cb = _symmetry_reference(xs, min_points=10, smoothing=0.01,
+                                            curve_step=step)
+                assert repr(a) == repr(b), (n, kind)  # NaN evidence compares by repr
+                if step:
+                    for k in cb:
+                        assert ca[k].dtype == cb[k].dtype, k
+                        assert np.array_equal(ca[k], cb[k], equal_nan=True), (n, kind, k)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_classification_identical_with_the_rule_on_every_cycles_curves(seed, monkeypatch):
+    # moments with the cuts from the prefix sums equals moments with every cycle's curves:
+    # fields, cuts, windows, recorded choices and curves
+    from lidarstat.classify import _moments_analysis
+
+    xyz, inten, nret, rnum, _ = _scene(np.random.default_rng(seed), 16000)
+    kw = dict(number_of_returns=nret, return_number=rnum, window=50.0, min_window=12.5)
+    a = moments(xyz, inten, **kw)
+    monkeypatch.setattr(_moments_analysis, "symmetry_cycle", _symmetry_reference)
+    b = moments(xyz, inten, **kw)
+    for name, v in a.to_fields().items():
+        assert np.array_equal(v, b.to_fields()[name], equal_nan=True), name
+    assert a.windows == b.windows
+    assert len(a.steps) == len(b.steps)
+    for s, t in zip(a.steps, b.steps):
+        assert repr(s.choice) == repr(t.choice)
+        for k in s.curves:
+            assert np.array_equal(s.curves[k], t.curves[k], equal_nan=True), k
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sorted_mad_equals_numpy_median_of_distances(seed):
+    # the merge of the two runs of distances reads np.median's middle one or two
+    from lidarstat.classify._moments_kernels import sorted_mad
+
+    g = np.random.default_rng(seed)
+    for n in (1, 2, 3, 8, 9, 100, 1001):
+        for decimals in (0, 2, 6):
+            xs = np.sort(np.round(g.normal(g.uniform(-3, 3), 1.0, n), decimals))
+            middle = np.mean(xs[(n - 1) // 2: n // 2 + 1])
+            for med in (middle, xs[0] - 1.0, xs[-1] + 0.5, float(g.uniform(xs[0], xs[-1]))):
+                ref = np.median(np.abs(xs - med))
+                assert np.float64(sorted_mad(xs, float(med))).tobytes() == ref.tobytes()

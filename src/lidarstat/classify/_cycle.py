@@ -19,9 +19,10 @@ from .._shared._deprecate import renamed_parameters
 from .._shared._jit import njit
 from .._shared.validation import check_option
 from ..errors import InvalidParameterError
-from ..stats import SequentialMoments
+from ..stats import SequentialMoments, moment_push, moment_shape, robust_frame
 
-__all__ = ["CycleChoice", "ElevationRule", "choose_cycle", "skewness_balance_cycle"]
+__all__ = ["CycleChoice", "ElevationRule", "choose_cycle", "skewness_balance_cycle",
+           "symmetry_cycle"]
 
 
 class ElevationRule(str, enum.Enum):
@@ -233,10 +234,7 @@ def choose_cycle(sm: SequentialMoments, category: str, *, min_points: int = 10,
                            {**ev, "kurtosis": float(sm.kurtosis[k]),
                             "skewness": float(sm.skewness[k])})
     if elevation_rule == "symmetry":
-        rem = sm.remaining.astype(float)
-        z = 1.645
-        good = ((sm.skewness <= z * np.sqrt(6.0 / rem))
-                & (sm.kurtosis >= 3.0 - z * np.sqrt(24.0 / rem)))
+        good = _symmetric(sm.skewness, sm.kurtosis, sm.remaining.astype(float))
         if good[0]:
             return CycleChoice(None, float(sm.threshold[0]), "none",
                                {**ev, "reason": "symmetric and not platykurtic at cycle 0",
@@ -280,3 +278,100 @@ def choose_cycle(sm: SequentialMoments, category: str, *, min_points: int = 10,
                        {**ev, "tolerance": float(tol[chosen]), "kurtosis_range": rng,
                         "kurtosis": float(sm.kurtosis[chosen]),
                         "skewness": float(sm.skewness[chosen])})
+
+
+#: One-sided 5 % normal quantile of the symmetry rule's tests of skewness and kurtosis.
+_Z_SYMMETRY = 1.645
+
+
+def _symmetric(sk, ku, rem):
+    """The symmetry rule's test of the values left (`rem` of them, float): skewness not
+    significantly positive, kurtosis not significantly below 3 (False where NaN)."""
+    return ((sk <= _Z_SYMMETRY * np.sqrt(6.0 / rem))
+            & (ku >= 3.0 - _Z_SYMMETRY * np.sqrt(24.0 / rem)))
+
+
+@njit
+def _symmetric_scan(xs, c, s, lo, hi, z, at, sk_at, ku_at):  # pragma: no cover - compiled
+    """``(k, skewness, kurtosis)`` of the symmetry rule on sorted `xs` (robust frame `c`,
+    `s`): ``k = -1`` when cycle 0 passes, else the first cycle of ``[lo, hi]`` that passes
+    (``hi`` when none does). The running sums of every prefix are kept in one forward
+    pass (:func:`~lidarstat.stats.moment_push`, as the sequential moments add
+    them), and the cycles are tested from ``lo`` on until one passes: the skewness and
+    kurtosis of the cycles past the cut are never formed. The test is
+    :func:`_symmetric`'s, operation for operation. The skewness and kurtosis of the
+    cycles `at` go to `sk_at`, `ku_at` (the curves a record keeps)."""
+    n = xs.shape[0]
+    sums = np.empty((n, 4))
+    mu = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    s4 = 0.0
+    for i in range(n):
+        mu, s2, s3, s4 = moment_push((xs[i] - c) / s, i, mu, s2, s3, s4)
+        sums[i, 0] = mu
+        sums[i, 1] = s2
+        sums[i, 2] = s3
+        sums[i, 3] = s4
+    for j in range(at.size):
+        i = n - 1 - at[j]
+        sk_at[j], ku_at[j] = moment_shape(float(i) + 1.0, sums[i, 0], sums[i, 1],
+                                          sums[i, 2], sums[i, 3])
+    k = 0
+    while True:
+        i = n - 1 - k
+        sk, ku = moment_shape(float(i) + 1.0, sums[i, 0], sums[i, 1], sums[i, 2],
+                              sums[i, 3])
+        rem = float(n - k)
+        if sk <= z * np.sqrt(6.0 / rem) and ku >= 3.0 - z * np.sqrt(24.0 / rem):
+            return (-1 if k == 0 else k), sk, ku
+        if k >= hi:
+            return k, sk, ku
+        k = lo if k < lo else k + 1
+
+
+def symmetry_cycle(sorted_values, *, min_points: int = 10, smoothing: float = 0.01,
+                   curve_step: int = 0) -> tuple[CycleChoice, dict | None]:
+    """The symmetry rule's choice on values sorted ascending, without the whole curves.
+
+    The same :class:`CycleChoice` as ``choose_cycle(sequential_moments(values,
+    min_points=max(2, min(4, n))), "elevation", min_points=min_points,
+    smoothing=smoothing, elevation_rule="symmetry")``, for a caller that needs the cut
+    and not the curves of every cycle: the moments are formed only for the cycles up to
+    the one chosen, and with ``curve_step > 0`` for every `curve_step`-th cycle, whose
+    ``cycle``, ``skewness``, ``kurtosis``, ``threshold`` and ``remaining`` are returned
+    as the second item (the curves sliced ``[::curve_step]``; None without).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lidarstat.stats import sequential_moments
+    >>> g = np.random.default_rng(0)
+    >>> z = np.sort(np.r_[g.normal(0, 0.2, 3000), g.normal(8, 0.5, 600)])
+    >>> a, _ = symmetry_cycle(z)
+    >>> b = choose_cycle(sequential_moments(z), "elevation", elevation_rule="symmetry")
+    >>> a == b
+    True
+    """
+    xs = sorted_values
+    n = xs.size
+    m = n - max(2, min(4, n)) + 1
+    at = np.arange(0, m, curve_step) if curve_step > 0 else np.empty(0, np.int64)
+    sk_at, ku_at = np.empty(at.size), np.empty(at.size)
+    w = max(3, int(smoothing * n) | 1)
+    lo, hi = max(min_points, 1), m - 1 - min_points
+    c, s = robust_frame(xs)
+    k, sk, ku = _symmetric_scan(xs, float(c), float(s), lo, hi, _Z_SYMMETRY, at, sk_at,
+                                ku_at)
+    curves = None if curve_step <= 0 else {
+        "cycle": at, "skewness": sk_at, "kurtosis": ku_at, "threshold": xs[n - 1 - at],
+        "remaining": n - at}
+    if hi <= lo:
+        return CycleChoice(None, float(xs[n - 1]), "none", {"reason": "too few values"}), curves
+    ev = {"window": w, "min_points": min_points}
+    if k < 0:
+        return CycleChoice(None, float(xs[n - 1]), "none",
+                           {**ev, "reason": "symmetric and not platykurtic at cycle 0",
+                            "skewness": float(sk), "kurtosis": float(ku)}), curves
+    return CycleChoice(int(k), float(xs[n - 1 - k]), "symmetry",
+                       {**ev, "skewness": float(sk), "kurtosis": float(ku)}), curves

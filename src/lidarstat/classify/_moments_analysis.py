@@ -22,9 +22,10 @@ from dataclasses import replace
 import numpy as np
 
 from ..stats import density_estimate, dip_test, sequential_moments, sort_values
-from ._cycle import choose_cycle, skewness_balance_cycle
+from ._cycle import ElevationRule, choose_cycle, skewness_balance_cycle, symmetry_cycle
+from ._moments_kernels import sorted_mad
 from ._moments_options import MomentsMethod, MomentsOptions
-from ._moments_result import MomentsStep, thin_curves
+from ._moments_result import MomentsStep, curve_step, thin_curves
 from ._surface import cell_keys
 
 __all__ = ["analyse", "dip_tests", "paper_clusters", "progressive_cut"]
@@ -46,7 +47,20 @@ def analyse(values, category, p: MomentsOptions, *, window, step, population, di
 
 def _analysis(values, category, p: MomentsOptions, *, window, step, population, dips,
               record=True, sorted_values=None):
-    """:func:`analyse`, and the values sorted: ``(choice, MomentsStep, sorted values)``."""
+    """:func:`analyse`, and the values sorted: ``(choice, MomentsStep, sorted values)``.
+    An elevation cut by the symmetry rule forms the moments of the cycles up to the cut
+    and of the curves a record keeps, not of every cycle (:func:`~._cycle.symmetry_cycle`:
+    the same choice and curves)."""
+    if (category == "elevation" and p.method is MomentsMethod.MOMENTS
+            and p.elevation_rule == ElevationRule.SYMMETRY
+            and (step != 1 or p.cycle is None) and values.size >= 2):
+        xs = sort_values(values) if sorted_values is None else sorted_values
+        if np.isfinite(xs[0]) and np.isfinite(xs[-1]):
+            m = xs.size - max(2, min(4, xs.size)) + 1
+            ch, curves = symmetry_cycle(xs, min_points=p.min_points, smoothing=p.smoothing,
+                                        curve_step=curve_step(m) if record else 0)
+            return ch, _record(values, xs, category, p, ch, curves, window=window, step=step,
+                               population=population, dips=dips, record=record), xs
     sm = sequential_moments(values, min_points=max(2, min(4, values.size)),
                             sorted_values=sorted_values)
     if p.method is MomentsMethod.SKEWNESS_BALANCING:
@@ -55,14 +69,20 @@ def _analysis(values, category, p: MomentsOptions, *, window, step, population, 
         ch = choose_cycle(sm, category, min_points=p.min_points, smoothing=p.smoothing,
                           cycle=p.cycle if step == 1 else None,
                           elevation_rule=p.elevation_rule)
-    rec = None
-    if record:
-        de = (density_estimate(values, bandwidth=p.bandwidth, gridsize=256,
-                               sorted_values=sm.sorted_values) if p.evidence else None)
-        rec = MomentsStep(window=window, step=step, population=population, category=category,
-                          n=int(values.size), dip=dips, choice=ch, curves=thin_curves(sm),
-                          density=de)
+    rec = _record(values, sm.sorted_values, category, p, ch,
+                  thin_curves(sm) if record else None, window=window, step=step,
+                  population=population, dips=dips, record=record)
     return ch, rec, sm.sorted_values
+
+
+def _record(values, xs, category, p, ch, curves, *, window, step, population, dips, record):
+    """The analysis's MomentsStep (None unless `record`); `xs`: the values sorted."""
+    if not record:
+        return None
+    de = (density_estimate(values, bandwidth=p.bandwidth, gridsize=256, sorted_values=xs)
+          if p.evidence else None)
+    return MomentsStep(window=window, step=step, population=population, category=category,
+                       n=int(values.size), dip=dips, choice=ch, curves=curves, density=de)
 
 
 def dip_tests(cats: dict, p: MomentsOptions, sorted_cats=None) -> dict:
@@ -93,14 +113,15 @@ def _cluster_bound(kept, z):
     The sequential cut stops where what is left is symmetric; on ground that the surface
     follows only roughly (sparse or steep terrain) that stop lies inside the ground's own
     upper tail. The cut is never placed closer to the ground cluster's centre than `z`
-    robust standard deviations of that cluster. The median is read from the sorted
-    values (the mean of the middle one or two, as ``np.median`` takes it).
+    robust standard deviations of that cluster. The median and the median absolute
+    deviation are read from the sorted values (:func:`~._moments_kernels.sorted_mad`)
+    as ``np.median`` takes them.
     """
     n = kept.size
     if n < 8:
         return -np.inf
     med = np.mean(kept[(n - 1) // 2: n // 2 + 1])
-    return float(med + z * 1.4826 * np.median(np.abs(kept - med)))
+    return float(med + z * 1.4826 * sorted_mad(kept, float(med)))
 
 
 def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, steps,
@@ -114,7 +135,9 @@ def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, 
     window's own analysis (``dips``, ``choice``, ``record``), which the paper's first
     clustering step of the same heights repeats (:func:`paper_clusters`).
     """
-    v = h[idx]
+    whole = idx.size == h.size  # the root window: idx is every position, in order
+    v = h if whole else h[idx]
+    wxy = xy if whole else xy[idx]
     thr = parent_thr
     rec = None
     vs = None  # v sorted: for the analysis and the dip tests
@@ -134,8 +157,8 @@ def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, 
                 kept = vs[:int(np.searchsorted(vs, thr, side="right"))]
                 thr = max(thr, _cluster_bound(kept, p.ground_spread))
     info = {"window": window_id, "size": size, "n": int(idx.size),
-            "x0": float(xy[idx, 0].min()) if idx.size else None,
-            "y0": float(xy[idx, 1].min()) if idx.size else None,
+            "x0": float(wxy[:, 0].min()) if idx.size else None,
+            "y0": float(wxy[:, 1].min()) if idx.size else None,
             "threshold": float(thr) if np.isfinite(thr) else None, "split": False}
     kept = v <= thr
     if (size / 2 >= p.min_window and idx.size >= 4 * p.min_window_points
@@ -150,8 +173,10 @@ def progressive_cut(xy, h, idx, size, parent_thr, p: MomentsOptions, window_id, 
             if rec is not None:
                 steps.append(rec)
             out = []
-            origin = (xy[idx, 0].min(), xy[idx, 1].min())
-            for j, child in enumerate(_quadrants(xy[idx], size / 2, origin)):
+            origin = (wxy[:, 0].min(), wxy[:, 1].min())
+            # a copy of a whole window's rows: the read-only view would be a second
+            # variant of the compiled cell keys
+            for j, child in enumerate(_quadrants(xy[idx] if whole else wxy, size / 2, origin)):
                 out.extend(progressive_cut(xy, h, idx[child], size / 2, thr, p,
                                            f"{window_id}.{j}", steps, windows, record))
             return out

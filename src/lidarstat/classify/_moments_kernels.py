@@ -1,4 +1,6 @@
-"""Compiled helpers of the moments driver (:mod:`._moments`): the canonical point order.
+"""Compiled helpers of the moments classification: the canonical point order of the driver
+(:mod:`._moments`), and the median absolute deviation of a window's sorted heights
+(:func:`sorted_mad`, the ground cut's spread).
 
 The classification must not depend on the order of the points, so every step runs on the
 points sorted by x, then y, z and intensity (``np.lexsort`` of the four keys, ties in
@@ -16,7 +18,7 @@ from numba import prange
 from .._shared._jit import njit, njit_parallel
 from ..neighbors import radix_order
 
-__all__ = ["canonical_order", "compact_rows"]
+__all__ = ["canonical_order", "compact_rows", "sorted_mad"]
 
 #: Runs of equal x up to this length are sorted by insertion, longer ones by merging.
 _INSERTION_RUN = 24
@@ -196,3 +198,39 @@ def compact_rows(a, keep):  # pragma: no cover - compiled
                     a[m, c] = a[i, c]
             m += 1
     return m
+
+
+@njit
+def sorted_mad(xs, med):  # pragma: no cover - compiled
+    """``np.median(np.abs(xs - med))`` of `xs` sorted ascending (no NaN, at least one
+    value), without the distances' array and its partition.
+
+    The distances ``|xs[i] - med|`` fall (rounded subtraction is monotone) on the values
+    below `med` and rise from the first value at or above it: the median is read by
+    merging the two runs outward from that value, up to the middle (the mean of the two
+    middle distances, ``(a + b) / 2``, for an even count, as ``np.median`` takes it).
+    """
+    n = xs.size
+    lo, hi = 0, n  # first index with xs >= med: binary search
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if xs[mid] < med:
+            lo = mid + 1
+        else:
+            hi = mid
+    left = lo - 1
+    right = lo
+    want = n // 2  # the distance of rank n // 2 and, for even n, the one before
+    prev = 0.0
+    d = 0.0
+    for _ in range(want + 1):
+        prev = d
+        if right < n and (left < 0 or abs(xs[right] - med) <= abs(xs[left] - med)):
+            d = abs(xs[right] - med)
+            right += 1
+        else:
+            d = abs(xs[left] - med)
+            left -= 1
+    if n % 2:
+        return d
+    return (prev + d) / 2.0

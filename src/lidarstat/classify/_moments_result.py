@@ -11,7 +11,7 @@ from ..errors import LidarstatDeprecationWarning
 from ..stats import DensityEstimate, SequentialMoments
 from ._cycle import CycleChoice
 
-__all__ = ["ASPRS", "MomentsClassification", "MomentsStep", "thin_curves"]
+__all__ = ["ASPRS", "MomentsClassification", "MomentsStep", "curve_step", "thin_curves"]
 
 #: ASPRS LAS classification codes written by ``moments``.
 ASPRS = {"unclassified": 1, "ground": 2, "low_vegetation": 3, "medium_vegetation": 4,
@@ -20,11 +20,15 @@ ASPRS = {"unclassified": 1, "ground": 2, "low_vegetation": 3, "medium_vegetation
 _CURVE_SAMPLES = 600  # samples of each curve kept for the report
 
 
+def curve_step(cycles: int) -> int:
+    """Stride of the samples :func:`thin_curves` keeps of curves of `cycles` cycles."""
+    return max(1, cycles // _CURVE_SAMPLES)
+
+
 def thin_curves(sm: SequentialMoments) -> dict:
     """About 600 samples of each curve, as copies: a strided view would keep the whole
     curve (one value per point analysed) alive in the report records."""
-    step = max(1, sm.cycle.size // _CURVE_SAMPLES)
-    s = slice(None, None, step)
+    s = slice(None, None, curve_step(sm.cycle.size))
     return {name: getattr(sm, name)[s].copy()
             for name in ("cycle", "skewness", "kurtosis", "threshold", "remaining")}
 

@@ -94,6 +94,9 @@ def _cut_window(xy, h, p, record, first=None):
     steps, infos = [], []
     parts = progressive_cut(xy, h, np.arange(h.size), p.window, np.inf, p, "", steps, infos,
                             record, first)
+    if len(parts) == 1:  # the window kept whole: every position, in order
+        thr = parts[0][1]
+        return h <= thr, np.full(h.size, thr), steps, infos
     ground = np.zeros(h.size, bool)
     cut = np.empty(h.size)
     for idx, thr in parts:

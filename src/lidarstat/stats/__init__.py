@@ -15,7 +15,8 @@ _WHERE = {
                      "z_test_statistic"), "_critical"),
     **dict.fromkeys(("hotelling_pvalue", "hotelling_test"), "_hotelling"),
     **dict.fromkeys(("DensityEstimate", "SequentialMoments", "density_estimate", "dip_test",
-                     "sequential_moments", "standard_moments"), "_moments"),
+                     "moment_push", "moment_shape", "robust_frame", "sequential_moments",
+                     "standard_moments"), "_moments"),
     "TestResult": "_results",
     "sort_values": "_sort",
     **dict.fromkeys(("chi2_isf_many", "chi2_isf_scalar", "chi2_sf_scalar", "gamma_q"),
@@ -38,6 +39,7 @@ __all__ = ["TestResult", "binomial_test", "z_critical", "t_critical", "chi2_crit
            "moran_test", "likelihood_ratio_test", "chow_test", "deletion_residual_envelope",
            "truncated_normal_variance",
            "SequentialMoments", "sequential_moments", "standard_moments", "DensityEstimate", "density_estimate",
+           "moment_push", "moment_shape", "robust_frame",
            "dip_test", "sort_values", "chi2_isf_many", "chi2_isf_scalar", "chi2_sf_scalar", "gamma_q"]
 
 

@@ -21,10 +21,38 @@ from ._results import TestResult
 from ._sort import sort_values
 
 __all__ = ["SequentialMoments", "sequential_moments", "standard_moments", "DensityEstimate",
-           "density_estimate", "dip_test"]
+           "density_estimate", "dip_test", "moment_push", "moment_shape", "robust_frame"]
 
 
 # --------------------------------------------------------------------------- kernels
+@njit
+def moment_push(y, i, mu, s2, s3, s4):  # pragma: no cover - compiled
+    """Mean and central sums ``mu, s2, s3, s4`` after adding `y` as value number `i`
+    (from 0): the one-pass updates of Pébay (2008), eq. 1.4-1.6."""
+    n1 = float(i)
+    cnt = n1 + 1.0
+    delta = y - mu
+    dn = delta / cnt
+    dn2 = dn * dn
+    term1 = delta * dn * n1
+    mu += dn
+    s4 += term1 * dn2 * (cnt * cnt - 3.0 * cnt + 3.0) + 6.0 * dn2 * s2 - 4.0 * dn * s3
+    s3 += term1 * dn * (cnt - 2.0) - 3.0 * dn * s2
+    s2 += term1
+    return mu, s2, s3, s4
+
+
+@njit
+def moment_shape(cnt, mu, s2, s3, s4):  # pragma: no cover - compiled
+    """Standard skewness and kurtosis of `cnt` values from their mean and central sums;
+    NaN where ``var <= (1e-12 (|mean| + 1))^2`` (the values all equal)."""
+    var = s2 / cnt
+    t = 1e-12 * (abs(mu) + 1.0)
+    if var > t * t:
+        return np.sqrt(cnt) * s3 / s2 ** 1.5, cnt * s4 / (s2 * s2)
+    return np.nan, np.nan
+
+
 @njit
 def _sequential_stats(xs, y, c, s, m, mean, std, skew, kurt, thr):  # pragma: no cover
     """Every cycle's mean, std, skewness, kurtosis and threshold, in one pass.
@@ -40,30 +68,15 @@ def _sequential_stats(xs, y, c, s, m, mean, std, skew, kurt, thr):  # pragma: no
     s3 = 0.0
     s4 = 0.0
     for i in range(n):
-        n1 = float(i)
-        cnt = n1 + 1.0
-        delta = y[i] - mu
-        dn = delta / cnt
-        dn2 = dn * dn
-        term1 = delta * dn * n1
-        mu += dn
-        s4 += term1 * dn2 * (cnt * cnt - 3.0 * cnt + 3.0) + 6.0 * dn2 * s2 - 4.0 * dn * s3
-        s3 += term1 * dn * (cnt - 2.0) - 3.0 * dn * s2
-        s2 += term1
+        mu, s2, s3, s4 = moment_push(y[i], i, mu, s2, s3, s4)
         k = n - 1 - i
         if k >= m:
             continue
-        var = s2 / cnt
-        t = 1e-12 * (abs(mu) + 1.0)
+        cnt = float(i) + 1.0
         mean[k] = mu * s + c
-        std[k] = np.sqrt(var) * s
+        std[k] = np.sqrt(s2 / cnt) * s
         thr[k] = xs[i]
-        if var > t * t:
-            skew[k] = np.sqrt(cnt) * s3 / s2 ** 1.5
-            kurt[k] = cnt * s4 / (s2 * s2)
-        else:
-            skew[k] = np.nan
-            kurt[k] = np.nan
+        skew[k], kurt[k] = moment_shape(cnt, mu, s2, s3, s4)
 
 
 def _as_values(values, name: str, func: str) -> np.ndarray:
@@ -88,7 +101,7 @@ def _presorted(sorted_values, n, func):
     return xs
 
 
-def _robust_frame(x: np.ndarray) -> tuple[float, float]:
+def robust_frame(x: np.ndarray) -> tuple[float, float]:
     """Centre (median) and a positive scale (IQR/1.349, else std, else 1) of sorted `x`."""
     n = x.size
     c = float(x[n // 2])
@@ -205,7 +218,7 @@ def sequential_moments(values, *, min_points: int = 4, return_order: bool = Fals
         order = None
         xs = sort_values(x) if sorted_values is None else _presorted(sorted_values, n,
                                                                       "sequential_moments")
-    c, s = _robust_frame(xs)
+    c, s = robust_frame(xs)
     y = (xs - c) / s
     m = n - min_points + 1  # cycle k leaves the prefix of length n - k, k = 0 .. m - 1
     mean, std, sk, ku, thr = (np.empty(m) for _ in range(5))
