@@ -316,7 +316,7 @@ def _workspace():
     """Per-thread scratch arrays of ``_fit_local`` (allocated once per chunk or cell)."""
     return (np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty((3, 3)),
             np.empty((3, 15)), np.empty((6, 6)), np.empty((6, 6)), np.zeros((6, 6)),
-            np.zeros((6, 6)), np.empty((6, 6)), np.empty(6), np.empty(6))
+            np.zeros((6, 6)), np.empty((6, 6)), np.empty(6), np.empty(6), np.empty((6, 6)))
 
 
 @njit
@@ -374,7 +374,7 @@ def _fit_local(cols, nk, p, px, py, pz, b, frame, sensor, has_sensor, min_nb, co
     bandwidth `b`. Its first three rows become the local
     coordinates u, v, h (pass 1), read contiguously by the moment and residual passes.
     """
-    R, cov3, ev, evec, mom, N, N2, L, LI, Ninv, tmp, rhs = ws
+    R, cov3, ev, evec, mom, N, N2, L, LI, Ninv, tmp, rhs, N3 = ws
     inv_b = 1.0 / b
     if p < min_nb or p < 6:
         return TOO_FEW, p
@@ -414,8 +414,8 @@ def _fit_local(cols, nk, p, px, py, pz, b, frame, sensor, has_sensor, min_nb, co
     _moment_sums(cols[0], cols[1], cols[2], cols[3], nk, mom, rhs)
     rhs[3] *= 0.5
     rhs[5] *= 0.5
-    # N's lower triangle (all the Cholesky reads) and N2 whole (for M = N2 Ninv); N3 only
-    # enters tr(Ninv N3), read from the moments
+    # N's lower triangle (all the Cholesky reads), N2 and N3 whole (for M = N2 Ninv and
+    # the traces)
     for a in range(6):
         for c in range(a + 1):
             k = _MONO[a * 6 + c]
@@ -423,6 +423,8 @@ def _fit_local(cols, nk, p, px, py, pz, b, frame, sensor, has_sensor, min_nb, co
             N[a, c] = f * mom[0, k]
             N2[a, c] = f * mom[1, k]
             N2[c, a] = N2[a, c]
+            N3[a, c] = f * mom[2, k]
+            N3[c, a] = N3[a, c]
     if not _spd_inverse6(N, 1e-12, L, LI, Ninv):
         return SINGULAR, p
     for a in range(6):
@@ -434,34 +436,36 @@ def _fit_local(cols, nk, p, px, py, pz, b, frame, sensor, has_sensor, min_nb, co
     q = _residual_ss(cols[0], cols[1], cols[2], cols[3], nk, tmp)
     sw = mom[0, 0]
     sw2 = mom[1, 0]
-    # traces: tr(Ninv N2), tr(Ninv N3) (N3's entries read from the moments) and, with M =
-    # N2 Ninv, tr(S N2) = tr(M M) for the sandwich S = Ninv N2 Ninv = Ninv M (symmetric:
-    # its upper triangle, mirrored); each trace summed over all 36 products in row order
-    t2 = 0.0
-    t3 = 0.0
-    for a in range(6):
-        for c in range(6):
-            t2 += Ninv[a, c] * N2[c, a]
-            t3 += Ninv[a, c] * (_COEF[c * 6 + a] * mom[2, _MONO[c * 6 + a]])
+    # traces: tr(Ninv N2), tr(Ninv N3) and, with M = N2 Ninv, tr(S N2) = tr(M M) for the
+    # sandwich S = Ninv N2 Ninv = Ninv M; the three summed in one loop over the 36 products
+    # in row order (three independent running sums)
     for a in range(6):  # L reused: M = N2 Ninv
         L[a, 0], L[a, 1], L[a, 2], L[a, 3], L[a, 4], L[a, 5] = _row_product(N2, a, Ninv)
+    t2 = 0.0
+    t3 = 0.0
     trSN2 = 0.0
     for a in range(6):
         for c in range(6):
+            t2 += Ninv[a, c] * N2[c, a]
+            t3 += Ninv[a, c] * N3[c, a]
             trSN2 += L[a, c] * L[c, a]
-    # the cofactor's upper triangle, rescaled to physical units as it is stored, mirrored
+    cof = Ninv
+    if cov_mode != COV_PAPER:  # LI reused: S, its upper triangle (sums in k order), mirrored
+        for a in range(6):
+            for c in range(a, 6):
+                acc = 0.0
+                for k in range(6):
+                    acc += Ninv[a, k] * L[k, c]
+                LI[a, c] = acc
+                LI[c, a] = acc
+        cof = LI
+    # beta and the cofactor, rescaled to physical units as they are stored
     for a in range(6):
         da = 1.0 if a == 0 else (inv_b if a < 3 else inv_b * inv_b)
         beta_out[row, a] = tmp[a] * da
-        if cov_mode == COV_PAPER:
-            cof = (Ninv[a, 0], Ninv[a, 1], Ninv[a, 2], Ninv[a, 3], Ninv[a, 4], Ninv[a, 5])
-        else:
-            cof = _row_product(Ninv, a, L)
-        for c in range(a, 6):
+        for c in range(6):
             dc = 1.0 if c == 0 else (inv_b if c < 3 else inv_b * inv_b)
-            acc = cof[c] * (da * dc)
-            cof_out[row, a, c] = acc
-            cof_out[row, c, a] = acc
+            cof_out[row, a, c] = cof[a, c] * (da * dc)
     stats_out[row, 0] = q
     stats_out[row, 1] = sw
     stats_out[row, 2] = sw - t2
