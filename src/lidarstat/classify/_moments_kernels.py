@@ -120,13 +120,11 @@ def _sort_ties(first, y, z, w, x_order, out):  # pragma: no cover - compiled
 
 
 @njit_parallel
-def _gather_keys(x, y, z, w, order, first, ys, zs, ws):  # pragma: no cover - compiled
-    """``first, ys, zs, ws = x[order], y[order], z[order], w[order]`` (`w` may be empty),
-    in parallel."""
+def _gather_keys(y, z, w, order, ys, zs, ws):  # pragma: no cover - compiled
+    """``ys, zs, ws = y[order], z[order], w[order]`` (`w` may be empty), in parallel."""
     has_w = w.size > 0
     for i in prange(order.size):
         j = order[i]
-        first[i] = x[j]
         ys[i] = y[j]
         zs[i] = z[j]
         if has_w:
@@ -154,34 +152,37 @@ def canonical_order(x, y, z, intensity=None) -> np.ndarray:
     True
     """
     x = np.ascontiguousarray(x, dtype=np.float64)
-    order = _x_order(x)
+    order, first = _x_order(x)
     n = x.size
     w = (np.empty(0) if intensity is None
          else np.ascontiguousarray(intensity, dtype=np.float64))
-    keys = np.empty((3, n)), np.empty(n if w.size else 0)
-    _gather_keys(x, np.ascontiguousarray(y, dtype=np.float64),
+    keys = np.empty((2, n)), np.empty(n if w.size else 0)
+    _gather_keys(np.ascontiguousarray(y, dtype=np.float64),
                  np.ascontiguousarray(z, dtype=np.float64), w, order, keys[0][0],
-                 keys[0][1], keys[0][2], keys[1])
+                 keys[0][1], keys[1])
     del w
     out = np.empty(n, np.int64)
     # inside a run the stable sort of x left the points in input order: their position
     # in the run breaks the last ties as the index does
-    _sort_ties(keys[0][0], keys[0][1], keys[0][2], keys[1], order, out)
+    _sort_ties(first, keys[0][0], keys[0][1], keys[1], order, out)
     return out
 
 
 def _x_order(x):
-    """Stable ascending order of `x` (float64, no NaN)."""
+    """Stable ascending order of `x` (float64, no NaN) and `x` in that order:
+    ``(order, x[order])``."""
     bits = x.view(np.int64)
     if x.size < 2:
-        return np.arange(x.size, dtype=np.int64)
+        return np.arange(x.size, dtype=np.int64), x.copy()
     lo = int(bits.min())
     if lo < 0:  # a negative value or -0.0: the bits do not order as the numbers
-        return np.argsort(x, kind="stable").astype(np.int64, copy=False)
+        order = np.argsort(x, kind="stable").astype(np.int64, copy=False)
+        return order, np.take(x, order)
     keys = bits - lo  # >= 0, in the order of the numbers; equal only for equal numbers
     span = int(keys.max())
-    order, _ = radix_order(keys, max(span, 1).bit_length())
-    return order
+    order, keys = radix_order(keys, max(span, 1).bit_length())
+    keys += lo  # the sorted keys back to the bits of the sorted values: no gather of x
+    return order, keys.view(np.float64)
 
 
 @njit
