@@ -184,3 +184,49 @@ def test_rewrite_copies_the_records_as_read(tmp_path, rng):
         np.testing.assert_array_equal(np.asarray(b[name]), np.asarray(want), err_msg=name)
     np.testing.assert_array_equal(np.asarray(b["cluster_id"]), fields["cluster_id"])
     np.testing.assert_array_equal(np.asarray(b["ground"]), fields["ground"])
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_rewrite_packs_write_chunks_inside_a_read_chunk(tmp_path, rng, monkeypatch, suffix):
+    """Each read chunk is copied, filled and written WRITE_CHUNK points at a time: the
+    file (points, header statistics, return counts) is the one of a single record."""
+    from lidarstat.io import _las
+
+    src = tmp_path / "src.las"
+    header = laspy.LasHeader(version="1.4", point_format=6)
+    header.scales, header.offsets = np.full(3, 0.001), np.array([5e5, 6e6, 0.0])
+    las = laspy.LasData(header)
+    las.x, las.y = 5e5 + rng.random(N) * 50, 6e6 + rng.random(N) * 50
+    las.z = rng.random(N) * 9 - 3
+    las.number_of_returns = rng.integers(1, 6, N)
+    las.return_number = rng.integers(1, 6, N)
+    las.gps_time = rng.random(N) * 1e5
+    las.write(src)
+    fields = {"classification": rng.integers(0, 32, N).astype(np.uint8),
+              "height": rng.normal(size=N), "cluster_id": np.arange(N, dtype=np.int32)}
+
+    def fields_of(start, chunk):
+        return {k: v[start:start + len(chunk)] for k, v in fields.items()}
+
+    written = []
+    real = laspy.LasWriter.write_points
+
+    def write_points(self, points):
+        written[-1].append(len(points))
+        real(self, points)
+
+    monkeypatch.setattr(laspy.LasWriter, "write_points", write_points)
+    outs = []
+    for write_chunk, read_chunk in ((N, N), (7, 50), (50, 7)):
+        monkeypatch.setattr(_las, "WRITE_CHUNK", write_chunk)
+        outs.append(tmp_path / f"o{write_chunk}{suffix}")
+        written.append([])
+        lio.rewrite(src, outs[-1], fields_of, points_per_chunk=read_chunk, decode=False)
+    assert written[0] == [N] and written[2] == [7] * (N // 7) + [N % 7]
+    assert written[1] == ([7] * 7 + [1]) * 2 + [7] * 2 + [6]  # 50, 50 and 20 points read
+    assert outs[0].read_bytes() == outs[1].read_bytes() == outs[2].read_bytes()
+    out = laspy.read(outs[1])
+    assert list(out.header.number_of_points_by_return[:5]) == [
+        int(np.sum(las.return_number == r)) for r in range(1, 6)]
+    np.testing.assert_array_equal(out.header.maxs, las.xyz.max(axis=0))
+    np.testing.assert_array_equal(np.asarray(out["height"]), fields["height"])

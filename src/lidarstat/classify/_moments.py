@@ -257,7 +257,7 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         (return_number, "return_number")))
     inten = _usable_intensity(inten, source)
     # the vegetation candidates (non-last returns of multi-return pulses): one mask
-    # reordered below, not the two return attributes
+    # put in window order below, not the two return attributes
     multi = _multiple_returns(nret, rnum)
     has_returns = multi is not None
     del nret, rnum
@@ -270,13 +270,12 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
         _permute_columns(pts, canon)
     else:
         pts = np.take(pts, canon, axis=0)  # rows by np.take: a third of fancy indexing's time
-    inten, multi = (None if a is None else np.take(a, canon) for a in (inten, multi))
 
     # 1. low noise, out of every analysis
     noise = (low_outliers(pts, pts[:, 2], min_depth=0.5 / uz) if low_noise
              else np.zeros(n, bool))
     pts_noise = pts[noise]  # for their heights under the final surface
-    pts, inten, multi = _without_low_noise(noise, pts, inten, multi, source, in_place=reuse)
+    pts = _without_low_noise(noise, pts, source, in_place=reuse)
     release_freed()  # between steps: what a step freed goes back to the system
 
     # 2. analysis windows; the points in root-window order, local coordinates. Ties are
@@ -296,6 +295,9 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     # fields go back to the caller's order through these alone
     kept = np.flatnonzero(~noise) if noise.any() else None
     dest = canon[perm] if kept is None else canon[kept[perm]]
+    # intensity and the candidates straight from the caller's order to window order
+    inten = None if inten is None else np.take(inten, dest)
+    multi = np.zeros(len(dest), bool) if multi is None else np.take(multi, dest)
     if n < 2**31:  # the positions are only scattered through: half the memory
         dest = dest.astype(np.int32)
     low = canon[np.flatnonzero(noise)]
@@ -303,8 +305,6 @@ def moments(xyz, intensity=None, *, number_of_returns=None, return_number=None,
     xy, z = _window_frame(pts, perm, origin, in_place=reuse)
     del pts  # the caller's array (or its copy without the low noise): not needed again
     release_freed()
-    inten = None if inten is None else np.take(inten, perm)
-    multi = np.take(multi, perm)
 
     # 3-4. window analyses and the ground; the raised patches' graph reads only the
     # coordinates, so it is built beside them, on the core the surface fits leave idle
@@ -452,18 +452,16 @@ def _multiple_returns(nret, rnum):
     return (nret.astype(int) > 1) & (rnum.astype(int) < nret.astype(int))
 
 
-def _without_low_noise(noise, pts, inten, multi, source, in_place=False):
-    """The points, intensity and vegetation candidates (`multi`, None: none) left out of
-    the low noise: ``(pts, inten, multi)``. `in_place`: the points kept are moved to the
-    front of `pts` (no copy)."""
+def _without_low_noise(noise, pts, source, in_place=False):
+    """The points left out of the low noise. `in_place`: they are moved to the front
+    of `pts` (no copy)."""
     if noise.any():
         keep = ~noise
         if keep.sum() < 8:
             raise InvalidParameterError(f"{source or 'points'}: fewer than 8 points left "
                                         "after removing low outliers")
         pts = pts[:compact_rows(pts, keep)] if in_place else pts[keep]
-        inten, multi = (None if a is None else a[keep] for a in (inten, multi))
-    return pts, inten, np.zeros(len(pts), bool) if multi is None else multi
+    return pts
 
 
 def _permute_columns(pts, order):

@@ -25,20 +25,24 @@ _INSERTION_RUN = 24
 
 
 @njit
-def _less(y, z, w, a, b):  # pragma: no cover - compiled
+def _less(y, z, w, x_order, a, b):  # pragma: no cover - compiled
     """Whether point `a` comes before point `b` by y, then z, then w (w empty: left out),
-    then the index (as a stable sort of the input would order them)."""
+    then the index (as a stable sort of the input would order them). `a` and `b` are
+    positions in the x order: `y` is in that order, `z` and `w` in the input's (read
+    through `x_order` on ties of y alone)."""
     if y[a] != y[b]:
         return y[a] < y[b]
-    if z[a] != z[b]:
-        return z[a] < z[b]
-    if w.size and w[a] != w[b]:
-        return w[a] < w[b]
+    ia = x_order[a]
+    ib = x_order[b]
+    if z[ia] != z[ib]:
+        return z[ia] < z[ib]
+    if w.size and w[ia] != w[ib]:
+        return w[ia] < w[ib]
     return a < b
 
 
 @njit
-def _sort_run(order, lo, hi, y, z, w, buf):  # pragma: no cover - compiled
+def _sort_run(order, lo, hi, y, z, w, x_order, buf):  # pragma: no cover - compiled
     """Stable sort of ``order[lo:hi]`` by y, z, w (insertion for short runs, bottom-up
     merge sort through `buf` otherwise)."""
     m = hi - lo
@@ -46,7 +50,7 @@ def _sort_run(order, lo, hi, y, z, w, buf):  # pragma: no cover - compiled
         for i in range(lo + 1, hi):
             p = order[i]
             j = i - 1
-            while j >= lo and _less(y, z, w, p, order[j]):
+            while j >= lo and _less(y, z, w, x_order, p, order[j]):
                 order[j + 1] = order[j]
                 j -= 1
             order[j + 1] = p
@@ -61,7 +65,7 @@ def _sort_run(order, lo, hi, y, z, w, buf):  # pragma: no cover - compiled
             end = min(a + 2 * width, m)
             i, j, k = a, mid, a
             while i < mid and j < end:
-                if _less(y, z, w, src[j], src[i]):
+                if _less(y, z, w, x_order, src[j], src[i]):
                     dst[k] = src[j]
                     j += 1
                 else:
@@ -89,9 +93,10 @@ _TIE_BLOCK = 1 << 16
 
 @njit_parallel
 def _sort_ties(first, y, z, w, x_order, out):  # pragma: no cover - compiled
-    """Sort every run of equal `first` (sorted) by y, z and w, and write the order of the
-    points, ``x_order`` composed with it, to `out`. The runs are independent: blocks of
-    whole runs are sorted in parallel, each through a buffer of its own."""
+    """Sort every run of equal `first` (sorted) by y (in the same order), z and w (in
+    the input's order), and write the order of the points, ``x_order`` composed with it,
+    to `out`. The runs are independent: blocks of whole runs are sorted in parallel,
+    each through a buffer of its own."""
     n = first.size
     nblk = max(1, n // _TIE_BLOCK)
     bounds = np.empty(nblk + 1, np.int64)
@@ -115,24 +120,17 @@ def _sort_ties(first, y, z, w, x_order, out):  # pragma: no cover - compiled
             while b < hi and first[b] == first[a]:
                 b += 1
             if b - a > 1:
-                _sort_run(pos, a - lo, b - lo, y, z, w, buf)
+                _sort_run(pos, a - lo, b - lo, y, z, w, x_order, buf)
             a = b
         for i in range(hi - lo):
             out[lo + i] = x_order[pos[i]]
 
 
 @njit_parallel
-def _gather_keys(x, y, z, w, order, first, ys, zs, ws):  # pragma: no cover - compiled
-    """``first, ys, zs, ws = x[order], y[order], z[order], w[order]`` (`w` may be empty),
-    in parallel."""
-    has_w = w.size > 0
+def _gather(values, order, out):  # pragma: no cover - compiled
+    """``out = values[order]``, in parallel."""
     for i in prange(order.size):
-        j = order[i]
-        first[i] = x[j]
-        ys[i] = y[j]
-        zs[i] = z[j]
-        if has_w:
-            ws[i] = w[j]
+        out[i] = values[order[i]]
 
 
 def canonical_order(x, y, z, intensity=None) -> np.ndarray:
@@ -140,12 +138,13 @@ def canonical_order(x, y, z, intensity=None) -> np.ndarray:
     stable sort of x and a sort of each run of equal x by y, z, intensity and the index.
 
     The sort of x is a radix sort of the bits of the values when none is negative (the
-    bits of non-negative doubles order as the numbers do), a comparison sort otherwise.
-    The other keys are gathered into that order once, so the runs are sorted on
-    contiguous memory; inside a run the stable sort left the points in input order, so
-    the position in it breaks the last ties as the index does. The radix passes, the
-    gather and the runs (in blocks of whole runs) run in parallel; the permutation does
-    not depend on the threads.
+    bits of non-negative doubles order as the numbers do), a comparison sort otherwise;
+    it gives x in that order too. y is gathered into that order once, so the runs are
+    sorted on contiguous memory; z and intensity, compared only between points of equal
+    x and y, are read where they are. Inside a run the stable sort left the points in
+    input order, so the position in it breaks the last ties as the index does. The radix
+    passes, the gather and the runs (in blocks of whole runs) run in parallel; the
+    permutation does not depend on the threads.
 
     Examples
     --------
@@ -156,34 +155,34 @@ def canonical_order(x, y, z, intensity=None) -> np.ndarray:
     True
     """
     x = np.ascontiguousarray(x, dtype=np.float64)
-    order = _x_order(x)
+    order, first = _x_order(x)
     n = x.size
+    ys = np.empty(n)
+    _gather(np.ascontiguousarray(y, dtype=np.float64), order, ys)
     w = (np.empty(0) if intensity is None
          else np.ascontiguousarray(intensity, dtype=np.float64))
-    keys = np.empty((3, n)), np.empty(n if w.size else 0)
-    _gather_keys(x, np.ascontiguousarray(y, dtype=np.float64),
-                 np.ascontiguousarray(z, dtype=np.float64), w, order, keys[0][0],
-                 keys[0][1], keys[0][2], keys[1])
-    del w
     out = np.empty(n, np.int64)
     # inside a run the stable sort of x left the points in input order: their position
     # in the run breaks the last ties as the index does
-    _sort_ties(keys[0][0], keys[0][1], keys[0][2], keys[1], order, out)
+    _sort_ties(first, ys, np.ascontiguousarray(z, dtype=np.float64), w, order, out)
     return out
 
 
 def _x_order(x):
-    """Stable ascending order of `x` (float64, no NaN)."""
+    """Stable ascending order of `x` (float64, no NaN) and `x` in that order:
+    ``(order, x[order])``."""
     bits = x.view(np.int64)
     if x.size < 2:
-        return np.arange(x.size, dtype=np.int64)
+        return np.arange(x.size, dtype=np.int64), x.copy()
     lo = int(bits.min())
     if lo < 0:  # a negative value or -0.0: the bits do not order as the numbers
-        return np.argsort(x, kind="stable").astype(np.int64, copy=False)
+        order = np.argsort(x, kind="stable").astype(np.int64, copy=False)
+        return order, np.take(x, order)
     keys = bits - lo  # >= 0, in the order of the numbers; equal only for equal numbers
     span = int(keys.max())
-    order, _ = radix_order(keys, max(span, 1).bit_length())
-    return order
+    order, keys = radix_order(keys, max(span, 1).bit_length())
+    keys += lo  # the sorted keys back to the bits of the sorted values: no gather of x
+    return order, keys.view(np.float64)
 
 
 @njit

@@ -474,8 +474,14 @@ def rewrite_file(src: Path, dst: Path, fin: str, fout: str, fields_of, points_pe
                      else range(start, start + m))
             new = check_fields(fields_of(start, chunk), m)
             start += m
-            yield bare, new, lambda header, assign, points=points: _copied_record(
-                dst, header, points, assign, reused)
+            # packed and written WRITE_CHUNK points at a time: the record being filled
+            # stays in the processor's cache through the copy, the fields, laspy's
+            # header statistics and the file write
+            for a in range(0, m, WRITE_CHUNK):
+                b = min(a + WRITE_CHUNK, m)
+                part = new if (a, b) == (0, m) else {k: v[a:b] for k, v in new.items()}
+                yield bare, part, lambda header, assign, points=points[a:b]: _copied_record(
+                    dst, header, points, assign, reused)
 
     with reader:
         return _write_parts(dst, parts(), fout)
