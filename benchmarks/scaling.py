@@ -272,7 +272,8 @@ def merge(paths, out, fig) -> None:
             by = {r["points"]: r for r in results["commands"].get(name, [])}
             by.update({r["points"]: r for r in rows})
             results["commands"][name] = [by[k] for k in sorted(by)]
-        if "catalogue" in part:
+        # a catalogue copied from results_catalogue.json is read from there again
+        if "catalogue" in part and part["catalogue"].get("source") != "results_catalogue.json":
             results["catalogue"] = part["catalogue"]
     if "catalogue" not in results:
         _stored_catalogue(results)
