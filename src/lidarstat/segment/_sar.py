@@ -40,6 +40,19 @@ SIGMA_RATIO = 1.25
 SIGMA_UNIT_MAX = 3.0
 
 
+class _PlaneFields:
+    """What the SAR segmentation keeps of its local planes: their noise, the adaptive
+    rule used and the per-point fields it writes (``z0``, ``slope_e``, ``slope_n``,
+    ``plane_pass``)."""
+
+    def __init__(self, fit):
+        f = fit.to_fields()  # the slopes are columns of the coefficients: copied
+        self.fields = {name: np.array(f[name])
+                       for name in ("z0", "slope_e", "slope_n", "plane_pass")}
+        self.sigma = float(np.sqrt(fit.sigma2))
+        self.adaptive = fit.params.get("adaptive")
+
+
 def _units_noise(sd, sigma_local):
     """Median residual standard deviation `sd` of the units that can be planes at the
     noise level: those within :data:`SIGMA_UNIT_MAX` times the local estimate (NaN if
@@ -192,35 +205,38 @@ def segment_sar(points, *, radius=None, sigma=None, alpha=0.05, edge_alpha=0.05,
         core = (fit.bandwidth >= b) if fit.params.get("adaptive") == "multiscale" else None
         raw = raw_clusters(points, fit, nbh, alpha=edge_alpha, min_points=min_points,
                            core=core)
-        seg = refine_raw_clusters(points, raw.labels, search=search, w_radius=w_radius,
+        # of the local planes only their noise and four output fields are used from here
+        # on: the rest (coefficients, covariances, statistics: some 200 bytes a point)
+        # is released before the units' search allocates its own
+        kept, labels = _PlaneFields(fit), raw.labels
+        del fit, core, raw
+        seg = refine_raw_clusters(points, labels, search=search, w_radius=w_radius,
                                   degrees=degree, max_degree=max_degree, fs_alpha=fs_alpha,
                                   envelope_alpha=envelope_alpha, fs_stop=fs_stop,
                                   fs_block=fs_block, max_steps=max_steps,
                                   min_points=min_points, graph=graph,
                                   outlier_alpha=outlier_alpha,
-                                  sigma=float(np.sqrt(fit.sigma2)), gof_alpha=gof_alpha,
+                                  sigma=kept.sigma, gof_alpha=gof_alpha,
                                   progress=progress)
-        return fit, seg
+        return kept, seg
 
     fit, seg = one_pass(sigma)
-    sigma_local = float(np.sqrt(fit.sigma2))
+    sigma_local = fit.sigma
     sigma_units = _units_noise(seg.presplit_sigma, sigma_local)
     passes = 1
     if sigma is None and sigma_units > SIGMA_RATIO * sigma_local:
         fit, seg = one_pass(sigma_units)
         passes = 2
+    del graph, nbh  # the passes' neighbourhoods, before the planes stage builds its own
     if planes:
-        noise = sigma_units if sigma is None and np.isfinite(sigma_units) \
-            else float(np.sqrt(fit.sigma2))
+        noise = sigma_units if sigma is None and np.isfinite(sigma_units) else fit.sigma
         seg = add_planes(points, seg, sigma=noise, alpha=alpha, edge_alpha=edge_alpha,
                          min_points=min_points, gof_alpha=gof_alpha)
-    f = fit.to_fields()
-    seg.fields.update({"z0": f["z0"], "slope_e": f["slope_e"], "slope_n": f["slope_n"],
-                       "plane_pass": f["plane_pass"]})
+    seg.fields.update(fit.fields)
     seg.params.update({"radius": b, "radius_selected_by": criterion if selected else None,
-                       "sigma": float(np.sqrt(fit.sigma2)), "sigma_local": sigma_local,
+                       "sigma": fit.sigma, "sigma_local": sigma_local,
                        "sigma_units": sigma_units, "sigma_passes": passes, "alpha": alpha,
                        "edge_alpha": edge_alpha, "grow_radius": grow_radius,
-                       "spacing": spacing, "adaptive": fit.params.get("adaptive"),
+                       "spacing": spacing, "adaptive": fit.adaptive,
                        "degree": degree, "max_degree": max_degree, "planes": planes})
     return seg
