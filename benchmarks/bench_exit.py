@@ -6,7 +6,7 @@ Whole processes, alternating, on synthetic airborne clouds (the town of ``bench_
 * ``teardown``: ``python -c "...; sys.exit(main(argv))"``, :func:`lidarstat.cli.main`
   followed by the interpreter's ordinary exit (module teardown, the compiled kernels'
   machine code unloaded);
-* ``at_once``: ``python -m lidarstat.cli``, the console script's path
+* ``at_once``: ``python -m lidarstat``, the console script's path
   (:func:`lidarstat.cli.run`: exit handlers, streams flushed, then ``os._exit``).
 
 The same command and input in both; wall and CPU seconds (``os.wait4``), median of
@@ -70,7 +70,7 @@ def measure(cases, repeats, tmp: Path) -> dict:
         if not src.exists():
             write_cloud(src, n)
         ways = {"teardown": [sys.executable, "-c", TEARDOWN],
-                "at_once": [sys.executable, "-m", "lidarstat.cli"]}
+                "at_once": [sys.executable, "-m", "lidarstat"]}
         _timed([*ways["at_once"], *head, str(src), str(tmp / "warm.las"), *tail, "-q"], env)
         runs = {w: [] for w in ways}
         for r in range(repeats):

@@ -1,7 +1,7 @@
 """The end of a ``lidarstat`` process (:func:`lidarstat.cli.run`): outputs complete, exit
 handlers run, streams flushed, the status kept; live threads joined as usual.
 
-Real processes (``python -m lidarstat.cli`` and small scripts calling
+Real processes (``python -m lidarstat`` and small scripts calling
 :func:`lidarstat.cli._app.end`), since the point is what happens after the interpreter's
 last line.
 """
@@ -47,7 +47,7 @@ def town(tmp_path_factory):
 def test_command_output_complete_and_summary_printed(town, tmp_path):
     src, n = town
     out = tmp_path / "out.las"
-    proc = _python(["-m", "lidarstat.cli", "moments", str(src), str(out), "--no-report"],
+    proc = _python(["-m", "lidarstat", "moments", str(src), str(out), "--no-report"],
                    tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert f"{n} points" in proc.stdout  # the summary reached the pipe
@@ -58,7 +58,7 @@ def test_command_output_complete_and_summary_printed(town, tmp_path):
 
 
 def test_command_error_status_and_one_line(town, tmp_path):
-    proc = _python(["-m", "lidarstat.cli", "moments", str(tmp_path / "absent.las"),
+    proc = _python(["-m", "lidarstat", "moments", str(tmp_path / "absent.las"),
                     str(tmp_path / "o.las")], tmp_path)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()

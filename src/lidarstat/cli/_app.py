@@ -463,7 +463,7 @@ def main(argv=None) -> int:
 
 
 def run() -> None:
-    """The ``lidarstat`` console script (and ``python -m lidarstat.cli``): :func:`main`,
+    """The ``lidarstat`` console script (and ``python -m lidarstat``): :func:`main`,
     then the process ends without the interpreter's teardown.
 
     Unloading the 1,500 modules of NumPy, SciPy and Numba and the compiled kernels' machine
