@@ -117,16 +117,38 @@ def _cell_median_at(xy, rows, values, points_per_cell, chunk=1 << 20):
     return cell_median_values(key, values, return_cells=True)
 
 
+def _peaks(x):
+    """Local maxima of `x` and their prominences, as ``scipy.signal.find_peaks(x,
+    prominence=0)`` gives them (a flat top's middle sample, rounded down; neither end).
+
+    On the density's few hundred samples; ``scipy.signal`` would add half a second of
+    imports (it loads ``scipy.stats``) to every ``moments`` process for this one call.
+    """
+    n = x.size
+    start = np.flatnonzero(np.r_[True, x[1:] != x[:-1]])  # runs of equal samples
+    end = np.r_[start[1:], n] - 1
+    inner = (start > 0) & (end < n - 1)
+    start, end = start[inner], end[inner]
+    top = (x[start - 1] < x[start]) & (x[end + 1] < x[start])
+    peaks = (start[top] + end[top]) // 2
+    prominences = np.empty(peaks.size)
+    for i, p in enumerate(peaks):  # the bases: lowest sample before a higher one each side
+        higher = np.flatnonzero(x[:p] > x[p])
+        left = x[(higher[-1] + 1 if higher.size else 0):p + 1].min()
+        higher = np.flatnonzero(x[p + 1:] > x[p])
+        right = x[p:(p + 1 + higher[0] if higher.size else n)].min()
+        prominences[i] = x[p] - max(left, right)
+    return peaks, prominences
+
+
 def _antimode(de):
     """Grid value of the density minimum between its two most prominent modes, or None."""
-    from scipy.signal import find_peaks
-
     f = de.density
-    peaks, prop = find_peaks(np.r_[0.0, f, 0.0], prominence=0)
+    peaks, prominences = _peaks(np.r_[0.0, f, 0.0])
     peaks = peaks - 1
     if peaks.size < 2:
         return None, {}
-    top = np.sort(peaks[np.argsort(prop["prominences"])[-2:]])
+    top = np.sort(peaks[np.argsort(prominences)[-2:]])
     a, b = int(top[0]), int(top[1])
     j = a + int(np.argmin(f[a:b + 1]))
     return float(de.grid[j]), {"modes": [float(de.grid[a]), float(de.grid[b])],
