@@ -79,10 +79,13 @@ def test_roof_top_is_the_highest_of_nine_cells(seed):
     zmax = np.array([zr[roof & (key == s)].max() for s in seeds])
     top = np.empty(key.size)
     _k.roof_top(key, seeds, zmax, width, top)
+    dense = np.empty(key.size)  # the table of every cell: the same values
+    _k.roof_top_dense(key, roof, zr, 31 * width, width, dense)
     for i in range(key.size):
         near = [key[i] + dx * width + dy for dx in (-1, 0, 1) for dy in (-1, 0, 1)]
         hit = np.isin(seeds, near)
         assert top[i] == (zmax[hit].max() if hit.any() else -np.inf)
+    assert np.array_equal(dense, top)
 
 
 def test_local_planes_fit_every_row_across_chunks():

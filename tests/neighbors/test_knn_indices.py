@@ -56,6 +56,17 @@ def test_ties_are_ordered_as_the_tree_orders_them(seed, monkeypatch):
     assert sum(asked) == 0
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_sparse_points_far_from_a_dense_cluster_are_exact(seed):
+    # the cell follows the dense majority: the sparse points' neighbours lie many cells
+    # away, found shell by shell of cells
+    g = np.random.default_rng(seed)
+    dense = g.normal([10.0, 10.0, 10.0], 0.3, (4000, 3))
+    sparse = g.uniform(0, 60, (60, 3))
+    _same(np.vstack([dense, sparse]), 12)
+    _same(np.vstack([sparse, dense[:200]]), 5)
+
+
 def test_tiny_clouds_and_bad_arguments():
     pts = np.random.default_rng(0).random((6, 3))
     for k in (1, 5, 6):

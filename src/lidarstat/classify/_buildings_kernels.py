@@ -108,6 +108,24 @@ def roof_top(key, seeds, zmax, width, top):  # pragma: no cover - compiled
             top[i] = best
 
 
+@njit_parallel
+def roof_top_dense(key, roof, z, ncells, width, top):  # pragma: no cover - compiled
+    """:func:`roof_top` on a dense table of the `ncells` cells: the highest `z` of the
+    `roof` points of each cell, then for every point the largest of its nine cells."""
+    zc = np.full(ncells, -np.inf)
+    for i in range(key.size):
+        if roof[i] and z[i] > zc[key[i]]:
+            zc[key[i]] = z[i]
+    n = key.size
+    for c in prange((n + _CHUNK - 1) // _CHUNK):
+        for i in range(c * _CHUNK, min(n, (c + 1) * _CHUNK)):
+            best = -np.inf
+            for dx in range(-1, 2):
+                row = key[i] + dx * width
+                best = max(best, max(zc[row - 1], max(zc[row], zc[row + 1])))
+            top[i] = best
+
+
 @njit
 def ground_sample(xy, z, mask, ux, uz, most, side):  # pragma: no cover - compiled
     """The rows `mask` of ``(xy * ux, z * uz)`` about their mean, in row order: all of

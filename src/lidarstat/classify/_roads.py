@@ -34,6 +34,7 @@ from .._shared._columns import column_max, column_min
 from .._shared._deprecate import renamed_parameters
 from .._shared.validation import check_option
 from ..stats import density_estimate, dip_test, sequential_moments
+from . import _roads_kernels as _rk
 from . import _surface_kernels as _sk
 from ._cycle import CycleChoice, choose_cycle
 from ._moments_result import MomentsStep, thin_curves
@@ -97,23 +98,21 @@ def cell_median(xy, values, *, points_per_cell: float = 8.0, return_cells: bool 
     return cell_median_values(key, v, return_cells=return_cells)
 
 
-def _cell_median_at(xy, rows, values, points_per_cell, chunk=1 << 20):
+def _cell_median_at(xy, rows, values, points_per_cell):
     """``cell_median(xy[rows], values, points_per_cell=..., return_cells=True)`` without
-    the (M, 2) copy of the rows: their bounds a chunk at a time, their cell keys in place."""
-    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
-    for a in range(0, rows.size, chunk):
-        part = xy[rows[a:a + chunk]]
-        lo = np.minimum(lo, column_min(part))
-        hi = np.maximum(hi, column_max(part))
-    span = np.maximum(hi - lo, 1e-9)
-    cell = float(np.sqrt(points_per_cell * span[0] * span[1] / rows.size))
+    the (M, 2) copy of the rows: their bounds and cell keys read in place."""
     key = np.empty(rows.size, np.int64)
     if rows.size:
         from numba import get_num_threads
 
-        _sk.cell_keys_where(np.ascontiguousarray(xy, dtype=np.float64),
-                            np.ascontiguousarray(rows, dtype=np.int64), cell,
-                            min(get_num_threads(), 8), key)
+        xy = np.ascontiguousarray(xy, dtype=np.float64)
+        rows = np.ascontiguousarray(rows, dtype=np.int64)
+        blocks = min(get_num_threads(), 8)
+        bounds = np.empty(4)
+        _rk.row_bounds(xy, rows, blocks, bounds)
+        span = np.maximum(bounds[2:] - bounds[:2], 1e-9)
+        cell = float(np.sqrt(points_per_cell * span[0] * span[1] / rows.size))
+        _sk.cell_keys_where(xy, rows, cell, blocks, key)
     return cell_median_values(key, values, return_cells=True)
 
 
