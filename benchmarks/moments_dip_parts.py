@@ -16,6 +16,10 @@ seconds summed over the replayed samples, each part repeated ``--repeats`` times
 * ``diptest_core``: the ``diptest`` package on the sorted sample (``sort_x=False``),
   statistic and interpolated p-value.
 
+``repeated_tests`` counts the tests whose sample (the same values in the same order) an
+earlier test of the run already took, and ``repeated_tests_cpu_s`` their CPU: what a
+cache of the results by sample would save.
+
 Usage::
 
     python benchmarks/moments_dip_parts.py --points 2000000 \\
@@ -25,6 +29,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import sys
 import time
@@ -114,6 +119,11 @@ def main(argv=None):
     cpu = np.array([c for _, _, c in log])
     given = np.array([s for _, s, _ in log])
     big = sizes > 20000
+    seen, repeated = set(), np.zeros(len(log), bool)
+    for i, (v, _, _) in enumerate(log):
+        key = hashlib.blake2b(v.tobytes(), digest_size=16).digest()
+        repeated[i] = key in seen
+        seen.add(key)
     g = np.random.default_rng(0)
     pick = np.sort(g.choice(len(log), size=min(a.replay, len(log)), replace=False))
     parts = _parts([(log[i][0], log[i][1]) for i in pick], a.repeats)
@@ -125,6 +135,8 @@ def main(argv=None):
         "subsampled_tests": int(big.sum()),
         "subsampled_tests_cpu_s": round(float(cpu[big].sum()), 3),
         "tests_with_sorted_values": int(given.sum()),
+        "repeated_tests": int(repeated.sum()),
+        "repeated_tests_cpu_s": round(float(cpu[repeated].sum()), 3),
         "size_percentiles_10_50_90": np.percentile(sizes, [10, 50, 90]).round().tolist(),
         "replayed_tests": int(pick.size), "replay_repeats": a.repeats,
         "parts_cpu_s_scaled_to_all_tests": {k: round(v * scale, 4) for k, v in parts.items()},

@@ -201,9 +201,9 @@ class _Grid2D:
             self.order = rank[order].astype(index)
         del order
         self.dims = np.array([self.cell_keys[-1] // ny + 1, ny, 1], np.int64)
-        self.points = np.zeros((self.pos.size, 3))
-        self.points[:, 0] = xy[self.pos, 0] - lo[0]
-        self.points[:, 1] = xy[self.pos, 1] - lo[1]
+        self.points = np.empty((self.pos.size, 3))
+        _local_rows(np.ascontiguousarray(xy), self.pos, float(lo[0]), float(lo[1]),
+                    self.points)
 
     def may_have_copies(self, zs):
         """False when no two points share a location (`zs` the elevations in the grid's
@@ -247,6 +247,18 @@ def _rank_order_in_cells(order, starts, rank):  # pragma: no cover - compiled
                 order[b + 1] = order[b]
                 b -= 1
             order[b + 1] = x
+
+
+@njit
+def _local_rows(xy, pos, x0, y0, out):  # pragma: no cover - compiled
+    """``out[r] = (xy[pos[r], 0] - x0, xy[pos[r], 1] - y0, 0)``: the grid's sorted local
+    coordinates in one pass (NumPy's gather of one column by an index array goes
+    through its general indexing, several times slower)."""
+    for r in range(pos.size):
+        j = pos[r]
+        out[r, 0] = xy[j, 0] - x0
+        out[r, 1] = xy[j, 1] - y0
+        out[r, 2] = 0.0
 
 
 @njit_parallel
@@ -336,15 +348,16 @@ def _join_smooth(parent, zs, nbr, smooth, start):  # pragma: no cover - compiled
     n_cut = 0
     for r in range(m):
         i = start + r
+        a = _find(parent, i)  # i's root, kept through the row's unions
         for c in range(k):
             if smooth[r, c]:
-                a = _find(parent, i)
                 b = _find(parent, np.int64(nbr[r, c]))  # one _find: i is int64
                 if a != b:
                     if a < b:
                         parent[b] = a
                     else:
                         parent[a] = b
+                        a = b
             else:
                 n_cut += 1
     ci = np.empty(n_cut, nbr.dtype)
