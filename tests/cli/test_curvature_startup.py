@@ -113,3 +113,43 @@ def test_moments_run_does_not_import_the_other_methods(tmp_path):
         " '--no-report', '-q']) == 0\n",
         prefixes=("lidarstat.segment", "lidarstat.synth", "lidarstat.report", "matplotlib"))
     assert (tmp_path / "out.las").exists()
+
+
+def test_console_script_ends_at_once_after_a_success_with_its_output_delivered(tmp_path):
+    # as the console script, a successful `curvature` ends the process without the
+    # interpreter's teardown (an exit hook does not run) once its summary is flushed into
+    # the pipe and its file written; a failure exits normally with its status
+    import numpy as np
+
+    from lidarstat.io import PointCloud, read, write
+
+    g = np.linspace(0, 3, 30)
+    x, y = [a.ravel() for a in np.meshgrid(g, g)]
+    rng = np.random.default_rng(1)
+    write(tmp_path / "in.las", PointCloud(xyz=np.c_[x, y, 0.1 * x * y + rng.normal(0, 0.01, x.size)]))
+
+    def console(*argv):
+        code = ("import atexit, sys\n"
+                "atexit.register(lambda: print('teardown', flush=True))\n"
+                f"sys.argv = ['lidarstat', *{list(argv)!r}]\n"
+                "from lidarstat.cli import main\n"
+                "raise SystemExit(main())\n")
+        return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+
+    done = console("curvature", str(tmp_path / "in.las"), str(tmp_path / "out.las"),
+                   "--radius", "0.6", "--sigma", "0.01")
+    assert done.returncode == 0, done.stderr
+    assert "teardown" not in done.stdout
+    assert "surface types:" in done.stdout and done.stdout.rstrip().endswith("%")
+    from lidarstat.cli._app import main
+
+    assert main(["curvature", str(tmp_path / "in.las"), str(tmp_path / "same.las"),
+                 "--radius", "0.6", "--sigma", "0.01", "-q"]) == 0
+    a, b = read(tmp_path / "out.las"), read(tmp_path / "same.las")
+    np.testing.assert_array_equal(a.xyz, b.xyz)
+    assert a.attributes.keys() == b.attributes.keys()
+    for name in a.attributes:
+        np.testing.assert_array_equal(a.attributes[name], b.attributes[name])
+    failed = console("curvature", str(tmp_path / "missing.las"), str(tmp_path / "o.las"),
+                     "--radius", "0.6")
+    assert failed.returncode == 2 and "teardown" in failed.stdout

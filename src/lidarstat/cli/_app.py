@@ -6,6 +6,7 @@ import argparse
 import contextlib
 import json
 import logging
+import os
 import signal
 import sys
 import threading
@@ -146,6 +147,7 @@ def cmd_curvature(args):
         meta = {"input": str(args.input), "output": str(out), "seconds": elapsed,
                 **params, **res.counts(), "params": params}
         write_summary_json(args.summary_json, meta)
+    args.exit_at_once = args.tile is None  # one process, no worker left (see main)
     return 0
 
 
@@ -423,8 +425,32 @@ def main(argv=None) -> int:
 
     0 success; 1 an internal error (one line; ``-v`` adds the traceback); 2 a usage or
     data error (one line naming the file or option); 130 Ctrl-C; 143 SIGTERM. Temporary
-    files are removed on every one of these exits.
+    files are removed on every one of these exits. As the console script (`argv` None),
+    a command that marks its arguments ``exit_at_once`` (every output written and closed,
+    no thread or child process left) ends the process as soon as it returns, without the
+    interpreter's teardown of the loaded kernels and modules.
     """
+    done = {}
+    code = _main(argv, done)
+    if argv is None and getattr(done.get("args"), "exit_at_once", False):
+        _exit_at_once(code)
+    return code
+
+
+def _exit_at_once(code):
+    """End the process with `code` once the standard streams and log handlers are flushed,
+    without the interpreter's teardown."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # closed or broken pipe: nothing more to deliver
+            pass
+    logging.shutdown()
+    os._exit(code)
+
+
+def _main(argv, done) -> int:
+    """:func:`main`'s work; the parsed arguments go to ``done["args"]``."""
     verbose = False
     args = None
     try:
@@ -434,6 +460,7 @@ def main(argv=None) -> int:
                 args = parser.parse_args(argv)
             except SystemExit as exc:  # --help, --version or a usage error, already printed
                 return exc.code
+            done["args"] = args
             verbose = args.verbose
             # all of a command's outputs appear, or none; its warnings follow a success
             with held_warnings(verbose), output_group(), _compile_notice():
