@@ -286,7 +286,7 @@ PROFILE_PIECES = (
     ("lidarstat.features._curvature", "_run_cells", "search_fit"),
     ("lidarstat.features._curvature", "fit_height_variance", "statistics"),
     ("lidarstat.features._curvature", "fit_variance_and_spread", "statistics"),
-    ("lidarstat.features._curvature", "curvature_tests", "statistics"),
+    ("lidarstat.features._curvature", "_block_fields", "statistics"),
     ("lidarstat.features._curvature", "_single_radius", "_single_radius"),
     ("lidarstat.features._curvature_result", "CurvatureResult.to_fields", "fields"),
 )
