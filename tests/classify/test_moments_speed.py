@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from classify.test_moments_classify import _scene
 
-from lidarstat.classify import _cycle, _moments_ground, _moments_windows, _surface, moments
+from lidarstat.classify import (_cycle, _moments_ground, _moments_windows, _surface,
+                                _surface_kernels, moments)
 
 
 def _scipy_surface(xy_ground, z_ground, *, cell, which="median", rank=None, where=None,
@@ -85,6 +86,10 @@ def test_tin_bins_of_the_triangles_give_the_bounding_boxes_values(seed, bin_side
     q = np.r_[P, mid.reshape(-1, 2), g.uniform(-1, 47, (20000, 2)),
               P[g.choice(len(P), 100)] + g.normal(0, 1e-9, (100, 2))]
     ref_ptr, ref_tri = _box_bins(P, simp, ox, oy, side, nx, ny)
+    for blocks in (1, 3):  # the same lists whatever the blocks of triangles
+        other = _surface_kernels.bin_triangles(P, simp, ox, oy, side, nx, ny, blocks)
+        np.testing.assert_array_equal(other[0], indptr)
+        np.testing.assert_array_equal(other[1], tri)
     assert tri.size < 0.8 * ref_tri.size
     for c in range(nx * ny):  # each bin's list: a subset of its boxes', in their order
         got = tri[indptr[c]:indptr[c + 1]]

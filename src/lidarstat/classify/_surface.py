@@ -5,7 +5,7 @@ scipy locates each query point by a walk from the previous point's triangle, so 
 acquisition or random order walks O(sqrt(T)) triangles per point, and a point outside the
 hull falls back to a brute-force scan of all T triangles. Both grow faster than N (the
 10-million-point classification did not finish). Here the triangles are binned once into
-a regular grid of cells (CSR of the cells each triangle's box overlaps) and every point
+a regular grid of cells (CSR of the cells each triangle meets) and every point
 tests only the triangles of its cell: O(N + T) whatever the order, in parallel over the
 points (each writes its own value: the same values in any thread count). The
 barycentric coordinates use scipy's own affine transforms (``Delaunay.transform``) in
@@ -244,81 +244,6 @@ def _cell_pick(xy, z, cell, which, rank=None, where=None):
 
 # --------------------------------------------------------------------------- TIN kernels
 @njit
-def _bin_triangles(P, simplices, ox, oy, g, nx, ny):  # pragma: no cover - compiled
-    """CSR of the triangles that meet each grid cell (``i * ny + j``), each cell's in
-    ascending order.
-
-    A triangle enters the cells of its bounding box that no edge's line separates from
-    it (the separating-axis test), each cell widened by a margin: 1e-6 of the
-    triangle's box side plus the coordinates' rounding. A point is accepted by a
-    triangle only within ``3 eps_broad`` (4.5e-8) of its diameter, so a triangle left
-    out of a cell accepts no point located in that cell: the first triangle of a cell's
-    list that accepts a point is the one the bounding boxes alone give, with fewer tried.
-    """
-    nt = simplices.shape[0]
-    counts = np.zeros(nx * ny + 1, np.int64)
-    tri = np.empty(0, np.int64)
-    fill = counts[:0]
-    grain = 64 * np.finfo(np.float64).eps * (abs(ox) + abs(oy) + g * (nx + ny))
-    for fill_in in range(2):  # count, then fill
-        if fill_in:
-            for c in range(nx * ny):
-                counts[c + 1] += counts[c]
-            fill = counts[:-1].copy()
-            tri = np.empty(counts[-1], np.int64)
-        for t in range(nt):
-            ax = P[simplices[t, 0], 0]
-            ay = P[simplices[t, 0], 1]
-            bx = P[simplices[t, 1], 0]
-            by = P[simplices[t, 1], 1]
-            cx = P[simplices[t, 2], 0]
-            cy = P[simplices[t, 2], 1]
-            xmin = min(ax, bx, cx)
-            xmax = max(ax, bx, cx)
-            ymin = min(ay, by, cy)
-            ymax = max(ay, by, cy)
-            d = 1e-6 * max(xmax - xmin, ymax - ymin) + grain
-            i0 = max(0, int(np.floor((xmin - ox) / g)))
-            i1 = min(nx - 1, int(np.floor((xmax - ox) / g)))
-            j0 = max(0, int(np.floor((ymin - oy) / g)))
-            j1 = min(ny - 1, int(np.floor((ymax - oy) / g)))
-            for i in range(i0, i1 + 1):
-                x0 = ox + i * g - d
-                x1 = ox + (i + 1) * g + d
-                for j in range(j0, j1 + 1):
-                    y0 = oy + j * g - d
-                    y1 = oy + (j + 1) * g + d
-                    if (_beyond(ax, ay, bx, by, cx, cy, x0, x1, y0, y1)
-                            or _beyond(bx, by, cx, cy, ax, ay, x0, x1, y0, y1)
-                            or _beyond(cx, cy, ax, ay, bx, by, x0, x1, y0, y1)):
-                        continue
-                    c = i * ny + j
-                    if fill_in:
-                        tri[fill[c]] = t
-                        fill[c] += 1
-                    else:
-                        counts[c + 1] += 1
-    return counts, tri
-
-
-@njit
-def _beyond(px, py, qx, qy, rx, ry, x0, x1, y0, y1):  # pragma: no cover - compiled
-    """Whether the box ``[x0, x1] x [y0, y1]`` lies wholly on the far side of the line
-    through p and q from r (False for a degenerate triangle: no side)."""
-    nx = py - qy
-    ny = qx - px
-    side = nx * (rx - px) + ny * (ry - py)
-    if side == 0.0 or side != side:
-        return False
-    if side < 0.0:
-        nx = -nx
-        ny = -ny
-    # the corner farthest toward r's side
-    far = nx * ((x1 if nx > 0.0 else x0) - px) + ny * ((y1 if ny > 0.0 else y0) - py)
-    return far < 0.0
-
-
-@njit
 def _inside(tf, t, x, y, eps):  # pragma: no cover - compiled
     """Barycentric coordinates of (x, y) in triangle t (scipy's operation order) and
     whether all are >= -eps."""
@@ -448,8 +373,13 @@ class TinSurface:
                 nx, ny = (np.floor(span / g).astype(np.int64) + 1).tolist()
                 if keep is not None:
                     simp = np.ascontiguousarray(simp[keep(self.P[simp])])
-                indptr, tri = _bin_triangles(self.P, simp, float(lo[0]), float(lo[1]), g,
-                                             nx, ny)
+                from numba import get_num_threads
+
+                from ._surface_kernels import bin_triangles
+
+                # blocks of triangles in parallel: a count per bin and block (at most 4)
+                indptr, tri = bin_triangles(self.P, simp, float(lo[0]), float(lo[1]), g,
+                                            nx, ny, min(get_num_threads(), 4))
                 self._tri = (float(lo[0]), float(lo[1]), g, nx, ny, indptr, tri, simp,
                              _transforms(self.P, simp))
 
