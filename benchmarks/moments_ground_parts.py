@@ -13,7 +13,9 @@ every part is timed on those inputs, CPU seconds of the process (all threads) an
 * ``delaunay``: SciPy's (Qhull's) Delaunay triangulation of those vertices alone;
 * ``tin_build``: the whole ``TinSurface`` (the triangulation, the triangles' bins and
   barycentric maps);
-* ``evaluation``: the surface at every point (the TIN kernel and, outside the hull, the
+* ``fit``: the whole surface fit the run makes (``ground_surface``: the pick, the
+  triangulation, the triangles' bins and barycentric maps);
+* ``evaluation``: that surface at every point (the TIN kernel and, outside the hull, the
   nearest vertices' planes);
 * ``cut``: the cut interpolation of every pass;
 * ``delaunay_two_threads`` against ``delaunay_one_after_other``: two triangulations of
@@ -44,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-PARTS = ("pick", "delaunay", "tin_build", "evaluation", "cut", "delaunay_one_after_other",
+PARTS = ("pick", "delaunay", "tin_build", "fit", "evaluation", "cut", "delaunay_one_after_other",
          "delaunay_two_threads")
 
 
@@ -121,7 +123,9 @@ def time_parts(folder):
         P = np.ascontiguousarray(xy[sel])
         vertices.append(len(P))
         timed("delaunay", Delaunay, P)
-        surf = timed("tin_build", _surface.TinSurface, P, z[sel], cell)
+        timed("tin_build", _surface.TinSurface, P, z[sel], cell)
+        surf = timed("fit", _surface.ground_surface, xy, z, cell=cell, rank=rank,
+                     where=ld(f"where{i}"))
         timed("evaluation", surf, xy)
         timed("delaunay_one_after_other", lambda P: [Delaunay(P), Delaunay(P)], P)
         timed("delaunay_two_threads", two_threads, P)

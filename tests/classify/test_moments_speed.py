@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from classify.test_moments_classify import _scene
 
-from lidarstat.classify import _cycle, _moments_ground, _moments_windows, _surface, moments
+from lidarstat.classify import (_cycle, _moments_ground, _moments_windows, _surface,
+                                _surface_kernels, moments)
 
 
 def _scipy_surface(xy_ground, z_ground, *, cell, which="median", rank=None, where=None,
@@ -51,6 +52,56 @@ def test_tin_matches_scipy_inside_outside_any_order(rng):
     got = _surface.TinSurface(P, V, cell=4.0)(q)
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9)
     np.testing.assert_allclose(got[40000:43000], V, rtol=0, atol=1e-12)
+
+
+def _box_bins(P, simp, ox, oy, g, nx, ny):
+    """The bins of every triangle's bounding box (NumPy reference of the CSR the TIN
+    kernel reads, each bin's triangles ascending)."""
+    lo = np.floor((P[simp].min(axis=1) - [ox, oy]) / g).astype(np.int64)
+    hi = np.floor((P[simp].max(axis=1) - [ox, oy]) / g).astype(np.int64)
+    lo, hi = np.maximum(lo, 0), np.minimum(hi, [nx - 1, ny - 1])
+    lists = [[] for _ in range(nx * ny)]
+    for t in range(len(simp)):
+        for i in range(lo[t, 0], hi[t, 0] + 1):
+            for j in range(lo[t, 1], hi[t, 1] + 1):
+                lists[i * ny + j].append(t)
+    return (np.r_[0, np.cumsum([len(c) for c in lists])].astype(np.int64),
+            np.array([t for c in lists for t in c], np.int64))
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("bin_side", [None, 0.25, 1.0])
+def test_tin_bins_of_the_triangles_give_the_bounding_boxes_values(seed, bin_side):
+    """The bins hold only the triangles that meet them: every value (vertices, edge
+    midpoints, points just outside the hull, slivers of a grid of vertices) is the one
+    the bins of the bounding boxes give, bit for bit, and fewer triangles are tried."""
+    g = np.random.default_rng(seed)
+    grid = np.stack(np.meshgrid(np.arange(12.0), np.arange(12.0)), -1).reshape(-1, 2)
+    P = np.r_[g.uniform(0, 30, (400, 2)), grid * 0.5 + 31, [[45.0, 45.0], [45.0, 10.0]]]
+    P = np.unique(np.round(P, 3), axis=0)
+    V = g.normal(size=len(P))
+    f = _surface.TinSurface(P, V, cell=2.0, bin_side=bin_side)
+    ox, oy, side, nx, ny, indptr, tri, simp, tf = f._tri
+    mid = (P[simp] + P[np.roll(simp, 1, axis=1)]) / 2
+    q = np.r_[P, mid.reshape(-1, 2), g.uniform(-1, 47, (20000, 2)),
+              P[g.choice(len(P), 100)] + g.normal(0, 1e-9, (100, 2))]
+    ref_ptr, ref_tri = _box_bins(P, simp, ox, oy, side, nx, ny)
+    for blocks in (1, 3):  # the same lists whatever the blocks of triangles
+        other = _surface_kernels.bin_triangles(P, simp, ox, oy, side, nx, ny, blocks)
+        np.testing.assert_array_equal(other[0], indptr)
+        np.testing.assert_array_equal(other[1], tri)
+    assert tri.size < 0.8 * ref_tri.size
+    for c in range(nx * ny):  # each bin's list: a subset of its boxes', in their order
+        got = tri[indptr[c]:indptr[c + 1]]
+        assert np.isin(got, ref_tri[ref_ptr[c]:ref_ptr[c + 1]]).all()
+        assert (np.diff(got) > 0).all()
+    ref, got = np.empty(len(q)), np.empty(len(q))
+    _surface._tin_eval(q, ox, oy, side, nx, ny, ref_ptr, ref_tri, simp, tf, f.V,
+                       _surface._EPS, _surface._EPS_BROAD, ref)
+    _surface._tin_eval(q, ox, oy, side, nx, ny, indptr, tri, simp, tf, f.V,
+                       _surface._EPS, _surface._EPS_BROAD, got)
+    assert np.isfinite(ref[:len(P)]).all()
+    np.testing.assert_array_equal(got, ref)  # NaN (outside) where NaN
 
 
 def test_tin_degenerate_vertices_fall_back_to_nearest():

@@ -5,7 +5,7 @@ scipy locates each query point by a walk from the previous point's triangle, so 
 acquisition or random order walks O(sqrt(T)) triangles per point, and a point outside the
 hull falls back to a brute-force scan of all T triangles. Both grow faster than N (the
 10-million-point classification did not finish). Here the triangles are binned once into
-a regular grid of cells (CSR of the cells each triangle's box overlaps) and every point
+a regular grid of cells (CSR of the cells each triangle meets) and every point
 tests only the triangles of its cell: O(N + T) whatever the order, in parallel over the
 points (each writes its own value: the same values in any thread count). The
 barycentric coordinates use scipy's own affine transforms (``Delaunay.transform``) in
@@ -244,45 +244,6 @@ def _cell_pick(xy, z, cell, which, rank=None, where=None):
 
 # --------------------------------------------------------------------------- TIN kernels
 @njit
-def _bin_triangles(P, simplices, ox, oy, g, nx, ny):  # pragma: no cover - compiled
-    """CSR of the triangles whose bounding box overlaps each grid cell (``i * ny + j``)."""
-    nt = simplices.shape[0]
-    counts = np.zeros(nx * ny + 1, np.int64)
-    box = np.empty((nt, 4), np.int64)
-    for t in range(nt):
-        xmin = np.inf
-        xmax = -np.inf
-        ymin = np.inf
-        ymax = -np.inf
-        for v in range(3):
-            x = P[simplices[t, v], 0]
-            y = P[simplices[t, v], 1]
-            xmin = min(xmin, x)
-            xmax = max(xmax, x)
-            ymin = min(ymin, y)
-            ymax = max(ymax, y)
-        i0 = max(0, int(np.floor((xmin - ox) / g)))
-        i1 = min(nx - 1, int(np.floor((xmax - ox) / g)))
-        j0 = max(0, int(np.floor((ymin - oy) / g)))
-        j1 = min(ny - 1, int(np.floor((ymax - oy) / g)))
-        box[t, 0], box[t, 1], box[t, 2], box[t, 3] = i0, i1, j0, j1
-        for i in range(i0, i1 + 1):
-            for j in range(j0, j1 + 1):
-                counts[i * ny + j + 1] += 1
-    for c in range(nx * ny):
-        counts[c + 1] += counts[c]
-    fill = counts[:-1].copy()
-    tri = np.empty(counts[-1], np.int64)
-    for t in range(nt):
-        for i in range(box[t, 0], box[t, 1] + 1):
-            for j in range(box[t, 2], box[t, 3] + 1):
-                c = i * ny + j
-                tri[fill[c]] = t
-                fill[c] += 1
-    return counts, tri
-
-
-@njit
 def _inside(tf, t, x, y, eps):  # pragma: no cover - compiled
     """Barycentric coordinates of (x, y) in triangle t (scipy's operation order) and
     whether all are >= -eps."""
@@ -367,7 +328,8 @@ class TinSurface:
     V : (M,) ndarray
         Values at the vertices.
     cell : float
-        Side of the grid cells the triangles are binned into (about the vertex spacing).
+        About the vertex spacing: the triangles are binned into cells of half this side,
+        or of `bin_side`.
     keep : callable, optional
         ``keep(corners) -> (T,) bool`` of the triangles' ``(T, 3, 2)`` corners: the others
         are left out (a point in one is outside the TIN). A TIN over wide empty areas
@@ -377,6 +339,10 @@ class TinSurface:
         `P` is given moved into this :class:`~._terrain_frame.BandFrame`; every query is
         moved into it too (a TIN over clumps far apart then bins the narrowed gaps, not
         the whole box).
+    bin_side : float, optional
+        Side of the bins: at a quarter of the vertex spacing a bin holds about 2.2
+        triangles, 3.7 at half of it (four times fewer bins); never more bins than the
+        terrain grid's cells for as many vertices.
 
     Examples
     --------
@@ -386,7 +352,7 @@ class TinSurface:
     [1.5, 0.25, 9.0]
     """
 
-    def __init__(self, P, V, cell: float, keep=None, frame=None):
+    def __init__(self, P, V, cell: float, keep=None, frame=None, bin_side=None):
         self.frame = frame
         self.P = np.ascontiguousarray(P, dtype=np.float64)
         self.V = np.ascontiguousarray(V, dtype=np.float64)
@@ -397,18 +363,23 @@ class TinSurface:
             if len(simp):  # none when the vertices are collinear
                 lo = column_min(self.P)
                 span = column_max(self.P) - lo
-                # half-cell bins: about 3 candidate triangles per bin instead of 8; no
-                # more bins than the terrain grid's cells (:func:`~._terrain_frame.
+                # no more bins than the terrain grid's cells (:func:`~._terrain_frame.
                 # terrain_cell`) for as many vertices: sparse vertices make large
                 # triangles, binned over their whole box
                 limit = max(CELLS_PER_POINT * len(self.P), MIN_CELLS)
-                g = max(0.5 * float(cell), float(span.max()) / 4096.0,
+                g = max(0.5 * float(cell) if bin_side is None else float(bin_side),
+                        float(span.max()) / 4096.0,
                         float(np.sqrt(span[0] * span[1] / limit)), 1e-12)
                 nx, ny = (np.floor(span / g).astype(np.int64) + 1).tolist()
                 if keep is not None:
                     simp = np.ascontiguousarray(simp[keep(self.P[simp])])
-                indptr, tri = _bin_triangles(self.P, simp, float(lo[0]), float(lo[1]), g,
-                                             nx, ny)
+                from numba import get_num_threads
+
+                from ._surface_kernels import bin_triangles
+
+                # blocks of triangles in parallel: a count per bin and block (at most 4)
+                indptr, tri = bin_triangles(self.P, simp, float(lo[0]), float(lo[1]), g,
+                                            nx, ny, min(get_num_threads(), 4))
                 self._tri = (float(lo[0]), float(lo[1]), g, nx, ny, indptr, tri, simp,
                              _transforms(self.P, simp))
 
@@ -492,4 +463,6 @@ def ground_surface(xy_ground, z_ground, *, cell: float, which: str = "median", r
     """
     sel = _cell_pick(xy_ground, z_ground, cell, which, rank, where)
     P = xy_ground[sel]
-    return TinSurface(P if frame is None else frame(P), z_ground[sel], cell, frame=frame)
+    # quarter-cell bins: the surface is evaluated at every point of the cloud
+    return TinSurface(P if frame is None else frame(P), z_ground[sel], cell, frame=frame,
+                      bin_side=0.25 * cell)

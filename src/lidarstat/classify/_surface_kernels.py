@@ -1,10 +1,12 @@
 """Compiled kernels of the ground surface's cell picks on a subset of the points, in
-parallel over blocks of points and blocks of cells (:func:`~._surface.ground_surface`).
+parallel over blocks of points and blocks of cells (:func:`~._surface.ground_surface`),
+and of its TIN's bins, in parallel over blocks of triangles.
 
 Each gives what its serial counterpart in :mod:`._surface` gives: the same keys (the same
 arithmetic), the same stable order of the points by key (a counting sort whose blocks of
 points keep their order inside each key) and the same pick in every cell (each cell is
-worked by one thread alone).
+worked by one thread alone); each bin lists its triangles in ascending order whatever the
+blocks.
 """
 
 from __future__ import annotations
@@ -12,10 +14,10 @@ from __future__ import annotations
 import numpy as np
 from numba import prange
 
-from .._shared._jit import njit_parallel
+from .._shared._jit import njit, njit_parallel
 from ._surface import pick_one
 
-__all__ = ["cell_keys_where", "order_where", "pick_cells"]
+__all__ = ["bin_triangles", "cell_keys_where", "order_where", "pick_cells"]
 
 
 @njit_parallel
@@ -117,3 +119,93 @@ def pick_cells(order, z, starts, which_median, rank, nblocks):  # pragma: no cov
         for c in range(c0, c1):
             out[c] = pick_one(order, starts[c], starts[c + 1], z, which_median, rank, buf)
     return out
+
+
+@njit_parallel
+def bin_triangles(P, simplices, ox, oy, g, nx, ny, nblocks):  # pragma: no cover - compiled
+    """CSR of the triangles that meet each grid cell (``i * ny + j``, cells of side `g`
+    from ``(ox, oy)``), each cell's in ascending order.
+
+    A triangle enters the cells of its bounding box that no edge's line separates from
+    it (the separating-axis test), each cell widened by a margin: 1e-6 of the
+    triangle's box side plus the coordinates' rounding. A point is accepted by a
+    triangle only within ``3 eps_broad`` (4.5e-8) of its diameter
+    (:func:`~._surface._tin_eval`), so a triangle left out of a cell accepts no point
+    located in that cell: the first triangle of a cell's list that accepts a point is
+    the one the bounding boxes alone give, with fewer tried. Blocks of triangles are
+    counted and filled in parallel, block after block inside each cell.
+    """
+    nt = simplices.shape[0]
+    nc = nx * ny
+    step = (nt + nblocks - 1) // nblocks
+    at = np.zeros((nblocks, nc), np.int64)  # counts, then each block's next slot
+    grain = 64 * np.finfo(np.float64).eps * (abs(ox) + abs(oy) + g * (nx + ny))
+    indptr = np.zeros(nc + 1, np.int64)
+    tri = np.empty(0, np.int64)
+    for fill_in in range(2):  # count, then fill
+        if fill_in:
+            run = 0
+            for c in range(nc):
+                indptr[c] = run
+                for b in range(nblocks):
+                    n = at[b, c]
+                    at[b, c] = run
+                    run += n
+            indptr[nc] = run
+            tri = np.empty(run, np.int64)
+        for b in prange(nblocks):
+            for t in range(b * step, min(nt, (b + 1) * step)):
+                _bin_one(P, simplices, t, ox, oy, g, nx, ny, grain, at[b], tri, fill_in)
+    return indptr, tri
+
+
+@njit
+def _bin_one(P, simplices, t, ox, oy, g, nx, ny, grain, at, tri,
+             fill_in):  # pragma: no cover - compiled
+    """Count (or, with `fill_in`, write at ``at[c]``) triangle t in the cells it meets."""
+    ax = P[simplices[t, 0], 0]
+    ay = P[simplices[t, 0], 1]
+    bx = P[simplices[t, 1], 0]
+    by = P[simplices[t, 1], 1]
+    cx = P[simplices[t, 2], 0]
+    cy = P[simplices[t, 2], 1]
+    xmin = min(ax, bx, cx)
+    xmax = max(ax, bx, cx)
+    ymin = min(ay, by, cy)
+    ymax = max(ay, by, cy)
+    d = 1e-6 * max(xmax - xmin, ymax - ymin) + grain
+    i0 = max(0, int(np.floor((xmin - ox) / g)))
+    i1 = min(nx - 1, int(np.floor((xmax - ox) / g)))
+    j0 = max(0, int(np.floor((ymin - oy) / g)))
+    j1 = min(ny - 1, int(np.floor((ymax - oy) / g)))
+    for i in range(i0, i1 + 1):
+        x0 = ox + i * g - d
+        x1 = ox + (i + 1) * g + d
+        for j in range(j0, j1 + 1):
+            y0 = oy + j * g - d
+            y1 = oy + (j + 1) * g + d
+            if (_beyond(ax, ay, bx, by, cx, cy, x0, x1, y0, y1)
+                    or _beyond(bx, by, cx, cy, ax, ay, x0, x1, y0, y1)
+                    or _beyond(cx, cy, ax, ay, bx, by, x0, x1, y0, y1)):
+                continue
+            c = i * ny + j
+            if fill_in:
+                tri[at[c]] = t
+            at[c] += 1
+
+
+@njit
+def _beyond(px, py, qx, qy, rx, ry, x0, x1, y0, y1):  # pragma: no cover - compiled
+    """Whether the box ``[x0, x1] x [y0, y1]`` lies wholly on the far side of the line
+    through p and q from r (False for a degenerate triangle: no side)."""
+    nx = py - qy
+    ny = qx - px
+    side = nx * (rx - px) + ny * (ry - py)
+    if side == 0.0 or side != side:
+        return False
+    if side < 0.0:
+        nx = -nx
+        ny = -ny
+    # the corner farthest toward r's side
+    far = nx * ((x1 if nx > 0.0 else x0) - px) + ny * ((y1 if ny > 0.0 else y0) - py)
+    return far < 0.0
