@@ -227,7 +227,7 @@ def segment_sar(points, *, radius=None, sigma=None, alpha=0.05, edge_alpha=0.05,
     if sigma is None and sigma_units > SIGMA_RATIO * sigma_local:
         fit, seg = one_pass(sigma_units)
         passes = 2
-    del graph, nbh  # the passes' neighbourhoods, before the planes stage builds its own
+    graph = nbh = None  # the passes' neighbourhoods, released before the planes stage
     if planes:
         noise = sigma_units if sigma is None and np.isfinite(sigma_units) else fit.sigma
         seg = add_planes(points, seg, sigma=noise, alpha=alpha, edge_alpha=edge_alpha,
