@@ -271,16 +271,23 @@ def _knn_point(px, py, pz, ix0, iy0, iz0, pts, cell_keys, cell_start, dims, cell
 
 
 @njit(inline="always")
-def cell_block(c, cell_keys, cell_start, dims, ranges, work):
-    """Cell `c`'s grid position ``(ix0, iy0, iz0)``, the column ranges of its 27-cell block
-    in `ranges` and their number, and `work` (:func:`_scratch` arrays) grown to hold every
-    candidate of the block: ``(ix0, iy0, iz0, nr, work)``."""
+def cell_ranges(c, cell_keys, cell_start, dims, ranges):
+    """Cell `c`'s grid position ``(ix0, iy0, iz0)`` and the column ranges of its 27-cell
+    block in `ranges` with their number: ``(ix0, iy0, iz0, nr)``."""
     key = cell_keys[c]
     iz0 = key % dims[2]
     rest = key // dims[2]
     ix0 = rest // dims[1]
     iy0 = rest % dims[1]
     nr = _block_ranges(ix0, iy0, iz0, 1, cell_keys, cell_start, dims, ranges)
+    return ix0, iy0, iz0, nr
+
+
+@njit(inline="always")
+def cell_block(c, cell_keys, cell_start, dims, ranges, work):
+    """:func:`cell_ranges`, and `work` (:func:`_scratch` arrays) grown to hold every
+    candidate of the block: ``(ix0, iy0, iz0, nr, work)``."""
+    ix0, iy0, iz0, nr = cell_ranges(c, cell_keys, cell_start, dims, ranges)
     need = _count(ranges, nr)
     cap = work[0].size - 1
     if need > cap:

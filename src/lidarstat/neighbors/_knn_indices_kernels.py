@@ -18,7 +18,7 @@ import numpy as np
 from numba import prange
 
 from .._shared._jit import njit, njit_parallel
-from ._grid_kernels import _CELL_CHUNK, _block_ranges, _count, _guaranteed
+from ._grid_kernels import _CELL_CHUNK, _count, _guaranteed, cell_ranges
 
 _WIDEN = 1.6  # factor of the squared radius when fewer than k + 1 candidates lie within
 _TRIES = 3  # radii tried before every candidate of the block is inserted
@@ -109,12 +109,7 @@ def grid_rows(c0, c1, pts, cell_keys, cell_start, dims, cell, k, tau0, order, ou
         ti = np.empty(kk, dtype=np.int64)
         bx, by, bz, bj, bd, bc = _block_arrays(256)
         for c in range(c0 + ch * _CELL_CHUNK, min(c1, c0 + (ch + 1) * _CELL_CHUNK)):
-            key = cell_keys[c]
-            iz0 = key % dims[2]
-            rest = key // dims[2]
-            ix0 = rest // dims[1]
-            iy0 = rest % dims[1]
-            nr = _block_ranges(ix0, iy0, iz0, 1, cell_keys, cell_start, dims, ranges)
+            ix0, iy0, iz0, nr = cell_ranges(c, cell_keys, cell_start, dims, ranges)
             m = _count(ranges, nr)
             if m > bx.size:
                 bx, by, bz, bj, bd, bc = _block_arrays(2 * m)
