@@ -36,6 +36,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _results import store
 
 HERE = Path(__file__).resolve().parent
 SRC = HERE.parent / "src"
@@ -122,12 +123,7 @@ def main(argv=None):
               "load_average": list(os.getloadavg()), "machine_shared": True,
               "rows": rows}
     if args.out:
-        path = Path(args.out)
-        data = json.loads(path.read_text()) if path.exists() else {}
-        data[args.key] = result
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(data, indent=1) + "\n")
-        tmp.replace(path)
+        store(args.out, args.key, result)
 
 
 if __name__ == "__main__":

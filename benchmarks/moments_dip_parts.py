@@ -36,6 +36,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _results import store
 
 HERE = Path(__file__).resolve().parent
 
@@ -143,12 +144,7 @@ def main(argv=None):
     }
     print(json.dumps(row, indent=1))
     if a.out:
-        p = Path(a.out)
-        doc = json.loads(p.read_text()) if p.exists() else {}
-        doc[a.label] = row
-        tmp = p.with_suffix(".tmp")
-        tmp.write_text(json.dumps(doc, indent=1) + "\n")
-        tmp.replace(p)
+        store(a.out, a.label, row)
 
 
 if __name__ == "__main__":
