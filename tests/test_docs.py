@@ -123,6 +123,18 @@ def test_fields_page_names_every_published_field():
     assert not missing, "fields not documented in docs/fields.md: " + ", ".join(missing)
 
 
+@pytest.mark.parametrize("results", ["results_scaling.json", "results_real_resources.json"])
+def test_performance_tables_are_their_results_files(results):
+    # These tables are rendered by the script that writes the results file; a row edited by
+    # hand (or pasted into the wrong table) would show figures no script regenerates.
+    import json
+
+    table = json.loads((ROOT / "benchmarks" / results).read_text())["markdown"].strip()
+    page = (DOCS / "performance.md").read_text(encoding="utf-8")
+    stale = [row for row in table.splitlines() if row not in page.splitlines()]
+    assert not stale, f"docs/performance.md differs from {results}:\n" + "\n".join(stale)
+
+
 def test_no_development_history_in_the_manual():
     pages = [ROOT / "README.md", *sorted(DOCS.glob("*.md")), DOCS / "methods" / "synthetic.md"]
     # The manual describes the software as it is; how it got there is in the CHANGELOG.
