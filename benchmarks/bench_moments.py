@@ -25,6 +25,12 @@ Usage::
     python benchmarks/bench_moments.py --points 10000000 --repeats 3 --profile \\
         --out benchmarks/results_moments.json
     python benchmarks/bench_moments.py --points 2000000 --repeats 1 --profile --skip-peers
+    python benchmarks/bench_moments.py --points 10000000 --repeats 3 --io-floor \
+        --variant 'core=--no-terrain --no-continuity' --out benchmarks/results_moments.json
+
+``--io-floor`` adds a process that only reads the file and writes it back with laspy (what
+CSF's process does besides filtering); each ``--variant`` times ``moments`` with other
+options, all alternating with the two commands above.
 """
 
 from __future__ import annotations
@@ -109,6 +115,18 @@ def child_csf(inp, out):
     g = csf_ground(xyz, 1.0)
     del xyz
     las.classification = np.where(g, 2, 1).astype(np.uint8)
+    las.write(out)
+
+
+def child_io(inp, out):
+    """What every filter of this file does besides filtering: start Python, read the LAS
+    with laspy, write it back with a classification (all ground: the truth's error)."""
+    import laspy
+
+    las = laspy.read(inp)
+    xyz = np.c_[las.x, las.y, las.z]  # the coordinates a filter reads
+    del xyz
+    las.classification = np.full(len(las.points), 2, np.uint8)
     las.write(out)
 
 
@@ -343,16 +361,23 @@ def errors(out_path, truth_path):
     return float(np.mean(ground != truth))
 
 
-def run_size(n, folder, repeats, env, skip_peers, profile):
+def run_size(n, folder, repeats, env, skip_peers, profile, variants=(), io_floor=False):
     inp, truth = write_cloud(n, folder)
     out_l, out_c = folder / f"moments_{n}.las", folder / f"csf_{n}.las"
     lid_cmd = [sys.executable, "-m", "lidarstat", "moments", inp, out_l, "--no-report", "-q"]
     csf_cmd = [sys.executable, __file__, "--child", "csf", inp, out_c]
-    rows = {"lidarstat": [], "csf": []}
+    extra = {name: [*lid_cmd[:-3], folder / f"{name}_{n}.las", *lid_cmd[-2:], *opts]
+             for name, opts in variants}
+    if io_floor:
+        extra["io_floor"] = [sys.executable, __file__, "--child", "io", inp,
+                             folder / f"io_{n}.las"]
+    rows = {"lidarstat": [], "csf": [], **{name: [] for name in extra}}
     for _ in range(repeats):  # alternating
         rows["lidarstat"].append(timed(lid_cmd, env))
         if not skip_peers:
             rows["csf"].append(timed(csf_cmd, env))
+        for name, cmd in extra.items():
+            rows[name].append(timed(cmd, env))
     med = {k: (float(np.median([r[0] for r in v])), float(max(r[1] for r in v)),
                float(np.median([r[3] for r in v])))
            for k, v in rows.items() if v}
@@ -368,6 +393,15 @@ def run_size(n, folder, repeats, env, skip_peers, profile):
                    csf_total_error=round(errors(out_c, truth), 6),
                    ratio=round(med["lidarstat"][0] / med["csf"][0], 2),
                    cpu_ratio=round(med["lidarstat"][2] / med["csf"][2], 2))
+    if extra:  # the same command with options, and the I/O floor, in the same alternation
+        row["variants"] = {}
+        for name, cmd in extra.items():
+            out = cmd[-1] if name == "io_floor" else cmd[len(lid_cmd) - 3]
+            row["variants"][name] = {
+                "options": [] if name == "io_floor" else [str(c) for c in cmd[len(lid_cmd):]],
+                "s": round(med[name][0], 2), "all_s": [r[0] for r in rows[name]],
+                "cpu_s": round(med[name][2], 2), "peak_rss_mib": round(med[name][1]),
+                "total_error": round(errors(out, truth), 6)}
     for mode in ("profile", "profile_no_trim")[:profile]:
         wall, peak, stdout, _ = timed([sys.executable, __file__, "--child", mode, inp,
                                        out_l], env)
@@ -388,6 +422,11 @@ def print_rows(rows):
               f"{r['lidarstat_cpu_s']:.1f} s | {peer} | "
               f"{r.get('cpu_ratio', float('nan')):.2f} | {r.get('ratio', float('nan')):.2f} | "
               f"{r['lidarstat_peak_rss_mib']} / {r.get('csf_peak_rss_mib', '-')} |")
+        for name, v in r.get("variants", {}).items():
+            what = ("laspy read + write, no filter" if name == "io_floor"
+                    else "`moments " + " ".join(v["options"]) + "`")
+            print(f"| {what} | {r['points']:,} | {v['s']:.1f} s / {v['cpu_s']:.1f} s | | | | "
+                  f"{v['peak_rss_mib']} MiB, total error {100 * v['total_error']:.4f} % |")
     for r, mode in ((r, m) for r in rows for m in ("profile", "profile_no_trim")):
         p = r.get(mode)
         if not p:
@@ -399,6 +438,16 @@ def print_rows(rows):
         for k, v in p.get("beside", {}).items():
             print(f"  beside, in its thread: {k:18s} {v['seconds']:7.2f} s  "
                   f"{v['thread_cpu_seconds']:7.2f} s CPU of its thread")
+
+
+def _variant(text):
+    """``NAME=OPTIONS`` -> (name, [option, ...])."""
+    import shlex
+
+    name, sep, opts = text.partition("=")
+    if not sep or not name.isidentifier():
+        raise SystemExit(f"bench_moments.py: --variant {text!r}: expected NAME=OPTIONS")
+    return name, shlex.split(opts)
 
 
 def main(argv=None):
@@ -415,12 +464,19 @@ def main(argv=None):
                     "--label; other labels already in the file are kept)")
     ap.add_argument("--label", default="current", help="name of this run in --out")
     ap.add_argument("--note", default=None, help="what code the run measured (stored in --out)")
+    ap.add_argument("--variant", action="append", default=[], metavar="NAME=OPTIONS",
+                    help="also time `moments` with these options in the same alternation "
+                         "(e.g. --variant 'core=--no-terrain --no-continuity'); repeatable")
+    ap.add_argument("--io-floor", action="store_true",
+                    help="also time a process that only reads and writes the file with laspy")
     ap.add_argument("--child", nargs=3, metavar=("MODE", "IN", "OUT"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
         mode, inp, out = args.child
         if mode == "csf":
             child_csf(inp, out)
+        elif mode == "io":
+            child_io(inp, out)
         else:
             print(json.dumps(child_profile(inp, out, trim=mode != "profile_no_trim")))
         return
@@ -433,7 +489,8 @@ def main(argv=None):
                     "--no-report", "-q"], env=env, check=True)
     rows = []
     for n in sizes:
-        rows.append(run_size(n, folder, repeats, env, args.skip_peers, args.profile))
+        rows.append(run_size(n, folder, repeats, env, args.skip_peers, args.profile,
+                             [_variant(v) for v in args.variant], args.io_floor))
         print(json.dumps({k: v for k, v in rows[-1].items() if not k.startswith("profile")}),
               flush=True)
     print_rows(rows)
