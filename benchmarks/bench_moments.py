@@ -25,7 +25,7 @@ Usage::
     python benchmarks/bench_moments.py --points 10000000 --repeats 3 --profile \\
         --out benchmarks/results_moments.json
     python benchmarks/bench_moments.py --points 2000000 --repeats 1 --profile --skip-peers
-    python benchmarks/bench_moments.py --points 10000000 --repeats 3 --io-floor \
+    python benchmarks/bench_moments.py --points 10000000 --repeats 3 --io-floor \\
         --variant 'core=--no-terrain --no-continuity' --out benchmarks/results_moments.json
 
 ``--io-floor`` adds a process that only reads the file and writes it back with laspy (what
@@ -366,17 +366,19 @@ def run_size(n, folder, repeats, env, skip_peers, profile, variants=(), io_floor
     out_l, out_c = folder / f"moments_{n}.las", folder / f"csf_{n}.las"
     lid_cmd = [sys.executable, "-m", "lidarstat", "moments", inp, out_l, "--no-report", "-q"]
     csf_cmd = [sys.executable, __file__, "--child", "csf", inp, out_c]
-    extra = {name: [*lid_cmd[:-3], folder / f"{name}_{n}.las", *lid_cmd[-2:], *opts]
-             for name, opts in variants}
+    extra = {}  # name -> (command, its output, the moments options)
+    for name, opts in variants:
+        out = folder / f"{name}_{n}.las"
+        extra[name] = ([*lid_cmd[:-3], out, *lid_cmd[-2:], *opts], out, opts)
     if io_floor:
-        extra["io_floor"] = [sys.executable, __file__, "--child", "io", inp,
-                             folder / f"io_{n}.las"]
+        out = folder / f"io_{n}.las"
+        extra["io_floor"] = ([sys.executable, __file__, "--child", "io", inp, out], out, [])
     rows = {"lidarstat": [], "csf": [], **{name: [] for name in extra}}
     for _ in range(repeats):  # alternating
         rows["lidarstat"].append(timed(lid_cmd, env))
         if not skip_peers:
             rows["csf"].append(timed(csf_cmd, env))
-        for name, cmd in extra.items():
+        for name, (cmd, _, _) in extra.items():
             rows[name].append(timed(cmd, env))
     med = {k: (float(np.median([r[0] for r in v])), float(max(r[1] for r in v)),
                float(np.median([r[3] for r in v])))
@@ -395,10 +397,9 @@ def run_size(n, folder, repeats, env, skip_peers, profile, variants=(), io_floor
                    cpu_ratio=round(med["lidarstat"][2] / med["csf"][2], 2))
     if extra:  # the same command with options, and the I/O floor, in the same alternation
         row["variants"] = {}
-        for name, cmd in extra.items():
-            out = cmd[-1] if name == "io_floor" else cmd[len(lid_cmd) - 3]
+        for name, (_, out, opts) in extra.items():
             row["variants"][name] = {
-                "options": [] if name == "io_floor" else [str(c) for c in cmd[len(lid_cmd):]],
+                "options": list(opts),
                 "s": round(med[name][0], 2), "all_s": [r[0] for r in rows[name]],
                 "cpu_s": round(med[name][2], 2), "peak_rss_mib": round(med[name][1]),
                 "total_error": round(errors(out, truth), 6)}
